@@ -1,0 +1,5 @@
+import sys
+
+from lfbench.cli import main
+
+sys.exit(main())

@@ -1,0 +1,1 @@
+"""Subcommands of the ``lfbench`` CLI, one module each."""

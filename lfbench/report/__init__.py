@@ -1,0 +1,1 @@
+"""Tables (markdown, LaTeX, CSV) and figures (PNG) from Results."""

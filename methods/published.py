@@ -1,0 +1,39 @@
+"""``published``: disparity maps precomputed by someone else, read from a submission folder."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from lfbench.errors import DataError
+from lfbench.method import Method, Prediction
+from lfbench.registry import register_method
+from lfbench.scene import LightField
+from lfbench.submission import disp_map_path, read_submission_map
+
+
+@register_method("published")
+class PublishedResults(Method):
+    """Precomputed results in the benchmark's submission layout (disp_maps/, runtimes/).
+
+    path: the submission folder (holding disp_maps/<scene>.pfm and runtimes/<scene>.txt)
+    """
+
+    def __init__(self, path: Path) -> None:
+        super().__init__(path=path)
+        self.path = Path(path)
+        if not (self.path / "disp_maps").is_dir():
+            raise ValueError(f"{self.path}: not a submission folder (no disp_maps/ inside)")
+
+    @property
+    def label(self) -> str:
+        return f"published:{self.path.resolve().name}"
+
+    def available_for(self, lf: LightField) -> str | None:
+        p = disp_map_path(self.path, lf.name)
+        return None if p.is_file() else f"no {p}"
+
+    def predict(self, lf: LightField) -> Prediction:
+        if not disp_map_path(self.path, lf.name).is_file():
+            raise DataError(f"no disparity map for scene {lf.name!r}", disp_map_path(self.path, lf.name))
+        disparity, runtime = read_submission_map(self.path, lf.name)
+        return Prediction(disparity=disparity, runtime_s=float("nan") if runtime is None else runtime)
