@@ -1,0 +1,36 @@
+"""Shared fixtures. Real-data tests read LFBENCH_HCI_ROOT (the HCI data root, e.g. ../shared/data/hci)
+and skip cleanly when it is unset; the folder beside it (its parent) holds published/, reference/
+and paper/ when present."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+
+def _hci_root() -> Path | None:
+    value = os.environ.get("LFBENCH_HCI_ROOT")
+    return Path(value) if value and Path(value).is_dir() else None
+
+
+@pytest.fixture(scope="session")
+def hci_root() -> Path:
+    """The HCI data root (ROOT/<category>/<scene>); skips the test when LFBENCH_HCI_ROOT is unset."""
+    root = _hci_root()
+    if root is None:
+        pytest.skip("LFBENCH_HCI_ROOT is not set (real HCI data not available)")
+    return root
+
+
+@pytest.fixture(scope="session")
+def shared_data(hci_root: Path) -> Path:
+    """The shared data folder beside the HCI root (published/, reference/, paper/)."""
+    return hci_root.parent
+
+
+def require(path: Path) -> Path:
+    if not path.exists():
+        pytest.skip(f"{path} not available")
+    return path
