@@ -18,6 +18,7 @@ COMMANDS = {
     "predict": "lfbench.commands.predict",
     "methods": "lfbench.commands.methods",
     "info": "lfbench.commands.info",
+    "regress": "lfbench.commands.regress",
 }
 
 
