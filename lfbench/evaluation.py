@@ -4,6 +4,8 @@ Rules (docs: hci-evaluation-reference.md): a 15 px border is ignored (scaled wit
 backgammon, dots and stripes are scored at high resolution when ``gt_disp_highres.pfm`` exists
 (the 512x512 prediction upsampled x10 by nearest neighbour exactly as ``scipy.ndimage.zoom(order=0)``,
 border 150 px), otherwise at low resolution; the resolution is recorded beside every number.
+Region and stratified metrics (lfbench.region_metrics) are scored wherever their mask files exist,
+at their own resolution (see :func:`metric_resolution`).
 Predictions cropped symmetrically by a border (482x482, 490x490) are aligned to the centre.
 """
 
@@ -80,6 +82,27 @@ def upsample_nearest(pred: np.ndarray, factor: int) -> np.ndarray:
     return ndimage.zoom(pred, factor, order=0)
 
 
+def metric_resolution(scene: Scene, metric: Metric, rules: ScoringRules = ScoringRules()) -> str | None:
+    """The resolution ``metric`` is scored at on ``scene``, or None when it does not apply.
+
+    General metrics ('scene'): the scene's rule. A 'highres' metric: high resolution when
+    high-res scoring is allowed and the high-res gt and all its masks exist, else low resolution
+    (recorded as such) when its low-res masks exist, else None. A 'lowres' metric: low resolution
+    when its low-res masks exist, else None.
+    """
+    if metric.resolution == "scene":
+        return rules.general_resolution(scene)
+    needed = metric.required_masks
+
+    def has_masks(res: str) -> bool:
+        present = set(scene.mask_names(res)) if needed else set()
+        return all(name in present for name in needed)
+
+    if metric.resolution == HIGHRES and rules.allow_highres and scene.has_gt(HIGHRES) and has_masks(HIGHRES):
+        return HIGHRES
+    return LOWRES if has_masks(LOWRES) else None
+
+
 def score_scene(scene: Scene, pred: np.ndarray, metrics: Sequence[Metric] = GENERAL_METRICS,
                 rules: ScoringRules = ScoringRules(), source: str = "prediction") -> SceneScore:
     """Score ``pred`` (H, W) disparity on ``scene`` with the benchmark's masks and resolution rules."""
@@ -98,7 +121,9 @@ def score_scene(scene: Scene, pred: np.ndarray, metrics: Sequence[Metric] = GENE
     preds: dict[str, np.ndarray] = {}
     nonfinite = nonfinite_count(pred, border_mask((h, w), rules.border_px))
     for metric in metrics:
-        res = rules.general_resolution(scene) if metric.resolution == "scene" else metric.resolution
+        res = metric_resolution(scene, metric, rules)
+        if res is None:  # a mask file the metric needs is absent: it does not apply to this scene
+            continue
         if res not in gts:
             gt = scene.gt_disparity(res)
             if gt is None:
@@ -116,8 +141,13 @@ def score_scene(scene: Scene, pred: np.ndarray, metrics: Sequence[Metric] = GENE
         if metric.mask_name is not None:
             if metric.mask_name not in scene.mask_names(res):
                 continue
-            mask &= scene.mask(metric.mask_name, res)
-        values[metric.id] = metric(gt, p, mask, toolkit=rules.toolkit)
+            region = scene.mask(metric.mask_name, res)
+            if region.shape != mask.shape:
+                raise DataError(f"mask is {region.shape[1]}x{region.shape[0]}, expected {mask.shape[1]}x{mask.shape[0]}",
+                                scene.path / f"{metric.mask_name}_{res}.png")
+            mask &= region
+        context = {"scene": scene, "resolution": res} if metric.needs_scene else {}
+        values[metric.id] = metric(gt, p, mask, toolkit=rules.toolkit, **context)
         resolution[metric.id] = res
     return SceneScore(scene=scene.name, values=values, resolution=resolution, nonfinite_pixels=nonfinite,
                       aligned_from=aligned_from, notes=notes)

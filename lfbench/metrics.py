@@ -98,7 +98,8 @@ def mse_x100(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = None, *
     if not scored.any():
         return float("nan")
     diff = np.square(gt - pred)[scored]
-    return float(np.average(diff) * 100)
+    # the toolkit (numpy 1.x) multiplied the float32 mean by 100 in float64; do the same under numpy 2
+    return float(np.average(diff)) * 100
 
 
 def quantile_x100(gt: np.ndarray, pred: np.ndarray, percentage: float = 25, mask: np.ndarray | None = None,
@@ -134,7 +135,10 @@ class Metric:
 
     ``fn(gt, pred, mask, toolkit=...)`` returns the score. ``mask_name`` is the evaluation mask the
     metric needs (None = general metric, scored under the border mask); ``resolution`` is
-    'scene' (the scene's rule), 'lowres' or 'highres'.
+    'scene' (the scene's rule), 'lowres' or 'highres'. Region / stratified metrics
+    (lfbench.region_metrics) may also need ``extra_masks`` (further mask files the metric reads
+    itself; it is skipped unless all exist) and, with ``needs_scene``, are called with the keywords
+    ``scene`` and ``resolution`` too. ``category``: 'general', 'region' or 'stratified'.
     """
 
     id: str
@@ -149,10 +153,18 @@ class Metric:
     vmax: float = 1.0
     cmap: str = "viridis"
     higher_is_better: bool = False
+    category: str = "general"
+    extra_masks: tuple[str, ...] = ()
+    needs_scene: bool = False
+
+    @property
+    def required_masks(self) -> tuple[str, ...]:
+        """Every mask file (``<name>_<resolution>.png``) the metric needs."""
+        return ((self.mask_name,) if self.mask_name else ()) + self.extra_masks
 
     def __call__(self, gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = None, *,
-                 toolkit: bool = False) -> float:
-        return self.fn(gt, pred, mask, toolkit=toolkit)
+                 toolkit: bool = False, **context) -> float:
+        return self.fn(gt, pred, mask, toolkit=toolkit, **context)
 
 
 def _bad_pix_metric(t: float) -> Metric:

@@ -16,12 +16,18 @@ from lfbench.results import Record, Results, RunInfo
 from lfbench.scene import Scene
 
 PredictionHook = Callable[[Method, Scene, Prediction], None]
+_NONFINITE_RULE = {False: "counted as bad pixels",
+                   True: "toolkit rule: BadPix counts NaN as good, MSE and Q25 leave them out"}
 
 
-def evaluate(methods: Sequence[Method], scenes: Sequence[Scene], *, metrics: Sequence[Metric] = GENERAL_METRICS,
+def evaluate(methods: Sequence[Method], scenes: Sequence[Scene], *,
+             metrics: Sequence[Metric] | Callable[[Scene], Sequence[Metric]] = GENERAL_METRICS,
              rules: ScoringRules = ScoringRules(), on_prediction: PredictionHook | None = None,
              progress: bool = True) -> Results:
     """Run every method on every scene with ground truth and score it.
+
+    ``metrics``: the metrics for every scene, or a function of the scene giving them (e.g.
+    ``lfbench.region_metrics.applicable_metrics``).
 
     A (method, scene) pair the method cannot serve (e.g. no stored map) is skipped with a note on
     stderr. ``on_prediction`` sees each prediction (to save maps or draw figures).
@@ -39,7 +45,8 @@ def evaluate(methods: Sequence[Method], scenes: Sequence[Scene], *, metrics: Seq
         pred = method.run(scene)
         if on_prediction is not None:
             on_prediction(method, scene, pred)
-        score = score_scene(scene, pred.disparity, metrics, rules, source=f"{method.label} on {scene.name}")
+        scene_metrics = metrics(scene) if callable(metrics) else metrics
+        score = score_scene(scene, pred.disparity, scene_metrics, rules, source=f"{method.label} on {scene.name}")
         for metric_id, value in score.values.items():
             results.records.append(Record(method.label, scene.name, metric_id, value, score.resolution[metric_id]))
         results.runs.append(RunInfo(method.label, scene.name, float(pred.runtime_s or np.nan), score.nonfinite_pixels,
@@ -48,7 +55,7 @@ def evaluate(methods: Sequence[Method], scenes: Sequence[Scene], *, metrics: Seq
             tqdm.write(f"lfbench: {method.label} on {scene.name}: {note}", file=sys.stderr)
         if score.nonfinite_pixels:
             tqdm.write(f"lfbench: {method.label} on {scene.name}: {score.nonfinite_pixels} non-finite pixels "
-                       f"inside the evaluation mask (counted as bad pixels)", file=sys.stderr)
+                       f"inside the evaluation mask ({_NONFINITE_RULE[rules.toolkit]})", file=sys.stderr)
     return results
 
 

@@ -23,13 +23,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="treat NaN/inf predictions exactly as the official toolkit (BadPix counts NaN as good)")
     p.add_argument("--lowres-only", action="store_true",
                    help="score every scene at 512x512, even where high-resolution ground truth exists")
+    p.add_argument("--all-metrics", action="store_true",
+                   help="also score the region and stratified metrics wherever the scene has their mask files")
     p.add_argument("--save-maps", action="store_true", help="also write each prediction as OUT/maps/<method>/ (submission layout)")
     p.add_argument("--figures", action="store_true", help="also draw per-scene figures into OUT/figures/")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
 def run(args: argparse.Namespace) -> int:
+    import functools
+
     from lfbench.evaluation import ScoringRules
+    from lfbench.metrics import GENERAL_METRICS
     from lfbench.registry import create_from_spec
     from lfbench.report.tables import per_scene_table, render, write_tables
     from lfbench.runner import evaluate, save_prediction
@@ -56,7 +61,12 @@ def run(args: argparse.Namespace) -> int:
         for hook in hooks:
             hook(method, scene, pred)
 
-    results = evaluate(methods, scenes, rules=rules, on_prediction=on_prediction if hooks else None,
+    metrics = GENERAL_METRICS
+    if args.all_metrics:
+        from lfbench.region_metrics import applicable_metrics
+
+        metrics = functools.partial(applicable_metrics, rules=rules)
+    results = evaluate(methods, scenes, metrics=metrics, rules=rules, on_prediction=on_prediction if hooks else None,
                        progress=not args.no_progress)
     results.meta["data_root"] = str(args.data)
     results.write(args.out)
