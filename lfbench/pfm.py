@@ -7,7 +7,9 @@ write so that arrays are top-down (row 0 = top of the image), like every other i
 
 from __future__ import annotations
 
+import io
 from pathlib import Path
+from typing import BinaryIO
 
 import numpy as np
 
@@ -44,29 +46,42 @@ def read_pfm(path: str | Path) -> np.ndarray:
     except IsADirectoryError:
         raise DataError("is a folder, expected a PFM file", path) from None
     with f:
-        ident = _header_line(f, path)
-        if ident not in ("Pf", "PF"):
-            raise DataError(f"not a PFM file: identifier {ident[:20]!r}, expected 'Pf' or 'PF'", path)
-        channels = 1 if ident == "Pf" else 3
-        dims = _header_line(f, path).split()
-        try:
-            width, height = (int(v) for v in dims)
-            if width <= 0 or height <= 0:
-                raise ValueError
-        except ValueError:
-            raise DataError(f"bad PFM dimensions {' '.join(dims)[:40]!r}", path) from None
-        try:
-            scale = float(_header_line(f, path))
-            if scale == 0 or not np.isfinite(scale):
-                raise ValueError
-        except ValueError:
-            raise DataError("bad PFM scale: must be a finite non-zero number", path) from None
-        dtype = np.dtype("<f4" if scale < 0 else ">f4")
-        count = width * height * channels
-        payload = f.read(count * 4 + 1)
-    if len(payload) != count * 4:
-        what = "truncated" if len(payload) < count * 4 else "trailing bytes after the data in"
-        raise DataError(f"{what} PFM: expected {count * 4} data bytes for {width}x{height}x{channels}", path)
+        return _read_pfm_stream(f, path)
+
+
+def parse_pfm(data: bytes, source: str | Path = "<bytes>") -> np.ndarray:
+    """Like :func:`read_pfm` for a PFM held in memory (e.g. a zip member); errors name ``source``."""
+    return _read_pfm_stream(io.BytesIO(data), Path(source))
+
+
+def _read_pfm_stream(f: BinaryIO, path: Path) -> np.ndarray:
+    ident = _header_line(f, path)
+    if ident not in ("Pf", "PF"):
+        raise DataError(f"not a PFM file: identifier {ident[:20]!r}, expected 'Pf' or 'PF'", path)
+    channels = 1 if ident == "Pf" else 3
+    dims = _header_line(f, path).split()
+    try:
+        width, height = (int(v) for v in dims)
+        if width <= 0 or height <= 0:
+            raise ValueError
+    except ValueError:
+        raise DataError(f"bad PFM dimensions {' '.join(dims)[:40]!r}", path) from None
+    try:
+        scale = float(_header_line(f, path))
+        if scale == 0 or not np.isfinite(scale):
+            raise ValueError
+    except ValueError:
+        raise DataError("bad PFM scale: must be a finite non-zero number", path) from None
+    dtype = np.dtype("<f4" if scale < 0 else ">f4")
+    count = width * height * channels
+    start = f.tell()  # compare sizes before reading: absurd dimensions must not allocate memory
+    available = f.seek(0, io.SEEK_END) - start
+    f.seek(start)
+    if available != count * 4:
+        what = "truncated" if available < count * 4 else "trailing bytes after the data in"
+        raise DataError(f"{what} PFM: expected {count * 4} data bytes for {width}x{height}x{channels}, "
+                        f"found {available}", path)
+    payload = f.read(count * 4)
     data = np.frombuffer(payload, dtype=dtype)
     shape = (height, width) if channels == 1 else (height, width, 3)
     out = np.flipud(data.reshape(shape)).astype(np.float32)

@@ -115,8 +115,22 @@ class MethodRegistry:
             except Exception as exc:  # a broken plugin must not break the others
                 self.load_errors[ep.name] = f"{type(exc).__name__}: {exc}"  # shown by `lfbench methods`
                 continue
-            if not isinstance(obj, types.ModuleType) and ep.name not in self._methods and callable(obj):
+            if isinstance(obj, types.ModuleType):
+                self._register_module(obj)
+            elif ep.name not in self._methods and callable(obj):
                 self.register(ep.name, obj)
+
+    def _register_module(self, module: types.ModuleType) -> None:
+        """Register the factories a plugin module decorated with @register_method (its import registered
+        them in the registry the decorator named; a fresh registry learns them here)."""
+        for obj in list(vars(module).values()):
+            if getattr(obj, "__module__", None) != module.__name__:
+                continue
+            for name in _decorated_names(obj):
+                try:
+                    self.register(name, obj)
+                except ValueError as exc:
+                    self.load_errors[name] = str(exc)
 
     def names(self) -> list[str]:
         self._load_entry_points()
@@ -135,7 +149,8 @@ class MethodRegistry:
         if unknown:
             known = ", ".join(info.params) or "none"
             raise SpecError(f"method {name!r} has no parameter {', '.join(map(repr, unknown))}; parameters: {known}")
-        missing = [p.name for p in info.params.values() if p.default is inspect.Parameter.empty and p.name not in params]
+        missing = [p.name for p in info.params.values()
+                   if p.default is inspect.Parameter.empty and p.name not in params]
         if missing:
             raise SpecError(f"method {name!r} needs parameter {', '.join(missing)} (e.g. {name}:{missing[0]}=...)")
         try:
@@ -169,9 +184,24 @@ def register_method(name: str, registry: MethodRegistry | None = None) -> Callab
 
     def deco(factory: Callable[..., Any]) -> Callable[..., Any]:
         (registry or REGISTRY).register(name, factory)
+        try:  # remember the name so that any registry loading the module finds the factory
+            setattr(factory, _NAMES_ATTR, (*_decorated_names(factory), name))
+        except (AttributeError, TypeError):
+            pass
         return factory
 
     return deco
+
+
+_NAMES_ATTR = "__lfbench_method_names__"
+
+
+def _decorated_names(obj: Any) -> tuple[str, ...]:
+    """Names given to ``obj`` itself by @register_method (not inherited from a registered base class)."""
+    try:
+        return tuple(vars(obj).get(_NAMES_ATTR, ()))
+    except TypeError:  # no __dict__
+        return ()
 
 
 def create(name: str, **params: Any) -> Any:

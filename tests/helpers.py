@@ -1,0 +1,186 @@
+"""Tiny HCI-format scenes and submissions for tests (no real data needed).
+
+A scene written by :func:`write_scene` has 9x9 RGB views of ``size`` x ``size`` px that are exact
+integer shifts of one random texture (a fronto-parallel plane at ``view_disparity`` px per view step,
+following the benchmark's geometry: centre(x, y) = view_{u,v}(x - (u-4) d, y - (v-4) d)), a
+parameters.cfg written by :meth:`SceneParameters.to_cfg`, and gt_disp_lowres.pfm (and optionally
+gt_disp_highres.pfm at 10x) written by :func:`write_pfm`.
+"""
+
+from __future__ import annotations
+
+import io
+import zipfile
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+
+import numpy as np
+from PIL import Image
+
+from lfbench.params import SceneParameters
+from lfbench.pfm import write_pfm
+
+ANGULAR = 9
+
+
+def scene_parameters(name: str, category: str, size: int, angular: int = ANGULAR) -> SceneParameters:
+    """Camera parameters like the HCI scenes' (f = 100 mm, sensor 35 mm, b = 30 mm, F = 8.3 m)."""
+    return SceneParameters(
+        focal_length_mm=100.0, image_resolution_x_px=size, image_resolution_y_px=size, sensor_size_mm=35.0,
+        num_cams_x=angular, num_cams_y=angular, baseline_mm=30.0, focus_distance_m=8.3,
+        disp_min=-2.0, disp_max=2.0, depth_map_scale=10.0, name=name, category=category,
+    )
+
+
+def shifted_views(centre: np.ndarray, d: int, angular: int = ANGULAR) -> np.ndarray:
+    """(V, U, H, W, C) views of a plane at integer disparity ``d``: view_{u,v}(x, y) = centre(x + (u-c) d, y + (v-c) d)
+    (periodic at the image edge)."""
+    c = angular // 2
+    rows = []
+    for v in range(angular):
+        rows.append([np.roll(centre, (-(v - c) * d, -(u - c) * d), axis=(0, 1)) for u in range(angular)])
+    return np.asarray(rows)
+
+
+def write_scene(root: Path, name: str = "tiny", category: str = "training", *, size: int = 40, seed: int = 0,
+                view_disparity: int = 1, gt: np.ndarray | None = None, gt_highres: np.ndarray | None = None,
+                views: bool = True, masks: Mapping[str, np.ndarray] | None = None) -> Path:
+    """Write an HCI scene folder ROOT/<category>/<name>/ and return its path.
+
+    gt: (size, size) low-res disparity (default: the plane at ``view_disparity``); gt_highres:
+    (10 size, 10 size) written as gt_disp_highres.pfm when given; masks: {'<name>_lowres': bool (H, W)}.
+    """
+    rng = np.random.default_rng(seed)
+    folder = Path(root) / category / name
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "parameters.cfg").write_text(scene_parameters(name, category, size).to_cfg(), encoding="utf-8")
+    if views:
+        centre = rng.integers(0, 256, size=(size, size, 3), dtype=np.uint8)
+        stack = shifted_views(centre, view_disparity)
+        for k in range(ANGULAR * ANGULAR):
+            Image.fromarray(stack[k // ANGULAR, k % ANGULAR]).save(folder / f"input_Cam{k:03d}.png")
+    if gt is None:
+        gt = np.full((size, size), float(view_disparity), dtype=np.float32)
+    write_pfm(folder / "gt_disp_lowres.pfm", np.asarray(gt, dtype=np.float32))
+    if gt_highres is not None:
+        write_pfm(folder / "gt_disp_highres.pfm", np.asarray(gt_highres, dtype=np.float32))
+    for mask_name, mask in (masks or {}).items():
+        Image.fromarray(np.where(mask, 255, 0).astype(np.uint8)).save(folder / f"{mask_name}.png")
+    return folder
+
+
+def write_submission(root: Path, maps: Mapping[str, np.ndarray], runtimes: Mapping[str, str] | None = None) -> Path:
+    """A submission folder: disp_maps/<scene>.pfm from ``maps``, runtimes/<scene>.txt (text, default '1.5')."""
+    root = Path(root)
+    for scene, disp in maps.items():
+        write_pfm(root / "disp_maps" / f"{scene}.pfm", np.asarray(disp, dtype=np.float32))
+    for scene in maps:
+        text = (runtimes or {}).get(scene, "1.5\n")
+        (root / "runtimes").mkdir(parents=True, exist_ok=True)
+        (root / "runtimes" / f"{scene}.txt").write_text(text, encoding="utf-8")
+    return root
+
+
+def zip_folder(folder: Path, zip_path: Path, prefix: str = "",
+               extra: Iterable[tuple[str | zipfile.ZipInfo, bytes]] = ()) -> Path:
+    """Zip every file under ``folder`` as ``prefix + relative path``, plus ``extra`` (name or ZipInfo, bytes)."""
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as zf:
+        for p in sorted(Path(folder).rglob("*")):
+            if p.is_file():
+                zf.write(p, prefix + p.relative_to(folder).as_posix())
+        for name, data in extra:
+            zf.writestr(name, data)
+    Path(zip_path).write_bytes(buf.getvalue())
+    return Path(zip_path)
+
+
+def pfm_bytes(data: np.ndarray, *, ident: bytes = b"Pf", big_endian: bool = False, scale: float = 1.0) -> bytes:
+    """A PFM file built by hand (independent of lfbench.pfm): rows bottom-up, sign of scale = byte order."""
+    arr = np.asarray(data, dtype=np.float32)
+    h, w = arr.shape[:2]
+    dtype = ">f4" if big_endian else "<f4"
+    signed = abs(scale) if big_endian else -abs(scale)
+    payload = np.ascontiguousarray(arr[::-1], dtype=dtype).tobytes()
+    return ident + b"\n" + f"{w} {h}\n".encode() + f"{signed}\n".encode() + payload
+
+
+PLUGIN_MODULE = '''\
+"""A third-party lfbench plugin used by the tests."""
+from lfbench.method import Method, Prediction
+from lfbench.registry import register_method
+
+
+@register_method("{centre}")
+class CentreView(Method):
+    """Returns the centre view times ``gain`` as its 'disparity' (a test plugin).
+
+    gain: factor applied to the centre view
+    """
+
+    def __init__(self, gain: float = 1.0) -> None:
+        super().__init__(gain=gain)
+        self.gain = gain
+
+    def predict(self, lf):
+        v, u = lf.angular_size
+        return Prediction(disparity=lf.gray_views()[v // 2, u // 2] * self.gain)
+
+
+class Offset(Method):
+    """Ground truth plus a constant (registered by its entry point, not by a decorator).
+
+    offset: added to the ground truth, px
+    """
+
+    def __init__(self, offset: float = 0.0) -> None:
+        super().__init__(offset=offset)
+        self.offset = offset
+
+    def predict(self, lf):
+        return Prediction(disparity=lf.gt_disparity() + self.offset)
+'''
+
+
+def write_fake_plugin(root: Path, tag: str) -> dict[str, str]:
+    """A fake installed distribution under ``root`` (put it on sys.path / PYTHONPATH): a module and a
+    ``*.dist-info`` whose entry_points.txt adds methods to the ``lfbench.methods`` group.
+
+    Returns the names: module, centre (a decorated class, module entry point), offset (a factory entry
+    point) and broken (an entry point whose module does not exist).
+    """
+    names = {"module": f"lfbench_testplugin_{tag}", "centre": f"centre-{tag}", "offset": f"offset-{tag}",
+             "broken": f"broken-{tag}"}
+    root = Path(root)
+    root.mkdir(parents=True, exist_ok=True)
+    (root / f"{names['module']}.py").write_text(PLUGIN_MODULE.format(centre=names["centre"]), encoding="utf-8")
+    dist = root / f"lfbench_testplugin_{tag}-1.0.dist-info"
+    dist.mkdir()
+    (dist / "METADATA").write_text(f"Metadata-Version: 2.1\nName: lfbench-testplugin-{tag}\nVersion: 1.0\n",
+                                   encoding="utf-8")
+    (dist / "entry_points.txt").write_text(
+        "[lfbench.methods]\n"
+        f"{names['centre']} = {names['module']}\n"
+        f"{names['offset']} = {names['module']}:Offset\n"
+        f"{names['broken']} = {names['module']}_does_not_exist\n", encoding="utf-8")
+    return names
+
+
+def install_fake_plugin(site: Path, monkeypatch) -> dict[str, str]:
+    """Write a fake plugin distribution into ``site``, put it on sys.path and swap in a fresh
+    ``lfbench.registry.REGISTRY`` (undone by ``monkeypatch``; the caller drops the module from
+    sys.modules afterwards: see :func:`forget_module`)."""
+    import uuid
+
+    import lfbench.registry as registry
+
+    names = write_fake_plugin(site, uuid.uuid4().hex[:10])
+    monkeypatch.syspath_prepend(str(site))
+    monkeypatch.setattr(registry, "REGISTRY", registry.MethodRegistry())
+    return names
+
+
+def forget_module(name: str) -> None:
+    import sys
+
+    sys.modules.pop(name, None)
