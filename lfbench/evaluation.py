@@ -60,18 +60,23 @@ def border_mask(shape: tuple[int, int], border: int) -> np.ndarray:
     return mask
 
 
-def align_prediction(pred: np.ndarray, shape: tuple[int, int], source: str = "prediction") -> tuple[np.ndarray, tuple[int, int] | None]:
+def align_prediction(pred: np.ndarray, shape: tuple[int, int], source: str = "prediction",
+                     max_crop: int | None = None) -> tuple[np.ndarray, tuple[int, int] | None]:
     """Place a prediction cropped by a symmetric border (e.g. 482x482 of 512x512) at the centre of a
-    NaN canvas of ``shape``. Returns (aligned, original shape or None if nothing was done)."""
+    NaN canvas of ``shape``. Returns (aligned, original shape or None if nothing was done).
+
+    A crop wider than ``max_crop`` px per side (the evaluation border) is refused: the uncovered
+    pixels would be scored, so such a map is the wrong size rather than a cropped one.
+    """
     pred = np.asarray(pred)
     if pred.ndim != 2:
         raise DataError(f"disparity must be a 2-D map, got shape {pred.shape}", source)
     if pred.shape == tuple(shape):
         return pred, None
     dh, dw = shape[0] - pred.shape[0], shape[1] - pred.shape[1]
-    if dh < 0 or dw < 0 or dh % 2 or dw % 2:
+    if dh < 0 or dw < 0 or dh % 2 or dw % 2 or (max_crop is not None and max(dh, dw) // 2 > max_crop):
         raise DataError(f"prediction is {pred.shape[1]}x{pred.shape[0]}, scene is {shape[1]}x{shape[0]} "
-                        "(only a symmetric crop of the scene can be aligned)", source)
+                        "(only a symmetric crop of at most the evaluation border can be aligned)", source)
     out = np.full(shape, np.nan, dtype=np.float32)
     out[dh // 2:dh // 2 + pred.shape[0], dw // 2:dw // 2 + pred.shape[1]] = pred
     return out, (int(pred.shape[0]), int(pred.shape[1]))
@@ -107,13 +112,11 @@ def score_scene(scene: Scene, pred: np.ndarray, metrics: Sequence[Metric] = GENE
                 rules: ScoringRules = ScoringRules(), source: str = "prediction") -> SceneScore:
     """Score ``pred`` (H, W) disparity on ``scene`` with the benchmark's masks and resolution rules."""
     h, w = scene.spatial_size
-    pred, aligned_from = align_prediction(pred, (h, w), source)
+    pred, aligned_from = align_prediction(pred, (h, w), source, max_crop=rules.border_px)
     pred = pred.astype(np.float32, copy=False)
     notes = []
     if aligned_from is not None:
-        b = (h - aligned_from[0]) // 2
-        notes.append(f"{aligned_from[1]}x{aligned_from[0]} prediction aligned to the centre of {w}x{h}"
-                     + (" (crop wider than the border: uncovered pixels count as bad)" if b > rules.border_px else ""))
+        notes.append(f"{aligned_from[1]}x{aligned_from[0]} prediction aligned to the centre of {w}x{h}")
     valid = scene.valid_mask()
     values: dict[str, float] = {}
     resolution: dict[str, str] = {}

@@ -105,20 +105,33 @@ class MethodRegistry:
             raise ValueError(f"method {name!r} is already registered by {self._methods[name].source}")
         self._methods[name] = _introspect(name, factory)
 
-    def _load_entry_points(self) -> None:
+    def _load_entry_point(self, ep: metadata.EntryPoint) -> None:
+        try:
+            obj = ep.load()
+        except Exception as exc:  # a broken plugin must not break the others
+            self.load_errors[ep.name] = f"{type(exc).__name__}: {exc}"  # shown by `lfbench methods`
+            return
+        if isinstance(obj, types.ModuleType):
+            self._register_module(obj)
+        elif ep.name not in self._methods and callable(obj):
+            self.register(ep.name, obj)
+
+    def _load_entry_points(self, name: str | None = None) -> None:
+        """Load the plugins: only the entry point called ``name`` when there is one (so that using one
+        method does not import every plugin, e.g. torch for a metric-only run), else all of them."""
         if self._loaded:
             return
+        eps = list(metadata.entry_points(group=self._group))
+        if name is not None:
+            named = [ep for ep in eps if ep.name == name]
+            if named:
+                for ep in named:
+                    self._load_entry_point(ep)
+                if name in self._methods:
+                    return
         self._loaded = True
-        for ep in metadata.entry_points(group=self._group):
-            try:
-                obj = ep.load()
-            except Exception as exc:  # a broken plugin must not break the others
-                self.load_errors[ep.name] = f"{type(exc).__name__}: {exc}"  # shown by `lfbench methods`
-                continue
-            if isinstance(obj, types.ModuleType):
-                self._register_module(obj)
-            elif ep.name not in self._methods and callable(obj):
-                self.register(ep.name, obj)
+        for ep in eps:
+            self._load_entry_point(ep)
 
     def _register_module(self, module: types.ModuleType) -> None:
         """Register the factories a plugin module decorated with @register_method (its import registered
@@ -137,7 +150,8 @@ class MethodRegistry:
         return sorted(self._methods)
 
     def info(self, name: str) -> MethodInfo:
-        self._load_entry_points()
+        if name not in self._methods:
+            self._load_entry_points(name)
         if name not in self._methods:
             hint = f" (plugin failed to load: {self.load_errors[name]})" if name in self.load_errors else ""
             raise SpecError(f"unknown method {name!r}{hint}; available: {', '.join(self.names())}")
