@@ -25,7 +25,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="score every scene at 512x512, even where high-resolution ground truth exists")
     p.add_argument("--all-metrics", action="store_true",
                    help="also score the region and stratified metrics wherever the scene has their mask files")
-    p.add_argument("--save-maps", action="store_true", help="also write each prediction as OUT/maps/<method>/ (submission layout)")
+    p.add_argument("--save-maps", action="store_true",
+                   help="also write each prediction as OUT/maps/<method>/ (submission layout)")
+    p.add_argument("--ci", action="store_true",
+                   help="also write 95%% bootstrap CIs: OUT/ci.csv and OUT/table_ci_per_scene.{md,tex,csv}")
+    p.add_argument("--ci-block", type=int, default=16, metavar="PX",
+                   help="tile size of the block bootstrap (1 = independent pixels; errors of neighbours correlate)")
+    p.add_argument("--ci-resamples", type=int, default=1000, metavar="N", help="bootstrap resamples")
     p.add_argument("--figures", action="store_true", help="also draw per-scene figures into OUT/figures/")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
@@ -57,6 +63,12 @@ def run(args: argparse.Namespace) -> int:
 
         hooks.append(scene_figure_hook(args.out / "figures"))
 
+    if args.ci:
+        from lfbench.stats import ErrorCollector
+
+        collector = ErrorCollector(rules)
+        hooks.append(collector)
+
     def on_prediction(method, scene, pred):
         for hook in hooks:
             hook(method, scene, pred)
@@ -71,6 +83,15 @@ def run(args: argparse.Namespace) -> int:
     results.meta["data_root"] = str(args.data)
     results.write(args.out)
     write_tables(results, args.out)
+    if args.ci:
+        from lfbench.atomic import write_text
+        from lfbench.stats import ci_records, format_ci_table
+
+        long = ci_records(results, collector.errors, n=args.ci_resamples, block=args.ci_block,
+                          progress=not args.no_progress)
+        write_text(args.out / "ci.csv", long.to_csv(index=False))
+        for fmt, ext in (("markdown", "md"), ("latex", "tex"), ("csv", "csv")):
+            write_text(args.out / f"table_ci_per_scene.{ext}", render(format_ci_table(long), fmt))
     print(render(per_scene_table(results), "markdown"), end="")
     print(f"\nwrote {args.out / 'results.json'} and {args.out / 'results.csv'}")
     return 0
