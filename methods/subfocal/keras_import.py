@@ -1,0 +1,244 @@
+"""Import the authors' Keras checkpoints (``model.save`` HDF5) into :class:`SubFocalNet`.
+
+The file's ``model_weights/`` group lists its layers in the attribute ``layer_names``; the shared
+feature extractor is a nested model group holding its own layers. Keras names layers with
+per-process creation counters (``conv2d_7``, ``batch_normalization_12``), so names differ between
+files: layers are matched by creation order (the counter suffix) and checked by shape.
+
+Keras kernel layouts: Conv2D (kh, kw, in, out) -> (out, in, kh, kw); Conv3D (kd, kh, kw, in, out)
+-> (out, in, kd, kh, kw); Dense-like 1x1x1 Conv3D (1, 1, 1, in, out) -> Linear (out, in).
+BatchNorm gamma, beta, moving_mean, moving_variance -> weight, bias, running_mean, running_var
+(eps 1e-3 and momentum 0.99 <-> 0.01 are fixed by the network's construction).
+"""
+
+from __future__ import annotations
+
+import io
+import re
+from pathlib import Path
+
+import numpy as np
+import torch
+from lfbench_methods.subfocal.network import SubFocalNet, count_trainable
+from torch import nn
+
+from lfbench.atomic import write_bytes
+from lfbench.errors import DataError
+
+_SUFFIX = re.compile(r"^(?P<base>.*?)(?:_(?P<n>\d+))?$")
+
+
+def _order_key(name: str) -> int:
+    """Creation order from a Keras layer name: conv2d -> 0, conv2d_7 -> 7."""
+    m = _SUFFIX.match(name)
+    return int(m.group("n")) if m and m.group("n") else 0
+
+
+def _base(name: str) -> str:
+    m = _SUFFIX.match(name)
+    return m.group("base") if m else name
+
+
+def _decode(v) -> str:
+    return v.decode() if isinstance(v, bytes) else str(v)
+
+
+def _layer_arrays(group, path: Path) -> dict[str, np.ndarray]:
+    """{'kernel': ..., 'gamma': ...} of one layer group (weights sit in a sub-group of the same name)."""
+    import h5py
+
+    out: dict[str, np.ndarray] = {}
+
+    def visit(name: str, obj) -> None:
+        if isinstance(obj, h5py.Dataset):
+            key = name.rsplit("/", 1)[-1].split(":")[0]
+            out[key] = np.asarray(obj[()], dtype=np.float32)
+
+    group.visititems(visit)
+    return out
+
+
+def read_keras_layers(path: Path) -> tuple[list[tuple[str, dict]], list[tuple[str, dict]]]:
+    """Read an HDF5 checkpoint: (top-level layers, nested-model layers), each a list of
+    (name, {weight name: array}) for layers that hold weights, in file order of ``layer_names``."""
+    import h5py
+
+    try:
+        f = h5py.File(path, "r")
+    except FileNotFoundError:
+        raise DataError("checkpoint not found", path) from None
+    except OSError as exc:
+        raise DataError(f"not an HDF5 file ({str(exc).splitlines()[0]})", path) from None
+    with f:
+        root = f["model_weights"] if "model_weights" in f else f
+        if "layer_names" not in root.attrs:
+            raise DataError("not a Keras checkpoint (no model_weights/ with a layer_names attribute)", path)
+        top: list[tuple[str, dict]] = []
+        nested: list[tuple[str, dict]] = []
+        for raw in root.attrs["layer_names"]:
+            name = _decode(raw)
+            if name not in root:  # a layer without weights may have no group
+                continue
+            g = root[name]
+            if any(k != name and isinstance(g[k], h5py.Group) for k in g.keys()):  # a nested model
+                if nested:
+                    raise DataError("Keras checkpoint has more than one nested model; not a SubFocal model", path)
+                nested = [(k, _layer_arrays(g[k], path)) for k in g.keys()]
+                continue
+            arrays = _layer_arrays(g, path)
+            if arrays:
+                top.append((name, arrays))
+        return top, nested
+
+
+def _by_kind(layers: list[tuple[str, dict]], kind: str) -> list[tuple[str, dict]]:
+    """Layers whose base name is ``kind`` (conv2d, conv3d, batch_normalization), in creation order."""
+    chosen = [(n, a) for n, a in layers if _base(n) == kind or n == kind]
+    return sorted(chosen, key=lambda item: _order_key(item[0]))
+
+
+def _keras_extractor_order(net: SubFocalNet) -> tuple[list[nn.Conv2d], list[nn.BatchNorm2d]]:
+    """The extractor's conv and BN layers in the order the Keras code creates them."""
+    ex = net.extractor
+    convbns = [ex.stem1, ex.stem2]
+    for layer in (ex.layer1, ex.layer2, ex.layer3, ex.layer4):
+        for block in layer.blocks:
+            if block.downsample is not None:
+                convbns.append(block.downsample)
+            convbns += [block.conv1, block.conv2]
+    convbns += [branch.convbn for branch in ex.spp]  # pool 2, 4, 8, 16
+    convbns.append(ex.last)
+    return [c.conv for c in convbns] + [ex.out], [c.bn for c in convbns]
+
+
+def _keras_volume_order(net: SubFocalNet) -> tuple[list[nn.Conv3d], list[nn.BatchNorm3d]]:
+    ag = net.aggregation
+    cbs = [ag.dres0a, ag.dres0b, ag.dres1a, ag.dres1b, ag.dres4a, ag.dres4b, ag.classify]
+    return [c.conv for c in cbs] + [ag.out], [c.bn for c in cbs]
+
+
+def _put(param: torch.Tensor, value: np.ndarray, what: str, path: Path) -> None:
+    if tuple(param.shape) != value.shape:
+        raise DataError(f"{what}: shape {value.shape} does not fit the network's {tuple(param.shape)}", path)
+    with torch.no_grad():
+        param.copy_(torch.from_numpy(np.ascontiguousarray(value)))
+
+
+def _load_convs(convs: list[nn.Module], layers: list[tuple[str, dict]], path: Path, where: str) -> None:
+    if len(layers) != len(convs):
+        raise DataError(f"{where}: {len(layers)} convolution layers, the network has {len(convs)}", path)
+    for module, (name, arrays) in zip(convs, layers, strict=True):
+        if "kernel" not in arrays:
+            raise DataError(f"layer {name!r} has no kernel", path)
+        k = arrays["kernel"]
+        k = np.transpose(k, (k.ndim - 1, k.ndim - 2, *range(k.ndim - 2)))  # (..., in, out) -> (out, in, ...)
+        if isinstance(module, nn.Linear):
+            k = k.reshape(k.shape[0], k.shape[1])
+        _put(module.weight, k, f"layer {name!r} kernel", path)
+        if module.bias is not None:
+            if "bias" not in arrays:
+                raise DataError(f"layer {name!r} has no bias", path)
+            _put(module.bias, arrays["bias"], f"layer {name!r} bias", path)
+        elif "bias" in arrays:
+            raise DataError(f"layer {name!r} has a bias the network does not have", path)
+
+
+def _load_bns(bns: list[nn.Module], layers: list[tuple[str, dict]], path: Path, where: str) -> None:
+    if len(layers) != len(bns):
+        raise DataError(f"{where}: {len(layers)} BatchNormalization layers, the network has {len(bns)}", path)
+    for module, (name, arrays) in zip(bns, layers, strict=True):
+        for keras_key, attr in (("gamma", "weight"), ("beta", "bias"), ("moving_mean", "running_mean"),
+                                ("moving_variance", "running_var")):
+            if keras_key not in arrays:
+                raise DataError(f"layer {name!r} has no {keras_key}", path)
+            _put(getattr(module, attr), arrays[keras_key], f"layer {name!r} {keras_key}", path)
+
+
+def infer_config(top: list[tuple[str, dict]], nested: list[tuple[str, dict]], path: Path,
+                 interval: float, d_min: float, d_max: float) -> dict:
+    """Network configuration from the weights' shapes (width, attention, angular); the disparity
+    grid is not stored in the weights and comes from the arguments."""
+    convs3d = _by_kind(top, "conv3d")
+    agg = [a for _, a in convs3d if a["kernel"].shape[:3] == (3, 3, 3)]
+    att = [a for _, a in convs3d if a["kernel"].shape[:3] == (1, 1, 1)]
+    if not nested or len(agg) != 8:
+        raise DataError("not a SubFocal/LFattNet Keras checkpoint (expected a nested feature extractor and "
+                        f"eight 3x3x3 Conv3D layers, found {len(agg)})", path)
+    cin, width = agg[0]["kernel"].shape[3:]
+    angular = int(round(np.sqrt(cin / 4)))
+    if angular * angular * 4 != cin:
+        raise DataError(f"first Conv3D has {cin} input channels, not 4 x a square number of views", path)
+    return {"d_min": d_min, "d_max": d_max, "interval": interval, "interpolation": "bilinear",
+            "width": int(width), "attention": bool(att), "angular": angular}
+
+
+def load_keras_checkpoint(path: str | Path, interval: float = 0.5, d_min: float = -4.0,
+                          d_max: float = 4.0) -> SubFocalNet:
+    """A SubFocalNet (eval mode) holding the weights of a Keras HDF5 checkpoint.
+
+    interval, d_min, d_max: the disparity grid the model was trained with (SubFocal: 0.5,
+    LFattNet: 1); it is not recorded in the weights. DataError for anything else than such a file.
+    """
+    path = Path(path)
+    top, nested = read_keras_layers(path)
+    config = infer_config(top, nested, path, interval, d_min, d_max)
+    net = SubFocalNet(**config)
+    convs, bns = _keras_extractor_order(net)
+    _load_convs(convs, _by_kind(nested, "conv2d"), path, "feature extractor")
+    _load_bns(bns, _by_kind(nested, "batch_normalization"), path, "feature extractor")
+    convs3d = _by_kind(top, "conv3d")
+    att = [item for item in convs3d if item[1]["kernel"].shape[:3] == (1, 1, 1)]
+    agg = [item for item in convs3d if item[1]["kernel"].shape[:3] != (1, 1, 1)]
+    if net.attention is not None:
+        _load_convs([net.attention.fc1, net.attention.fc2], att, path, "channel attention")
+    vconvs, vbns = _keras_volume_order(net)
+    _load_convs(vconvs, agg, path, "3D aggregation")
+    _load_bns(vbns, _by_kind(top, "batch_normalization"), path, "3D aggregation")
+    extra = {_base(n) for n, _ in top} - {"conv3d", "batch_normalization"}
+    if extra:
+        raise DataError(f"unexpected weight layers {sorted(extra)}; not a SubFocal/LFattNet checkpoint", path)
+    return net.eval()
+
+
+def save_checkpoint(net: SubFocalNet, out: str | Path, source: str) -> None:
+    """Write ``{"state_dict", "config", "source"}`` atomically with torch.save."""
+    buf = io.BytesIO()
+    torch.save({"state_dict": net.state_dict(), "config": net.config(), "source": source}, buf)
+    write_bytes(out, buf.getvalue())
+
+
+def load_checkpoint(path: str | Path) -> tuple[dict, dict, str]:
+    """(state_dict, config, source) of a checkpoint written by :func:`save_checkpoint` or training
+    (``torch.load(weights_only=True)``); DataError naming the file otherwise."""
+    path = Path(path)
+    if not path.is_file():
+        raise DataError("checkpoint not found", path)
+    try:
+        ckpt = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # pickle, zip and format errors all mean: not our checkpoint
+        first = (str(exc).splitlines() or [type(exc).__name__])[0]
+        raise DataError(f"not a torch checkpoint ({type(exc).__name__}: {first[:160]})", path) from None
+    if not isinstance(ckpt, dict) or not isinstance(ckpt.get("state_dict"), dict) \
+            or not isinstance(ckpt.get("config"), dict):
+        raise DataError("not a SubFocal checkpoint (expected a dict with 'state_dict' and 'config')", path)
+    return ckpt["state_dict"], ckpt["config"], str(ckpt.get("source", ""))
+
+
+def build_from_checkpoint(path: str | Path, **overrides) -> SubFocalNet:
+    """A SubFocalNet (eval mode) from a torch checkpoint; ``overrides`` replace config entries that
+    do not change the weights' shapes (the caller checks conflicts)."""
+    state, config, _ = load_checkpoint(path)
+    config = {**config, **overrides}
+    try:
+        net = SubFocalNet(**config)
+    except (TypeError, ValueError) as exc:
+        raise DataError(f"checkpoint config {config} is not valid: {exc}", path) from None
+    try:
+        net.load_state_dict(state)
+    except RuntimeError as exc:
+        raise DataError(f"weights do not fit the stored config: {str(exc).splitlines()[0]}", path) from None
+    return net.eval()
+
+
+__all__ = ["load_keras_checkpoint", "read_keras_layers", "save_checkpoint", "load_checkpoint",
+           "build_from_checkpoint", "count_trainable"]

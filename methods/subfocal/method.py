@@ -1,0 +1,237 @@
+"""Registered methods ``subfocal`` (Chao et al., TCI 2023) and ``lfattnet`` (its baseline, interval 1).
+
+Weights come from a checkpoint (``{"state_dict", "config", ...}``, e.g. from ``lfbench train`` or
+``lfbench convert-keras``); its stored config decides the architecture, and an explicitly given
+parameter that contradicts it is a SpecError. Without ``weights`` the shipped default checkpoint
+(methods/weights/<name>_small.pt) is used; when it is absent the method is unavailable (never
+random weights).
+"""
+
+from __future__ import annotations
+
+import os
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+import torch
+
+from lfbench.errors import DataError, SpecError
+from lfbench.method import Method, Prediction
+from lfbench.registry import register_method
+from lfbench.scene import LightField
+from lfbench.shift import INTERPOLATIONS, disparity_grid
+
+WEIGHTS_DIR = Path(__file__).resolve().parent.parent / "weights"
+PAPER_WIDTH = 150
+_ARCH_KEYS = ("d_min", "d_max", "interval", "interpolation", "width", "attention")
+
+
+@contextmanager
+def _threads(n: int):
+    """Run torch with ``n`` intra-op threads (0 = all cores), restoring the previous setting."""
+    before = torch.get_num_threads()
+    torch.set_num_threads(n if n > 0 else (os.cpu_count() or 1))
+    try:
+        yield
+    finally:
+        torch.set_num_threads(before)
+
+
+class _SubFocalBase(Method):
+    """Shared implementation of ``subfocal`` and ``lfattnet`` (see their docstrings)."""
+
+    DEFAULT_WEIGHTS: Path = WEIGHTS_DIR / "subfocal_small.pt"
+    DEFAULT_INTERVAL = 0.5
+
+    def _setup(self, **values) -> None:
+        defaults = {"weights": None, "interval": self.DEFAULT_INTERVAL, "interpolation": "bilinear", "d_min": -4.0,
+                    "d_max": 4.0, "width": None, "attention": True, "tile": 0, "precision": "fp32", "threads": 0,
+                    "max_memory_gb": 4.0}
+        Method.__init__(self, **{k: v for k, v in values.items() if v != defaults[k]})
+        if values["interpolation"] not in INTERPOLATIONS:
+            raise ValueError(f"interpolation must be one of {', '.join(INTERPOLATIONS)}, "
+                             f"got {values['interpolation']!r}")
+        if values["precision"] not in ("fp32", "bf16"):
+            raise ValueError(f"precision must be fp32 or bf16, got {values['precision']!r}")
+        if values["width"] is not None and values["width"] < 1:
+            raise ValueError(f"width must be >= 1, got {values['width']}")
+        if values["tile"] < 0 or values["threads"] < 0 or values["max_memory_gb"] <= 0:
+            raise ValueError("tile and threads must be >= 0 and max_memory_gb > 0")
+        disparity_grid(values["d_min"], values["d_max"], values["interval"])  # ValueError if not a grid
+        self.values = values
+        self._net = None
+
+    # -- configuration ----------------------------------------------------------------------
+
+    @property
+    def weights_path(self) -> Path:
+        w = self.values["weights"]
+        return Path(w).expanduser() if w is not None else self.DEFAULT_WEIGHTS
+
+    def _explicit(self) -> dict:
+        """Parameters the user gave (the registry records them in ``params``)."""
+        return {k: self.values[k] for k in self.params if k in _ARCH_KEYS}
+
+    def _configured(self) -> dict:
+        """The architecture from the parameters alone (width: the paper's 150 unless given)."""
+        v = self.values
+        return {"d_min": float(v["d_min"]), "d_max": float(v["d_max"]), "interval": float(v["interval"]),
+                "interpolation": v["interpolation"], "width": int(v["width"] or PAPER_WIDTH),
+                "attention": bool(v["attention"]), "angular": 9}
+
+    def _conflicts(self, config: dict) -> list[str]:
+        """Explicit parameters that contradict a checkpoint's config, as ``key=ours (checkpoint: theirs)``."""
+        out = []
+        for key, value in self._explicit().items():
+            stored = config.get(key)
+            if isinstance(value, float) and isinstance(stored, (int, float)) and not isinstance(stored, bool):
+                same = abs(float(stored) - value) < 1e-9
+            else:
+                same = stored == value
+            if not same:
+                out.append(f"{key}={value} (checkpoint: {stored})")
+        return out
+
+    def _checkpoint_config(self, config: dict) -> dict:
+        """The checkpoint's config, after checking explicit parameters against it (SpecError)."""
+        conflicts = self._conflicts(config)
+        if conflicts:
+            raise SpecError(f"{self.name or 'subfocal'}: {', '.join(conflicts)} conflicts with the checkpoint "
+                            f"{self.weights_path}; leave it out to use the checkpoint's")
+        return config
+
+    def _missing_reason(self) -> str | None:
+        p = self.weights_path
+        if p.is_file():
+            return None
+        if self.values["weights"] is None:
+            return (f"default weights {p} are not installed; give weights=CHECKPOINT.pt "
+                    "(from lfbench train or lfbench convert-keras)")
+        return f"weights file {p} not found"
+
+    def load_network(self):
+        """The SubFocalNet with the checkpoint's weights (eval mode), loaded once."""
+        if self._net is None:
+            from lfbench_methods.subfocal.keras_import import build_from_checkpoint
+
+            reason = self._missing_reason()
+            if reason:
+                raise DataError(reason)
+            net = build_from_checkpoint(self.weights_path)
+            self._checkpoint_config(net.config())
+            self._net = net
+        return self._net
+
+    def describe_variant(self) -> dict:
+        """Facts about the configured variant: trainable parameters, disparity grid, weights."""
+        from lfbench_methods.subfocal.keras_import import load_checkpoint
+        from lfbench_methods.subfocal.network import SubFocalNet, count_trainable
+
+        weights = str(self.weights_path)
+        config = self._configured()
+        if self.weights_path.is_file():
+            _, stored, source = load_checkpoint(self.weights_path)
+            if self.values["weights"] is not None:
+                config = self._checkpoint_config(stored)
+                weights += f" (architecture from the checkpoint{'; source ' + source if source else ''})"
+            elif self._conflicts(stored):
+                weights += f" (default weights do not fit: {', '.join(self._conflicts(stored))})"
+            else:
+                config = stored
+                weights += f" (default; architecture from the checkpoint{'; source ' + source if source else ''})"
+        else:
+            weights += " (missing; predictions need weights=CHECKPOINT.pt)"
+        net = SubFocalNet(**config)
+        d = net.disparities
+        return {"trainable_parameters": count_trainable(net), "disparities": d.numel(),
+                "disparity_grid": f"[{config['d_min']:g}, {config['d_max']:g}] step {config['interval']:g}",
+                "interpolation": config["interpolation"], "width": config["width"],
+                "attention": config["attention"], "weights": weights}
+
+    # -- prediction -------------------------------------------------------------------------
+
+    def available_for(self, lf: LightField) -> str | None:
+        reason = self._missing_reason()
+        if reason:
+            return reason
+        v, u = lf.angular_size
+        if (v, u) != (9, 9):
+            return f"needs a 9x9 light field, got {v}x{u} views"
+        return None
+
+    def predict(self, lf: LightField) -> Prediction:
+        from lfbench_methods.subfocal.inference import infer
+
+        v, u = lf.angular_size
+        if (v, u) != (9, 9):
+            raise DataError(f"{self.label}: needs a 9x9 light field, got {v}x{u} views ({lf.name})")
+        net = self.load_network()
+        views = lf.gray_views()
+        x = torch.from_numpy(np.ascontiguousarray(views.reshape(v * u, *views.shape[2:]), dtype=np.float32))
+        with _threads(self.values["threads"]):
+            out = infer(net, x, tile=self.values["tile"], max_memory_gb=self.values["max_memory_gb"],
+                        precision=self.values["precision"])
+        return Prediction(disparity=out.disparity[0].numpy(), distribution=out.probability[0].numpy(),
+                          disparity_values=out.disparities.numpy(), uncertainty=out.uncertainty[0].numpy())
+
+
+@register_method("subfocal")
+class SubFocal(_SubFocalBase):
+    """SubFocal (Chao et al., TCI 2023): sub-pixel cost volume, channel attention, 3D aggregation.
+
+    The uncertainty output is the standard deviation (px) of the predicted disparity distribution.
+    weights: checkpoint .pt (lfbench train / convert-keras); default: the shipped methods/weights/subfocal_small.pt
+    interval: disparity step of the cost volume in px (paper 0.5; 1, 0.25, 0.1 or any)
+    interpolation: sub-pixel shift of the features: nearest, bilinear (paper) or phase (Fourier)
+    d_min: smallest candidate disparity in px
+    d_max: largest candidate disparity in px
+    width: channels of the 3D aggregation (paper 150); default: the checkpoint's
+    attention: channel attention over the views on/off
+    tile: inference tile size in px (0 = from max_memory_gb; exact, with a 9 px halo)
+    precision: fp32, or bf16 autocast for the 3D aggregation
+    threads: torch CPU threads (0 = all cores)
+    max_memory_gb: memory budget of inference in GB (decides the tile size when tile=0)
+    """
+
+    DEFAULT_WEIGHTS = WEIGHTS_DIR / "subfocal_small.pt"
+    DEFAULT_INTERVAL = 0.5
+
+    def __init__(self, weights: Path | None = None, interval: float = 0.5,
+                 interpolation: Literal["nearest", "bilinear", "phase"] = "bilinear", d_min: float = -4.0,
+                 d_max: float = 4.0, width: int | None = None, attention: bool = True, tile: int = 0,
+                 precision: Literal["fp32", "bf16"] = "fp32", threads: int = 0, max_memory_gb: float = 4.0) -> None:
+        self._setup(weights=weights, interval=interval, interpolation=interpolation, d_min=d_min, d_max=d_max,
+                    width=width, attention=attention, tile=tile, precision=precision, threads=threads,
+                    max_memory_gb=max_memory_gb)
+
+
+@register_method("lfattnet")
+class LFAttNet(_SubFocalBase):
+    """LFattNet (Tsai et al., AAAI 2020), SubFocal's baseline: the same network at integer disparities.
+
+    The uncertainty output is the standard deviation (px) of the predicted disparity distribution.
+    weights: checkpoint .pt (lfbench train / convert-keras --interval 1); default: methods/weights/lfattnet_small.pt
+    interval: disparity step of the cost volume in px (LFattNet 1)
+    interpolation: sub-pixel shift of the features: nearest, bilinear or phase (Fourier)
+    d_min: smallest candidate disparity in px
+    d_max: largest candidate disparity in px
+    width: channels of the 3D aggregation (paper 150); default: the checkpoint's
+    attention: channel attention over the views on/off
+    tile: inference tile size in px (0 = from max_memory_gb; exact, with a 9 px halo)
+    precision: fp32, or bf16 autocast for the 3D aggregation
+    threads: torch CPU threads (0 = all cores)
+    max_memory_gb: memory budget of inference in GB (decides the tile size when tile=0)
+    """
+
+    DEFAULT_WEIGHTS = WEIGHTS_DIR / "lfattnet_small.pt"
+    DEFAULT_INTERVAL = 1.0
+
+    def __init__(self, weights: Path | None = None, interval: float = 1.0,
+                 interpolation: Literal["nearest", "bilinear", "phase"] = "bilinear", d_min: float = -4.0,
+                 d_max: float = 4.0, width: int | None = None, attention: bool = True, tile: int = 0,
+                 precision: Literal["fp32", "bf16"] = "fp32", threads: int = 0, max_memory_gb: float = 4.0) -> None:
+        self._setup(weights=weights, interval=interval, interpolation=interpolation, d_min=d_min, d_max=d_max,
+                    width=width, attention=attention, tile=tile, precision=precision, threads=threads,
+                    max_memory_gb=max_memory_gb)

@@ -1,0 +1,312 @@
+"""The SubFocal network (Chao et al., TCI 2023) in PyTorch, faithful to the authors' Keras code.
+
+Shapes and units: views (B, N, H, W) float32 gray in [0, 1] with channel k = view k (angular row
+k // 9, column k % 9); features (B, N, 4, H, W); cost volume (B, 4N, D, H, W) with channel
+4 * view + c (view-major, as the authors concatenate); cost and probability (B, D, H, W);
+disparity (B, H, W) in px per view step.
+
+Conventions taken from Keras: BatchNorm eps 1e-3 and momentum 0.99 (PyTorch momentum 0.01),
+glorot_uniform kernels, zero biases, 'same' average pooling that leaves padded cells out of the
+mean, bilinear upsampling with align_corners=True. The shared feature extractor is applied to
+every view; in training mode its BatchNorm layers normalise each view with the statistics of
+that view's batch (Keras calls the shared model once per view) and update the running
+statistics once per view, view 0 first.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from lfbench.shift import INTERPOLATIONS, angular_offsets, disparity_grid, shift_views
+
+BN_EPS = 1e-3
+BN_MOMENTUM = 0.01  # Keras momentum 0.99
+FEATURES = 4  # channels per view after the extractor
+SPP_POOLS = (2, 4, 8, 16)
+
+
+class ViewBatchNorm2d(nn.BatchNorm2d):
+    """BatchNorm2d whose training statistics are taken per view group.
+
+    The input (G * B, C, H, W) holds G view groups of B samples each (group-major). In training
+    every group is normalised with its own mean and biased variance, and the running statistics
+    receive G successive exponential updates (unbiased variance), group 0 first, in closed form.
+    In eval mode (or with one group) this is a plain BatchNorm2d.
+    """
+
+    def forward(self, x: torch.Tensor, groups: int = 1) -> torch.Tensor:  # type: ignore[override]
+        if not self.training or groups <= 1:
+            return super().forward(x)
+        gb, c, h, w = x.shape
+        if gb % groups:
+            raise ValueError(f"batch {gb} is not a multiple of {groups} view groups")
+        xg = x.reshape(groups, gb // groups, c, h, w)
+        var, mean = torch.var_mean(xg, dim=(1, 3, 4), unbiased=False)  # (G, C)
+        out = (xg - mean[:, None, :, None, None]) * torch.rsqrt(var + self.eps)[:, None, :, None, None]
+        out = out * self.weight[None, None, :, None, None] + self.bias[None, None, :, None, None]
+        if self.track_running_stats and self.running_mean is not None:
+            with torch.no_grad():
+                n = xg[0].numel() // c
+                unbiased = var * (n / max(n - 1, 1))
+                m = self.momentum if self.momentum is not None else 0.1
+                # m_G = (1-m)^G m_0 + sum_g m (1-m)^(G-1-g) s_g: the sequential updates, group 0 first.
+                decay = (1.0 - m) ** torch.arange(groups - 1, -1, -1, device=x.device, dtype=var.dtype)
+                self.running_mean.mul_((1.0 - m) ** groups).add_((m * decay[:, None] * mean).sum(0))
+                self.running_var.mul_((1.0 - m) ** groups).add_((m * decay[:, None] * unbiased).sum(0))
+                self.num_batches_tracked.add_(groups)
+        return out.reshape(gb, c, h, w)
+
+
+class ConvBN2d(nn.Module):
+    """Keras ``convbn``: Conv2D 'same' without bias, then BatchNorm."""
+
+    def __init__(self, cin: int, cout: int, kernel: int, dilation: int = 1) -> None:
+        super().__init__()
+        self.conv = nn.Conv2d(cin, cout, kernel, padding=dilation * (kernel // 2), dilation=dilation, bias=False)
+        self.bn = ViewBatchNorm2d(cout, eps=BN_EPS, momentum=BN_MOMENTUM)
+
+    def forward(self, x: torch.Tensor, groups: int = 1) -> torch.Tensor:
+        return self.bn(self.conv(x), groups)
+
+
+class BasicBlock2d(nn.Module):
+    """convbn3x3 -> ReLU -> convbn3x3, plus the (optionally 1x1-projected) input; no ReLU after."""
+
+    def __init__(self, cin: int, planes: int, dilation: int, project: bool) -> None:
+        super().__init__()
+        # Keras creates the projection first (conv, BN), then the block's two convbn layers.
+        self.downsample = ConvBN2d(cin, planes, 1) if project else None
+        self.conv1 = ConvBN2d(cin, planes, 3, dilation)
+        self.conv2 = ConvBN2d(planes, planes, 3, dilation)
+
+    def forward(self, x: torch.Tensor, groups: int = 1) -> torch.Tensor:
+        skip = x if self.downsample is None else self.downsample(x, groups)
+        return self.conv2(F.relu(self.conv1(x, groups)), groups) + skip
+
+
+class ResLayer2d(nn.Module):
+    """``_make_layer``: blocks of ``planes`` channels; the first projects its skip when planes != 4."""
+
+    def __init__(self, cin: int, planes: int, blocks: int, dilation: int = 1) -> None:
+        super().__init__()
+        self.blocks = nn.ModuleList(
+            BasicBlock2d(cin if i == 0 else planes, planes, dilation, project=(i == 0 and planes != FEATURES))
+            for i in range(blocks))
+
+    def forward(self, x: torch.Tensor, groups: int = 1) -> torch.Tensor:
+        for block in self.blocks:
+            x = block(x, groups)
+        return x
+
+
+def keras_avg_pool_same(x: torch.Tensor, p: int) -> torch.Tensor:
+    """Keras AveragePooling2D(p, p, 'same'): ceil(n/p) outputs, padding split floor(total/2) before,
+    padded cells left out of the mean. (M, C, H, W) -> (M, C, ceil(H/p), ceil(W/p))."""
+    h, w = x.shape[-2:]
+    ph, pw = math.ceil(h / p) * p - h, math.ceil(w / p) * p - w
+    if ph == 0 and pw == 0:
+        return F.avg_pool2d(x, p, p)
+    pad = (pw // 2, pw - pw // 2, ph // 2, ph - ph // 2)
+    summed = F.avg_pool2d(F.pad(x, pad), p, p)
+    ones = torch.ones((1, 1, h, w), dtype=x.dtype, device=x.device)
+    frac = F.avg_pool2d(F.pad(ones, pad), p, p)  # share of real cells in each window
+    return summed / frac
+
+
+class SPPBranch(nn.Module):
+    """Average pool p ('same') -> convbn 1x1 to 4 ch -> ReLU -> bilinear upsample (align_corners)."""
+
+    def __init__(self, pool: int, cin: int = 16) -> None:
+        super().__init__()
+        self.pool = pool
+        self.convbn = ConvBN2d(cin, FEATURES, 1)
+
+    def forward(self, x: torch.Tensor, groups: int = 1) -> torch.Tensor:
+        y = F.relu(self.convbn(keras_avg_pool_same(x, self.pool), groups))
+        return F.interpolate(y, size=x.shape[-2:], mode="bilinear", align_corners=True)
+
+
+class FeatureExtractor(nn.Module):
+    """The shared per-view extractor: (M, 1, H, W) -> (M, 4, H, W)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.stem1 = ConvBN2d(1, 4, 3)
+        self.stem2 = ConvBN2d(4, 4, 3)
+        self.layer1 = ResLayer2d(4, 4, 2)
+        self.layer2 = ResLayer2d(4, 8, 8)
+        self.layer3 = ResLayer2d(8, 16, 2)
+        self.layer4 = ResLayer2d(16, 16, 2, dilation=2)
+        self.spp = nn.ModuleList(SPPBranch(p) for p in SPP_POOLS)  # created pool 2 first, as in Keras
+        self.last = ConvBN2d(8 + 16 + FEATURES * len(SPP_POOLS), 16, 3)
+        self.out = nn.Conv2d(16, FEATURES, 1, bias=False)
+
+    def forward(self, x: torch.Tensor, groups: int = 1) -> torch.Tensor:
+        x = F.relu(self.stem2(F.relu(self.stem1(x, groups)), groups))
+        l2 = self.layer2(self.layer1(x, groups), groups)
+        l4 = self.layer4(self.layer3(l2, groups), groups)
+        branches = [b(l4, groups) for b in self.spp]
+        x = torch.cat([l2, l4, *branches[::-1]], dim=1)  # [layer2, layer4, pool16, pool8, pool4, pool2]
+        return self.out(F.relu(self.last(x, groups)))
+
+
+def attention_index(angular: int = 9) -> torch.Tensor:
+    """(angular^2,) index into the attention vector for each view.
+
+    The k = (a+1)(a+2)/2 values (a = angular // 2; 15 for 9x9) fill the upper triangle of a
+    symmetric (a+1)x(a+1) matrix row-major; it is reflect-padded to angular x angular:
+    A[v, u] = A5[f(v), f(u)], f(i) = min(i, angular - 1 - i).
+    """
+    a = angular // 2 + 1
+    tri = {}
+    for i in range(a):
+        for j in range(i, a):
+            tri[(i, j)] = len(tri)
+    f = [min(i, angular - 1 - i) for i in range(angular)]
+    idx = [tri[(min(f[v], f[u]), max(f[v], f[u]))] for v in range(angular) for u in range(angular)]
+    return torch.tensor(idx, dtype=torch.long)
+
+
+class ChannelAttention(nn.Module):
+    """Per-view weights from the cost volume's channel means: (B, 4N) -> (B, 4N) in (0, 1)."""
+
+    def __init__(self, angular: int = 9, hidden: int = 170) -> None:
+        super().__init__()
+        n = angular * angular
+        a = angular // 2 + 1
+        self.fc1 = nn.Linear(FEATURES * n, hidden)
+        self.fc2 = nn.Linear(hidden, a * (a + 1) // 2)
+        self.register_buffer("index", attention_index(angular).repeat_interleave(FEATURES), persistent=False)
+
+    def forward(self, channel_mean: torch.Tensor) -> torch.Tensor:
+        w = torch.sigmoid(self.fc2(F.relu(self.fc1(channel_mean))))
+        return w[:, self.index]
+
+
+class ConvBN3d(nn.Module):
+    """Conv3D 3x3x3 'same' (zero padding along D too), no bias, then BatchNorm."""
+
+    def __init__(self, cin: int, cout: int) -> None:
+        super().__init__()
+        self.conv = nn.Conv3d(cin, cout, 3, padding=1, bias=False)
+        self.bn = nn.BatchNorm3d(cout, eps=BN_EPS, momentum=BN_MOMENTUM)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.bn(self.conv(x))
+
+
+class Aggregation(nn.Module):
+    """The 3D aggregation ``basic``: (B, 4N, D, H, W) -> raw cost (B, D, H, W).
+
+    Nine 3x3x3 convolutions in a row, so a pixel depends on inputs up to 9 px away.
+    """
+
+    RECEPTIVE_RADIUS = 9
+
+    def __init__(self, cin: int, width: int) -> None:
+        super().__init__()
+        self.dres0a, self.dres0b = ConvBN3d(cin, width), ConvBN3d(width, width)
+        self.dres1a, self.dres1b = ConvBN3d(width, width), ConvBN3d(width, width)
+        self.dres4a, self.dres4b = ConvBN3d(width, width), ConvBN3d(width, width)
+        self.classify = ConvBN3d(width, width)
+        self.out = nn.Conv3d(width, 1, 3, padding=1, bias=False)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        x = F.relu(self.dres0b(F.relu(self.dres0a(x))))
+        x = self.dres1b(F.relu(self.dres1a(x))) + x
+        x = self.dres4b(F.relu(self.dres4a(x))) + x
+        return self.out(F.relu(self.classify(x))).squeeze(1)
+
+
+class SubFocalNet(nn.Module):
+    """SubFocal / LFattNet: views (B, N, H, W) -> (disparity (B, H, W), probability (B, D, H, W)).
+
+    d_min, d_max, interval: the disparity grid (px per view step); interpolation: how features
+    are shifted by sub-pixel amounts (nearest, bilinear, phase); width: channels of the 3D
+    aggregation (150 in the paper); attention: the channel attention on/off; angular: views per
+    angular row (N = angular^2).
+    """
+
+    def __init__(self, d_min: float = -4.0, d_max: float = 4.0, interval: float = 0.5,
+                 interpolation: str = "bilinear", width: int = 150, attention: bool = True, angular: int = 9) -> None:
+        super().__init__()
+        if interpolation not in INTERPOLATIONS:
+            raise ValueError(f"interpolation must be one of {', '.join(INTERPOLATIONS)}, got {interpolation!r}")
+        if width < 1 or angular < 1 or angular % 2 == 0:
+            raise ValueError(f"need width >= 1 and an odd angular size, got width={width}, angular={angular}")
+        self._config = {"d_min": float(d_min), "d_max": float(d_max), "interval": float(interval),
+                        "interpolation": interpolation, "width": int(width), "attention": bool(attention),
+                        "angular": int(angular)}
+        self.interpolation = interpolation
+        self.angular = angular
+        self.register_buffer("disparities", disparity_grid(d_min, d_max, interval), persistent=False)
+        self.register_buffer("offsets", angular_offsets(angular), persistent=False)
+        channels = FEATURES * angular * angular
+        self.extractor = FeatureExtractor()
+        self.attention = ChannelAttention(angular) if attention else None
+        self.aggregation = Aggregation(channels, width)
+        self.reset_parameters()
+
+    def config(self) -> dict:
+        """The constructor keyword arguments (stored in checkpoints)."""
+        return dict(self._config)
+
+    def reset_parameters(self) -> None:
+        """Keras defaults: glorot_uniform kernels, zero biases, BN gamma 1, beta 0, mean 0, var 1."""
+        for m in self.modules():
+            if isinstance(m, (nn.Conv2d, nn.Conv3d, nn.Linear)):
+                nn.init.xavier_uniform_(m.weight)
+                if m.bias is not None:
+                    nn.init.zeros_(m.bias)
+            elif isinstance(m, nn.modules.batchnorm._BatchNorm):
+                m.reset_parameters()
+
+    # -- stages (used by forward and by tiled inference) --------------------------------------
+
+    def features(self, views: torch.Tensor, view_chunk: int = 0) -> torch.Tensor:
+        """(B, N, H, W) -> (B, N, 4, H, W). In eval mode ``view_chunk`` > 0 extracts that many
+        views at a time (identical results, less memory); training always batches all views."""
+        b, n, h, w = views.shape
+        if n != self.angular * self.angular:
+            raise ValueError(f"expected {self.angular ** 2} views, got {n}")
+        x = views.transpose(0, 1).reshape(n * b, 1, h, w)  # view-major: group g = view g
+        if self.training:
+            f = self.extractor(x, groups=n)
+        elif view_chunk and view_chunk * b < n * b:
+            f = torch.cat([self.extractor(c) for c in x.split(view_chunk * b)], dim=0)
+        else:
+            f = self.extractor(x)
+        return f.reshape(n, b, FEATURES, h, w).transpose(0, 1)
+
+    def cost_volume(self, features: torch.Tensor) -> torch.Tensor:
+        """(B, N, 4, H, W) -> (B, 4N, D, H, W): every view shifted by every candidate disparity."""
+        b, n, c, h, w = features.shape
+        vol = shift_views(features, self.offsets, self.disparities, self.interpolation)  # (B, D, N, C, H, W)
+        return vol.reshape(b, -1, n * c, h, w).transpose(1, 2)
+
+    def attention_weights(self, channel_mean: torch.Tensor) -> torch.Tensor | None:
+        """(B, 4N) mean of the cost volume over (D, H, W) -> (B, 4N) weights, or None without attention."""
+        return None if self.attention is None else self.attention(channel_mean)
+
+    def regress(self, cost: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Raw cost (B, D, H, W) -> (disparity (B, H, W), probability (B, D, H, W)); softmax of +cost."""
+        prob = torch.softmax(cost.float(), dim=1)
+        disp = (prob * self.disparities[None, :, None, None]).sum(dim=1)
+        return disp, prob
+
+    def forward(self, views: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """views (B, N, H, W) float32 in [0, 1] -> (disparity (B, H, W) px, probability (B, D, H, W))."""
+        vol = self.cost_volume(self.features(views))
+        weights = self.attention_weights(vol.mean(dim=(2, 3, 4)))
+        if weights is not None:
+            vol = vol * weights[:, :, None, None, None]
+        return self.regress(self.aggregation(vol))
+
+
+def count_trainable(module: nn.Module) -> int:
+    """Number of trainable parameters (BN running statistics excluded)."""
+    return sum(p.numel() for p in module.parameters() if p.requires_grad)
