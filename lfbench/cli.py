@@ -18,7 +18,10 @@ COMMANDS = {
     "predict": "lfbench.commands.predict",
     "methods": "lfbench.commands.methods",
     "info": "lfbench.commands.info",
+    "synth": "lfbench.commands.synth",
+    "convert-keras": "lfbench.commands.convert_keras",
     "regress": "lfbench.commands.regress",
+    "validate-submission": "lfbench.commands.validate_submission",
 }
 
 
