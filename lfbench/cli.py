@@ -18,6 +18,8 @@ COMMANDS = {
     "predict": "lfbench.commands.predict",
     "methods": "lfbench.commands.methods",
     "info": "lfbench.commands.info",
+    "demo": "lfbench.commands.demo",
+    "report": "lfbench.commands.report",
     "synth": "lfbench.commands.synth",
     "convert-keras": "lfbench.commands.convert_keras",
     "regress": "lfbench.commands.regress",

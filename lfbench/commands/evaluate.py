@@ -61,7 +61,7 @@ def run(args: argparse.Namespace) -> int:
     if args.figures:
         from lfbench.report.figures import scene_figure_hook
 
-        hooks.append(scene_figure_hook(args.out / "figures"))
+        hooks.append(scene_figure_hook(args.out / "figures", rules=rules))
 
     if args.ci:
         from lfbench.stats import ErrorCollector
