@@ -1,5 +1,6 @@
 """`lfbench report` and the paper's numbers: tables regenerated from results equal evaluate's, paper
-columns carry the published values, and bad input fails with one line."""
+columns carry the numbers of the paper folder the user names (lfbench ships no copy), and bad input
+fails with one line."""
 
 from __future__ import annotations
 
@@ -10,12 +11,15 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from conftest import require
 
 from lfbench.cli import main
 from lfbench.errors import DataError, SpecError
 from lfbench.report.paper import (
+    HCI_ROOT_ENV,
+    PAPER_DIR_ENV,
     average_with_paper,
-    bundled_dir,
+    find_paper_dir,
     load_paper,
     paper_column,
     per_scene_with_paper,
@@ -23,13 +27,70 @@ from lfbench.report.paper import (
 from lfbench.report.tables import average_table, per_scene_table
 from lfbench.results import Record, Results
 
+ROOT = Path(__file__).resolve().parent.parent
 TABLE_FILES = [f"table_{n}.{e}" for n in ("per_scene", "average") for e in ("md", "tex", "csv")]
+NOT_FOUND = ("the paper's tables were not found: pass --paper DIR (e.g. ../shared/data/paper) "
+             "or set LFBENCH_PAPER_DIR")
+
+# A tiny paper folder with made-up numbers (same layout and columns as the paper's tables): 3 methods,
+# 4 scenes, Table II averages, and one of the other tables. The tests look these literals up.
+TINY_TABLE1 = """method,scene,metric,value
+SubFocal,backgammon,badpix_0.07,3.194
+SubFocal,backgammon,mse_x100,3.667
+SubFocal,boxes,badpix_0.07,8.5
+SubFocal,boxes,mse_x100,2.25
+SubFocal,dots,badpix_0.07,0.75
+SubFocal,dots,mse_x100,1.5
+SubFocal,cotton,badpix_0.07,0.25
+SubFocal,cotton,mse_x100,0.125
+SubFocal-L,backgammon,badpix_0.07,2.5
+SubFocal-L,boxes,badpix_0.07,7.0
+OACC-Net,backgammon,badpix_0.07,3.9
+OACC-Net,boxes,badpix_0.07,10.25
+"""
+TINY_TABLE2 = """method,metric,value
+SubFocal,badpix_0.07,2.956
+SubFocal,mse_x100,1.875
+SubFocal-L,badpix_0.07,2.735
+OACC-Net,badpix_0.07,3.5
+"""
+TINY_TABLE5 = "loss,badpix_0.07\nbaseline_l1,2.04\nuafl,1.93\n"
+
+
+def write_paper(folder: Path) -> Path:
+    """Write the tiny made-up paper tables into ``folder``; returns it."""
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "table1_per_scene.csv").write_text(TINY_TABLE1)
+    (folder / "table2_average.csv").write_text(TINY_TABLE2)
+    (folder / "table5_losses.csv").write_text(TINY_TABLE5)
+    return folder
+
+
+@pytest.fixture
+def paper(tmp_path):
+    return load_paper(write_paper(tmp_path / "paper"))
 
 
 # --------------------------------------------------------------------------- paper data
 
-def test_bundled_paper_tables_hold_the_published_numbers():
-    paper = load_paper("bundled")
+def test_paper_tables_are_read_from_the_folder(tmp_path):
+    paper = load_paper(write_paper(tmp_path / "paper"))
+    assert paper.source == tmp_path / "paper"
+    assert paper.value("SubFocal", "backgammon", "badpix_0.07") == 3.194
+    assert paper.value("SubFocal", "boxes", "mse_x100") == 2.25
+    assert np.isnan(paper.value("SubFocal", "boxes", "q25_x100"))
+    assert paper.average_value("SubFocal", "badpix_0.07") == 2.956
+    assert paper.average_value("SubFocal-L", "badpix_0.07") == 2.735
+    assert np.isnan(paper.average_value("SubFocal-L", "mse_x100"))
+    assert paper.methods == ["SubFocal", "SubFocal-L", "OACC-Net"]
+    assert paper.scenes == ["backgammon", "boxes", "dots", "cotton"]
+    assert set(paper.extra) == {"table5_losses"}
+    t5 = paper.extra["table5_losses"].set_index("loss")["badpix_0.07"]
+    assert t5["uafl"] == 1.93 and t5["baseline_l1"] == 2.04
+
+
+def test_shared_paper_tables_hold_the_published_numbers(shared_data):
+    paper = load_paper(require(shared_data / "paper"))
     assert paper.value("SubFocal", "backgammon", "badpix_0.07") == 3.194
     assert paper.value("SubFocal", "backgammon", "mse_x100") == 3.667
     assert paper.average_value("SubFocal", "badpix_0.07") == 2.956
@@ -44,12 +105,44 @@ def test_bundled_paper_tables_hold_the_published_numbers():
     assert np.abs((t1.reindex(t2.index) - t2).to_numpy()).max() < 0.035
 
 
-def test_bundled_copy_equals_the_shared_paper_tables(shared_data):
-    src = shared_data / "paper"
-    if not src.is_dir():
-        pytest.skip(f"{src} not available")
-    for p in sorted(bundled_dir().glob("*.csv")):
-        assert p.read_bytes() == (src / p.name).read_bytes(), p.name
+def test_no_copy_of_the_paper_tables_ships_with_lfbench():
+    import tomllib
+
+    shipped = [p for top in ("lfbench", "methods") for p in (ROOT / top).rglob("table*.csv")]
+    assert shipped == []
+    package_data = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["package-data"]
+    assert package_data["lfbench"] == ["py.typed"]
+
+
+def test_find_paper_dir_order_and_error(tmp_path, monkeypatch):
+    beside = write_paper(tmp_path / "data" / "paper")
+    (tmp_path / "data" / "hci").mkdir()
+    monkeypatch.setenv(PAPER_DIR_ENV, str(tmp_path / "env_paper"))
+    monkeypatch.setenv(HCI_ROOT_ENV, str(tmp_path / "data" / "hci"))
+    # 1. the explicit folder, as given (even when missing: load_paper then names it)
+    assert find_paper_dir(tmp_path / "explicit") == tmp_path / "explicit"
+    assert find_paper_dir(str(tmp_path / "explicit")) == tmp_path / "explicit"
+    # 2. LFBENCH_PAPER_DIR ("" / None: not given, e.g. a bare --paper)
+    assert find_paper_dir(None) == tmp_path / "env_paper"
+    assert find_paper_dir("") == tmp_path / "env_paper"
+    with pytest.raises(DataError, match="paper folder not found"):
+        load_paper(find_paper_dir(None))
+    # 3. $LFBENCH_HCI_ROOT/../paper when it exists
+    monkeypatch.setenv(PAPER_DIR_ENV, "")
+    assert find_paper_dir(None) == beside.resolve()
+    assert load_paper(find_paper_dir(None)).value("SubFocal", "backgammon", "badpix_0.07") == 3.194
+    monkeypatch.delenv(PAPER_DIR_ENV)
+    assert find_paper_dir(None) == beside.resolve()
+    # 4. nothing: one line naming both ways to give the folder
+    (tmp_path / "elsewhere" / "hci").mkdir(parents=True)
+    monkeypatch.setenv(HCI_ROOT_ENV, str(tmp_path / "elsewhere" / "hci"))
+    with pytest.raises(DataError) as exc:
+        find_paper_dir(None)
+    assert str(exc.value) == NOT_FOUND
+    monkeypatch.delenv(HCI_ROOT_ENV)
+    with pytest.raises(DataError) as exc:
+        find_paper_dir()
+    assert str(exc.value) == NOT_FOUND
 
 
 def _results() -> Results:
@@ -61,35 +154,35 @@ def _results() -> Results:
     return r
 
 
-def test_per_scene_table_gets_labelled_paper_columns():
-    paper = load_paper()
+def test_per_scene_table_gets_labelled_paper_columns(paper):
     table = per_scene_with_paper(per_scene_table(_results()), paper, ["subfocal", "OACC-Net"])
     assert paper_column("SubFocal") == "SubFocal (paper)"
     assert table.loc[("backgammon", "badpix_0.07"), "SubFocal (paper)"] == 3.194
-    assert table.loc[("boxes", "mse_x100"), "SubFocal (paper)"] == paper.value("SubFocal", "boxes", "mse_x100")
-    assert table.loc[("boxes", "badpix_0.07"), "OACC-Net (paper)"] == paper.value("OACC-Net", "boxes", "badpix_0.07")
+    assert table.loc[("boxes", "mse_x100"), "SubFocal (paper)"] == 2.25
+    assert table.loc[("boxes", "badpix_0.07"), "OACC-Net (paper)"] == 10.25
+    assert np.isnan(table.loc[("boxes", "mse_x100"), "OACC-Net (paper)"])  # not in the paper's table
     assert np.isnan(table.loc[("boxes", "q25_x100"), "SubFocal (paper)"])  # the paper has no Q25
     assert table.loc[("backgammon", "badpix_0.07"), "paper resolution"] == "highres"
     assert table.loc[("boxes", "badpix_0.07"), "paper resolution"] == "lowres"
     assert table.loc[("backgammon", "badpix_0.07"), "mine"] == 2.0  # ours untouched
 
 
-def test_average_table_gets_table2_and_same_scene_rows():
-    paper = load_paper()
+def test_average_table_gets_table2_and_same_scene_rows(paper):
     results = _results()
     table = average_with_paper(average_table(results), paper, results.scenes)
-    assert table.loc["SubFocal (paper, Table II, 12 scenes)", "badpix_0.07"] == 2.956
+    # Table II row: the published averages, labelled with the number of scenes in the paper's Table I
+    assert table.loc["SubFocal (paper, Table II, 4 scenes)", "badpix_0.07"] == 2.956
+    assert table.loc["SubFocal (paper, Table II, 4 scenes)", "mse_x100"] == 1.875
+    assert table.loc["SubFocal (paper, Table II, 4 scenes)", "scenes"] == 4
     same = table.loc["SubFocal (paper, 2 of our scenes)"]
-    expected = (paper.value("SubFocal", "backgammon", "badpix_0.07")
-                + paper.value("SubFocal", "boxes", "badpix_0.07")) / 2
-    assert same["badpix_0.07"] == pytest.approx(expected)
+    assert same["badpix_0.07"] == pytest.approx((3.194 + 8.5) / 2)  # backgammon and boxes
+    assert same["mse_x100"] == pytest.approx((3.667 + 2.25) / 2)
     assert same["scenes"] == 2
     assert table.loc["mine", "badpix_0.07"] == 2.0
     # only the scenes the paper reports are averaged; none of them: no such row
     mixed = Results(records=[Record("m", s, "badpix_0.07", 1.0, "lowres") for s in ("synth_0_0", "dots")])
     table = average_with_paper(average_table(mixed), paper, mixed.scenes)
-    dots = paper.value("SubFocal", "dots", "badpix_0.07")
-    assert table.loc["SubFocal (paper, 1 of our scenes)", "badpix_0.07"] == dots
+    assert table.loc["SubFocal (paper, 1 of our scenes)", "badpix_0.07"] == 0.75  # dots
     other = Results(records=[Record("m", "synth_0_0", "badpix_0.07", 1.0, "lowres")])
     rows = average_with_paper(average_table(other), paper, other.scenes).index
     assert not any("of our scenes" in r for r in rows)
@@ -98,15 +191,19 @@ def test_average_table_gets_table2_and_same_scene_rows():
 def test_bad_paper_input_fails_clearly(tmp_path):
     with pytest.raises(DataError, match="paper folder not found"):
         load_paper(tmp_path / "nope")
-    shutil.copytree(bundled_dir(), tmp_path / "p")
+    write_paper(tmp_path / "p")
+    (tmp_path / "p" / "table1_per_scene.csv").unlink()
+    with pytest.raises(DataError, match=r"table1_per_scene.csv.*paper table not found"):
+        load_paper(tmp_path / "p")
+    write_paper(tmp_path / "p")
     (tmp_path / "p" / "table2_average.csv").write_text("method,metric,value\nSubFocal,badpix_0.07,abc\n")
     with pytest.raises(DataError, match=r"table2_average.csv.*line 2.*not a number"):
         load_paper(tmp_path / "p")
     (tmp_path / "p" / "table2_average.csv").write_text("method,value\nSubFocal,1\n")
     with pytest.raises(DataError, match="missing column"):
         load_paper(tmp_path / "p")
-    with pytest.raises(SpecError, match="no method 'Nope'"):
-        load_paper().resolve_method("Nope")
+    with pytest.raises(SpecError, match="no method 'Nope'; it has: SubFocal, SubFocal-L, OACC-Net"):
+        load_paper(write_paper(tmp_path / "q")).resolve_method("Nope")
 
 
 # --------------------------------------------------------------------------- report CLI
@@ -143,17 +240,39 @@ def test_report_regenerates_the_evaluate_tables(evaluated, tmp_path, capsys):
 
 
 def test_report_with_paper_columns_and_formats(evaluated, tmp_path):
-    rc = main(["report", str(evaluated / "eval"), "--out", str(tmp_path / "r"), "--paper", "bundled",
+    paper_dir = write_paper(tmp_path / "paper")
+    rc = main(["report", str(evaluated / "eval"), "--out", str(tmp_path / "r"), "--paper", str(paper_dir),
                "--paper-methods", "SubFocal,SubFocal-L", "--format", "csv"])
     assert rc == 0
     assert sorted(p.name for p in (tmp_path / "r").glob("table_*")) == [
         "table_average.csv", "table_average_paper.csv", "table_per_scene.csv", "table_per_scene_paper.csv"]
     avg = pd.read_csv(tmp_path / "r" / "table_average_paper.csv").set_index("method")
-    assert avg.loc["SubFocal (paper, Table II, 12 scenes)", "badpix_0.07"] == 2.956
-    assert avg.loc["SubFocal-L (paper, Table II, 12 scenes)", "badpix_0.07"] == 2.735
+    assert avg.loc["SubFocal (paper, Table II, 4 scenes)", "badpix_0.07"] == 2.956
+    assert avg.loc["SubFocal-L (paper, Table II, 4 scenes)", "badpix_0.07"] == 2.735
     assert avg.loc["gt", "badpix_0.07"] == 0.0
     per = pd.read_csv(tmp_path / "r" / "table_per_scene_paper.csv")
     assert {"SubFocal (paper)", "SubFocal-L (paper)", "paper resolution"} <= set(per.columns)
+    assert set(per["paper resolution"]) == {"-"}  # the synthetic scenes are not in the paper
+
+
+def test_report_bare_paper_uses_lfbench_paper_dir(evaluated, tmp_path, monkeypatch):
+    monkeypatch.setenv(PAPER_DIR_ENV, str(write_paper(tmp_path / "paper")))
+    rc = main(["report", str(evaluated / "eval"), "--out", str(tmp_path / "r"), "--format", "csv", "--paper"])
+    assert rc == 0
+    avg = pd.read_csv(tmp_path / "r" / "table_average_paper.csv").set_index("method")
+    assert avg.loc["SubFocal (paper, Table II, 4 scenes)", "mse_x100"] == 1.875
+
+
+def test_report_bare_paper_finds_the_shared_tables(evaluated, shared_data, tmp_path, monkeypatch):
+    require(shared_data / "paper")
+    monkeypatch.delenv(PAPER_DIR_ENV, raising=False)
+    monkeypatch.setenv(HCI_ROOT_ENV, str(shared_data / "hci"))
+    rc = main(["report", str(evaluated / "eval"), "--out", str(tmp_path / "r"), "--format", "csv",
+               "--paper", "--paper-methods", "SubFocal,SubFocal-L"])
+    assert rc == 0
+    avg = pd.read_csv(tmp_path / "r" / "table_average_paper.csv").set_index("method")
+    assert avg.loc["SubFocal (paper, Table II, 12 scenes)", "badpix_0.07"] == 2.956
+    assert avg.loc["SubFocal-L (paper, Table II, 12 scenes)", "badpix_0.07"] == 2.735
 
 
 def test_report_without_saved_curves_uses_the_results_thresholds(evaluated, tmp_path, capsys):
@@ -188,12 +307,16 @@ def test_report_draws_overviews_from_saved_maps(evaluated, tmp_path):
 @pytest.mark.parametrize("argv, message", [
     (["report", "MISSING", "--out", "OUT"], "results file not found"),
     (["report", "RESULTS", "--out", "OUT", "--format", "docx"], "unknown table format"),
-    (["report", "RESULTS", "--out", "OUT", "--paper", "bundled", "--paper-methods", "Nope"], "no method 'Nope'"),
+    (["report", "RESULTS", "--out", "OUT", "--paper", "PAPER", "--paper-methods", "Nope"], "no method 'Nope'"),
     (["report", "RESULTS", "--out", "OUT", "--paper", "NOPAPER"], "paper folder not found"),
+    (["report", "RESULTS", "--out", "OUT", "--paper"], NOT_FOUND),
 ])
-def test_report_bad_input_is_one_line_exit_2(evaluated, tmp_path, capsys, argv, message):
+def test_report_bad_input_is_one_line_exit_2(evaluated, tmp_path, capsys, monkeypatch, argv, message):
+    monkeypatch.delenv(PAPER_DIR_ENV, raising=False)
+    monkeypatch.delenv(HCI_ROOT_ENV, raising=False)
     subst = {"MISSING": str(tmp_path / "missing.json"), "OUT": str(tmp_path / "out"),
-             "RESULTS": str(evaluated / "eval"), "NOPAPER": str(tmp_path / "nopaper")}
+             "RESULTS": str(evaluated / "eval"), "NOPAPER": str(tmp_path / "nopaper"),
+             "PAPER": str(write_paper(tmp_path / "paper"))}
     capsys.readouterr()
     assert main([subst.get(a, a) for a in argv]) == 2
     err = capsys.readouterr().err

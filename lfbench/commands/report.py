@@ -2,8 +2,10 @@
 
 Writes OUT/table_per_scene.* and OUT/table_average.* (the same tables `lfbench evaluate` writes) and,
 with --paper, OUT/table_per_scene_paper.* and OUT/table_average_paper.* with the paper's numbers in
-labelled columns/rows. The BadPix series (t = 0 .. 0.1 px) come from the curves an `evaluate --figures`
-run saved (RESULTS_DIR/figures/badpix_series.csv, or --curves CSV); without them, from the BadPix
+labelled columns/rows. lfbench ships no copy of the paper's tables: --paper DIR names the folder
+(e.g. ../shared/data/paper); a bare --paper finds it through $LFBENCH_PAPER_DIR or
+$LFBENCH_HCI_ROOT/../paper. The BadPix series (t = 0 .. 0.1 px) come from the curves an
+`evaluate --figures` run saved (RESULTS_DIR/figures/badpix_series.csv, or --curves CSV); without them, from the BadPix
 thresholds the results hold (0.01, 0.03, 0.07). With --maps (maps saved by `evaluate --save-maps`)
 the per-scene overviews and exact curves are drawn from the saved maps.
 """
@@ -22,9 +24,10 @@ FORMATS = {"md": ("markdown", "md"), "markdown": ("markdown", "md"), "tex": ("la
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("results", type=Path, metavar="RESULTS.json|DIR", help="a results.json or the folder holding one")
     p.add_argument("--out", required=True, type=Path, metavar="DIR", help="output folder")
-    p.add_argument("--paper", metavar="DIR|bundled",
-                   help="add the paper's numbers: a folder with table1_per_scene.csv and table2_average.csv, "
-                        "or 'bundled' for the copy shipped with lfbench")
+    p.add_argument("--paper", nargs="?", const="", metavar="DIR",
+                   help="add the paper's numbers from DIR, a folder with table1_per_scene.csv and table2_average.csv "
+                        "(e.g. ../shared/data/paper); a bare --paper uses $LFBENCH_PAPER_DIR, else "
+                        "$LFBENCH_HCI_ROOT/../paper")
     p.add_argument("--paper-methods", default="SubFocal", metavar="NAMES",
                    help="comma-separated paper methods to show (default SubFocal; e.g. SubFocal,SubFocal-L,OACC-Net)")
     p.add_argument("--format", default="md,tex,csv", help="comma-separated table formats: md, tex, csv")
@@ -77,10 +80,10 @@ def run(args: argparse.Namespace) -> int:
         raise DataError("the results hold no records", args.results)
     results_dir = args.results if args.results.is_dir() else args.results.parent
     paper = paper_methods = None
-    if args.paper:
-        from lfbench.report.paper import load_paper
+    if args.paper is not None:
+        from lfbench.report.paper import find_paper_dir, load_paper
 
-        paper = load_paper(args.paper)
+        paper = load_paper(find_paper_dir(args.paper or None))
         paper_methods = [m.strip() for m in args.paper_methods.split(",") if m.strip()]
         for m in paper_methods:
             paper.resolve_method(m)  # unknown names fail before anything is written

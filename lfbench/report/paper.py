@@ -3,8 +3,8 @@
 A paper folder holds ``table1_per_scene.csv`` (method, scene, metric, value: Table I),
 ``table2_average.csv`` (method, metric, value: Table II, mean over the 12 benchmark scenes) and
 other tables (``table4_interval_interp.csv``, ``table5_losses.csv``, ...) kept as plain DataFrames.
-A copy ships with lfbench (lfbench/data/paper, the paper's numbers only); ``load_paper("bundled")``
-reads it, ``load_paper(DIR)`` any other folder.
+lfbench ships no copy of them: the folder is the user's (e.g. ../shared/data/paper), found by
+:func:`find_paper_dir` (--paper DIR, else $LFBENCH_PAPER_DIR, else $LFBENCH_HCI_ROOT/../paper).
 
 Resolution: the benchmark (and so the paper) scores backgammon, dots and stripes at high
 resolution, the other scenes at 512x512; the columns added here say so.
@@ -12,6 +12,7 @@ resolution, the other scenes at 512x512; the columns added here say so.
 
 from __future__ import annotations
 
+import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -21,16 +22,28 @@ import pandas as pd
 
 from lfbench.errors import DataError, SpecError
 
-BUNDLED = "bundled"
+PAPER_DIR_ENV, HCI_ROOT_ENV = "LFBENCH_PAPER_DIR", "LFBENCH_HCI_ROOT"
 PER_SCENE_FILE, AVERAGE_FILE = "table1_per_scene.csv", "table2_average.csv"
 PAPER_HIGHRES_SCENES = frozenset({"backgammon", "dots", "stripes"})
 DEFAULT_PAPER_METHODS = ("SubFocal",)
 PAPER_RESOLUTION_COLUMN = "paper resolution"
 
 
-def bundled_dir() -> Path:
-    """The copy of the paper's tables shipped with lfbench."""
-    return Path(__file__).resolve().parent.parent / "data" / "paper"
+def find_paper_dir(explicit: str | Path | None = None) -> Path:
+    """The folder holding the paper's tables, in this order: ``explicit`` (e.g. --paper DIR); the
+    environment variable LFBENCH_PAPER_DIR; ``$LFBENCH_HCI_ROOT/../paper`` when that folder exists.
+    The first two are returned as given (load_paper names them if they are missing); none of the
+    three: DataError."""
+    if explicit is not None and str(explicit):
+        return Path(explicit)
+    if os.environ.get(PAPER_DIR_ENV):
+        return Path(os.environ[PAPER_DIR_ENV])
+    if os.environ.get(HCI_ROOT_ENV):
+        beside = Path(os.environ[HCI_ROOT_ENV]) / os.pardir / "paper"
+        if beside.is_dir():
+            return beside.resolve()
+    raise DataError("the paper's tables were not found: pass --paper DIR (e.g. ../shared/data/paper) "
+                    f"or set {PAPER_DIR_ENV}")
 
 
 @dataclass
@@ -96,10 +109,10 @@ def _read_csv(path: Path, columns: Sequence[str] | None) -> pd.DataFrame:
     return df
 
 
-def load_paper(path: str | Path | None = BUNDLED) -> PaperTables:
-    """Load the paper's tables from a folder (``None`` or ``"bundled"``: the shipped copy).
+def load_paper(path: str | Path) -> PaperTables:
+    """Load the paper's tables from a folder (see :func:`find_paper_dir` to locate it).
     DataError naming the file when a table is missing or malformed."""
-    folder = bundled_dir() if path is None or str(path) == BUNDLED else Path(path)
+    folder = Path(path)
     if not folder.is_dir():
         raise DataError("paper folder not found (expected table1_per_scene.csv, table2_average.csv)", folder)
     per_scene = _read_csv(folder / PER_SCENE_FILE, ("method", "scene", "metric", "value"))
