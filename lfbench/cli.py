@@ -22,6 +22,7 @@ COMMANDS = {
     "report": "lfbench.commands.report",
     "synth": "lfbench.commands.synth",
     "convert-keras": "lfbench.commands.convert_keras",
+    "train": "lfbench.commands.train",
     "regress": "lfbench.commands.regress",
     "validate-submission": "lfbench.commands.validate_submission",
 }

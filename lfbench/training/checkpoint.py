@@ -1,0 +1,95 @@
+"""Training checkpoints and exported weights: written atomically with torch.save, read with
+``torch.load(weights_only=True)`` (so every value is a tensor, number, string, list or dict).
+
+A training checkpoint holds the model and optimizer state, the stage index and the number of
+steps done in it, the RNG states of python, numpy and torch, and the resolved config. Exported
+weights are what inference loads: ``{"state_dict", "config": net.config(), "training": {...}}``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import random
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from lfbench.atomic import atomic_open
+from lfbench.errors import DataError
+
+CHECKPOINT_FORMAT = "lfbench.train.checkpoint"
+WEIGHTS_FORMAT = "lfbench.subfocal.weights"
+VERSION = 1
+
+
+def rng_state() -> dict[str, Any]:
+    """Python, numpy (global) and torch RNG states as weights-only-loadable values."""
+    version, internal, gauss = random.getstate()
+    kind, keys, pos, has_gauss, cached = np.random.get_state(legacy=True)  # type: ignore[misc]
+    state: dict[str, Any] = {
+        "python": [version, torch.tensor(internal, dtype=torch.int64), gauss],
+        "numpy": [kind, torch.from_numpy(np.asarray(keys, dtype=np.int64)), int(pos), int(has_gauss), float(cached)],
+        "torch": torch.get_rng_state(),
+    }
+    if torch.cuda.is_available():
+        state["cuda"] = torch.cuda.get_rng_state_all()
+    return state
+
+
+def set_rng_state(state: dict[str, Any]) -> None:
+    """Restore what :func:`rng_state` saved."""
+    version, internal, gauss = state["python"]
+    random.setstate((int(version), tuple(int(x) for x in internal.tolist()), gauss))
+    kind, keys, pos, has_gauss, cached = state["numpy"]
+    np.random.set_state((kind, keys.numpy().astype(np.uint32), int(pos), int(has_gauss), float(cached)))
+    torch.set_rng_state(state["torch"])
+    if "cuda" in state and torch.cuda.is_available() and len(state["cuda"]) == torch.cuda.device_count():
+        torch.cuda.set_rng_state_all(state["cuda"])
+
+
+def save(path: str | Path, payload: dict[str, Any]) -> None:
+    """torch.save ``payload`` to ``path`` atomically (a reader sees the old file or the new one)."""
+    with atomic_open(path, "wb") as f:
+        torch.save(payload, f)
+
+
+def load(path: str | Path, expected_format: str | None = None) -> dict[str, Any]:
+    """torch.load(weights_only=True) on CPU; DataError naming the file if unreadable or of another format."""
+    path = Path(path)
+    try:
+        payload = torch.load(path, map_location="cpu", weights_only=True)
+    except FileNotFoundError:
+        raise DataError("file not found", path) from None
+    except Exception as exc:  # noqa: BLE001 - torch raises many kinds for a corrupt file
+        raise DataError(f"cannot load checkpoint: {str(exc).splitlines()[0] if str(exc) else type(exc).__name__}",
+                        path) from None
+    if not isinstance(payload, dict):
+        raise DataError("not an lfbench checkpoint (expected a dict)", path)
+    if expected_format is not None and payload.get("format") != expected_format:
+        raise DataError(f"not a {expected_format} file (format {payload.get('format')!r})", path)
+    return payload
+
+
+def state_sha256(state_dict: dict[str, torch.Tensor]) -> str:
+    """SHA-256 over names and bytes of a state dict, in its order (an exact-equality fingerprint)."""
+    h = hashlib.sha256()
+    for name, t in state_dict.items():
+        h.update(name.encode())
+        h.update(t.detach().cpu().contiguous().numpy().tobytes())
+    return h.hexdigest()
+
+
+def parameters_sha256(module: torch.nn.Module) -> str:
+    """:func:`state_sha256` of the module's parameters (no buffers), in named_parameters order."""
+    return state_sha256(dict(module.named_parameters()))
+
+
+def export_weights(path: str | Path, model: torch.nn.Module, training: dict[str, Any] | None = None,
+                   method: str = "subfocal") -> None:
+    """Write the inference format ``{"format", "method", "state_dict", "config", "training"}`` atomically."""
+    config = model.config() if hasattr(model, "config") else {}
+    save(path, {"format": WEIGHTS_FORMAT, "version": VERSION, "method": method,
+                "state_dict": {k: v.detach().cpu().contiguous() for k, v in model.state_dict().items()},
+                "config": config, "training": training or {}})

@@ -1,0 +1,42 @@
+"""Validation during training: whole-image inference on chosen scenes, BadPix and MSE x100
+(lfbench.metrics) inside a border mask, per scene and pooled over the pixels of all scenes (as
+the authors' validation pools its 8 scenes)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import torch
+
+from lfbench.evaluation import border_mask
+from lfbench.metrics import bad_pix, mse_x100
+from lfbench.training.data import ValidationScene
+
+
+@torch.no_grad()
+def predict_disparity(model: torch.nn.Module, views: np.ndarray, device: torch.device) -> np.ndarray:
+    """(N, h, w) gray views -> (h, w) float32 disparity, model in eval mode, batch 1."""
+    was_training = model.training
+    model.eval()
+    try:
+        disp, _ = model(torch.from_numpy(views).unsqueeze(0).to(device))
+    finally:
+        model.train(was_training)
+    return disp[0].float().cpu().numpy()
+
+
+def validate(model: torch.nn.Module, scenes: Sequence[ValidationScene], device: torch.device,
+             border: int = 15, threshold: float = 0.07) -> dict:
+    """``{"badpix": %, "mse_x100": ..., "pixels": n, "scenes": {name: {...}}}``; badpix at ``threshold`` px."""
+    per_scene: dict[str, dict[str, float]] = {}
+    gts, preds = [], []
+    for s in scenes:
+        pred = predict_disparity(model, s.views, device)
+        mask = border_mask(s.gt.shape, border) & np.isfinite(s.gt)
+        per_scene[s.name] = {"badpix": bad_pix(s.gt, pred, threshold, mask), "mse_x100": mse_x100(s.gt, pred, mask)}
+        gts.append(s.gt[mask])
+        preds.append(pred[mask])
+    gt, pred = np.concatenate(gts), np.concatenate(preds)
+    return {"badpix": bad_pix(gt, pred, threshold), "mse_x100": mse_x100(gt, pred), "threshold": threshold,
+            "pixels": int(gt.size), "scenes": per_scene}
