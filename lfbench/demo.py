@@ -131,7 +131,8 @@ def select_methods(requested: Sequence | None, scenes: Sequence, log: Log = _std
 
     Without ``requested`` methods: every registered method whose parameters all have defaults
     (``published`` needs a path: skipped) and that runs on every scene (``available_for`` gives no
-    reason, e.g. shipped weights are present). With ``requested`` (methods made from the user's
+    reason); a method offering ``offline_variants()`` (e.g. the architecture of its shipped weights)
+    runs as those variants. With ``requested`` (methods made from the user's
     specs): those; one that cannot run on the scenes is skipped with its reason.
     """
     from lfbench.registry import REGISTRY, create, list_methods
@@ -146,10 +147,12 @@ def select_methods(requested: Sequence | None, scenes: Sequence, log: Log = _std
             if required:
                 skipped[info.name] = f"needs parameter {', '.join(required)} (e.g. {info.name}:{required[0]}=...)"
                 continue
-            try:
-                candidates.append(create(info.name))
-            except LFBenchError as exc:
-                skipped[info.name] = str(exc)
+            variants = getattr(info.factory, "offline_variants", None)
+            for params in (variants() if variants else None) or [{}]:  # e.g. shipped weights' architecture
+                try:
+                    candidates.append(create(info.name, **params))
+                except LFBenchError as exc:
+                    skipped[info.name] = str(exc)
         for name, error in sorted(REGISTRY.load_errors.items()):
             skipped.setdefault(name, f"plugin failed to load ({error})")
     methods = []

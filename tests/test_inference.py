@@ -206,3 +206,23 @@ def test_info_prints_trainable_parameters_of_the_configured_variant(no_default_w
     assert "trainable_parameters: 5055329" in out and "disparities: 9" in out
     assert main(["info", "subfocal:width=16,attention=false"]) == 0
     assert "trainable_parameters: 216260" in capsys.readouterr().out  # 34164 + 27*(324*16+6*256+16) + 224
+
+
+def test_shipped_weights_serve_only_their_own_architecture(monkeypatch, tmp_path: Path, capsys):
+    shipped = tmp_path / "subfocal_small.pt"
+    save_checkpoint(_net(width=3), shipped, source="shipped test model")
+    monkeypatch.setattr(SubFocal, "DEFAULT_WEIGHTS", shipped)
+    lf = ArrayLightField(views=_views(12, 12, seed=5)[0].reshape(9, 9, 12, 12).numpy(), name="toy")
+    assert SubFocal.offline_variants() == [{"width": 3}]
+    small = create_from_spec("subfocal:width=3,threads=1")
+    assert small.weights_path == shipped and small.available_for(lf) is None
+    assert small.run(lf).disparity.shape == (12, 12)
+    paper = create("subfocal")  # the paper's architecture: the small checkpoint must not be used for it
+    assert paper.weights_path is None
+    assert "subfocal:width=3" in paper.available_for(lf)
+    assert main(["info", "subfocal"]) == 0
+    out = capsys.readouterr().out
+    assert "trainable_parameters: 5055329" in out and "weights: none" in out
+    assert main(["info", "subfocal:width=3"]) == 0
+    out = capsys.readouterr().out
+    assert f"weights: {shipped} (shipped; source shipped test model)" in out

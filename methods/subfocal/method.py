@@ -2,9 +2,10 @@
 
 Weights come from a checkpoint (``{"state_dict", "config", ...}``, e.g. from ``lfbench train`` or
 ``lfbench convert-keras``); its stored config decides the architecture, and an explicitly given
-parameter that contradicts it is a SpecError. Without ``weights`` the shipped default checkpoint
-(methods/weights/<name>_small.pt) is used; when it is absent the method is unavailable (never
-random weights).
+parameter that contradicts it is a SpecError. Without ``weights``, the variant's parameters decide
+the architecture (default: the paper's, 5,055,329 trainable parameters) and the shipped checkpoint
+(methods/weights/<name>_small.pt, trained on CPU by lfbench itself) is used when it has exactly that
+architecture, e.g. ``subfocal:width=16``; otherwise the method is unavailable (never random weights).
 """
 
 from __future__ import annotations
@@ -66,9 +67,16 @@ class _SubFocalBase(Method):
     # -- configuration ----------------------------------------------------------------------
 
     @property
-    def weights_path(self) -> Path:
+    def weights_path(self) -> Path | None:
+        """The checkpoint to load: the one given, else the shipped one if it has this variant's
+        architecture, else None."""
         w = self.values["weights"]
-        return Path(w).expanduser() if w is not None else self.DEFAULT_WEIGHTS
+        if w is not None:
+            return Path(w).expanduser()
+        shipped = self.DEFAULT_WEIGHTS
+        if shipped.is_file() and not self._differences(self._configured(), _stored_config(shipped)):
+            return shipped
+        return None
 
     def _explicit(self) -> dict:
         """Parameters the user gave (the registry records them in ``params``)."""
@@ -81,10 +89,11 @@ class _SubFocalBase(Method):
                 "interpolation": v["interpolation"], "width": int(v["width"] or PAPER_WIDTH),
                 "attention": bool(v["attention"]), "angular": 9}
 
-    def _conflicts(self, config: dict) -> list[str]:
-        """Explicit parameters that contradict a checkpoint's config, as ``key=ours (checkpoint: theirs)``."""
+    @staticmethod
+    def _differences(ours: dict, config: dict) -> list[str]:
+        """Entries of ``ours`` that ``config`` contradicts, as ``key=ours (checkpoint: theirs)``."""
         out = []
-        for key, value in self._explicit().items():
+        for key, value in ours.items():
             stored = config.get(key)
             if isinstance(value, float) and isinstance(stored, (int, float)) and not isinstance(stored, bool):
                 same = abs(float(stored) - value) < 1e-9
@@ -96,20 +105,34 @@ class _SubFocalBase(Method):
 
     def _checkpoint_config(self, config: dict) -> dict:
         """The checkpoint's config, after checking explicit parameters against it (SpecError)."""
-        conflicts = self._conflicts(config)
+        conflicts = self._differences(self._explicit(), config)
         if conflicts:
             raise SpecError(f"{self.name or 'subfocal'}: {', '.join(conflicts)} conflicts with the checkpoint "
                             f"{self.weights_path}; leave it out to use the checkpoint's")
         return config
 
+    @classmethod
+    def offline_variants(cls) -> list[dict]:
+        """Parameter sets that run with no download: the shipped checkpoint's architecture, as the
+        parameters that differ from the defaults (e.g. ``{"width": 16}``). Empty if none is shipped."""
+        if not cls.DEFAULT_WEIGHTS.is_file():
+            return []
+        stored = _stored_config(cls.DEFAULT_WEIGHTS)
+        defaults = {"d_min": -4.0, "d_max": 4.0, "interval": cls.DEFAULT_INTERVAL, "interpolation": "bilinear",
+                    "width": PAPER_WIDTH, "attention": True}
+        return [{k: stored[k] for k in _ARCH_KEYS if k in stored and stored[k] != defaults[k]}]
+
     def _missing_reason(self) -> str | None:
         p = self.weights_path
-        if p.is_file():
-            return None
-        if self.values["weights"] is None:
-            return (f"default weights {p} are not installed; give weights=CHECKPOINT.pt "
-                    "(from lfbench train or lfbench convert-keras)")
-        return f"weights file {p} not found"
+        if p is None:
+            hint = ""
+            variants = self.offline_variants()
+            if variants:
+                spec = ",".join(f"{k}={v}" for k, v in variants[0].items())
+                hint = f", or run the shipped CPU-trained model: {self.name or 'subfocal'}:{spec}"
+            return ("no weights for this configuration: give weights=CHECKPOINT.pt (lfbench train or "
+                    f"lfbench convert-keras){hint}")
+        return None if p.is_file() else f"weights file {p} not found"
 
     def load_network(self):
         """The SubFocalNet with the checkpoint's weights (eval mode), loaded once."""
@@ -129,20 +152,17 @@ class _SubFocalBase(Method):
         from lfbench_methods.subfocal.keras_import import load_checkpoint
         from lfbench_methods.subfocal.network import SubFocalNet, count_trainable
 
-        weights = str(self.weights_path)
+        path = self.weights_path
         config = self._configured()
-        if self.weights_path.is_file():
-            _, stored, source = load_checkpoint(self.weights_path)
-            if self.values["weights"] is not None:
-                config = self._checkpoint_config(stored)
-                weights += f" (architecture from the checkpoint{'; source ' + source if source else ''})"
-            elif self._conflicts(stored):
-                weights += f" (default weights do not fit: {', '.join(self._conflicts(stored))})"
-            else:
-                config = stored
-                weights += f" (default; architecture from the checkpoint{'; source ' + source if source else ''})"
+        if path is None:
+            weights = "none (predictions need weights=CHECKPOINT.pt)"
+        elif not path.is_file():
+            weights = f"{path} (missing)"
         else:
-            weights += " (missing; predictions need weights=CHECKPOINT.pt)"
+            _, stored, source = load_checkpoint(path)
+            config = self._checkpoint_config(stored)
+            kind = "given" if self.values["weights"] is not None else "shipped"
+            weights = f"{path} ({kind}{'; source ' + source if source else ''})"
         net = SubFocalNet(**config)
         d = net.disparities
         return {"trainable_parameters": count_trainable(net), "disparities": d.numel(),
@@ -177,17 +197,23 @@ class _SubFocalBase(Method):
                           disparity_values=out.disparities.numpy(), uncertainty=out.uncertainty[0].numpy())
 
 
+def _stored_config(path: Path) -> dict:
+    from lfbench_methods.subfocal.keras_import import load_checkpoint
+
+    return load_checkpoint(path)[1]
+
+
 @register_method("subfocal")
 class SubFocal(_SubFocalBase):
     """SubFocal (Chao et al., TCI 2023): sub-pixel cost volume, channel attention, 3D aggregation.
 
     The uncertainty output is the standard deviation (px) of the predicted disparity distribution.
-    weights: checkpoint .pt (lfbench train / convert-keras); default: the shipped methods/weights/subfocal_small.pt
+    weights: checkpoint .pt (lfbench train / convert-keras); default: the shipped CPU-trained checkpoint when the configured architecture is its own (see `lfbench info subfocal`)
     interval: disparity step of the cost volume in px (paper 0.5; 1, 0.25, 0.1 or any)
     interpolation: sub-pixel shift of the features: nearest, bilinear (paper) or phase (Fourier)
     d_min: smallest candidate disparity in px
     d_max: largest candidate disparity in px
-    width: channels of the 3D aggregation (paper 150); default: the checkpoint's
+    width: channels of the 3D aggregation (paper 150; with weights=..., the checkpoint's)
     attention: channel attention over the views on/off
     tile: inference tile size in px (0 = from max_memory_gb; exact, with a 9 px halo)
     precision: fp32, or bf16 autocast for the 3D aggregation
@@ -212,12 +238,12 @@ class LFAttNet(_SubFocalBase):
     """LFattNet (Tsai et al., AAAI 2020), SubFocal's baseline: the same network at integer disparities.
 
     The uncertainty output is the standard deviation (px) of the predicted disparity distribution.
-    weights: checkpoint .pt (lfbench train / convert-keras --interval 1); default: methods/weights/lfattnet_small.pt
+    weights: checkpoint .pt (lfbench train / convert-keras --interval 1); default: a shipped checkpoint of the configured architecture, if any
     interval: disparity step of the cost volume in px (LFattNet 1)
     interpolation: sub-pixel shift of the features: nearest, bilinear or phase (Fourier)
     d_min: smallest candidate disparity in px
     d_max: largest candidate disparity in px
-    width: channels of the 3D aggregation (paper 150); default: the checkpoint's
+    width: channels of the 3D aggregation (paper 150; with weights=..., the checkpoint's)
     attention: channel attention over the views on/off
     tile: inference tile size in px (0 = from max_memory_gb; exact, with a 9 px halo)
     precision: fp32, or bf16 autocast for the 3D aggregation
