@@ -29,14 +29,13 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from PIL import Image
 from scipy import ndimage
 
 from lfbench.errors import DataError
 from lfbench.evaluation import ScoringRules, metric_resolution
 from lfbench.metrics import GENERAL_METRICS, Metric, _prepare, bad_pix, mse_x100
 from lfbench.params import SceneParameters
-from lfbench.scene import Scene
+from lfbench.scene import Scene, read_png
 
 __all__ = [
     "scharr_derivative",
@@ -306,11 +305,7 @@ def read_label_mask(path: str | Path) -> np.ndarray:
     """A label PNG (e.g. mask_boxes, mask_dots_by_size) as int32 (H, W): the gray value of each
     pixel. An RGB(A) image is accepted when its colour channels are equal."""
     path = Path(path)
-    try:
-        with Image.open(path) as img:
-            arr = np.asarray(img)
-    except (OSError, ValueError) as exc:
-        raise DataError(f"cannot read label mask: {exc}", path) from None
+    arr = read_png(path, "label mask")
     if arr.ndim == 3:
         rgb = arr[..., :3]
         if not (rgb == rgb[..., :1]).all():

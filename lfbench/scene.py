@@ -34,25 +34,28 @@ def rgb_to_gray(rgb: np.ndarray) -> np.ndarray:
     return np.clip(out, 0.0, 1.0).astype(np.float32)
 
 
-def read_rgb(path: Path) -> np.ndarray:
-    """A PNG as float32 (H, W, 3) in [0, 1]; DataError naming the file if unreadable."""
+def read_png(path: Path, what: str = "image", mode: str | None = None) -> np.ndarray:
+    """A PNG's pixels as stored (uint8/uint16, (H, W) or (H, W, C)), converted to PIL ``mode`` if given.
+
+    DataError naming the file ("missing <what>" / "cannot read <what>: ...") if it cannot be read.
+    """
     try:
         with Image.open(path) as img:
-            arr = np.asarray(img.convert("RGB"), dtype=np.float32)
+            return np.asarray(img.convert(mode) if mode else img)
     except FileNotFoundError:
-        raise DataError("missing view image", path) from None
+        raise DataError(f"missing {what}", path) from None
     except (OSError, ValueError) as exc:
-        raise DataError(f"cannot read image: {exc}", path) from None
-    return arr / np.float32(255.0)
+        raise DataError(f"cannot read {what}: {exc}", path) from None
+
+
+def read_rgb(path: Path) -> np.ndarray:
+    """A PNG as float32 (H, W, 3) in [0, 1]; DataError naming the file if unreadable."""
+    return read_png(path, "view image", "RGB").astype(np.float32) / np.float32(255.0)
 
 
 def read_mask(path: Path) -> np.ndarray:
     """A mask PNG as bool (H, W): True where any colour channel is non-zero (alpha ignored)."""
-    try:
-        with Image.open(path) as img:
-            arr = np.asarray(img)
-    except (OSError, ValueError) as exc:
-        raise DataError(f"cannot read mask: {exc}", path) from None
+    arr = read_png(path, "mask")
     if arr.ndim == 3:
         arr = arr[..., :3].any(axis=-1) if arr.shape[2] >= 3 else arr[..., 0]
     return arr.astype(bool)

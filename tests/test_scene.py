@@ -32,7 +32,7 @@ def test_scene_metadata_and_lazy_loading(tmp_path):
     assert scene.gt_disparity().shape == (40, 40)
     with pytest.raises(DataError) as info:
         scene.gray_views()
-    assert "input_Cam005.png" in str(info.value) and "cannot read image" in str(info.value)
+    assert "input_Cam005.png" in str(info.value) and "cannot read view image" in str(info.value)
 
 
 def test_views_are_indexed_v_u_and_gray_is_the_weighted_sum(tmp_path):

@@ -26,10 +26,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from PIL import Image
 
 from lfbench.errors import DataError
-from lfbench.scene import GRAY_WEIGHTS, Scene
+from lfbench.scene import GRAY_WEIGHTS, Scene, read_png
 from lfbench.training.augment import apply_augment, draw_augment
 from lfbench.training.config import AugmentConfig, DataConfig
 
@@ -59,13 +58,7 @@ def read_views_uint8(scene: Scene) -> np.ndarray:
     out = np.empty((h, w, v * u, 3), dtype=np.uint8)
     for k in range(v * u):  # one file per view: reading is per file by nature
         path = scene.view_path(k)
-        try:
-            with Image.open(path) as img:
-                arr = np.asarray(img.convert("RGB"))
-        except FileNotFoundError:
-            raise DataError("missing view image", path) from None
-        except (OSError, ValueError) as exc:
-            raise DataError(f"cannot read image: {exc}", path) from None
+        arr = read_png(path, "view image", "RGB")
         if arr.shape[:2] != (h, w):
             raise DataError(f"view is {arr.shape[1]}x{arr.shape[0]}, parameters.cfg says {w}x{h}", path)
         out[:, :, k] = arr
@@ -74,11 +67,7 @@ def read_views_uint8(scene: Scene) -> np.ndarray:
 
 def read_invalid_area(path: Path) -> np.ndarray:
     """The authors' invalid-area PNG as bool (H, W): alpha > 0 (any channel > 0 without alpha)."""
-    try:
-        with Image.open(path) as img:
-            arr = np.asarray(img)
-    except (OSError, ValueError) as exc:
-        raise DataError(f"cannot read invalid-area mask: {exc}", path) from None
+    arr = read_png(path, "invalid-area mask")
     if arr.ndim == 3:
         return arr[..., 3] > 0 if arr.shape[2] == 4 else arr.any(axis=-1)
     return arr > 0
