@@ -23,6 +23,7 @@ COMMANDS = {
     "synth": "lfbench.commands.synth",
     "convert-keras": "lfbench.commands.convert_keras",
     "train": "lfbench.commands.train",
+    "ablate": "lfbench.commands.ablate",
     "regress": "lfbench.commands.regress",
     "validate-submission": "lfbench.commands.validate_submission",
 }
