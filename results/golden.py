@@ -1,0 +1,59 @@
+"""Recompute the deterministic runs behind results/golden.json.
+
+    python results/golden.py --out OUT [--hci ../shared/data/hci]
+    lfbench regress results/golden.json OUT/results.json            # the CI check (nox -s regress)
+    lfbench regress --update --tolerance '*=0.05' results/golden.json OUT/results.json   # refresh
+
+Runs: every training-free method and the shipped SubFocal checkpoint on a synthetic mini benchmark
+(seed 0, 96x96, 3 scenes), and, when the HCI data is given, the published SubFocal maps on the
+real scenes that have them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import torch
+
+from lfbench.registry import REGISTRY, create
+from lfbench.results import Results
+from lfbench.runner import evaluate
+from lfbench.scene import Benchmark
+from lfbench.synth import write_benchmark
+
+SYNTH = {"seed": 0, "size": 96, "scenes": 3}
+SYNTH_METHODS = ("planesweep", "subfocal", "lfattnet")
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--out", type=Path, required=True)
+    ap.add_argument("--hci", type=Path, default=None, help="HCI data root (published maps are looked up beside it)")
+    args = ap.parse_args(argv)
+    torch.manual_seed(0)
+    data = args.out / "data"
+    if not data.exists():
+        write_benchmark(data, **SYNTH)
+    scenes = list(Benchmark.discover(data))
+    methods = []
+    for name in SYNTH_METHODS:
+        if name in REGISTRY.names():
+            method = create(name)
+            if method.available_for(scenes[0]) is None:
+                methods.append(method)
+    results = evaluate(methods, scenes, progress=False)
+    if args.hci is not None:
+        published = args.hci.parent / "published" / "subfocal"
+        if published.is_dir():
+            real = [s for s in Benchmark.discover(args.hci) if s.has_gt()]
+            results.extend(evaluate([create("published", path=published)], real, progress=False))
+    results.meta["golden_setup"] = {"synthetic": SYNTH, "hci": str(args.hci) if args.hci else None}
+    results.write(args.out)
+    print(f"{len(results.records)} records from {', '.join(results.methods)} -> {args.out / 'results.json'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
