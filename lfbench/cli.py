@@ -26,6 +26,7 @@ COMMANDS = {
     "ablate": "lfbench.commands.ablate",
     "regress": "lfbench.commands.regress",
     "validate-submission": "lfbench.commands.validate_submission",
+    "bench": "lfbench.commands.bench",
 }
 
 

@@ -146,7 +146,8 @@ def score_scene(scene: Scene, pred: np.ndarray, metrics: Sequence[Metric] = GENE
                 continue
             region = scene.mask(metric.mask_name, res)
             if region.shape != mask.shape:
-                raise DataError(f"mask is {region.shape[1]}x{region.shape[0]}, expected {mask.shape[1]}x{mask.shape[0]}",
+                expected = f"{mask.shape[1]}x{mask.shape[0]}"
+                raise DataError(f"mask is {region.shape[1]}x{region.shape[0]}, expected {expected}",
                                 scene.path / f"{metric.mask_name}_{res}.png")
             mask &= region
         context = {"scene": scene, "resolution": res} if metric.needs_scene else {}

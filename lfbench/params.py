@@ -78,7 +78,8 @@ class SceneParameters:
             if value is not None:
                 meta["scene" if key == "name" else key] = str(value)
         lines = []
-        for section in ("intrinsics", "extrinsics", "meta", *sorted(set(sections) - {"intrinsics", "extrinsics", "meta"})):
+        known = ("intrinsics", "extrinsics", "meta")
+        for section in (*known, *sorted(set(sections) - set(known))):
             if section in sections:
                 lines.append(f"[{section}]")
                 lines += [f"{k} = {v}" for k, v in sections[section].items()]

@@ -89,7 +89,8 @@ def compare(golden: list[GoldenRecord], new: Results, skip_absent_scenes: bool =
             continue
         r = current.get(g.key)
         if r is None:
-            findings.append(Finding("missing", g.key, f"MISSING  {name}: in golden ({g.value:.6g}) but not in the new results"))
+            findings.append(Finding("missing", g.key,
+                                    f"MISSING  {name}: in golden ({g.value:.6g}) but not in the new results"))
             continue
         if r.resolution != g.resolution:
             findings.append(Finding("resolution", g.key,

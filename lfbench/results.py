@@ -12,7 +12,7 @@ import json
 import math
 import platform
 from dataclasses import asdict, dataclass, field
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -82,7 +82,7 @@ class Results:
 
     # ------------------------------------------------------------------ files
     def to_json_dict(self) -> dict[str, Any]:
-        meta = {"lfbench_version": _version(), "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        meta = {"lfbench_version": _version(), "created": datetime.now(UTC).isoformat(timespec="seconds"),
                 "python": platform.python_version(), **self.meta}
         return {"meta": meta, "records": [_clean(asdict(r)) for r in self.records],
                 "runs": [_clean(asdict(r)) for r in self.runs]}

@@ -18,7 +18,6 @@ from pathlib import Path
 import torch
 
 from lfbench.registry import REGISTRY, create
-from lfbench.results import Results
 from lfbench.runner import evaluate
 from lfbench.scene import Benchmark
 from lfbench.synth import write_benchmark

@@ -12,7 +12,8 @@ HELP = "compare results with golden metrics (CI regression check)"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("golden", type=Path, help="golden JSON: list of {method, scene, metric, value, tolerance, resolution}")
+    p.add_argument("golden", type=Path,
+                   help="golden JSON: list of {method, scene, metric, value, tolerance, resolution}")
     p.add_argument("new", type=Path, help="new results.json (or the folder holding it)")
     p.add_argument("--update", action="store_true", help="write NEW's records as the golden file instead of checking")
     p.add_argument("--tolerance", default="0.001", metavar="T|metric=T,...",

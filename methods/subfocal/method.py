@@ -208,7 +208,8 @@ class SubFocal(_SubFocalBase):
     """SubFocal (Chao et al., TCI 2023): sub-pixel cost volume, channel attention, 3D aggregation.
 
     The uncertainty output is the standard deviation (px) of the predicted disparity distribution.
-    weights: checkpoint .pt (lfbench train / convert-keras); default: the shipped CPU-trained checkpoint when the configured architecture is its own (see `lfbench info subfocal`)
+    weights: checkpoint .pt (lfbench train / convert-keras); default: the shipped CPU-trained checkpoint
+        when the configured architecture is its own (see `lfbench info subfocal`)
     interval: disparity step of the cost volume in px (paper 0.5; 1, 0.25, 0.1 or any)
     interpolation: sub-pixel shift of the features: nearest, bilinear (paper) or phase (Fourier)
     d_min: smallest candidate disparity in px
@@ -238,7 +239,8 @@ class LFAttNet(_SubFocalBase):
     """LFattNet (Tsai et al., AAAI 2020), SubFocal's baseline: the same network at integer disparities.
 
     The uncertainty output is the standard deviation (px) of the predicted disparity distribution.
-    weights: checkpoint .pt (lfbench train / convert-keras --interval 1); default: a shipped checkpoint of the configured architecture, if any
+    weights: checkpoint .pt (lfbench train / convert-keras --interval 1); default: a shipped checkpoint
+        of the configured architecture, if any
     interval: disparity step of the cost volume in px (LFattNet 1)
     interpolation: sub-pixel shift of the features: nearest, bilinear or phase (Fourier)
     d_min: smallest candidate disparity in px

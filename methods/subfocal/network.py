@@ -5,6 +5,11 @@ k // 9, column k % 9); features (B, N, 4, H, W); cost volume (B, 4N, D, H, W) wi
 4 * view + c (view-major, as the authors concatenate); cost and probability (B, D, H, W);
 disparity (B, H, W) in px per view step.
 
+Eval mode without autograd (``torch.no_grad`` / ``torch.inference_mode``) runs the fast path of
+methods/subfocal/fast.py (folded BatchNorm, channels-last, fused oneDNN ops; the bilinear cost
+volume gathered from interpolated maps): the same results up to float rounding. Training, and eval
+with autograd on, run the layer-by-layer modules below; ``net.fast_inference = False`` forces them.
+
 Conventions taken from Keras: BatchNorm eps 1e-3 and momentum 0.99 (PyTorch momentum 0.01),
 glorot_uniform kernels, zero biases, 'same' average pooling that leaves padded cells out of the
 mean, bilinear upsampling with align_corners=True. The shared feature extractor is applied to
@@ -202,10 +207,11 @@ class ConvBN3d(nn.Module):
 class Aggregation(nn.Module):
     """The 3D aggregation ``basic``: (B, 4N, D, H, W) -> raw cost (B, D, H, W).
 
-    Nine 3x3x3 convolutions in a row, so a pixel depends on inputs up to 9 px away.
+    Eight 3x3x3 convolutions in a row (324 -> w, six w -> w, w -> 1; the residual paths skip some),
+    so a pixel depends on inputs up to 8 px away.
     """
 
-    RECEPTIVE_RADIUS = 9
+    RECEPTIVE_RADIUS = 8
 
     def __init__(self, cin: int, width: int) -> None:
         super().__init__()
@@ -251,9 +257,34 @@ class SubFocalNet(nn.Module):
         self.aggregation = Aggregation(channels, width)
         self.reset_parameters()
 
+    fast_inference = True  # eval mode without autograd takes methods/subfocal/fast.py
+
     def config(self) -> dict:
         """The constructor keyword arguments (stored in checkpoints)."""
         return dict(self._config)
+
+    def flops(self, height: int, width: int) -> dict[str, float]:
+        """Floating-point operations of one eval forward pass on an H x W light field (2 per multiply-add of
+        the convolutions and linear layers; BN, ReLU, shifts and softmax not counted): ``extractor`` (all
+        views, SPP convs at their pooled size), ``attention``, ``aggregation`` (D disparities), ``total``."""
+        n, d = self.angular ** 2, self.disparities.numel()
+        pooled = {id(b.convbn.conv): math.ceil(height / b.pool) * math.ceil(width / b.pool) for b in self.extractor.spp}
+        ext = 0.0
+        for m in self.extractor.modules():
+            if isinstance(m, nn.Conv2d):
+                k = m.kernel_size[0] * m.kernel_size[1]
+                ext += 2.0 * m.in_channels * m.out_channels * k * pooled.get(id(m), height * width)
+        agg = sum(2.0 * m.in_channels * m.out_channels * 27 for m in self.aggregation.modules()
+                  if isinstance(m, nn.Conv3d)) * d * height * width
+        att = 0.0 if self.attention is None else sum(2.0 * m.in_features * m.out_features
+                                                     for m in self.attention.modules() if isinstance(m, nn.Linear))
+        out = {"extractor": ext * n, "attention": att, "aggregation": agg}
+        out["total"] = sum(out.values())
+        return out
+
+    def uses_fast_path(self) -> bool:
+        """True when a call now takes the fast path: eval mode, autograd off, ``fast_inference``."""
+        return self.fast_inference and not self.training and not torch.is_grad_enabled()
 
     def reset_parameters(self) -> None:
         """Keras defaults: glorot_uniform kernels, zero biases, BN gamma 1, beta 0, mean 0, var 1."""
@@ -274,7 +305,13 @@ class SubFocalNet(nn.Module):
         if n != self.angular * self.angular:
             raise ValueError(f"expected {self.angular ** 2} views, got {n}")
         x = views.transpose(0, 1).reshape(n * b, 1, h, w)  # view-major: group g = view g
-        if self.training:
+        if self.uses_fast_path():
+            from lfbench_methods.subfocal.fast import FastExtractor
+
+            extractor = FastExtractor(self.extractor)
+            chunks = x.split(view_chunk * b) if view_chunk and view_chunk < n else [x]
+            f = torch.cat([extractor(c) for c in chunks], dim=0)  # channels-last
+        elif self.training:
             f = self.extractor(x, groups=n)
         elif view_chunk and view_chunk * b < n * b:
             f = torch.cat([self.extractor(c) for c in x.split(view_chunk * b)], dim=0)
@@ -285,6 +322,10 @@ class SubFocalNet(nn.Module):
     def cost_volume(self, features: torch.Tensor) -> torch.Tensor:
         """(B, N, 4, H, W) -> (B, 4N, D, H, W): every view shifted by every candidate disparity."""
         b, n, c, h, w = features.shape
+        if self.interpolation == "bilinear" and self.uses_fast_path():
+            from lfbench_methods.subfocal.inference import region_volume
+
+            return region_volume(self, features, 0, h, 0, w)
         vol = shift_views(features, self.offsets, self.disparities, self.interpolation)  # (B, D, N, C, H, W)
         return vol.reshape(b, -1, n * c, h, w).transpose(1, 2)
 
@@ -300,6 +341,11 @@ class SubFocalNet(nn.Module):
 
     def forward(self, views: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """views (B, N, H, W) float32 in [0, 1] -> (disparity (B, H, W) px, probability (B, D, H, W))."""
+        if self.uses_fast_path():
+            from lfbench_methods.subfocal.inference import eval_cost
+
+            h, w = views.shape[-2:]
+            return self.regress(eval_cost(self, views.float(), h, w, halo=0, max_memory_gb=1e6))
         vol = self.cost_volume(self.features(views))
         weights = self.attention_weights(vol.mean(dim=(2, 3, 4)))
         if weights is not None:

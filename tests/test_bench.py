@@ -1,0 +1,108 @@
+"""The bench plumbing (lfbench bench): records, machine info, isolation, peaks, tables. No timing assertions."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from lfbench import bench
+from lfbench.cli import main
+
+CONTRACT = {"size", "interval", "precision", "seconds", "peak_memory_gb", "gflops_per_s"}
+
+
+def test_inference_command_writes_the_contract_records(tmp_path: Path, capsys):
+    out = tmp_path / "OUT.json"
+    # A tiny network on a tiny scene, in its own process, after the conv peak (in another process).
+    code = main(["bench", "inference", "--size", "12", "--interval", "1", "--precision", "bf16",
+                 "--width", "3", "--threads", "1", "--json", str(out)])
+    assert code == 0
+    records = json.loads(out.read_text())
+    assert [r["precision"] for r in records] == ["bf16"]  # only inference records in this file
+    for r in records:
+        assert CONTRACT <= set(r)
+        assert r["size"] == 12 and r["interval"] == 1.0 and r["width"] == 3 and r["disparities"] == 9
+        assert r["seconds"] > 0 and r["gflops_per_s"] > 0
+        assert r["peak_memory_gb"] >= r["baseline_memory_gb"] > 0.05  # a fresh process with torch loaded
+        assert r["tiles"] == 1 and r["tile"] == [12, 12] and r["weights"] == "random"
+        assert set(r["phases_s"]) == {"features_s", "attention_s", "aggregation_s"}
+        m = r["machine"]
+        assert m["cores"] >= 1 and m["threads"] == 1 and m["torch"] and m["cpu"]
+        # The measured peak sits beside the record, and the floor follows from the network's FLOPs.
+        assert r["peak_gflops_per_s"] > 0
+        assert r["fraction_of_peak"] == pytest.approx(r["gflops_per_s"] / r["peak_gflops_per_s"])
+        assert r["fraction_of_peak_cpu"] > 0 and r["cpu_seconds"] > 0
+        assert r["floor_s"] == pytest.approx(r["tflop"] * 1e3 / r["peak_gflops_per_s"])
+    text = capsys.readouterr().out
+    assert "## inference" in text and "## peak" in text and "machine:" in text
+
+
+def test_network_flops_are_the_analytic_count():
+    from lfbench_methods.subfocal.network import SubFocalNet
+
+    f = SubFocalNet().flops(512, 512)
+    # The issue's ~44 TFLOP: 17 disparities x 512^2 px x 2 x 27 x (324*150 + 6*150^2 + 150).
+    assert f["aggregation"] == 17 * 512 * 512 * 2 * 27 * (324 * 150 + 6 * 150 ** 2 + 150)
+    assert f["aggregation"] == pytest.approx(44.2e12, rel=1e-3)
+    # Extractor per view pixel (multiply-adds): stem 180, layer1 576, layer2 4*8 + 288 + 15*576,
+    # layer3 128 + 1152 + 3*2304, layer4 256 + 4*2304, last 5760 + 64; SPP 64 per pooled pixel.
+    per_px = 180 + 576 + (32 + 288 + 15 * 576) + (128 + 1152 + 3 * 2304) + (256 + 4 * 2304) + 5824
+    pooled = sum((512 // p) ** 2 for p in (2, 4, 8, 16)) * 64
+    assert f["extractor"] == 2 * 81 * (per_px * 512 * 512 + pooled)
+    assert f["total"] == pytest.approx(f["extractor"] + f["aggregation"] + f["attention"])
+    assert SubFocalNet(interval=0.1).flops(512, 512)["aggregation"] == pytest.approx(f["aggregation"] * 81 / 17)
+
+
+def test_attach_peaks_and_the_table():
+    peak = {"bench": "peak", "precision": "bf16", "seconds": 1.0, "shape": [150, 17, 64, 64]}
+    records = [{**peak, "gflops_per_s": 300.0, "gflops_per_cpu_s": 200.0},
+               {"bench": "inference", "size": 512, "interval": 0.5, "precision": "bf16", "seconds": 200.0,
+                "gflops_per_s": 200.0, "gflops_per_cpu_s": 100.0, "tflop": 40.0, "peak_memory_gb": 3.5,
+                "machine": {"load_average": 2.5}},
+               {**peak, "gflops_per_s": 500.0, "gflops_per_cpu_s": 200.0},
+               {"bench": "inference", "size": 512, "interval": 0.5, "precision": "fp32", "seconds": 1.0,
+                "gflops_per_s": 1.0, "tflop": 1.0, "peak_memory_gb": 1.0}]
+    out = bench.attach_peaks(records)
+    # The peak is the mean of the measurements just before and after the case: (300 + 500) / 2.
+    assert out[1]["peak_gflops_per_s"] == 400.0 and out[1]["fraction_of_peak"] == 0.5
+    assert out[1]["fraction_of_peak_cpu"] == 0.5  # 100 / 200 GFLOP per CPU second
+    assert out[1]["floor_s"] == 100.0 and out[1]["ratio_to_floor"] == 2.0  # 40 TFLOP at 400 GFLOP/s
+    assert "fraction_of_peak" not in out[3]  # no fp32 peak measured
+    assert "ratio_to_floor" not in records[1]  # inputs are not modified
+    text = bench.table(out)
+    assert "## peak" in text and "## inference" in text
+    row = next(line for line in text.splitlines() if line.startswith("| 512") and "bf16" in line)
+    assert "| 2.5 " in row and "| 0.5 " in row  # load average and fraction of peak in the row
+
+
+def test_metrics_bench_scores_every_scene_and_method():
+    r = bench.run_case("metrics", {"scenes": 2, "methods": 3, "size": 40})
+    assert r["bench"] == "metrics" and r["scenes"] == 2 and r["methods"] == 3 and r["metrics"] == 5
+    assert r["scores_per_s"] == pytest.approx(6 / r["seconds"])
+    assert r["machine"]["cpu"] and "load_average_before" in r["machine"]
+
+
+def test_volume_bench_measures_both_paths_in_process():
+    for method in ("gather", "grid_sample"):
+        r = bench.bench_volume(size=10, interval=1.0, precision="bf16", method=method, threads=1)
+        item = 2 if method == "gather" else 4  # grid_sample is the fp32 reference path
+        assert r["volume_gb"] == pytest.approx(9 * 10 * 10 * 324 * item / 1e9)
+        assert r["gb_per_s"] == pytest.approx(r["volume_gb"] / r["seconds"])
+
+
+def test_a_failing_case_is_a_record_with_an_error_and_exit_code_1(tmp_path: Path, capsys):
+    r = bench.run_isolated("peak", {"precision": "fp16"})
+    assert "error" in r and "fp16" in r["error"]
+    assert main(["bench", "volume", "--size", "8", "--interval", "0.3", "--method", "gather",
+                 "--precision", "fp32", "--json", str(tmp_path / "v.json")]) == 1  # 8 / 0.3 is not a grid
+    assert "error" in json.loads((tmp_path / "v.json").read_text())[0]
+    assert "error" in capsys.readouterr().out
+
+
+def test_memory_helpers():
+    assert bench.peak_rss_gb() > 0
+    assert 0 < bench.current_rss_gb() <= bench.peak_rss_gb() * 1.01
+    info = bench.machine_info()
+    assert {"cpu", "cores", "threads", "torch", "load_average"} <= set(info)
