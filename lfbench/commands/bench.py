@@ -102,6 +102,8 @@ def _cases(args: argparse.Namespace) -> list[tuple[str, dict]]:
                                                 "repeat": args.repeat, **th}))
             if peaks:  # the peak again after the last case: each case sits between two peak measurements
                 cases += [("peak", {"precision": p, **th}) for p in args.precision]
+        elif "peak" not in skip:  # the suite without inference: the peaks still sit beside the training bench
+            cases += [("peak", {"precision": p, **th}) for p in args.precision]
         if which == "suite":
             quick = args.quick
             if "volume" not in skip:

@@ -126,7 +126,7 @@ class FastExtractor:
         wt, b, pad, dil = self.stem[0]
         y = conv(x.reshape(1, m, h, w).float().contiguous(memory_format=torch.channels_last), wt.repeat(m, 1, 1, 1),
                  None if b is None else b.repeat(m), pad, dil, relu=True, groups=m)  # (1, 4M, H, W)
-        y = y.permute(0, 2, 3, 1).reshape(h, w, m, FEATURES).permute(2, 0, 1, 3).contiguous()  # (M, H, W, 4)
+        y = y.permute(0, 2, 3, 1).reshape(h, w, m, wt.shape[0]).permute(2, 0, 1, 3).contiguous()  # (M, H, W, 4)
         return y.permute(0, 3, 1, 2)
 
     def __call__(self, x: torch.Tensor) -> torch.Tensor:
