@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lfbench.atomic import write_bytes
+from lfbench.atomic import write_bytes, write_text
 from lfbench.stats import pixel_loss
 
 __all__ = [
@@ -267,3 +267,85 @@ def plot_sparsification(results: Sparsification | Mapping[str, Sparsification], 
         plt.close(fig)
     write_bytes(path, buf.getvalue())
     return Path(path)
+
+
+# --------------------------------------------------------------------------- evaluation hook and report
+
+REPORT_MEASURES: tuple[str, ...] = ("abs", "badpix_0.07")
+
+
+class UncertaintyCollector:
+    """Prediction hook for ``runner.evaluate(on_prediction=...)``: the sparsification of every
+    (method label, scene) whose prediction carries an uncertainty map, per measure of ``measures``,
+    in ``self.items[(label, scene, measure)]``. Methods without uncertainty are listed in ``self.without``."""
+
+    def __init__(self, rules=None, measures: Sequence[str] = REPORT_MEASURES) -> None:
+        self.rules = rules
+        self.measures = tuple(dict.fromkeys(pixel_loss(np.zeros(1), m)[1] for m in measures))  # canonical ids
+        self.items: dict[tuple[str, str, str], Sparsification] = {}
+        self.without: set[str] = set()
+
+    def __call__(self, method, scene, pred) -> None:
+        if not scene.has_gt():
+            return
+        if pred.uncertainty is None:
+            self.without.add(method.label)
+            return
+        for measure in self.measures:
+            sp = scene_sparsification(scene, pred, self.rules, measure)
+            if sp is not None:
+                self.items[(method.label, scene.name, sp.measure)] = sp
+
+
+def uncertainty_table(items: Mapping[tuple[str, str, str], Sparsification]):
+    """Long DataFrame with columns method, scene, measure, unit, ause, aurg, full (the measure on all
+    pixels), oracle_half (the measure after removing the worst half by true error), n_pixels; a scene
+    ``average`` per (method, measure) averages the curves over scenes (equal weights)."""
+    import pandas as pd
+
+    rows = []
+
+    def row(method: str, scene: str, sp: Sparsification) -> dict:
+        half = int(np.argmin(np.abs(sp.fractions - 0.5)))
+        return {"method": method, "scene": scene, "measure": sp.measure, "unit": sp.unit, "ause": sp.ause,
+                "aurg": sp.aurg, "full": float(sp.curve[0]), "oracle_half": float(sp.oracle[half]),
+                "n_pixels": sp.n_pixels}
+
+    groups: dict[tuple[str, str], list[Sparsification]] = {}
+    for (method, scene, measure), sp in items.items():
+        rows.append(row(method, scene, sp))
+        groups.setdefault((method, measure), []).append(sp)
+    for (method, _), sps in groups.items():
+        if len(sps) > 1:
+            rows.append(row(method, "average", average_sparsification(sps)))
+    return pd.DataFrame(rows, columns=["method", "scene", "measure", "unit", "ause", "aurg", "full", "oracle_half",
+                                       "n_pixels"])
+
+
+def write_uncertainty_report(collector: UncertaintyCollector, out: str | Path) -> list[Path]:
+    """OUT/uncertainty.csv (see :func:`uncertainty_table`), OUT/table_uncertainty.md and one figure per
+    measure, OUT/figures/sparsification_<measure>.png (curves averaged over scenes, one colour per
+    method). Returns the written paths (none when no method predicted an uncertainty)."""
+    out = Path(out)
+    if not collector.items:
+        return []
+    table = uncertainty_table(collector.items)
+    write_text(out / "uncertainty.csv", table.to_csv(index=False))
+    shown = table.assign(ause=table.ause.map("{:.4g}".format), aurg=table.aurg.map("{:.4g}".format),
+                         full=table.full.map("{:.4g}".format), oracle_half=table.oracle_half.map("{:.4g}".format))
+    lines = ["Uncertainty quality: sparsification of each method's uncertainty map against its error "
+             "(AUSE: 0 = ranks pixels like the true error; AURG > 0: better than a random ranking).", "",
+             shown.to_markdown(index=False), ""]
+    write_text(out / "table_uncertainty.md", "\n".join(lines))
+    written = [out / "uncertainty.csv", out / "table_uncertainty.md"]
+    for measure in collector.measures:
+        curves: dict[str, Sparsification] = {}
+        for method in dict.fromkeys(m for m, _, _ in collector.items):
+            sps = [sp for (m, _, me), sp in collector.items.items() if m == method and me == measure]
+            if sps:
+                curves[method] = average_sparsification(sps)
+        if curves:
+            path = out / "figures" / f"sparsification_{measure}.png"
+            n = len({s for _, s, _ in collector.items})
+            written.append(plot_sparsification(curves, path, title=f"sparsification, mean of {n} scene(s)"))
+    return written

@@ -391,3 +391,18 @@ def test_process_plugin_discovered_through_entry_points(tmp_path):
                  str(tmp_path / "views.npy"), "--out", str(tmp_path / "c.npy")], PYTHONPATH=pythonpath)
     assert proc.returncode == 0, proc.stderr
     assert np.array_equal(np.load(tmp_path / "c.npy"), 0.5 * views[:, :, 40])
+
+
+def test_evaluate_rates_uncertainty_maps(data, capsys):
+    rc, out, err = run_cli(capsys, "evaluate", "--data", data["root"], "--method", "planesweep:interval=0.5",
+                           "--method", "gt", "--scenes", "alpha", "--out", data["out"], "--no-progress",
+                           "--uncertainty")
+    assert rc == 0, err
+    with open(data["out"] / "uncertainty.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert {(r["method"], r["scene"], r["measure"]) for r in rows} == {
+        ("planesweep:interval=0.5", "alpha", m) for m in ("abs", "badpix_0.07")}
+    for r in rows:
+        assert float(r["ause"]) >= 0 and int(r["n_pixels"]) == (SIZE - 30) ** 2
+    assert "note: gt predicts no uncertainty map" in out and "AUSE" in out
+    assert (data["out"] / "figures" / "sparsification_abs.png").is_file()

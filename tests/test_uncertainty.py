@@ -144,3 +144,48 @@ def test_scene_sparsification_on_a_real_scene(hci_root):
     assert sp.ause == pytest.approx(0.0, abs=1e-9)
     assert sp.curve[0] == pytest.approx(err[15:-15, 15:-15].mean(), rel=1e-5)
     assert U.scene_sparsification(scene, Prediction(pred)) is None
+
+
+class _Named:
+    def __init__(self, label: str) -> None:
+        self.label = label
+
+
+def test_collector_table_and_report(tmp_path):
+    from helpers import write_scene
+
+    from lfbench.method import Prediction
+    from lfbench.scene import Benchmark
+
+    rng = np.random.default_rng(3)
+    for k in range(2):
+        write_scene(tmp_path / "data", f"s{k}", size=40, gt=rng.uniform(-1, 1, (40, 40)).astype(np.float32), seed=k)
+    scenes = list(Benchmark.discover(tmp_path / "data"))
+    rater = U.UncertaintyCollector(measures=("sq", "badpix_0.07"))
+    assert rater.measures == ("mse_x100", "badpix_0.07")
+    expected_full = []
+    for scene in scenes:
+        gt = scene.gt_disparity()
+        pred = gt + rng.standard_normal(gt.shape).astype(np.float32) * 0.1
+        err = np.abs(pred - gt)
+        rater(_Named("oracle"), scene, Prediction(pred, uncertainty=err))  # ranks exactly like the error
+        rater(_Named("inverted"), scene, Prediction(pred, uncertainty=-err))
+        rater(_Named("none"), scene, Prediction(pred))
+        expected_full.append(100 * np.mean(np.square(pred - gt)[15:-15, 15:-15].astype(np.float64)))
+    assert rater.without == {"none"}
+    table = U.uncertainty_table(rater.items)
+    mse = table[table.measure == "mse_x100"].set_index(["method", "scene"])
+    assert set(mse.index) == {(m, s) for m in ("oracle", "inverted") for s in ("s0", "s1", "average")}
+    assert mse.loc[("oracle", "s0"), "ause"] == pytest.approx(0.0, abs=1e-9)
+    assert mse.loc[("oracle", "s1"), "full"] == pytest.approx(expected_full[1], rel=1e-5)
+    assert mse.loc[("inverted", "s0"), "aurg"] < 0 < mse.loc[("oracle", "s0"), "aurg"]
+    assert mse.loc[("inverted", "average"), "ause"] == pytest.approx(
+        (mse.loc[("inverted", "s0"), "ause"] + mse.loc[("inverted", "s1"), "ause"]) / 2)
+    assert (mse.n_pixels.loc[[("oracle", "s0")]] == 10 * 10).all()  # 40 px minus the 15 px border
+    written = U.write_uncertainty_report(rater, tmp_path / "out")
+    names = sorted(p.relative_to(tmp_path / "out").as_posix() for p in written)
+    assert names == ["figures/sparsification_badpix_0.07.png", "figures/sparsification_mse_x100.png",
+                     "table_uncertainty.md", "uncertainty.csv"]
+    assert "| inverted" in (tmp_path / "out" / "table_uncertainty.md").read_text()
+    assert U.write_uncertainty_report(U.UncertaintyCollector(), tmp_path / "empty") == []
+    assert not (tmp_path / "empty").exists()

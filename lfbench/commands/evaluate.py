@@ -33,6 +33,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="tile size of the block bootstrap (1 = independent pixels; errors of neighbours correlate)")
     p.add_argument("--ci-resamples", type=int, default=1000, metavar="N", help="bootstrap resamples")
     p.add_argument("--figures", action="store_true", help="also draw per-scene figures into OUT/figures/")
+    p.add_argument("--uncertainty", action="store_true",
+                   help="also rate each method's uncertainty map (SubFocal: std of its distribution): "
+                        "sparsification curves and AUSE/AURG in OUT/uncertainty.csv, OUT/table_uncertainty.md "
+                        "and OUT/figures/sparsification_*.png")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
@@ -69,6 +73,12 @@ def run(args: argparse.Namespace) -> int:
         collector = ErrorCollector(rules)
         hooks.append(collector)
 
+    if args.uncertainty:
+        from lfbench.uncertainty import UncertaintyCollector
+
+        rater = UncertaintyCollector(rules)
+        hooks.append(rater)
+
     def on_prediction(method, scene, pred):
         for hook in hooks:
             hook(method, scene, pred)
@@ -92,6 +102,13 @@ def run(args: argparse.Namespace) -> int:
         write_text(args.out / "ci.csv", long.to_csv(index=False))
         for fmt, ext in (("markdown", "md"), ("latex", "tex"), ("csv", "csv")):
             write_text(args.out / f"table_ci_per_scene.{ext}", render(format_ci_table(long), fmt))
+    if args.uncertainty:
+        from lfbench.uncertainty import write_uncertainty_report
+
+        if write_uncertainty_report(rater, args.out):
+            print((args.out / "table_uncertainty.md").read_text(encoding="utf-8"))
+        for label in sorted(rater.without):
+            print(f"note: {label} predicts no uncertainty map; not rated")
     print(render(per_scene_table(results), "markdown"), end="")
     print(f"\nwrote {args.out / 'results.json'} and {args.out / 'results.csv'}")
     return 0
