@@ -9,8 +9,10 @@ are reported (so the golden file can be refreshed) but do not fail.
 
 from __future__ import annotations
 
+import fnmatch
 import json
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -110,15 +112,27 @@ def compare(golden: list[GoldenRecord], new: Results, skip_absent_scenes: bool =
     return findings
 
 
-def make_golden(results: Results, tolerance: float | dict[str, float], path: str | Path) -> int:
-    """Write results as golden records; ``tolerance`` is one number or a dict by metric id (key '*' = default)."""
-    def tol(metric: str) -> float:
-        if isinstance(tolerance, dict):
-            return float(tolerance.get(metric, tolerance.get("*", 0.0)))
+def tolerance_for(method: str, metric: str, tolerance: float | Mapping[str, float]) -> float:
+    """The tolerance of one record: ``tolerance`` is one number, or a dict whose keys are glob patterns
+    of ``METHOD/METRIC`` (e.g. ``'published*/*'``, tried first, in order) or of the metric id alone
+    (``'mse_x100'``, ``'*'``); no match gives 0."""
+    if not isinstance(tolerance, Mapping):
         return float(tolerance)
+    for key, value in tolerance.items():
+        if "/" in key and fnmatch.fnmatchcase(f"{method}/{metric}", key):
+            return float(value)
+    if metric in tolerance:
+        return float(tolerance[metric])
+    for key, value in tolerance.items():
+        if "/" not in key and fnmatch.fnmatchcase(metric, key):
+            return float(value)
+    return 0.0
 
+
+def make_golden(results: Results, tolerance: float | Mapping[str, float], path: str | Path) -> int:
+    """Write results as golden records; ``tolerance`` as in :func:`tolerance_for`."""
     records = [{"method": r.method, "scene": r.scene, "metric": r.metric, "value": r.value,
-                "tolerance": tol(r.metric), "resolution": r.resolution}
+                "tolerance": tolerance_for(r.method, r.metric, tolerance), "resolution": r.resolution}
                for r in results.records if math.isfinite(r.value)]
     write_text(path, json.dumps(records, indent=1) + "\n")
     return len(records)

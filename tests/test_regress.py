@@ -30,6 +30,18 @@ def test_golden_records_carry_tolerances(golden):
     assert recs["badpix_0.07"].value == 5.0 and recs["badpix_0.07"].resolution == "lowres"
 
 
+def test_tolerance_by_method_and_metric():
+    from lfbench.regress import tolerance_for
+
+    spec = {"published*/*": 1e-6, "subfocal:width=16/badpix_*": 0.25, "mse_x100": 0.05, "*": 0.01}
+    assert tolerance_for("published:subfocal", "mse_x100", spec) == 1e-6  # METHOD/METRIC keys win
+    assert tolerance_for("subfocal:width=16", "badpix_0.07", spec) == 0.25
+    assert tolerance_for("subfocal:width=16", "mse_x100", spec) == 0.05
+    assert tolerance_for("planesweep", "q25_x100", spec) == 0.01
+    assert tolerance_for("planesweep", "q25_x100", {"mse_x100": 1.0}) == 0.0
+    assert tolerance_for("planesweep", "q25_x100", 0.5) == 0.5
+
+
 def test_within_tolerance_passes(golden):
     assert not [f for f in compare(read_golden(golden), _results(**{"badpix_0.07": 5.009})) if f.failed]
 

@@ -17,7 +17,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("new", type=Path, help="new results.json (or the folder holding it)")
     p.add_argument("--update", action="store_true", help="write NEW's records as the golden file instead of checking")
     p.add_argument("--tolerance", default="0.001", metavar="T|metric=T,...",
-                   help="tolerance for --update: one number, or per metric id, e.g. '*=0.01,mse_x100=0.005'")
+                   help="tolerance for --update: one number, or per metric id or METHOD/METRIC glob, e.g. "
+                        "'*=0.01,mse_x100=0.005,published*/*=1e-6' (METHOD/METRIC keys win)")
     p.add_argument("--skip-absent-scenes", action="store_true",
                    help="ignore golden records of scenes absent from NEW (e.g. real scenes when the data is not here)")
     p.add_argument("--quiet", action="store_true", help="print only failures and the summary")
