@@ -34,3 +34,14 @@ def require(path: Path) -> Path:
     if not path.exists():
         pytest.skip(f"{path} not available")
     return path
+
+
+@pytest.fixture()
+def one_torch_thread():
+    """Run a test with one torch thread: tiny tensors avoid OpenMP barrier stalls on a shared, loaded machine."""
+    import torch
+
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)

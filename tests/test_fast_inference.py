@@ -11,14 +11,7 @@ from lfbench_methods.subfocal.network import SubFocalNet
 
 from lfbench.shift import angular_offsets, disparity_grid, shift_views
 
-
-@pytest.fixture(autouse=True)
-def one_thread():
-    """Tiny tensors: one thread avoids OpenMP barrier stalls on a shared, loaded machine."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")  # small tensors: see conftest
 
 
 def _net(seed: int = 0, **kw) -> SubFocalNet:

@@ -17,14 +17,7 @@ from lfbench.errors import DataError, SpecError
 from lfbench.registry import create, create_from_spec
 from lfbench.scene import ArrayLightField
 
-
-@pytest.fixture(autouse=True)
-def one_thread():
-    """Tiny tensors: one thread avoids OpenMP barrier stalls on a shared, loaded machine."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")  # small tensors: see conftest
 
 
 def _net(seed: int = 0, **kw) -> SubFocalNet:

@@ -21,14 +21,7 @@ from lfbench_methods.subfocal.network import SubFocalNet, count_trainable
 from lfbench.cli import main
 from lfbench.errors import DataError
 
-
-@pytest.fixture(autouse=True)
-def one_thread():
-    """Small tensors: one thread avoids OpenMP barrier stalls on a shared, loaded machine."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")  # small tensors: see conftest
 
 
 @pytest.fixture(scope="module")

@@ -22,13 +22,7 @@ EXTRACTOR = 34_164  # trainable parameters of the shared 2D feature extractor
 ATTENTION = 324 * 170 + 170 + 170 * 15 + 15  # two 1x1x1 Conv3D with bias
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    """Small tensors: one thread avoids OpenMP barrier stalls on a shared, loaded machine."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")  # small tensors: see conftest
 
 
 def aggregation_params(width: int, cin: int = 324) -> int:
