@@ -213,19 +213,10 @@ def _resolve(value: str, source: Path, key: str) -> Path:
 
 def load_spec(path: str | Path) -> AblationSpec:
     """Read and check an ablation spec (every cell's training config is parsed; no work is done)."""
-    import tomllib
+    from lfbench.tomlfile import read_toml
 
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise SpecError("ablation spec not found", path) from None
-    except OSError as exc:
-        raise SpecError(f"cannot read ablation spec: {exc}", path) from None
-    try:
-        raw = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise SpecError(f"invalid TOML: {exc}", path) from None
+    raw, text = read_toml(path, "ablation spec")
     return parse_spec(raw, path, text)
 
 

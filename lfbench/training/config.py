@@ -156,24 +156,9 @@ class TrainConfig:
 
     @classmethod
     def from_toml(cls, path: str | Path) -> TrainConfig:
-        path = Path(path)
-        try:
-            import tomllib
-        except ModuleNotFoundError:  # Python 3.10
-            try:
-                import tomli as tomllib  # type: ignore[no-redef]
-            except ModuleNotFoundError:
-                raise SpecError("reading TOML needs Python 3.11+ (tomllib) or the tomli package", path) from None
-        try:
-            text = path.read_text(encoding="utf-8")
-        except FileNotFoundError:
-            raise SpecError("config file not found", path) from None
-        except OSError as exc:
-            raise SpecError(f"cannot read config: {exc}", path) from None
-        try:
-            raw = tomllib.loads(text)
-        except tomllib.TOMLDecodeError as exc:
-            raise SpecError(f"invalid TOML: {exc}", path) from None
+        from lfbench.tomlfile import read_toml
+
+        raw, _ = read_toml(path, "config file")
         return _parse(raw, str(path))
 
 
