@@ -135,7 +135,7 @@ def select_methods(requested: Sequence | None, scenes: Sequence, log: Log = _std
     runs as those variants. With ``requested`` (methods made from the user's
     specs): those; one that cannot run on the scenes is skipped with its reason.
     """
-    from lfbench.registry import REGISTRY, create, list_methods
+    from lfbench.registry import REGISTRY, create, list_methods, offline_variants
 
     candidates: list = []
     skipped: dict[str, str] = {}
@@ -147,8 +147,7 @@ def select_methods(requested: Sequence | None, scenes: Sequence, log: Log = _std
             if required:
                 skipped[info.name] = f"needs parameter {', '.join(required)} (e.g. {info.name}:{required[0]}=...)"
                 continue
-            variants = getattr(info.factory, "offline_variants", None)
-            for params in (variants() if variants else None) or [{}]:  # e.g. shipped weights' architecture
+            for params in offline_variants(info.name):  # e.g. the shipped weights' architecture
                 try:
                     candidates.append(create(info.name, **params))
                 except LFBenchError as exc:

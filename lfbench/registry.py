@@ -236,6 +236,14 @@ def method_info(name: str) -> MethodInfo:
     return REGISTRY.info(name)
 
 
+def offline_variants(name: str) -> list[dict[str, Any]]:
+    """Parameter sets under which ``name`` runs with what is installed: the method's own
+    ``offline_variants()`` (e.g. ``[{"width": 16}]``, the architecture of its shipped weights) when it
+    offers a non-empty list, else ``[{}]`` (its defaults)."""
+    variants = getattr(REGISTRY.info(name).factory, "offline_variants", None)
+    return (variants() if variants else None) or [{}]
+
+
 def parse_spec(spec: str) -> tuple[str, dict[str, str]]:
     """``name:key=value,key=value`` -> (name, {key: raw value}). Values may not contain commas."""
     spec = spec.strip()

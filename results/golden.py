@@ -22,7 +22,7 @@ from pathlib import Path
 
 import torch
 
-from lfbench.registry import REGISTRY, create, method_info
+from lfbench.registry import REGISTRY, create, offline_variants
 from lfbench.regress import make_golden
 from lfbench.runner import evaluate
 from lfbench.scene import Benchmark
@@ -49,8 +49,7 @@ def main(argv: list[str] | None = None) -> int:
     for name in SYNTH_METHODS:
         if name not in REGISTRY.names():
             continue
-        variants = getattr(method_info(name).factory, "offline_variants", None)
-        for params in (variants() if variants else None) or [{}]:  # e.g. subfocal:width=16 (shipped weights)
+        for params in offline_variants(name):  # e.g. subfocal:width=16 (shipped weights)
             method = create(name, **params)
             if method.available_for(scenes[0]) is None:
                 methods.append(method)
