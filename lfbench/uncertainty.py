@@ -43,6 +43,10 @@ __all__ = [
     "sparsification_from_loss",
     "average_sparsification",
     "scene_sparsification",
+    "scene_sparsifications",
+    "UncertaintyCollector",
+    "uncertainty_table",
+    "write_uncertainty_report",
     "plot_sparsification",
 ]
 
@@ -187,22 +191,35 @@ def scene_sparsification(scene, prediction, rules=None, measure: str = "abs",
     resolution, border and valid masks; the uncertainty is aligned and upsampled like the disparity).
     The default non-finite rules apply even under toolkit rules. None when the prediction has no
     uncertainty map."""
+    found = scene_sparsifications(scene, prediction, rules, (measure,), fractions, normalize)
+    return next(iter(found.values())) if found else None
+
+
+def scene_sparsifications(scene, prediction, rules=None, measures: Sequence[str] = ("abs",),
+                          fractions: Sequence[float] | np.ndarray = DEFAULT_FRACTIONS,
+                          normalize: bool = False) -> dict[str, Sparsification]:
+    """:func:`scene_sparsification` for several measures, scoring the prediction once: canonical
+    measure id -> Sparsification (empty when the prediction has no uncertainty map)."""
     import dataclasses
 
     from lfbench.evaluation import ScoringRules, align_prediction, upsample_nearest
     from lfbench.stats import scene_errors
 
     if prediction.uncertainty is None:
-        return None
+        return {}
     rules = dataclasses.replace(rules or ScoringRules(), toolkit=False)
     se = scene_errors(scene, prediction.disparity, rules)
     unc, _ = align_prediction(np.asarray(prediction.uncertainty), scene.spatial_size, "uncertainty")
     scale = se.shape[0] // scene.spatial_size[0]
     if scale != 1:
         unc = upsample_nearest(unc, scale)
-    loss, mid, unit = pixel_loss(se.errors, measure)
-    keep = np.isfinite(loss)
-    return sparsification_from_loss(loss[keep], unc.ravel()[se.flat_index][keep], mid, unit, fractions, normalize)
+    scored_unc = unc.ravel()[se.flat_index]
+    out = {}
+    for measure in measures:
+        loss, mid, unit = pixel_loss(se.errors, measure)
+        keep = np.isfinite(loss)
+        out[mid] = sparsification_from_loss(loss[keep], scored_unc[keep], mid, unit, fractions, normalize)
+    return out
 
 
 def average_sparsification(items: Sequence[Sparsification]) -> Sparsification:
@@ -291,10 +308,8 @@ class UncertaintyCollector:
         if pred.uncertainty is None:
             self.without.add(method.label)
             return
-        for measure in self.measures:
-            sp = scene_sparsification(scene, pred, self.rules, measure)
-            if sp is not None:
-                self.items[(method.label, scene.name, sp.measure)] = sp
+        for measure, sp in scene_sparsifications(scene, pred, self.rules, self.measures).items():
+            self.items[(method.label, scene.name, measure)] = sp
 
 
 def uncertainty_table(items: Mapping[tuple[str, str, str], Sparsification]):
