@@ -29,7 +29,7 @@ def lint(session: nox.Session) -> None:
     """ruff over the package, the methods, tests and scripts."""
     if not isinstance(session.virtualenv, nox.virtualenv.PassthroughEnv):
         session.install("ruff")
-    session.run("ruff", "check", "lfbench", "methods", "tests", "benchmarks", "noxfile.py")
+    session.run("ruff", "check", "lfbench", "methods", "tests", "benchmarks", "results", "noxfile.py")
 
 
 @nox.session

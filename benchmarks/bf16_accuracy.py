@@ -26,8 +26,8 @@ def measure(net, scene, crop: int, border: int = 15) -> dict:
     import torch
     from lfbench_methods.subfocal.inference import infer
 
-    from lfbench.evaluation import border_mask
-    from lfbench.metrics import bad_pix, mse_x100
+    from lfbench.scoring.metrics import bad_pix, mse_x100
+    from lfbench.scoring.rules import border_mask
 
     views = scene.gray_views()  # (9, 9, H, W)
     gt = scene.gt_disparity()
@@ -67,7 +67,7 @@ def main(argv: list[str] | None = None) -> int:
 
     import torch
 
-    from lfbench.scene import Benchmark
+    from lfbench.data.scene import Benchmark
 
     torch.set_num_threads(args.threads or os.cpu_count() or 1)
     if args.weights.suffix in (".h5", ".hdf5"):
@@ -86,7 +86,7 @@ def main(argv: list[str] | None = None) -> int:
         records.append(r)
         print(json.dumps(r), flush=True)
     if args.json:
-        from lfbench.atomic import write_text
+        from lfbench.utils.atomic import write_text
 
         write_text(args.json, json.dumps(records, indent=2) + "\n")
     return 0

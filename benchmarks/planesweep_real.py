@@ -36,9 +36,9 @@ def main(argv: list[str] | None = None) -> int:
 
     import torch
 
-    from lfbench.evaluation import ScoringRules, score_scene
-    from lfbench.registry import create_from_spec
-    from lfbench.scene import Benchmark
+    from lfbench.data.scene import Benchmark
+    from lfbench.method.registry import create_from_spec
+    from lfbench.scoring.rules import ScoringRules, score_scene
 
     torch.set_num_threads(args.threads)
     method = create_from_spec(args.method)

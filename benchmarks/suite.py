@@ -7,7 +7,7 @@
 
 The same as ``lfbench bench suite`` (or ``nox -s bench``) with the output files named after the date and
 host, so runs on different machines sit side by side. Every case runs in a fresh process; see
-lfbench/bench.py for what each bench measures.
+lfbench/runs/bench.py for what each bench measures.
 """
 
 from __future__ import annotations

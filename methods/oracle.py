@@ -2,10 +2,10 @@
 
 from __future__ import annotations
 
-from lfbench.errors import DataError
-from lfbench.method import Method, Prediction
-from lfbench.registry import register_method
-from lfbench.scene import LightField
+from lfbench.data.scene import LightField
+from lfbench.method.base import Method, Prediction
+from lfbench.method.registry import register_method
+from lfbench.utils.errors import DataError
 
 
 @register_method("gt")

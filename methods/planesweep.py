@@ -5,7 +5,7 @@ Pipeline, all batched torch on the CPU (or any device the views live on):
 1. Matching features: each gray view is contrast-normalised in a small window,
    ``(I - mean) / (std + eps)``, so faint texture (shadows, dark walls) counts as much as strong texture.
 2. Plane sweep: every view is shifted onto the centre view for every candidate disparity
-   ``d_min, d_min + interval, ..., d_max`` (``lfbench.shift`` geometry: a view at angular offset (du, dv)
+   ``d_min, d_min + interval, ..., d_max`` (``lfbench.data.shift`` geometry: a view at angular offset (du, dv)
    is read at ``(x - d du, y - d dv)``; edge pixels are replicated instead of zero-filled). Per view the
    cost is ``|view - centre|``.
 3. Occlusion-aware matching: the per-view costs are averaged over several view subsets (all views, the
@@ -38,11 +38,11 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from lfbench.errors import DataError
-from lfbench.method import Method, Prediction
-from lfbench.registry import register_method
-from lfbench.scene import LightField
-from lfbench.shift import INTERPOLATIONS, angular_offsets, disparity_grid
+from lfbench.data.scene import LightField
+from lfbench.data.shift import INTERPOLATIONS, angular_offsets, disparity_grid
+from lfbench.method.base import Method, Prediction
+from lfbench.method.registry import register_method
+from lfbench.utils.errors import DataError
 
 VIEW_SETS = ("star", "all")
 OCCLUSION_MODES = ("subsets", "none")

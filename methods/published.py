@@ -4,11 +4,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from lfbench.errors import DataError
-from lfbench.method import Method, Prediction
-from lfbench.registry import register_method
-from lfbench.scene import LightField
-from lfbench.submission import disp_map_path, read_submission_map
+from lfbench.data.scene import LightField
+from lfbench.data.submission import disp_map_path, read_submission_map
+from lfbench.method.base import Method, Prediction
+from lfbench.method.registry import register_method
+from lfbench.utils.errors import DataError
 
 
 @register_method("published")

@@ -22,11 +22,11 @@ from pathlib import Path
 
 import torch
 
-from lfbench.registry import REGISTRY, create, offline_variants
-from lfbench.regress import make_golden
-from lfbench.runner import evaluate
-from lfbench.scene import Benchmark
-from lfbench.synth import write_benchmark
+from lfbench.data.scene import Benchmark
+from lfbench.data.synth import write_benchmark
+from lfbench.method.registry import REGISTRY, create, offline_variants
+from lfbench.runs.regress import make_golden
+from lfbench.runs.runner import evaluate
 
 SYNTH = {"seed": 0, "size": 96, "scenes": 3}
 SYNTH_METHODS = ("planesweep", "subfocal", "lfattnet")

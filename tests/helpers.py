@@ -17,8 +17,8 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
-from lfbench.params import SceneParameters
-from lfbench.pfm import write_pfm
+from lfbench.data.params import SceneParameters
+from lfbench.data.pfm import write_pfm
 
 ANGULAR = 9
 
@@ -96,7 +96,7 @@ def zip_folder(folder: Path, zip_path: Path, prefix: str = "",
 
 
 def pfm_bytes(data: np.ndarray, *, ident: bytes = b"Pf", big_endian: bool = False, scale: float = 1.0) -> bytes:
-    """A PFM file built by hand (independent of lfbench.pfm): rows bottom-up, sign of scale = byte order."""
+    """A PFM file built by hand (independent of lfbench.data.pfm): rows bottom-up, sign of scale = byte order."""
     arr = np.asarray(data, dtype=np.float32)
     h, w = arr.shape[:2]
     dtype = ">f4" if big_endian else "<f4"
@@ -107,8 +107,8 @@ def pfm_bytes(data: np.ndarray, *, ident: bytes = b"Pf", big_endian: bool = Fals
 
 PLUGIN_MODULE = '''\
 """A third-party lfbench plugin used by the tests."""
-from lfbench.method import Method, Prediction
-from lfbench.registry import register_method
+from lfbench.method.base import Method, Prediction
+from lfbench.method.registry import register_method
 
 
 @register_method("{centre}")
@@ -168,11 +168,11 @@ def write_fake_plugin(root: Path, tag: str) -> dict[str, str]:
 
 def install_fake_plugin(site: Path, monkeypatch) -> dict[str, str]:
     """Write a fake plugin distribution into ``site``, put it on sys.path and swap in a fresh
-    ``lfbench.registry.REGISTRY`` (undone by ``monkeypatch``; the caller drops the module from
+    ``lfbench.method.registry.REGISTRY`` (undone by ``monkeypatch``; the caller drops the module from
     sys.modules afterwards: see :func:`forget_module`)."""
     import uuid
 
-    import lfbench.registry as registry
+    import lfbench.method.registry as registry
 
     names = write_fake_plugin(site, uuid.uuid4().hex[:10])
     monkeypatch.syspath_prepend(str(site))

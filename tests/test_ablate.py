@@ -13,12 +13,12 @@ import pandas as pd
 import pytest
 import torch
 
-from lfbench.ablate import report
-from lfbench.ablate.runner import run_ablation
-from lfbench.ablate.spec import load_spec
-from lfbench.errors import SpecError
-from lfbench.results import Record, Results
+from lfbench.ablation import report
+from lfbench.ablation.runner import run_ablation
+from lfbench.ablation.spec import load_spec
+from lfbench.runs.results import Record, Results
 from lfbench.training import checkpoint as ckpt
+from lfbench.utils.errors import SpecError
 
 TINY_BASE = """
 [base]

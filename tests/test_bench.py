@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from lfbench import bench
+from lfbench.runs import bench
 from lfbench.cli import main
 
 CONTRACT = {"size", "interval", "precision", "seconds", "peak_memory_gb", "gflops_per_s"}

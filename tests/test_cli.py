@@ -15,7 +15,7 @@ import pytest
 from helpers import forget_module, install_fake_plugin, pfm_bytes, write_scene, write_submission, zip_folder
 
 from lfbench.cli import main
-from lfbench.pfm import read_pfm, write_pfm
+from lfbench.data.pfm import read_pfm, write_pfm
 
 GENERAL_IDS = {"badpix_0.01", "badpix_0.03", "badpix_0.07", "mse_x100", "q25_x100"}
 SIZE = 40

@@ -8,8 +8,8 @@ from pathlib import Path
 import pytest
 
 from lfbench.cli import main
-from lfbench.demo import MANIFEST, select_methods, split_specs
-from lfbench.registry import REGISTRY
+from lfbench.method.registry import REGISTRY
+from lfbench.runs.demo import MANIFEST, select_methods, split_specs
 
 GENERAL = {"badpix_0.01", "badpix_0.03", "badpix_0.07", "mse_x100", "q25_x100"}
 SCENES = {"synth_5_0", "synth_5_1"}
@@ -93,7 +93,7 @@ def test_split_specs_keeps_parameters_with_their_method():
 
 
 def test_default_selection_skips_methods_with_required_parameters(demo):
-    from lfbench.scene import Benchmark
+    from lfbench.data.scene import Benchmark
 
     out, _, _ = demo
     scenes = list(Benchmark.discover(out / "data"))

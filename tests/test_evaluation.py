@@ -12,12 +12,12 @@ from PIL import Image
 from scipy import ndimage
 
 from lfbench.cli import main
-from lfbench.errors import DataError
-from lfbench.evaluation import ScoringRules, border_mask, score_scene, upsample_nearest
-from lfbench.metrics import GENERAL_METRICS
-from lfbench.registry import create
-from lfbench.runner import evaluate
-from lfbench.scene import Scene
+from lfbench.data.scene import Scene
+from lfbench.method.registry import create
+from lfbench.runs.runner import evaluate
+from lfbench.scoring.metrics import GENERAL_METRICS
+from lfbench.scoring.rules import ScoringRules, border_mask, score_scene, upsample_nearest
+from lfbench.utils.errors import DataError
 
 GENERAL_IDS = ["badpix_0.01", "badpix_0.03", "badpix_0.07", "mse_x100", "q25_x100"]
 

@@ -1,5 +1,5 @@
 """The eval fast path of SubFocal (methods/subfocal/fast.py) against independent references: the grid_sample
-shifts of lfbench.shift, the layer-by-layer modules (eval with autograd on), explicit volume sums."""
+shifts of lfbench.data.shift, the layer-by-layer modules (eval with autograd on), explicit volume sums."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from lfbench_methods.subfocal import fast
 from lfbench_methods.subfocal.inference import _tile_need, infer, plan_tiles
 from lfbench_methods.subfocal.network import SubFocalNet
 
-from lfbench.shift import angular_offsets, disparity_grid, shift_views
+from lfbench.data.shift import angular_offsets, disparity_grid, shift_views
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")  # small tensors: see conftest
 

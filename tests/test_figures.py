@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from lfbench.errors import DataError
-from lfbench.evaluation import border_mask
-from lfbench.method import Prediction
-from lfbench.metrics import bad_pix
-from lfbench.report import figures as fig
-from lfbench.scene import ArrayLightField
+from lfbench.data.scene import ArrayLightField
+from lfbench.method.base import Prediction
+from lfbench.reports import figures as fig
+from lfbench.scoring.metrics import bad_pix
+from lfbench.scoring.rules import border_mask
+from lfbench.utils.errors import DataError
 
 RED = np.array([1.0, 0.0, 0.0], dtype=np.float32)
 
@@ -179,7 +179,7 @@ def test_hook_writes_overviews_rows_and_curves(tmp_path):
 
 
 def test_curves_from_records_average_the_stored_thresholds():
-    from lfbench.results import Record, Results
+    from lfbench.runs.results import Record, Results
 
     values = (("a", "badpix_0.07", 2.0), ("a", "badpix_0.01", 8.0), ("b", "badpix_0.07", 4.0),
               ("b", "badpix_0.01", 10.0), ("b", "mse_x100", 1.0))
@@ -202,8 +202,8 @@ def test_malformed_curve_csv_is_a_data_error(tmp_path):
 
 
 def test_curve_on_a_real_scene_matches_the_scored_badpix(hci_root, tmp_path):
-    from lfbench.evaluation import score_scene
-    from lfbench.scene import Benchmark
+    from lfbench.data.scene import Benchmark
+    from lfbench.scoring.rules import score_scene
 
     scene = Benchmark.discover(hci_root).select(["backgammon"])[0]
     gt = scene.gt_disparity()

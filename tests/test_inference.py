@@ -13,9 +13,9 @@ from lfbench_methods.subfocal.method import LFAttNet, SubFocal
 from lfbench_methods.subfocal.network import SubFocalNet
 
 from lfbench.cli import main
-from lfbench.errors import DataError, SpecError
-from lfbench.registry import create, create_from_spec
-from lfbench.scene import ArrayLightField
+from lfbench.data.scene import ArrayLightField
+from lfbench.method.registry import create, create_from_spec
+from lfbench.utils.errors import DataError, SpecError
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")  # small tensors: see conftest
 

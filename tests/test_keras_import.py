@@ -19,7 +19,7 @@ from lfbench_methods.subfocal.keras_import import (
 from lfbench_methods.subfocal.network import SubFocalNet, count_trainable
 
 from lfbench.cli import main
-from lfbench.errors import DataError
+from lfbench.utils.errors import DataError
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")  # small tensors: see conftest
 

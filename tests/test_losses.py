@@ -7,8 +7,7 @@ import math
 import pytest
 import torch
 
-from lfbench.errors import SpecError
-from lfbench.losses import (
+from lfbench.training.losses import (
     EPSILON,
     LOSSES,
     js_divergence,
@@ -18,6 +17,7 @@ from lfbench.losses import (
     uafl_loss,
     uncertainty,
 )
+from lfbench.utils.errors import SpecError
 
 GRID_1 = torch.tensor([-1.0, 0.0, 1.0])  # interval 1
 GRID_05 = torch.linspace(-4, 4, 17)  # the paper's grid, interval 0.5

@@ -11,8 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lfbench.evaluation import border_mask
-from lfbench.metrics import (
+from lfbench.scoring.metrics import (
     GENERAL_METRICS,
     bad_pix,
     bad_pix_curve,
@@ -23,6 +22,7 @@ from lfbench.metrics import (
     q25_x100,
     quantile_x100,
 )
+from lfbench.scoring.rules import border_mask
 
 # --------------------------------------------------------------------------- toolkit re-statement
 

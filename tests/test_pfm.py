@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from helpers import pfm_bytes
 
-from lfbench.errors import DataError
-from lfbench.pfm import parse_pfm, read_pfm, write_pfm
+from lfbench.data.pfm import parse_pfm, read_pfm, write_pfm
+from lfbench.utils.errors import DataError
 
 
 def _special_values(rng: np.random.Generator, shape: tuple[int, ...]) -> np.ndarray:

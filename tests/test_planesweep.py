@@ -15,11 +15,11 @@ import pytest
 import torch
 from lfbench_methods import planesweep as ps
 
-from lfbench.errors import DataError, SpecError
-from lfbench.evaluation import ScoringRules, score_scene
-from lfbench.registry import create, create_from_spec
-from lfbench.scene import ArrayLightField, Benchmark
-from lfbench.shift import angular_offsets, shift_views
+from lfbench.data.scene import ArrayLightField, Benchmark
+from lfbench.data.shift import angular_offsets, shift_views
+from lfbench.method.registry import create, create_from_spec
+from lfbench.scoring.rules import ScoringRules, score_scene
+from lfbench.utils.errors import DataError, SpecError
 
 SIZE, ANGULAR = 64, 9
 

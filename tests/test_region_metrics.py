@@ -14,12 +14,11 @@ import pytest
 import skimage.filters as skf
 from PIL import Image
 
-from lfbench.errors import DataError
-from lfbench.evaluation import ScoringRules, metric_resolution, score_scene
-from lfbench.metrics import GENERAL_METRICS
-from lfbench.params import SceneParameters
-from lfbench.pfm import write_pfm
-from lfbench.region_metrics import (
+from lfbench.data.params import SceneParameters
+from lfbench.data.pfm import write_pfm
+from lfbench.data.scene import Benchmark, Scene
+from lfbench.scoring.metrics import GENERAL_METRICS
+from lfbench.scoring.region_metrics import (
     REGION_METRICS,
     STRATIFIED_METRICS,
     angular_error_deg,
@@ -37,7 +36,8 @@ from lfbench.region_metrics import (
     scene_metric_by_id,
     scharr_derivative,
 )
-from lfbench.scene import Benchmark, Scene
+from lfbench.scoring.rules import ScoringRules, metric_resolution, score_scene
+from lfbench.utils.errors import DataError
 
 GENERAL_IDS = [m.id for m in GENERAL_METRICS]
 PARAMS = SceneParameters(focal_length_mm=100.0, image_resolution_x_px=32, image_resolution_y_px=32,

@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 from helpers import forget_module, install_fake_plugin, write_scene
 
-import lfbench.registry as registry
-from lfbench.errors import SpecError
-from lfbench.method import Method, Prediction
-from lfbench.registry import MethodRegistry, Param, coerce, format_spec, parse_spec, register_method
-from lfbench.scene import ArrayLightField, Scene
+import lfbench.method.registry as registry
+from lfbench.data.scene import ArrayLightField, Scene
+from lfbench.method.base import Method, Prediction
+from lfbench.method.registry import MethodRegistry, Param, coerce, format_spec, parse_spec, register_method
+from lfbench.utils.errors import SpecError
 
 # --------------------------------------------------------------------------- spec strings
 

@@ -7,8 +7,8 @@ import json
 import pytest
 
 from lfbench.cli import main
-from lfbench.regress import compare, make_golden, read_golden
-from lfbench.results import Record, Results
+from lfbench.runs.regress import compare, make_golden, read_golden
+from lfbench.runs.results import Record, Results
 
 
 def _results(**overrides: float) -> Results:
@@ -31,7 +31,7 @@ def test_golden_records_carry_tolerances(golden):
 
 
 def test_tolerance_by_method_and_metric():
-    from lfbench.regress import tolerance_for
+    from lfbench.runs.regress import tolerance_for
 
     spec = {"published*/*": 1e-6, "subfocal:width=16/badpix_*": 0.25, "mse_x100": 0.05, "*": 0.01}
     assert tolerance_for("published:subfocal", "mse_x100", spec) == 1e-6  # METHOD/METRIC keys win

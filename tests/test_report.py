@@ -14,8 +14,7 @@ import pytest
 from conftest import require
 
 from lfbench.cli import main
-from lfbench.errors import DataError, SpecError
-from lfbench.report.paper import (
+from lfbench.reports.paper import (
     HCI_ROOT_ENV,
     PAPER_DIR_ENV,
     average_with_paper,
@@ -24,8 +23,9 @@ from lfbench.report.paper import (
     paper_column,
     per_scene_with_paper,
 )
-from lfbench.report.tables import average_table, per_scene_table
-from lfbench.results import Record, Results
+from lfbench.reports.tables import average_table, per_scene_table
+from lfbench.runs.results import Record, Results
+from lfbench.utils.errors import DataError, SpecError
 
 ROOT = Path(__file__).resolve().parent.parent
 TABLE_FILES = [f"table_{n}.{e}" for n in ("per_scene", "average") for e in ("md", "tex", "csv")]
@@ -211,9 +211,9 @@ def test_bad_paper_input_fails_clearly(tmp_path):
 @pytest.fixture(scope="module")
 def evaluated(tmp_path_factory) -> Path:
     """A synthetic data root, a 'published' submission of perturbed maps, and an evaluate run of it."""
-    from lfbench.scene import Benchmark
-    from lfbench.submission import write_submission_map
-    from lfbench.synth import write_benchmark
+    from lfbench.data.scene import Benchmark
+    from lfbench.data.submission import write_submission_map
+    from lfbench.data.synth import write_benchmark
 
     base = tmp_path_factory.mktemp("report")
     write_benchmark(base / "data", seed=3, size=48, scenes=2)
@@ -290,7 +290,7 @@ def test_report_draws_overviews_from_saved_maps(evaluated, tmp_path):
     figs = tmp_path / "r" / "figures"
     assert (figs / "overview_synth_3_0.png").is_file()
     # the curves drawn from the saved maps reproduce the evaluate run's curves
-    from lfbench.report.figures import read_curves_csv
+    from lfbench.reports.figures import read_curves_csv
 
     ours = {(c.method, c.scene): c.values for c in read_curves_csv(figs / "badpix_series.csv")}
     saved = evaluated / "eval" / "figures" / "badpix_series.csv"

@@ -9,10 +9,10 @@ from helpers import ANGULAR, scene_parameters, write_scene
 from PIL import Image
 from scipy import ndimage
 
-from lfbench.errors import DataError
-from lfbench.params import read_parameters
-from lfbench.pfm import write_pfm
-from lfbench.scene import ArrayLightField, Benchmark, Scene, read_mask, rgb_to_gray
+from lfbench.data.params import read_parameters
+from lfbench.data.pfm import write_pfm
+from lfbench.data.scene import ArrayLightField, Benchmark, Scene, read_mask, rgb_to_gray
+from lfbench.utils.errors import DataError
 
 # --------------------------------------------------------------------------- views
 

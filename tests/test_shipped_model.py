@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 import torch
 
-from lfbench.evaluation import score_scene
-from lfbench.registry import create
-from lfbench.scene import Benchmark
-from lfbench.synth import write_benchmark
-from lfbench.uncertainty import scene_sparsification
+from lfbench.data.scene import Benchmark
+from lfbench.data.synth import write_benchmark
+from lfbench.method.registry import create
+from lfbench.scoring.rules import score_scene
+from lfbench.scoring.uncertainty import scene_sparsification
 
 SubFocal = pytest.importorskip("lfbench_methods.subfocal.method").SubFocal
 SHIPPED = SubFocal.DEFAULT_WEIGHTS

@@ -1,4 +1,4 @@
-"""Bootstrap CIs and paired tests (lfbench.stats) against independent references: lfbench.metrics,
+"""Bootstrap CIs and paired tests (lfbench.scoring.stats) against independent references: lfbench.scoring.metrics,
 exact enumeration of tiny bootstraps, analytic variances, known distributions, hand-computed p-values."""
 
 from __future__ import annotations
@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 from scipy import stats as sps
 
-from lfbench import stats
-from lfbench.errors import SpecError
-from lfbench.metrics import bad_pix, mse_x100, q25_x100
-from lfbench.results import Record, Results
+from lfbench.scoring import stats
+from lfbench.runs.results import Record, Results
+from lfbench.scoring.metrics import bad_pix, mse_x100, q25_x100
+from lfbench.utils.errors import SpecError
 
 METRICS = ("badpix_0.07", "badpix_0.01", "mse_x100", "q25_x100")
 
@@ -299,7 +299,7 @@ def test_ci_records_and_table():
     value, rest = cell.split(" [")
     low, high = (float(v) for v in rest.rstrip("]").split(", "))
     assert float(value) == pytest.approx(results.value("a", "s1", "mse_x100"), abs=5e-4) and low <= float(value) <= high
-    from lfbench.report.tables import render
+    from lfbench.reports.tables import render
 
     assert "[" in render(table, "markdown")
 
@@ -307,9 +307,9 @@ def test_ci_records_and_table():
 def test_collector_errors_reproduce_the_evaluated_metrics(hci_root, shared_data):
     from conftest import require
 
-    from lfbench.registry import create
-    from lfbench.runner import evaluate
-    from lfbench.scene import Benchmark
+    from lfbench.data.scene import Benchmark
+    from lfbench.method.registry import create
+    from lfbench.runs.runner import evaluate
 
     maps = require(shared_data / "published" / "subfocal")
     scenes = [s for s in Benchmark.discover(hci_root).select([]) if s.name == "backgammon"]

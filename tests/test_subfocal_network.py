@@ -16,7 +16,7 @@ from lfbench_methods.subfocal.network import (
 )
 from torch import nn
 
-from lfbench.shift import angular_offsets, disparity_grid
+from lfbench.data.shift import angular_offsets, disparity_grid
 
 EXTRACTOR = 34_164  # trainable parameters of the shared 2D feature extractor
 ATTENTION = 324 * 170 + 170 + 170 * 15 + 15  # two 1x1x1 Conv3D with bias

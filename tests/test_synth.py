@@ -1,7 +1,7 @@
-"""The synthetic light-field generator (lfbench.synth, `lfbench synth`): determinism, the benchmark's
+"""The synthetic light-field generator (lfbench.data.synth, `lfbench synth`): determinism, the benchmark's
 geometry (warping views by the ground truth reproduces the centre view; the wrong sign does not),
 analytic ground truth of planes and quadrics, the cfg's depth <-> disparity, the HCI layout as read
-by lfbench.scene, atomic writing and the CLI."""
+by lfbench.data.scene, atomic writing and the CLI."""
 
 from __future__ import annotations
 
@@ -13,13 +13,13 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from lfbench import synth
+from lfbench.data import synth
 from lfbench.cli import main
-from lfbench.evaluation import score_scene
-from lfbench.params import read_parameters
-from lfbench.pfm import read_pfm
-from lfbench.scene import Benchmark, Scene, rgb_to_gray
-from lfbench.synth import Affine, Quadric, generate_scene, quantize, view_offsets, write_benchmark
+from lfbench.data.params import read_parameters
+from lfbench.data.pfm import read_pfm
+from lfbench.data.scene import Benchmark, Scene, rgb_to_gray
+from lfbench.data.synth import Affine, Quadric, generate_scene, quantize, view_offsets, write_benchmark
+from lfbench.scoring.rules import score_scene
 
 SIZE = 64
 

@@ -17,15 +17,15 @@ import pytest
 import torch
 from PIL import Image
 
-from lfbench.errors import DataError, SpecError
-from lfbench.params import SceneParameters
-from lfbench.pfm import write_pfm
-from lfbench.scene import Benchmark, Scene
-from lfbench.shift import angular_offsets, shift_views
+from lfbench.data.params import SceneParameters
+from lfbench.data.pfm import write_pfm
+from lfbench.data.scene import Benchmark, Scene
+from lfbench.data.shift import angular_offsets, shift_views
 from lfbench.training import checkpoint as ckpt
 from lfbench.training.augment import SampleAugment, apply_augment, flip_rows, rotate90
 from lfbench.training.config import AugmentConfig, DataConfig, TrainConfig
 from lfbench.training.data import PatchSampler, load_scene_data
+from lfbench.utils.errors import DataError, SpecError
 
 REPO = Path(__file__).resolve().parents[1]
 NO_AUGMENT = AugmentConfig(enabled=False)
@@ -329,8 +329,8 @@ def reference_run(data_root, tmp_path_factory):
 def test_training_outputs(reference_run, data_root):
     from lfbench_methods.subfocal.network import SubFocalNet
 
-    from lfbench.evaluation import border_mask
-    from lfbench.metrics import bad_pix, mse_x100
+    from lfbench.scoring.metrics import bad_pix, mse_x100
+    from lfbench.scoring.rules import border_mask
 
     cfg, out, result = reference_run
     assert result["steps"] == 6

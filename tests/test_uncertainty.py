@@ -1,13 +1,13 @@
-"""Sparsification curves and AUSE (lfbench.uncertainty): a hand-computed 4-pixel example, the oracle
-and random limits, tie handling, measures against lfbench.metrics, and the figure."""
+"""Sparsification curves and AUSE (lfbench.scoring.uncertainty): a hand-computed 4-pixel example, the oracle
+and random limits, tie handling, measures against lfbench.scoring.metrics, and the figure."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from lfbench import uncertainty as U
-from lfbench.metrics import bad_pix, mse_x100
+from lfbench.scoring import uncertainty as U
+from lfbench.scoring.metrics import bad_pix, mse_x100
 
 # 4 pixels: true absolute errors and predicted uncertainties
 ERR = np.array([0.1, 0.4, 0.2, 0.3])
@@ -130,8 +130,8 @@ def test_plot_writes_a_png_atomically(tmp_path):
 
 
 def test_scene_sparsification_on_a_real_scene(hci_root):
-    from lfbench.method import Prediction
-    from lfbench.scene import Benchmark
+    from lfbench.data.scene import Benchmark
+    from lfbench.method.base import Prediction
 
     scene = next(s for s in Benchmark.discover(hci_root).select([]) if s.name == "backgammon")
     gt = scene.gt_disparity()
@@ -154,8 +154,8 @@ class _Named:
 def test_collector_table_and_report(tmp_path):
     from helpers import write_scene
 
-    from lfbench.method import Prediction
-    from lfbench.scene import Benchmark
+    from lfbench.data.scene import Benchmark
+    from lfbench.method.base import Prediction
 
     rng = np.random.default_rng(3)
     for k in range(2):

@@ -12,8 +12,8 @@ import pytest
 from helpers import pfm_bytes, write_submission, zip_folder
 
 from lfbench.cli import main
-from lfbench.errors import DataError
-from lfbench.validate import BENCHMARK_SCENES, parse_size, validate_submission
+from lfbench.data.submission_check import BENCHMARK_SCENES, parse_size, validate_submission
+from lfbench.utils.errors import DataError
 
 SIZE = (16, 16)  # small maps keep the tests fast; --size / size= sets it
 

@@ -16,8 +16,8 @@ from typing import Any
 import numpy as np
 import torch
 
-from lfbench.atomic import atomic_open
-from lfbench.errors import DataError
+from lfbench.utils.atomic import atomic_open
+from lfbench.utils.errors import DataError
 
 CHECKPOINT_FORMAT = "lfbench.train.checkpoint"
 WEIGHTS_FORMAT = "lfbench.subfocal.weights"

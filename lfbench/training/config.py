@@ -51,7 +51,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from lfbench.errors import SpecError
+from lfbench.utils.errors import SpecError
 
 STAGE_KEYS = {"name", "loss", "lr", "steps", "eps", "betas"}
 _VAR_RE = re.compile(r"\$\{(\w+)\}|\$(\w+)")
@@ -59,7 +59,7 @@ _VAR_RE = re.compile(r"\$\{(\w+)\}|\$(\w+)")
 
 @dataclass(frozen=True)
 class SyntheticSpec:
-    """Synthetic scenes written by lfbench.synth into OUT/data/<category>."""
+    """Synthetic scenes written by lfbench.data.synth into OUT/data/<category>."""
 
     category: str = "synthetic"
     seed: int = 0
@@ -156,7 +156,7 @@ class TrainConfig:
 
     @classmethod
     def from_toml(cls, path: str | Path) -> TrainConfig:
-        from lfbench.tomlfile import read_toml
+        from lfbench.utils.tomlfile import read_toml
 
         raw, _ = read_toml(path, "config file")
         return _parse(raw, str(path))
@@ -354,7 +354,7 @@ def _parse_validation(t: _Table) -> ValidationConfig:
 
 
 def _parse_stage(t: _Table, index: int) -> StageConfig:
-    from lfbench.losses import make_loss
+    from lfbench.training.losses import make_loss
 
     loss = t.get("loss", str, None, required=True).strip().lower()
     params = {k: v for k, v in t.raw.items() if k not in STAGE_KEYS}

@@ -14,7 +14,7 @@ from datetime import timedelta
 import torch
 import torch.distributed as dist
 
-from lfbench.errors import SpecError
+from lfbench.utils.errors import SpecError
 
 
 @dataclass

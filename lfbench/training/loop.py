@@ -38,15 +38,15 @@ from typing import Any
 import numpy as np
 import torch
 
-from lfbench.atomic import write_text
-from lfbench.errors import DataError, LFBenchError, SpecError
-from lfbench.losses import make_loss
-from lfbench.scene import Benchmark, Scene
+from lfbench.data.scene import Benchmark, Scene
 from lfbench.training import checkpoint as ckpt
 from lfbench.training.config import TrainConfig, expand_path
 from lfbench.training.data import PatchSampler, ValidationScene, load_scene_data, load_validation_scene
 from lfbench.training.distributed import DistContext, setup
+from lfbench.training.losses import make_loss
 from lfbench.training.validate import validate
+from lfbench.utils.atomic import write_text
+from lfbench.utils.errors import DataError, LFBenchError, SpecError
 
 # Settings that may change between a run and its resumption (they do not change the result).
 RESUME_FREE_KEYS = (("out",), ("training", "threads"), ("training", "prefetch"), ("training", "log_every"),
@@ -121,9 +121,9 @@ def prepare_synthetic(cfg: TrainConfig, data_dir: Path, log=print) -> None:
         if target.is_dir():
             continue
         try:
-            from lfbench.synth import write_benchmark
+            from lfbench.data.synth import write_benchmark
         except ImportError as exc:
-            raise SpecError(f"[[data.synthetic]] needs lfbench.synth ({exc})", cfg.source) from None
+            raise SpecError(f"[[data.synthetic]] needs lfbench.data.synth ({exc})", cfg.source) from None
         data_dir.mkdir(parents=True, exist_ok=True)
         log(f"generating {spec.scenes} synthetic scenes ({spec.size} px, seed {spec.seed}) into {target}")
         tmp = Path(tempfile.mkdtemp(prefix=f".{spec.category}.", dir=data_dir))
@@ -131,7 +131,7 @@ def prepare_synthetic(cfg: TrainConfig, data_dir: Path, log=print) -> None:
             write_benchmark(tmp, seed=spec.seed, size=spec.size, scenes=spec.scenes, category=spec.category)
             produced = tmp / spec.category
             if not produced.is_dir():
-                raise DataError(f"lfbench.synth wrote no {spec.category}/ folder", tmp)
+                raise DataError(f"lfbench.data.synth wrote no {spec.category}/ folder", tmp)
             os.replace(produced, target)
         finally:
             shutil.rmtree(tmp, ignore_errors=True)

@@ -1,5 +1,5 @@
 """Validation during training: whole-image inference on chosen scenes, BadPix and MSE x100
-(lfbench.metrics) inside a border mask, per scene and pooled over the pixels of all scenes (as
+(lfbench.scoring.metrics) inside a border mask, per scene and pooled over the pixels of all scenes (as
 the authors' validation pools its 8 scenes)."""
 
 from __future__ import annotations
@@ -9,8 +9,8 @@ from collections.abc import Sequence
 import numpy as np
 import torch
 
-from lfbench.evaluation import border_mask
-from lfbench.metrics import bad_pix, mse_x100
+from lfbench.scoring.metrics import bad_pix, mse_x100
+from lfbench.scoring.rules import border_mask
 from lfbench.training.data import ValidationScene
 
 

@@ -184,7 +184,7 @@ class ShiftPlan:
 
 
 def shift_plan(d_min: float, interval: float, count: int, offsets: torch.Tensor) -> ShiftPlan:
-    """The plan for the grid d_k = d_min + k * interval (k < count, float64 as lfbench.shift builds it)
+    """The plan for the grid d_k = d_min + k * interval (k < count, float64 as lfbench.data.shift builds it)
     and view offsets (N, 2) of (u - uc, v - vc); view n at disparity d is shifted by (d du, d dv)."""
     d = torch.tensor([d_min + k * interval for k in range(count)], dtype=torch.float64)
     off = offsets.to(torch.float64).cpu()

@@ -30,7 +30,7 @@ import torch.nn.functional as F
 from lfbench_methods.subfocal.network import FEATURES, Aggregation, SubFocalNet
 from tqdm import tqdm
 
-from lfbench.shift import shift_views
+from lfbench.data.shift import shift_views
 
 EXACT_HALO = Aggregation.RECEPTIVE_RADIUS  # px: eight 3x3x3 convolutions in a row
 PRECISIONS = ("fp32", "bf16")
@@ -192,7 +192,7 @@ def region_volume(net: SubFocalNet, features: torch.Tensor, y0: int, y1: int, x0
 
     features (B, N, 4, H, W) of the whole image -> (B, 4N, D, y1 - y0, x1 - x0) float32 (channels-last
     memory on the fast path). Bilinear on the eval fast path: gathered from interpolated maps
-    (methods/subfocal/fast.py); otherwise sampled like lfbench.shift.shift_views.
+    (methods/subfocal/fast.py); otherwise sampled like lfbench.data.shift.shift_views.
     """
     if net.interpolation != "bilinear" or not net.uses_fast_path():
         return _grid_region_volume(net, features, y0, y1, x0, x1, chunk_bytes)
@@ -211,7 +211,7 @@ def region_volume(net: SubFocalNet, features: torch.Tensor, y0: int, y1: int, x0
 
 def _grid_region_volume(net: SubFocalNet, features: torch.Tensor, y0: int, y1: int, x0: int, x1: int,
                   chunk_bytes: float = 256e6) -> torch.Tensor:
-    """:func:`region_volume` with the arithmetic of lfbench.shift.shift_views (grid_sample; phase shifts
+    """:func:`region_volume` with the arithmetic of lfbench.data.shift.shift_views (grid_sample; phase shifts
     the whole map, a global operation, and crops): the reference path, and nearest / phase."""
     b, n, c, h, w = features.shape
     disp = net.disparities
@@ -250,7 +250,7 @@ def _grid_region_volume(net: SubFocalNet, features: torch.Tensor, y0: int, y1: i
 
 
 def _phase_pad(shifts: torch.Tensor) -> int:
-    """The canvas padding lfbench.shift uses for phase shifts of these amounts (px)."""
+    """The canvas padding lfbench.data.shift uses for phase shifts of these amounts (px)."""
     return int(math.ceil(float(shifts.abs().max()))) + 1
 
 

@@ -22,8 +22,8 @@ import torch
 from lfbench_methods.subfocal.network import SubFocalNet, count_trainable
 from torch import nn
 
-from lfbench.atomic import write_bytes
-from lfbench.errors import DataError
+from lfbench.utils.atomic import write_bytes
+from lfbench.utils.errors import DataError
 
 _SUFFIX = re.compile(r"^(?P<base>.*?)(?:_(?P<n>\d+))?$")
 

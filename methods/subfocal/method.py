@@ -18,11 +18,11 @@ from typing import Literal
 import numpy as np
 import torch
 
-from lfbench.errors import DataError, SpecError
-from lfbench.method import Method, Prediction
-from lfbench.registry import register_method
-from lfbench.scene import LightField
-from lfbench.shift import INTERPOLATIONS, disparity_grid
+from lfbench.data.scene import LightField
+from lfbench.data.shift import INTERPOLATIONS, disparity_grid
+from lfbench.method.base import Method, Prediction
+from lfbench.method.registry import register_method
+from lfbench.utils.errors import DataError, SpecError
 
 WEIGHTS_DIR = Path(__file__).resolve().parent.parent / "weights"
 PAPER_WIDTH = 150

@@ -26,7 +26,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from lfbench.shift import INTERPOLATIONS, angular_offsets, disparity_grid, shift_views
+from lfbench.data.shift import INTERPOLATIONS, angular_offsets, disparity_grid, shift_views
 
 BN_EPS = 1e-3
 BN_MOMENTUM = 0.01  # Keras momentum 0.99

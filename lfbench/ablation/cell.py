@@ -1,0 +1,309 @@
+"""One ablation cell: train it (``lfbench train`` in-process, resuming from its own checkpoint), score
+its final weights on the evaluation scenes with the ``subfocal`` method, and write the marker
+``cell.json`` last (atomically): a cell with a marker of the same config is finished and is not run
+again. The test time (one whole-scene prediction) is measured afterwards by :func:`time_cell`, one
+cell at a time, so that parallel cells do not slow each other's timings.
+
+Files in OUT/cells/<cell id>/ (besides the trainer's checkpoint.pt, final.pt, metrics.jsonl,
+summary.json, ...): ``train.toml`` (the cell's training config: ``lfbench train train.toml --out
+CELL`` reproduces it), ``log.txt`` (the trainer's log lines), ``results.json`` / ``results.csv``
+(its scores, method = the cell id), ``maps/`` (disparity and uncertainty maps in the submission
+layout), ``cell.json`` and ``timing.json``.
+
+A cell of a spec with a shared stage 1 starts from the shared run's final checkpoint: it is copied
+in with the cell's config (the trainer's own resume then runs the last stage only), so the result is
+bit for bit that of an uninterrupted two-stage ``lfbench train`` of ``train.toml``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import shlex
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from lfbench.ablation.spec import Evaluation
+from lfbench.ablation.toml_text import dumps
+from lfbench.utils.atomic import write_bytes, write_text
+from lfbench.utils.errors import DataError, SpecError
+
+MARKER, TRAIN_CONFIG, LOG, MAPS, TIMING = "cell.json", "train.toml", "log.txt", "maps", "timing.json"
+UNCERTAINTY_DIR = "uncertainty"
+
+
+@dataclass(frozen=True)
+class CellTask:
+    """Everything a worker process needs to run one cell (plain, picklable values)."""
+
+    cell_id: str
+    values: dict[str, Any]
+    config: dict[str, Any]
+    fingerprint: str
+    eval_fingerprint: str
+    cell_dir: str
+    data_links: dict[str, str]  # synthetic category -> shared folder of generated scenes
+    stage1_dir: str | None
+    scenes: tuple[tuple[str, str], ...]  # (scene folder, category)
+    evaluation: Evaluation
+    threads: int
+    progress: bool | None = None
+
+    @property
+    def path(self) -> Path:
+        return Path(self.cell_dir)
+
+
+def read_marker(cell_dir: str | Path) -> dict[str, Any] | None:
+    """The cell's marker (None when absent or unreadable: a cell without one is not finished)."""
+    try:
+        return json.loads((Path(cell_dir) / MARKER).read_text(encoding="utf-8"))
+    except (FileNotFoundError, json.JSONDecodeError, UnicodeDecodeError):
+        return None
+
+
+def is_done(task: CellTask) -> bool:
+    """True when the cell finished with this config and these evaluation settings. A marker of
+    another training config is a SpecError (the folder holds another experiment)."""
+    marker = read_marker(task.cell_dir)
+    if marker is None:
+        return False
+    if marker.get("fingerprint") != task.fingerprint:
+        raise SpecError(f"cell {task.cell_id} in {task.cell_dir} was trained with another config; use another "
+                        "--out folder (or delete that cell folder)")
+    return marker.get("eval_fingerprint") == task.eval_fingerprint and (task.path / "results.json").is_file()
+
+
+def write_train_config(task: CellTask) -> Path:
+    """Write CELL/train.toml (unchanged if present with the same config; SpecError if it differs)."""
+    from lfbench.training.config import TrainConfig
+    from lfbench.training.loop import comparable
+
+    path = task.path / TRAIN_CONFIG
+    header = (f"Ablation cell {task.cell_id}: written by lfbench ablate.\n"
+              f"Reproduce: lfbench train {path} --out {task.path}")
+    text = dumps(task.config, header)
+    if path.is_file():
+        old = TrainConfig.from_toml(path).to_dict()
+        if comparable(old) != comparable(task.config):
+            raise SpecError(f"cell {task.cell_id}: {path} holds another config; use another --out folder")
+    write_text(path, text)
+    return path
+
+
+def link_data(task: CellTask) -> None:
+    """Make CELL/data/<category> point at the shared generated scenes (the trainer then skips
+    generating them); without symlink support each cell generates its own copy."""
+    data = task.path / "data"
+    for category, folder in task.data_links.items():
+        link = data / category
+        if link.exists() or link.is_symlink():
+            continue
+        data.mkdir(parents=True, exist_ok=True)
+        with contextlib.suppress(OSError):
+            link.symlink_to(Path(folder).resolve(), target_is_directory=True)
+
+
+def seed_from_stage1(task: CellTask) -> float:
+    """Put the shared run's final checkpoint (next stage = the last, step 0, no optimizer) into the cell
+    with the cell's config, unless the cell has a checkpoint already. Returns the stage-1 seconds."""
+    from lfbench.training import checkpoint as ckpt
+
+    assert task.stage1_dir is not None
+    src = Path(task.stage1_dir)
+    state = ckpt.load(src / "checkpoint.pt", ckpt.CHECKPOINT_FORMAT)
+    n_shared = len(task.config["stages"]) - 1
+    if state["stage"] != n_shared or state["step"] != 0:
+        raise DataError(f"the shared stage-1 run is not finished (stage {state['stage']}, step {state['step']})",
+                        src / "checkpoint.pt")
+    dst = task.path / "checkpoint.pt"
+    if not dst.is_file():
+        names = [f"stage{i + 1}_{s['name']}.pt" for i, s in enumerate(task.config["stages"][:n_shared])]
+        for name in [*names, "best.pt", "metrics.jsonl"]:
+            if (src / name).is_file():
+                write_bytes(task.path / name, (src / name).read_bytes())
+        state["config"] = task.config
+        ckpt.save(dst, state)  # last: its presence means "seeded"
+    return float(state["elapsed_s"])
+
+
+def stage1_digest(stage1_dir: str | Path) -> str:
+    """SHA-256 of the model state the shared run ended with (what every cell's last stage starts from)."""
+    from lfbench.training import checkpoint as ckpt
+
+    state = ckpt.load(Path(stage1_dir) / "checkpoint.pt", ckpt.CHECKPOINT_FORMAT)
+    return ckpt.state_sha256(state["model"])
+
+
+# --------------------------------------------------------------------------- evaluation
+
+def resolve_device(name: str) -> str:
+    import torch
+
+    if name == "auto":
+        return "cuda" if torch.cuda.is_available() else "cpu"
+    if name == "cuda" and not torch.cuda.is_available():
+        raise SpecError("evaluation.device = 'cuda' but no CUDA device is available")
+    return name
+
+
+def make_method(weights: Path, ev: Evaluation, threads: int):
+    """The ``subfocal`` method on these weights, its network moved to the evaluation device."""
+    from lfbench.method.registry import create
+
+    method = create("subfocal", weights=weights, threads=threads, tile=ev.tile, max_memory_gb=ev.max_memory_gb,
+                    precision=ev.precision)
+    net = method.load_network()
+    net.to(resolve_device(ev.device))
+    return method
+
+
+def time_whole_scene(method, size: int, repeats: int, warmup: int, seed: int = 0) -> list[float]:
+    """Seconds of ``repeats`` predictions of one whole 9 x 9 x size x size light field (random views:
+    the network's cost does not depend on the content), after ``warmup`` untimed ones."""
+    from lfbench.data.scene import ArrayLightField
+
+    rng = np.random.default_rng(seed)
+    lf = ArrayLightField(views=rng.random((9, 9, size, size), dtype=np.float32), name=f"timing_{size}px")
+    for _ in range(warmup):
+        method.predict(lf)
+    out = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        method.predict(lf)
+        _sync()
+        out.append(time.perf_counter() - start)
+    return out
+
+
+def _sync() -> None:
+    import torch
+
+    if torch.cuda.is_available():
+        torch.cuda.synchronize()
+
+
+def save_maps(folder: Path):
+    """A prediction hook writing disparity (and uncertainty) maps in the submission layout."""
+    from lfbench.data.pfm import write_pfm
+    from lfbench.data.submission import write_submission_map
+
+    def hook(method, scene, pred) -> None:
+        runtime = pred.runtime_s if pred.runtime_s and np.isfinite(pred.runtime_s) and pred.runtime_s > 0 else 1e-9
+        write_submission_map(folder, scene.name, pred.disparity, runtime)
+        if pred.uncertainty is not None:
+            write_pfm(folder / UNCERTAINTY_DIR / f"{scene.name}.pfm", np.asarray(pred.uncertainty, np.float32))
+
+    return hook
+
+
+def load_scenes(pairs: tuple[tuple[str, str], ...]):
+    from lfbench.data.scene import Scene
+
+    return [Scene(path, category=category) for path, category in pairs]
+
+
+def evaluate_weights(label: str, weights: Path, ev: Evaluation, scenes, threads: int, maps_dir: Path | None):
+    """Score the weights on the scenes; the records are named ``label``."""
+    from lfbench.runs.runner import evaluate
+    from lfbench.scoring.rules import ScoringRules
+
+    method = make_method(weights, ev, threads)
+    rules = ScoringRules(allow_highres=not ev.lowres_only)
+    results = evaluate([method], scenes, rules=rules, on_prediction=save_maps(maps_dir) if maps_dir else None,
+                       progress=False)
+    results.records = [replace(r, method=label) for r in results.records]
+    results.runs = [replace(r, method=label) for r in results.runs]
+    return results
+
+
+def timing_key(ev: Evaluation, threads: int) -> dict[str, Any]:
+    return {"time_size": ev.time_size, "repeats": ev.time_repeats, "warmup": ev.time_warmup, "threads": threads,
+            "device": resolve_device(ev.device), "tile": ev.tile, "max_memory_gb": ev.max_memory_gb,
+            "precision": ev.precision}
+
+
+def time_cell(cell_dir: str | Path, ev: Evaluation, threads: int) -> dict[str, Any]:
+    """Test time of a finished cell (CELL/timing.json, reused when the timing settings are the same):
+    the median of ``time_repeats`` whole-scene predictions. Run one cell at a time, with nothing else
+    of the ablation running, so that the cells' times compare."""
+    import torch
+
+    path = Path(cell_dir) / TIMING
+    key = timing_key(ev, threads)
+    with contextlib.suppress(FileNotFoundError, json.JSONDecodeError, UnicodeDecodeError):
+        old = json.loads(path.read_text(encoding="utf-8"))
+        if old.get("key") == key:
+            return old
+    before = torch.get_num_threads()
+    try:
+        method = make_method(Path(cell_dir) / "final.pt", ev, threads)
+        times = time_whole_scene(method, ev.time_size, ev.time_repeats, ev.time_warmup)
+    finally:
+        torch.set_num_threads(before)
+    out = {"key": key, "test_s": float(np.median(times)), "test_s_all": times, "time_size": ev.time_size,
+           "threads": threads, "device": key["device"]}
+    write_text(path, json.dumps(out, indent=2, sort_keys=True) + "\n")
+    return out
+
+
+# --------------------------------------------------------------------------- the cell
+
+def run_cell(task: CellTask) -> dict[str, Any]:
+    """Train, evaluate and mark one cell (skipped when it is finished); returns its marker."""
+    import torch
+
+    if is_done(task):
+        return read_marker(task.cell_dir) or {}
+    before = torch.get_num_threads()
+    torch.set_num_threads(task.threads)
+    try:
+        return _run(task)
+    finally:
+        torch.set_num_threads(before)
+
+
+def _run(task: CellTask) -> dict[str, Any]:
+    from lfbench.training import loop
+    from lfbench.training.config import TrainConfig
+
+    task.path.mkdir(parents=True, exist_ok=True)
+    config_path = write_train_config(task)
+    link_data(task)
+    stage1_s = 0.0
+    if task.stage1_dir is not None:
+        stage1_s = seed_from_stage1(task)
+    cfg = TrainConfig.from_toml(config_path)
+    command = shlex.join(["lfbench", "train", str(config_path), "--out", str(task.path)])
+    with open(task.path / LOG, "a", encoding="utf-8") as log, contextlib.redirect_stdout(log):
+        print(f"# {time.strftime('%Y-%m-%d %H:%M:%S')} cell {task.cell_id} ({task.threads} threads)")
+        loop.train(cfg, task.path, command=command, progress=task.progress)
+    summary = json.loads((task.path / "summary.json").read_text(encoding="utf-8"))
+    train_s = float(summary["elapsed_s"])
+
+    results = evaluate_weights(task.cell_id, task.path / "final.pt", task.evaluation, load_scenes(task.scenes),
+                               task.evaluation.threads or task.threads, task.path / MAPS)
+    marker: dict[str, Any] = {
+        "id": task.cell_id, "values": task.values, "fingerprint": task.fingerprint,
+        "eval_fingerprint": task.eval_fingerprint, "steps": int(summary["steps"]),
+        "train_s": train_s, "own_train_s": train_s - stage1_s, "stage1_s": stage1_s,
+        "stage1_sha256": stage1_digest(task.stage1_dir) if task.stage1_dir else None,
+        "final_sha256": _weights_digest(task.path / "final.pt"),
+        "threads": task.threads, "device": resolve_device(task.evaluation.device),
+        "eval_runtime_s": float(np.mean([r.runtime_s for r in results.runs])) if results.runs else None,
+        "scenes": results.scenes,
+    }
+    results.meta["cell"] = {k: v for k, v in marker.items() if k not in ("fingerprint", "eval_fingerprint")}
+    results.write(task.path)
+    write_text(task.path / MARKER, json.dumps(marker, indent=2, sort_keys=True) + "\n")
+    return marker
+
+
+def _weights_digest(path: Path) -> str:
+    from lfbench.training import checkpoint as ckpt
+
+    return ckpt.state_sha256(ckpt.load(path)["state_dict"])

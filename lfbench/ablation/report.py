@@ -1,0 +1,324 @@
+"""Tables and figures of an ablation run, with the paper's numbers in adjacent, labelled columns.
+
+Written into OUT (each table as .md, .tex and .csv):
+
+- ``table_cells``: one row per cell: its grid values, mean BadPix 0.07/0.03/0.01 and MSE x100 over the
+  evaluation scenes, train time and test time;
+- ``table4`` (spec table = "table4"): interval, interpolation, BadPix 0.07, MSE x100, train time, test
+  time, ours beside the paper's Table IV;
+- ``table5`` ("table5"): BadPix 0.07 per fine-tuning loss, ours beside the paper's Table V;
+- ``table_beta`` ("beta"): BadPix 0.07 and MSE x100 per UAFL beta (the paper prints no values);
+- ``table_per_scene`` / ``table_average`` (Tables I/II) for every cell and extra method, and, when the
+  evaluation includes scenes the paper reports, ``table_per_scene_paper`` / ``table_average_paper``;
+- figures/: ``beta_curve.png`` (BadPix 0.07 against beta), ``accuracy_vs_test_time.png`` (BadPix 0.07
+  against test time, per interval and interpolation, ours and the paper's), and ``error_maps/``
+  (per scene: one row per variant with disparity, BadPix map, signed error and uncertainty; the
+  BadPix(t) curves), drawn with lfbench.reports.figures.
+
+"ours" columns are labelled with the budget (width, batch, patch, steps, device) and the test-time
+input size; "paper" columns with "RTX 3090, full training". Without the paper's tables there are no
+paper columns, and one line says so.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from lfbench.ablation.spec import AblationSpec
+from lfbench.runs.results import Results
+from lfbench.utils.atomic import write_text
+from lfbench.utils.errors import DataError
+
+PAPER_LABEL = "paper (RTX 3090, full training)"
+TABLE4_FILE, TABLE5_FILE = "table4_interval_interp", "table5_losses"
+PAPER_LOSS_NAMES = {"l1": "baseline_l1"}  # our loss name -> the paper's Table V row
+PAPER_UAFL_BETA = 0.1
+METRICS = ("badpix_0.07", "badpix_0.03", "badpix_0.01", "mse_x100")
+METRIC_NAMES = {"badpix_0.07": "BadPix 0.07 (%)", "badpix_0.03": "BadPix 0.03 (%)", "badpix_0.01": "BadPix 0.01 (%)",
+                "mse_x100": "MSE x100"}
+FORMATS = (("markdown", "md"), ("latex", "tex"), ("csv", "csv"))
+Log = Callable[[str], None]
+
+
+# --------------------------------------------------------------------------- facts per cell
+
+def last_stage_loss(config: dict[str, Any]) -> tuple[str, dict[str, Any]]:
+    """(loss name, loss parameters) of a cell's last training stage."""
+    from lfbench.training.config import STAGE_KEYS
+
+    st = config["stages"][-1]
+    return st["loss"], {k: v for k, v in st.items() if k not in STAGE_KEYS}
+
+
+def uafl_beta(config: dict[str, Any]) -> float | None:
+    loss, params = last_stage_loss(config)
+    return float(params.get("beta", PAPER_UAFL_BETA)) if loss == "uafl" else None
+
+
+def cell_frame(spec: AblationSpec, results: Results, markers: Sequence[dict[str, Any]]) -> pd.DataFrame:
+    """One row per cell (index: cell id): grid values, interval, interpolation, loss, beta, mean metrics
+    over the evaluation scenes, train_s, own_train_s, test_s, time_size, scenes."""
+    df = results.to_frame()
+    by_id = {m.get("id"): m for m in markers}
+    rows = []
+    for cell in spec.cells:
+        m = by_id.get(cell.id, {})
+        model = cell.config["model"]
+        loss, params = last_stage_loss(cell.config)
+        row: dict[str, Any] = {"cell": cell.id, **{f"grid:{k}": v for k, v in cell.values.items()},
+                               "interval": float(model.get("interval", 0.5)),
+                               "interpolation": model.get("interpolation", "bilinear"),
+                               "loss": loss + ("" if not params else "(" + ", ".join(f"{k}={v}" for k, v in
+                                                                                       params.items()) + ")"),
+                               "beta": uafl_beta(cell.config)}
+        sel = df[df["method"] == cell.id]
+        for metric in METRICS:
+            vals = sel[sel["metric"] == metric]["value"]
+            row[metric] = float(vals.mean()) if len(vals) else np.nan
+        row["scenes"] = int(sel["scene"].nunique())
+        for key in ("train_s", "own_train_s", "test_s", "time_size", "device", "threads"):
+            row[key] = m.get(key, np.nan)
+        rows.append(row)
+    return pd.DataFrame(rows).set_index("cell") if rows else pd.DataFrame()
+
+
+def ours_label(spec: AblationSpec) -> str:
+    return f"ours ({spec.budget_label()})"
+
+
+def time_label(frame: pd.DataFrame) -> str:
+    if frame.empty:
+        return "ours"
+    size = frame["time_size"].iloc[0]
+    device, threads = frame["device"].iloc[0], frame["threads"].iloc[0]
+    where = str(device)
+    if device == "cpu" and pd.notna(threads):
+        where += f", {int(threads)} thread{'s' if int(threads) != 1 else ''}"
+    return f"ours (9x9x{int(size)}x{int(size)}, {where})"
+
+
+# --------------------------------------------------------------------------- the tables
+
+def cells_table(spec: AblationSpec, frame: pd.DataFrame) -> pd.DataFrame:
+    if frame.empty:
+        return frame
+    grid_cols = [c for c in frame.columns if c.startswith("grid:")]
+    out = frame[grid_cols].rename(columns=lambda c: c[5:]).copy()
+    for metric in METRICS:
+        out[f"{METRIC_NAMES[metric]}, {ours_label(spec)}"] = frame[metric]
+    out["train time (min)"] = frame["train_s"] / 60.0
+    out[f"test time (s), {time_label(frame)}"] = frame["test_s"]
+    out["scenes"] = frame["scenes"]
+    return out
+
+
+def _paper_extra(paper, name: str, columns: Sequence[str], log: Log) -> pd.DataFrame | None:
+    if paper is None:
+        return None
+    df = paper.extra.get(name)
+    if df is None:
+        log(f"the paper folder {paper.source} has no {name}.csv: no paper columns in that table")
+        return None
+    missing = [c for c in columns if c not in df.columns]
+    if missing:
+        raise DataError(f"missing column(s) {', '.join(missing)}", Path(paper.source) / f"{name}.csv")
+    return df
+
+
+def table4(spec: AblationSpec, frame: pd.DataFrame, paper, log: Log) -> pd.DataFrame:
+    """Table IV: interval, interpolation, BadPix 0.07, MSE x100, train time, test time (ours | paper)."""
+    ours, test = ours_label(spec), time_label(frame)
+    ref = _paper_extra(paper, TABLE4_FILE, ("interval", "interpolation", "badpix_0.07", "mse_x100",
+                                            "train_hours_rtx3090", "test_seconds_512x512_rtx3090"), log)
+    rows = []
+    for cid, r in frame.iterrows():
+        p = None
+        if ref is not None:
+            hit = ref[(np.isclose(pd.to_numeric(ref["interval"], errors="coerce"), r["interval"], rtol=0, atol=1e-9))
+                      & (ref["interpolation"].astype(str).str.strip() == r["interpolation"])]
+            p = hit.iloc[0] if len(hit) else None
+        row = {"cell": cid, "interval (px)": f"{r['interval']:g}", "interpolation": r["interpolation"],
+               f"BadPix 0.07 (%), {ours}": r["badpix_0.07"]}
+        if ref is not None:
+            row[f"BadPix 0.07 (%), {PAPER_LABEL}"] = _num(p, "badpix_0.07")
+        row[f"MSE x100, {ours}"] = r["mse_x100"]
+        if ref is not None:
+            row[f"MSE x100, {PAPER_LABEL}"] = _num(p, "mse_x100")
+        row[f"train time (min), {ours}"] = float(r["train_s"]) / 60.0
+        if ref is not None:
+            row[f"train time (h), {PAPER_LABEL}"] = _num(p, "train_hours_rtx3090")
+        row[f"test time (s), {test}"] = float(r["test_s"])
+        if ref is not None:
+            row["test time (s), paper (RTX 3090, 512x512)"] = _num(p, "test_seconds_512x512_rtx3090")
+        rows.append(row)
+    return pd.DataFrame(rows).set_index("cell")
+
+
+def paper_loss_name(config: dict[str, Any]) -> str | None:
+    """The paper's Table V row of a cell's last-stage loss (UAFL only with the paper's beta 0.1)."""
+    loss, params = last_stage_loss(config)
+    if loss == "uafl":
+        return "uafl" if abs(float(params.get("beta", PAPER_UAFL_BETA)) - PAPER_UAFL_BETA) < 1e-12 else None
+    return PAPER_LOSS_NAMES.get(loss, loss) if not params else None
+
+
+def table5(spec: AblationSpec, frame: pd.DataFrame, paper, log: Log) -> pd.DataFrame:
+    """Table V: BadPix 0.07 per fine-tuning loss (ours | paper), and our MSE x100."""
+    ours = ours_label(spec)
+    ref = _paper_extra(paper, TABLE5_FILE, ("loss", "badpix_0.07"), log)
+    configs = {c.id: c.config for c in spec.cells}
+    rows = []
+    for cid, r in frame.iterrows():
+        name = paper_loss_name(configs[cid])
+        row = {"cell": cid, "loss (stage 2)": r["loss"], "paper row": name or "-",
+               f"BadPix 0.07 (%), {ours}": r["badpix_0.07"]}
+        if ref is not None:
+            hit = ref[ref["loss"].astype(str).str.strip() == name] if name else ref.iloc[0:0]
+            row[f"BadPix 0.07 (%), {PAPER_LABEL}"] = float(hit["badpix_0.07"].iloc[0]) if len(hit) else np.nan
+        row[f"MSE x100, {ours}"] = r["mse_x100"]
+        row["stage-2 train time (min)"] = r["own_train_s"] / 60.0
+        rows.append(row)
+    return pd.DataFrame(rows).set_index("cell")
+
+
+def table_beta(spec: AblationSpec, frame: pd.DataFrame) -> pd.DataFrame:
+    ours = ours_label(spec)
+    out = pd.DataFrame({"beta": frame["beta"], f"BadPix 0.07 (%), {ours}": frame["badpix_0.07"],
+                        f"MSE x100, {ours}": frame["mse_x100"]}, index=frame.index)
+    return out.sort_values("beta", ascending=False, kind="stable")
+
+
+def _num(row, key: str) -> float:
+    if row is None:
+        return np.nan
+    value = pd.to_numeric(pd.Series([row[key]]), errors="coerce").iloc[0]
+    return float(value)
+
+
+# --------------------------------------------------------------------------- writing
+
+PAPER_ABLATION_NOTE = ("paper: Chao et al., IEEE TCI 2023 (RTX 3090, full training: 50 + 10 epochs, batch 32, the 16 "
+                       "additional scenes; scored on 8 validation scenes; test time for a 512x512 input)")
+PAPER_BENCHMARK_NOTE = ("paper: Chao et al., IEEE TCI 2023, Tables I/II (HCI benchmark; backgammon, dots and stripes "
+                        "scored at high resolution, see 'paper resolution')")
+
+
+def caption_lines(spec: AblationSpec, paper, what: str | None = None, note: str = PAPER_ABLATION_NOTE) -> list[str]:
+    """The lines above a table: what it is, what 'ours' means (budget, scenes, times), what 'paper' means."""
+    ev = spec.evaluation
+    where = []
+    if ev.synthetic is not None:
+        where.append(f"{ev.synthetic.scenes} synthetic scenes ({ev.synthetic.size} px, seed {ev.synthetic.seed})")
+    if ev.data is not None:
+        where.append(f"{', '.join(ev.scenes) or 'all scenes'} of {ev.data}")
+    scored = f"scored on {' and '.join(where)}"
+    if spec.cells:
+        ours = (f"ours: {spec.budget_label()}; {scored} (mean over scenes); train time = wall time of "
+                "`lfbench train` (incl. the shared stage 1 when there is one); test time = one whole "
+                f"9x9x{ev.time_size}x{ev.time_size} light field")
+    else:
+        ours = f"ours: the methods listed, {scored}"
+    return [spec.title if what is None else f"{spec.title}: {what}", ours,
+            note if paper is not None else "paper: not shown (the paper's tables were not found)"]
+
+
+def render_with_caption(table: pd.DataFrame, fmt: str, caption: Sequence[str]) -> str:
+    from lfbench.reports.tables import render
+
+    body = render(table, fmt)
+    if fmt == "markdown":
+        return "".join(f"{line}  \n" for line in caption) + "\n" + body
+    if fmt == "latex":
+        return "".join(f"% {line}\n" for line in caption) + body
+    return body
+
+
+def write_table(table: pd.DataFrame, out: Path, stem: str, caption: Sequence[str]) -> list[Path]:
+    written = []
+    for fmt, ext in FORMATS:
+        path = out / f"{stem}.{ext}"
+        write_text(path, render_with_caption(table, fmt, caption))
+        written.append(path)
+    return written
+
+
+def load_paper_tables(paper: str | Path | None, log: Log):
+    """The paper's tables, or None (with one line saying so) when no folder is given or found."""
+    from lfbench.reports.paper import find_paper_dir, load_paper
+
+    try:
+        folder = find_paper_dir(paper)
+    except DataError:
+        log("the paper's tables were not found (--paper DIR or LFBENCH_PAPER_DIR): tables without paper columns")
+        return None
+    return load_paper(folder)
+
+
+def write_report(spec: AblationSpec, out: str | Path, results: Results, markers: Sequence[dict[str, Any]], *,
+                 paper: str | Path | None = None, log: Log = print) -> list[Path]:
+    """Every table and figure of the run into ``out``; returns the files written."""
+    from lfbench.reports.paper import average_with_paper, per_scene_with_paper
+    from lfbench.reports.tables import average_table, per_scene_table
+
+    out = Path(out)
+    paper_tables = load_paper_tables(paper, log)
+    frame = cell_frame(spec, results, markers)
+    written: list[Path] = []
+    if not frame.empty:
+        written += write_table(cells_table(spec, frame), out, "table_cells", caption_lines(spec, None, "all cells"))
+        if spec.table == "table4":
+            written += write_table(table4(spec, frame, paper_tables, log), out, "table4",
+                                   caption_lines(spec, paper_tables))
+        elif spec.table == "table5":
+            written += write_table(table5(spec, frame, paper_tables, log), out, "table5",
+                                   caption_lines(spec, paper_tables))
+        elif spec.table == "beta":
+            caption = [*caption_lines(spec, None),
+                       "paper: no values printed (its figure: BadPix 0.07 improves as beta goes from 1 down to 0.1)"]
+            written += write_table(table_beta(spec, frame), out, "table_beta", caption)
+    per_scene, average = per_scene_table(results), average_table(results)
+    base_caption = caption_lines(spec, None, "Tables I/II")
+    written += write_table(per_scene, out, "table_per_scene", base_caption)
+    written += write_table(average, out, "table_average", base_caption)
+    if paper_tables is not None and not per_scene.empty:
+        covered = [s for s in results.scenes if s in paper_tables.scenes]
+        if covered:
+            methods = [paper_tables.resolve_method(m) for m in spec.paper_methods]
+            caption = caption_lines(spec, paper_tables, "Tables I/II", PAPER_BENCHMARK_NOTE)
+            written += write_table(per_scene_with_paper(per_scene, paper_tables, methods), out,
+                                   "table_per_scene_paper", caption)
+            written += write_table(average_with_paper(average, paper_tables, results.scenes, methods), out,
+                                   "table_average_paper", caption)
+    written += write_figures(spec, out, frame, results, paper_tables, log)
+    log(f"wrote {len(written)} files into {out} (results.json, table_*.md/.tex/.csv, figures/)")
+    return written
+
+
+# --------------------------------------------------------------------------- figures
+
+def write_figures(spec: AblationSpec, out: Path, frame: pd.DataFrame, results: Results, paper, log: Log) -> list[Path]:
+    from lfbench.ablation import plots
+
+    fig_dir = out / "figures"
+    written = []
+    if not frame.empty and spec.table == "beta" and frame["beta"].notna().any():
+        per_scene = results.to_frame()
+        written.append(plots.beta_curve(frame, per_scene, fig_dir / "beta_curve.png", ours_label(spec)))
+    if not frame.empty and spec.table == "table4":
+        ref = _paper_extra(paper, TABLE4_FILE, ("interval", "interpolation", "badpix_0.07",
+                                                "test_seconds_512x512_rtx3090"), lambda _: None)
+        written.append(plots.accuracy_vs_time(frame, ref, fig_dir / "accuracy_vs_test_time.png", ours_label(spec),
+                                              time_label(frame)))
+    if spec.evaluation.error_maps:
+        maps = {cid: out / "cells" / cid / "maps" for cid in frame.index} if not frame.empty else {}
+        from lfbench.reports.figures import safe_name
+
+        for m in spec.methods:
+            maps[m.label] = out / "methods" / safe_name(m.label) / "maps"
+        written += plots.error_maps(results.meta.get("scenes", []), maps, fig_dir / "error_maps")
+    return written

@@ -1,0 +1,344 @@
+"""``lfbench ablate``: run every cell of a spec (resumable, optionally in parallel processes), then
+combine their scores into OUT/results.json and the tables and figures (lfbench.ablation.report).
+
+Layout of OUT::
+
+    spec.toml                  the spec as given
+    data/<set>/                synthetic training scenes, generated once and linked into each cell
+    eval_data/<set>/           synthetic evaluation scenes
+    stage1/                    the shared stage-1 run (specs with [stage1] shared = true)
+    cells/<cell id>/           one `lfbench train` run per cell, its scores and maps (lfbench.ablation.cell)
+    methods/<label>/           scores of the spec's extra [[methods]]
+    results.json, results.csv  every cell's and method's records (method = cell id or label)
+    table_*.md/.tex/.csv, figures/   see lfbench.ablation.report
+
+Re-running the same command skips finished cells (their marker is written last) and resumes an
+interrupted one from its training checkpoint.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import shlex
+import shutil
+import sys
+import tempfile
+from collections.abc import Callable
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+from lfbench.ablation.cell import CellTask, is_done, read_marker, run_cell
+from lfbench.ablation.spec import AblationSpec, Cell, SyntheticEval, _sha
+from lfbench.runs.results import Results
+from lfbench.utils.atomic import write_text
+from lfbench.utils.errors import DataError, SpecError
+
+Log = Callable[[str], None]
+
+
+def available_cores() -> int:
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # not on Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def _safe(label: str) -> str:
+    from lfbench.reports.figures import safe_name
+
+    return safe_name(label)
+
+
+# --------------------------------------------------------------------------- data
+
+def _generate(target: Path, seed: int, size: int, scenes: int, category: str, log: Log) -> Path:
+    """Synthetic scenes as target/<scene>/, generated in a temporary folder and renamed into place."""
+    if target.is_dir():
+        return target
+    from lfbench.data.synth import write_benchmark
+
+    target.parent.mkdir(parents=True, exist_ok=True)
+    log(f"generating {scenes} synthetic scenes ({size} px, seed {seed}) into {target}")
+    tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
+    try:
+        write_benchmark(tmp, seed=seed, size=size, scenes=scenes, category=category)
+        os.replace(tmp / category, target)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return target
+
+
+def prepare_training_data(cells: tuple[Cell, ...], out: Path, log: Log) -> dict[str, dict[str, str]]:
+    """Generate every [[data.synthetic]] set of the cells once into OUT/data/; returns, per cell id,
+    category -> folder (linked into the cell as CELL/data/<category>)."""
+    links: dict[str, dict[str, str]] = {}
+    for cell in cells:
+        links[cell.id] = {}
+        for syn in cell.config["data"].get("synthetic", []):
+            name = f"{syn['category']}_s{syn['seed']}_{syn['size']}px_{syn['scenes']}"
+            folder = _generate(out / "data" / name, syn["seed"], syn["size"], syn["scenes"], syn["category"], log)
+            links[cell.id][syn["category"]] = str(folder)
+    return links
+
+
+def prepare_evaluation(spec: AblationSpec, out: Path, log: Log) -> tuple[tuple[str, str], ...]:
+    """The evaluation scenes as (folder, category): generated synthetic ones and/or the named HCI ones."""
+    from lfbench.data.scene import Benchmark, Scene
+
+    ev = spec.evaluation
+    scenes: list[Scene] = []
+    if ev.synthetic is not None:
+        syn: SyntheticEval = ev.synthetic
+        folder = _generate(out / "eval_data" / syn.folder_name, syn.seed, syn.size, syn.scenes, "synthetic", log)
+        scenes += [Scene(p, category="synthetic") for p in sorted(folder.iterdir()) if (p / "parameters.cfg").is_file()]
+    if ev.data is not None:
+        if not ev.data.is_dir():
+            raise DataError("evaluation.data: data root not found", ev.data)
+        chosen = Benchmark.discover(ev.data).select(list(ev.scenes))
+        scenes += [s for s in chosen if s.has_gt()]
+    if not scenes:
+        raise DataError("none of the evaluation scenes has ground truth (gt_disp_lowres.pfm)", spec.source)
+    names = [s.name for s in scenes]
+    if len(set(names)) != len(names):
+        raise SpecError(f"evaluation: scene names must be unique, got {', '.join(names)}", spec.source)
+    return tuple((str(s.path), s.category) for s in scenes)
+
+
+# --------------------------------------------------------------------------- stage 1
+
+def run_shared_stage1(spec: AblationSpec, out: Path, links: dict[str, str], threads: int,
+                      progress: bool | None, log: Log) -> Path:
+    """Train the shared stages (all but the last) once into OUT/stage1 (resuming when interrupted)."""
+    from lfbench.ablation.cell import LOG, TRAIN_CONFIG
+    from lfbench.ablation.toml_text import dumps
+    from lfbench.training.config import TrainConfig
+    from lfbench.training.loop import comparable, train
+
+    folder = out / "stage1"
+    folder.mkdir(parents=True, exist_ok=True)
+    cfg = spec.stage1_config()
+    cfg["training"]["threads"] = threads
+    path = folder / TRAIN_CONFIG
+    if path.is_file() and comparable(TrainConfig.from_toml(path).to_dict()) != comparable(cfg):
+        raise SpecError(f"{path} holds another stage-1 config; use another --out folder")
+    write_text(path, dumps(cfg, f"The shared stage 1 of {spec.source}: written by lfbench ablate."))
+    for category, target in links.items():
+        link = folder / "data" / category
+        if not (link.exists() or link.is_symlink()):
+            link.parent.mkdir(parents=True, exist_ok=True)
+            with contextlib.suppress(OSError):
+                link.symlink_to(Path(target).resolve(), target_is_directory=True)
+    marker = folder / "done.json"
+    if marker.is_file():
+        return folder
+    log(f"stage 1 (shared by {len(spec.cells)} cells) in {folder}")
+    command = shlex.join(["lfbench", "train", str(path), "--out", str(folder)])
+    import torch
+
+    before = torch.get_num_threads()
+    try:
+        with open(folder / LOG, "a", encoding="utf-8") as f, contextlib.redirect_stdout(f):
+            train(TrainConfig.from_toml(path), folder, command=command, progress=progress)
+    finally:
+        torch.set_num_threads(before)
+    summary = json.loads((folder / "summary.json").read_text(encoding="utf-8"))
+    write_text(marker, json.dumps({"steps": summary["steps"], "elapsed_s": summary["elapsed_s"]}, indent=2) + "\n")
+    return folder
+
+
+# --------------------------------------------------------------------------- cells
+
+def make_tasks(spec: AblationSpec, out: Path, links: dict[str, dict[str, str]], scenes: tuple[tuple[str, str], ...],
+               threads: int, stage1: Path | None, progress: bool | None) -> list[CellTask]:
+    tasks = []
+    for cell in spec.cells:
+        config = json.loads(json.dumps(cell.config))
+        config["training"]["threads"] = threads
+        tasks.append(CellTask(
+            cell_id=cell.id, values=cell.values, config=config, fingerprint=cell.fingerprint,
+            eval_fingerprint=_sha([spec.evaluation.fingerprint(), [s for s, _ in scenes]]),
+            cell_dir=str(out / "cells" / cell.id), data_links=links[cell.id],
+            stage1_dir=str(stage1) if stage1 is not None else None, scenes=scenes, evaluation=spec.evaluation,
+            threads=threads, progress=progress))
+    return tasks
+
+
+def _cost_estimate(task: CellTask) -> float:
+    """Relative cost of a cell (candidates x steps; phase shifts about 1.6x), to start the longest first."""
+    model = task.config["model"]
+    d = (float(model.get("d_max", 4.0)) - float(model.get("d_min", -4.0))) / float(model.get("interval", 0.5)) + 1
+    steps = sum(int(s["steps"]) for s in task.config["stages"][(1 if task.stage1_dir else 0):])
+    return d * steps * (1.6 if model.get("interpolation") == "phase" else 1.0)
+
+
+def _worker_init(threads: int) -> None:
+    import torch
+
+    torch.set_num_threads(threads)
+
+
+def run_cells(tasks: list[CellTask], jobs: int, progress: bool | None, log: Log) -> list[dict[str, Any]]:
+    """Run the unfinished cells, ``jobs`` at a time in separate processes (1: in this process)."""
+    from tqdm import tqdm
+
+    pending = [t for t in tasks if not is_done(t)]
+    for t in tasks:
+        if t not in pending:
+            log(f"cell {t.cell_id}: finished earlier, skipped")
+    bar = tqdm(total=len(tasks), initial=len(tasks) - len(pending), desc="cells", unit="cell",
+               disable=None if progress is None else not progress, file=sys.stderr, dynamic_ncols=True)
+    try:
+        if jobs <= 1 or len(pending) <= 1:
+            for t in pending:
+                bar.set_postfix_str(t.cell_id[-50:])
+                _report(run_cell(t), log)
+                bar.update(1)
+        else:
+            import multiprocessing
+
+            quiet = sorted((replace(t, progress=False) for t in pending), key=_cost_estimate, reverse=True)
+            ctx = multiprocessing.get_context("spawn")
+            pool = ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=_worker_init,
+                                       initargs=(quiet[0].threads,))
+            try:
+                futures: dict[Future, CellTask] = {pool.submit(run_cell, t): t for t in quiet}
+                remaining = set(futures)
+                while remaining:
+                    done, remaining = wait(remaining, return_when=FIRST_COMPLETED)
+                    for fut in done:
+                        _report(fut.result(), log)  # a failed cell stops the run (queued cells are dropped)
+                        bar.update(1)
+            finally:
+                pool.shutdown(wait=True, cancel_futures=True)
+    finally:
+        bar.close()
+    return [read_marker(t.cell_dir) or {} for t in tasks]
+
+
+def _report(marker: dict[str, Any], log: Log) -> None:
+    log(f"cell {marker.get('id')}: trained {marker.get('steps')} steps in {marker.get('train_s', float('nan')):.1f} s"
+        f" (own {marker.get('own_train_s', float('nan')):.1f} s), scored on {len(marker.get('scenes', []))} scene(s)")
+
+
+def time_cells(tasks: list[CellTask], threads: int, progress: bool | None, log: Log) -> list[dict[str, Any]]:
+    """Test time of every finished cell, one at a time in this process (cached in CELL/timing.json)."""
+    from tqdm import tqdm
+
+    from lfbench.ablation.cell import time_cell
+
+    out = []
+    for t in tqdm(tasks, desc="test time", unit="cell", disable=None if progress is None else not progress,
+                  file=sys.stderr, leave=False):
+        timing = time_cell(t.cell_dir, t.evaluation, threads)
+        log(f"cell {t.cell_id}: test time {timing['test_s']:.2f} s for 9x9x{timing['time_size']}x{timing['time_size']}"
+            f" ({timing['device']}, {threads} thread{'s' if threads != 1 else ''})")
+        out.append(timing)
+    return out
+
+
+# --------------------------------------------------------------------------- extra methods
+
+def run_methods(spec: AblationSpec, out: Path, scenes: tuple[tuple[str, str], ...], log: Log) -> list[Results]:
+    """Score the spec's [[methods]] (cached in OUT/methods/<label>/ with a marker, like cells)."""
+    from lfbench.ablation.cell import load_scenes, save_maps
+    from lfbench.method.registry import create_from_spec
+    from lfbench.runs.runner import evaluate
+    from lfbench.scoring.rules import ScoringRules
+
+    ev = spec.evaluation
+    rules = ScoringRules(allow_highres=not ev.lowres_only)
+    loaded = load_scenes(scenes)
+    out_list = []
+    for m in spec.methods:
+        folder = out / "methods" / _safe(m.label)
+        key = _sha([m.spec, ev.fingerprint(), [s for s, _ in scenes]])
+        marker = folder / "method.json"
+        if marker.is_file() and json.loads(marker.read_text(encoding="utf-8")).get("key") == key:
+            out_list.append(Results.read(folder))
+            log(f"method {m.label}: finished earlier, skipped")
+            continue
+        method = create_from_spec(m.spec)
+        res = evaluate([method], loaded, rules=rules, on_prediction=save_maps(folder / "maps"), progress=False)
+        res.records = [replace(r, method=m.label) for r in res.records]
+        res.runs = [replace(r, method=m.label) for r in res.runs]
+        res.meta["method"] = {"label": m.label, "spec": m.spec}
+        res.write(folder)
+        if res.records:  # a method that served no scene (e.g. weights not there yet) is tried again next time
+            write_text(marker, json.dumps({"label": m.label, "spec": m.spec, "key": key}, indent=2) + "\n")
+        log(f"method {m.label}: scored on {len(res.scenes)} scene(s)")
+        out_list.append(res)
+    return out_list
+
+
+# --------------------------------------------------------------------------- the whole run
+
+@dataclass
+class AblationRun:
+    out: Path
+    results: Results
+    markers: list[dict[str, Any]]
+    written: list[Path]
+
+
+def run_ablation(spec: AblationSpec, out: str | Path, *, jobs: int = 1, progress: bool | None = None,
+                 paper: str | Path | None = None, log: Log = print) -> AblationRun:
+    """Run (or resume) every cell and extra method of ``spec`` into ``out``; write the combined results,
+    tables and figures. ``paper``: the paper's tables folder (None: lfbench.reports.paper.find_paper_dir)."""
+    from lfbench.ablation.report import write_report
+
+    if jobs < 1:
+        raise SpecError(f"--jobs must be >= 1, got {jobs}")
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    if spec.text:
+        write_text(out / "spec.toml", spec.text)
+    cores = available_cores()
+    threads = spec.budget.threads or max(1, cores // jobs)
+    log(f"{spec.title}: {len(spec.cells)} cell(s), {len(spec.methods)} extra method(s), budget "
+        f"{spec.budget_label()}; {jobs} process(es) x {threads} thread(s) on {cores} core(s)")
+    scenes = prepare_evaluation(spec, out, log)
+    links = prepare_training_data(spec.cells, out, log)
+    stage1 = None
+    if spec.shared_stage1 and spec.cells:
+        stage1 = run_shared_stage1(spec, out, links[spec.cells[0].id], spec.budget.threads or cores, progress, log)
+    tasks = make_tasks(spec, out, links, scenes, threads, stage1, progress)
+    markers = run_cells(tasks, jobs, progress, log)
+    timings = time_cells(tasks, spec.evaluation.threads or cores, progress, log)
+    markers = [{**m, **{k: v for k, v in t.items() if k != "key"}} for m, t in zip(markers, timings, strict=True)]
+    combined = Results(meta={"ablation": {"title": spec.title, "spec": str(spec.source), "table": spec.table,
+                                          "budget": spec.budget_label(), "shared_stage1": spec.shared_stage1,
+                                          "cells": markers}})
+    for t in tasks:
+        combined.extend(Results.read(Path(t.cell_dir) / "results.json"))
+    for res in run_methods(spec, out, scenes, log):
+        combined.extend(res)
+    combined.meta["scenes"] = [s for s, _ in scenes]
+    combined.write(out)
+    written = write_report(spec, out, combined, markers, paper=paper, log=log)
+    return AblationRun(out=out, results=combined, markers=markers, written=written)
+
+
+def report_only(spec: AblationSpec, out: str | Path, *, paper: str | Path | None = None,
+                log: Log = print) -> list[Path]:
+    """Rewrite the tables and figures from OUT/results.json and the cells' markers (nothing is run)."""
+    from lfbench.ablation.report import write_report
+
+    out = Path(out)
+    results = Results.read(out / "results.json")
+    from lfbench.ablation.cell import TIMING
+
+    markers = []
+    for c in spec.cells:
+        marker = read_marker(out / "cells" / c.id) or {}
+        timing = out / "cells" / c.id / TIMING
+        if marker and timing.is_file():
+            marker.update({k: v for k, v in json.loads(timing.read_text(encoding="utf-8")).items() if k != "key"})
+        markers.append(marker)
+    missing = [c.id for c, m in zip(spec.cells, markers, strict=True) if "test_s" not in m]
+    if missing:
+        raise DataError(f"cell(s) not finished: {', '.join(missing)}; run `lfbench ablate` first", out)
+    return write_report(spec, out, results, markers, paper=paper, log=log)

@@ -1,0 +1,73 @@
+"""The ``lfbench`` command line. Each subcommand lives in lfbench/cli/<name>.py with
+``HELP``, ``add_arguments(parser)`` and ``run(args) -> int``; heavy imports happen inside run().
+
+Errors caused by input (files, specs, options) print one line on stderr and exit with code 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Sequence
+
+from lfbench.utils.errors import LFBenchError
+
+COMMANDS = {
+    "evaluate": "lfbench.cli.evaluate",
+    "predict": "lfbench.cli.predict",
+    "methods": "lfbench.cli.methods",
+    "info": "lfbench.cli.info",
+    "demo": "lfbench.cli.demo",
+    "report": "lfbench.cli.report",
+    "synth": "lfbench.cli.synth",
+    "convert-keras": "lfbench.cli.convert_keras",
+    "train": "lfbench.cli.train",
+    "ablate": "lfbench.cli.ablate",
+    "regress": "lfbench.cli.regress",
+    "validate-submission": "lfbench.cli.validate_submission",
+    "bench": "lfbench.cli.bench",
+}
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line usage errors (exit 2) instead of a usage block."""
+
+    def error(self, message: str):  # type: ignore[override]
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from lfbench import __version__
+
+    parser = _Parser(prog="lfbench", description="Light-field depth estimation on the HCI 4D Light Field Benchmark.")
+    parser.add_argument("--version", action="version", version=f"lfbench {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    for name, module_name in COMMANDS.items():
+        module = importlib.import_module(module_name)
+        p = sub.add_parser(name, help=module.HELP, description=module.__doc__)
+        module.add_arguments(p)
+        p.set_defaults(_run=module.run)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "_run", None):
+        parser.print_help()
+        return 2
+    try:
+        return int(args._run(args) or 0)
+    except LFBenchError as exc:
+        print(f"lfbench {args.command}: error: {exc}", file=sys.stderr)
+        return exc.exit_code
+    except KeyboardInterrupt:
+        print(f"lfbench {args.command}: interrupted", file=sys.stderr)
+        return 130
+    except BrokenPipeError:
+        return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

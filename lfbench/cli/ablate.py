@@ -1,0 +1,75 @@
+"""Run an ablation: a grid of SubFocal variants, each trained with the spec's budget (an in-process
+``lfbench train`` per cell), scored on the spec's scenes and timed on a whole scene; then the tables
+(markdown, LaTeX, CSV) with the paper's numbers in adjacent, labelled columns, and the figures.
+
+Shipped specs: ablations/table4_cpu.toml, table5_cpu.toml, beta_cpu.toml (2-core CPU presets on
+synthetic scenes), *_paper.toml (the paper's widths, steps and data, for a GPU) and tables12_*.toml
+(Tables I/II for any set of methods). Spec layout: lfbench/ablation/spec.py.
+
+Re-running the same command skips finished cells and resumes an interrupted one from its
+checkpoint. ``--jobs N`` trains N cells at a time in separate processes (cores / N threads each).
+The paper's tables come from --paper DIR, else $LFBENCH_PAPER_DIR, else $LFBENCH_HCI_ROOT/../paper;
+without them the tables have no paper columns.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+HELP = "train and score a grid of SubFocal variants (Tables IV, V, beta sweep, I/II) beside the paper's numbers"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("spec", type=Path, metavar="SPEC.toml", help="ablation spec (see ablations/*.toml)")
+    p.add_argument("--out", type=Path, default=None,
+                   help="output folder (default: the spec's 'out', else runs/ablate/<spec name>)")
+    p.add_argument("--jobs", type=int, default=1, metavar="N",
+                   help="cells trained at a time, each in its own process with cores / N torch threads")
+    p.add_argument("--paper", default=None, metavar="DIR",
+                   help="folder of the paper's tables (default: $LFBENCH_PAPER_DIR, else $LFBENCH_HCI_ROOT/../paper)")
+    p.add_argument("--cells", default="", metavar="IDS",
+                   help="comma-separated cell ids: run (and tabulate) only these (see --list)")
+    p.add_argument("--list", action="store_true", help="print the cells and their training configs, run nothing")
+    p.add_argument("--report-only", action="store_true",
+                   help="rewrite the tables and figures from the finished cells in OUT (train nothing)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+
+
+def run(args: argparse.Namespace) -> int:
+    from lfbench.ablation.spec import load_spec
+    from lfbench.utils.errors import SpecError
+
+    spec = load_spec(args.spec)
+    if args.jobs < 1:
+        raise SpecError(f"--jobs must be >= 1, got {args.jobs}")
+    if args.cells.strip():
+        import dataclasses
+
+        wanted = [c.strip() for c in args.cells.split(",") if c.strip()]
+        known = {c.id: c for c in spec.cells}
+        unknown = [c for c in wanted if c not in known]
+        if unknown:
+            raise SpecError(f"--cells: no cell {', '.join(unknown)} in {args.spec}; cells: {', '.join(known)}")
+        spec = dataclasses.replace(spec, cells=tuple(known[c] for c in wanted))
+    out = args.out or (Path(spec.out) if spec.out else Path("runs") / "ablate" / args.spec.stem)
+    if args.list:
+        from lfbench.ablation.toml_text import dumps
+
+        print(f"{spec.title}: {len(spec.cells)} cell(s), budget {spec.budget_label()}"
+              f"{', shared stage 1' if spec.shared_stage1 else ''}; output {out}")
+        for cell in spec.cells:
+            print(f"\n## cell {cell.id}\n{dumps(cell.config)}", end="")
+        for m in spec.methods:
+            print(f"\n## method {m.label}: {m.spec}")
+        return 0
+    progress = False if args.no_progress else None
+    if args.report_only:
+        from lfbench.ablation.runner import report_only
+
+        report_only(spec, out, paper=args.paper)
+        return 0
+    from lfbench.ablation.runner import run_ablation
+
+    run_ablation(spec, out, jobs=args.jobs, progress=progress, paper=args.paper)
+    return 0

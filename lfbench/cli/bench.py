@@ -1,0 +1,181 @@
+"""Speed and memory benchmarks (not part of the tests): SubFocal inference per interval and precision,
+the cost volume alone, training steps, the metric engine, and the conv3d peak they are judged against.
+
+Every case runs in a fresh Python process; peak_memory_gb is that process's peak RSS. Records (JSON
+list) carry the machine (CPU, cores, torch threads and version, load average). Without a subcommand
+``lfbench bench`` runs ``suite``: the conv peak, one 512x512 scene at interval 0.5 in fp32 and bf16,
+the volume, training and metric benches. On a loaded 2-core CPU that takes about 30 min; the whole
+grid (``lfbench bench suite --interval 1 0.5 0.25 0.1``) about 3 h; ``--quick`` (64x64) under a minute.
+
+Examples:
+  lfbench bench inference --size 512 --interval 0.5 --precision bf16 --json OUT.json
+  lfbench bench inference --interval 1 0.5 0.25 0.1 --precision fp32 bf16 --json grid.json
+  lfbench bench volume --size 512 --method gather grid_sample
+  lfbench bench train --width 150 16 --batch 2
+  lfbench bench suite --quick --json quick.json
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+HELP = "speed and memory benchmarks (inference, cost volume, training, metrics, conv peak)"
+
+
+def _common(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--json", type=Path, metavar="OUT.json", help="write the records (a JSON list) here")
+    p.add_argument("--table", type=Path, metavar="OUT.md", help="also write the table (Markdown) here")
+    p.add_argument("--threads", type=int, default=0, help="torch threads (0 = all cores)")
+    p.add_argument("--timeout", type=float, default=None, metavar="S", help="give up a case after S seconds")
+
+
+def _inference_options(p: argparse.ArgumentParser, size: int, intervals: list[float]) -> None:
+    p.add_argument("--size", type=int, default=size, help="image size in px (a size x size scene, 81 views)")
+    p.add_argument("--interval", type=float, nargs="+", default=intervals, help="disparity intervals (px)")
+    p.add_argument("--precision", nargs="+", default=["fp32", "bf16"], choices=["fp32", "bf16"])
+    p.add_argument("--width", type=int, default=150, help="aggregation width (150 = the paper)")
+    p.add_argument("--weights", help="checkpoint .pt (default: random weights)")
+    p.add_argument("--max-memory", type=float, default=4.0, metavar="GB", help="memory budget of inference")
+    p.add_argument("--tile", type=int, default=0, help="core tile size in px (0 = from --max-memory)")
+    p.add_argument("--repeat", type=int, default=1, help="runs per case (the best is kept)")
+    p.add_argument("--no-peak", action="store_true", help="do not measure the conv3d peak around each case")
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    sub = p.add_subparsers(dest="which", metavar="BENCH")
+    s = sub.add_parser("suite", help="all benches (default)", description="All benches; see lfbench bench --help.")
+    _inference_options(s, 512, [0.5])
+    s.add_argument("--quick", action="store_true", help="64x64 scene, tiny training and metric cases (seconds)")
+    s.add_argument("--skip", nargs="+", default=[], choices=["peak", "inference", "volume", "train", "metrics"])
+    s.add_argument("--train-batch", type=int, default=2)
+    s.add_argument("--train-steps", type=int, default=2)
+    s.add_argument("--small-width", type=int, default=16, help="the small width of the training bench")
+    _common(s)
+    i = sub.add_parser("inference", help="one scene per interval x precision (seconds, peak memory, GFLOP/s)")
+    _inference_options(i, 512, [0.5])
+    _common(i)
+    v = sub.add_parser("volume", help="the cost volume alone (GB/s)")
+    v.add_argument("--size", type=int, default=512)
+    v.add_argument("--interval", type=float, nargs="+", default=[0.5])
+    v.add_argument("--precision", nargs="+", default=["fp32", "bf16"], choices=["fp32", "bf16"])
+    v.add_argument("--method", nargs="+", default=["gather", "grid_sample"], choices=["gather", "grid_sample"])
+    v.add_argument("--repeat", type=int, default=1)
+    _common(v)
+    t = sub.add_parser("train", help="training steps per second (Adam + L1 on random patches)")
+    t.add_argument("--width", type=int, nargs="+", default=[150, 16])
+    t.add_argument("--batch", type=int, default=2)
+    t.add_argument("--patch", type=int, default=32)
+    t.add_argument("--steps", type=int, default=2)
+    t.add_argument("--interval", type=float, default=0.5)
+    t.add_argument("--no-channels-last", action="store_true")
+    _common(t)
+    m = sub.add_parser("metrics", help="the metric engine over synthetic scenes x methods")
+    m.add_argument("--scenes", type=int, default=12)
+    m.add_argument("--methods", type=int, default=5)
+    m.add_argument("--size", type=int, default=512)
+    m.add_argument("--repeat", type=int, default=1)
+    _common(m)
+    k = sub.add_parser("peak", help="the conv3d peak (GFLOP/s) of the paper's 3D convolution")
+    k.add_argument("--precision", nargs="+", default=["fp32", "bf16"], choices=["fp32", "bf16"])
+    k.add_argument("--repeat", type=int, default=3)
+    _common(k)
+
+
+def _cases(args: argparse.Namespace) -> list[tuple[str, dict]]:
+    """(bench, params) in the order they run."""
+    which = args.which
+    th = {"threads": args.threads}
+    cases: list[tuple[str, dict]] = []
+    if which in ("inference", "suite"):
+        skip = set(getattr(args, "skip", []))
+        size = 64 if getattr(args, "quick", False) else args.size
+        if which == "inference" or "inference" not in skip:
+            peaks = not args.no_peak and not (which == "suite" and "peak" in skip)
+            for interval in args.interval:
+                for precision in args.precision:
+                    if peaks:
+                        cases.append(("peak", {"precision": precision, **th}))
+                    cases.append(("inference", {"size": size, "interval": interval, "precision": precision,
+                                                "width": args.width, "weights": args.weights,
+                                                "max_memory_gb": args.max_memory, "tile": args.tile,
+                                                "repeat": args.repeat, **th}))
+            if peaks:  # the peak again after the last case: each case sits between two peak measurements
+                cases += [("peak", {"precision": p, **th}) for p in args.precision]
+        elif "peak" not in skip:  # the suite without inference: the peaks still sit beside the training bench
+            cases += [("peak", {"precision": p, **th}) for p in args.precision]
+        if which == "suite":
+            quick = args.quick
+            if "volume" not in skip:
+                cases += [("volume", {"size": size, "interval": 0.5, "precision": p, "method": "gather", **th})
+                          for p in args.precision]
+                cases.append(("volume", {"size": size, "interval": 0.5, "precision": "fp32", "method": "grid_sample",
+                                         **th}))
+            if "train" not in skip:
+                for width in (150, args.small_width):
+                    cases.append(("train", {"width": width, "batch": 1 if quick else args.train_batch,
+                                            "patch": 16 if quick else 32, "steps": 1 if quick else args.train_steps,
+                                            **th}))
+            if "metrics" not in skip:
+                cases.append(("metrics", {"scenes": 12, "methods": 5, "size": 128 if quick else 512}))
+    elif which == "volume":
+        for interval in args.interval:
+            for method in args.method:
+                for precision in (args.precision if method == "gather" else ["fp32"]):
+                    cases.append(("volume", {"size": args.size, "interval": interval, "precision": precision,
+                                             "method": method, "repeat": args.repeat, **th}))
+    elif which == "train":
+        cases = [("train", {"width": w, "batch": args.batch, "patch": args.patch, "steps": args.steps,
+                            "interval": args.interval, "channels_last": not args.no_channels_last, **th})
+                 for w in args.width]
+    elif which == "metrics":
+        cases = [("metrics", {"scenes": args.scenes, "methods": args.methods, "size": args.size,
+                              "repeat": args.repeat})]
+    elif which == "peak":
+        cases = [("peak", {"precision": p, "repeat": args.repeat, **th}) for p in args.precision]
+    return cases
+
+
+def _line(record: dict) -> str:
+    from lfbench.runs.bench import _fmt
+
+    if "error" in record:
+        return f"[{record.get('bench')}] error: {record['error']}"
+    keys = [k for k in ("size", "interval", "precision", "method", "width", "batch", "seconds", "peak_memory_gb",
+                        "gflops_per_s", "gb_per_s", "steps_per_s", "scores_per_s") if k in record]
+    load = (record.get("machine") or {}).get("load_average")
+    return f"[{record['bench']}] " + ", ".join(f"{k} {_fmt(record[k])}" for k in keys) + f" (load {load})"
+
+
+def _output(args: argparse.Namespace, records: list[dict]) -> list[dict]:
+    """What the JSON file holds: every record, or for ``inference`` only the inference records (each carries
+    its peak)."""
+    return records if args.which != "inference" else [r for r in records if r.get("bench") == "inference"]
+
+
+def run(args: argparse.Namespace) -> int:
+    from lfbench.runs.bench import attach_peaks, run_isolated, table, write_json
+
+    if args.which is None:  # the default: the suite with its defaults
+        parser = argparse.ArgumentParser()
+        add_arguments(parser)
+        args = parser.parse_args(["suite"])
+    records: list[dict] = []
+    cases = _cases(args)
+    print(f"lfbench bench {args.which}: {len(cases)} cases, each in a fresh process", flush=True)
+    for bench, params in cases:
+        record = run_isolated(bench, params, args.timeout)
+        records.append(record)
+        print(_line(record), flush=True)
+        if args.json:
+            write_json(args.json, _output(args, records))
+    records = attach_peaks(records)
+    if args.json:
+        write_json(args.json, _output(args, records))
+    text = table(records)
+    print("\n" + text, end="")
+    if args.table:
+        from lfbench.utils.atomic import write_text
+
+        write_text(args.table, text)
+    return 1 if any("error" in r for r in records) else 0

@@ -1,0 +1,80 @@
+"""Predict a disparity map with one method for one light field (a scene folder or VIEWS.npy).
+
+VIEWS.npy is float32 (H, W, 81) gray in [0, 1], channel k = view k. The output is a PFM
+(submission format) or a .npy; with --extras the distribution and uncertainty are saved beside it.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+HELP = "predict a disparity map for a scene folder or a VIEWS.npy"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--method", required=True, metavar="SPEC", help="method spec name[:key=value,...]")
+    p.add_argument("--input", required=True, type=Path, help="scene folder (HCI layout) or VIEWS.npy (H, W, 81)")
+    p.add_argument("--out", required=True, type=Path, help="OUT.pfm or OUT.npy")
+    p.add_argument("--extras", action="store_true",
+                   help="also save OUT.distribution.npy (D, H, W), OUT.disparities.npy (D,) and OUT.uncertainty.npy")
+
+
+def load_input(path: Path):
+    """A LightField from a scene folder or a VIEWS.npy; DataError naming the file otherwise."""
+    import numpy as np
+
+    from lfbench.data.scene import ArrayLightField, Scene
+    from lfbench.utils.errors import DataError
+
+    if path.is_dir():
+        return Scene(path)
+    if path.suffix != ".npy":
+        raise DataError("input must be a scene folder or a .npy file", path)
+    try:
+        arr = np.load(path, allow_pickle=False)
+    except FileNotFoundError:
+        raise DataError("input not found", path) from None
+    except (ValueError, OSError, EOFError) as exc:
+        raise DataError(f"cannot read .npy: {str(exc).splitlines()[0]}", path) from None
+    if arr.ndim != 3 or arr.shape[2] != 81:
+        raise DataError(f"expected (H, W, 81) views, got shape {arr.shape}", path)
+    if not np.issubdtype(arr.dtype, np.floating) or not np.isfinite(arr).all():
+        raise DataError("views must be finite floating-point values in [0, 1]", path)
+    return ArrayLightField.from_channels(arr.astype(np.float32), name=path.stem)
+
+
+def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from lfbench.data.pfm import write_pfm
+    from lfbench.method.registry import create_from_spec
+    from lfbench.utils.atomic import atomic_open
+    from lfbench.utils.errors import DataError
+
+    if args.out.suffix not in (".pfm", ".npy"):
+        raise DataError("output must end in .pfm or .npy", args.out)
+    method = create_from_spec(args.method)
+    lf = load_input(args.input)
+    reason = method.available_for(lf)
+    if reason:
+        raise DataError(f"{method.label} cannot run on this input: {reason}", args.input)
+    pred = method.run(lf)
+
+    def save(path: Path, arr) -> None:
+        with atomic_open(path, "wb") as f:
+            np.save(f, np.asarray(arr))
+
+    if args.out.suffix == ".pfm":
+        write_pfm(args.out, pred.disparity)
+    else:
+        save(args.out, pred.disparity)
+    if args.extras:
+        stem = args.out.with_suffix("")
+        for suffix, arr in ((".distribution.npy", pred.distribution), (".disparities.npy", pred.disparity_values),
+                            (".uncertainty.npy", pred.uncertainty)):
+            if arr is not None:
+                save(Path(f"{stem}{suffix}"), arr)
+    print(f"{method.label}: wrote {args.out} ({pred.disparity.shape[1]}x{pred.disparity.shape[0]}, "
+          f"{pred.runtime_s:.2f} s)")
+    return 0

@@ -1,1 +1,0 @@
-"""Subcommands of the ``lfbench`` CLI, one module each."""

@@ -1,0 +1,102 @@
+"""PFM (portable float map) read/write, as used by the HCI benchmark for disparity maps.
+
+Header ``Pf`` (1 channel) or ``PF`` (3 channels), then ``width height``, then a scale whose sign
+gives the byte order (negative = little endian). Rows are stored bottom-up; we flip on read and
+write so that arrays are top-down (row 0 = top of the image), like every other image.
+"""
+
+from __future__ import annotations
+
+import io
+from pathlib import Path
+from typing import BinaryIO
+
+import numpy as np
+
+from lfbench.utils.atomic import atomic_open
+from lfbench.utils.errors import DataError
+
+_MAX_HEADER_LINE = 256
+
+
+def _header_line(f, path: Path) -> str:
+    while True:
+        raw = f.readline(_MAX_HEADER_LINE)
+        if not raw:
+            raise DataError("not a PFM file: header ends early", path)
+        try:
+            line = raw.decode("ascii").strip()
+        except UnicodeDecodeError:
+            raise DataError("not a PFM file: header is not ASCII", path) from None
+        if line and not line.startswith("#"):
+            return line
+
+
+def read_pfm(path: str | Path) -> np.ndarray:
+    """Read a PFM file as float32, (H, W) for ``Pf`` or (H, W, 3) for ``PF``, rows top-down.
+
+    Values are multiplied by |scale| as the benchmark toolkit does (scale is 1 in HCI files).
+    Raises DataError naming the file for any malformed or truncated input.
+    """
+    path = Path(path)
+    try:
+        f = open(path, "rb")
+    except FileNotFoundError:
+        raise DataError("file not found", path) from None
+    except IsADirectoryError:
+        raise DataError("is a folder, expected a PFM file", path) from None
+    with f:
+        return _read_pfm_stream(f, path)
+
+
+def parse_pfm(data: bytes, source: str | Path = "<bytes>") -> np.ndarray:
+    """Like :func:`read_pfm` for a PFM held in memory (e.g. a zip member); errors name ``source``."""
+    return _read_pfm_stream(io.BytesIO(data), Path(source))
+
+
+def _read_pfm_stream(f: BinaryIO, path: Path) -> np.ndarray:
+    ident = _header_line(f, path)
+    if ident not in ("Pf", "PF"):
+        raise DataError(f"not a PFM file: identifier {ident[:20]!r}, expected 'Pf' or 'PF'", path)
+    channels = 1 if ident == "Pf" else 3
+    dims = _header_line(f, path).split()
+    try:
+        width, height = (int(v) for v in dims)
+        if width <= 0 or height <= 0:
+            raise ValueError
+    except ValueError:
+        raise DataError(f"bad PFM dimensions {' '.join(dims)[:40]!r}", path) from None
+    try:
+        scale = float(_header_line(f, path))
+        if scale == 0 or not np.isfinite(scale):
+            raise ValueError
+    except ValueError:
+        raise DataError("bad PFM scale: must be a finite non-zero number", path) from None
+    dtype = np.dtype("<f4" if scale < 0 else ">f4")
+    count = width * height * channels
+    start = f.tell()  # compare sizes before reading: absurd dimensions must not allocate memory
+    available = f.seek(0, io.SEEK_END) - start
+    f.seek(start)
+    if available != count * 4:
+        what = "truncated" if available < count * 4 else "trailing bytes after the data in"
+        raise DataError(f"{what} PFM: expected {count * 4} data bytes for {width}x{height}x{channels}, "
+                        f"found {available}", path)
+    payload = f.read(count * 4)
+    data = np.frombuffer(payload, dtype=dtype)
+    shape = (height, width) if channels == 1 else (height, width, 3)
+    out = np.flipud(data.reshape(shape)).astype(np.float32)
+    if abs(scale) != 1.0:
+        out *= np.float32(abs(scale))
+    return out
+
+
+def write_pfm(path: str | Path, data: np.ndarray) -> None:
+    """Write (H, W) or (H, W, 3) data as little-endian float32 PFM, atomically (exact round trip)."""
+    arr = np.asarray(data)
+    if arr.ndim not in (2, 3) or (arr.ndim == 3 and arr.shape[2] != 3):
+        raise ValueError(f"PFM holds (H, W) or (H, W, 3) arrays, got shape {arr.shape}")
+    ident = b"Pf" if arr.ndim == 2 else b"PF"
+    height, width = arr.shape[:2]
+    payload = np.ascontiguousarray(np.flipud(arr), dtype="<f4").tobytes()
+    with atomic_open(path, "wb") as f:
+        f.write(ident + b"\n" + f"{width} {height}\n".encode() + b"-1.0\n" + payload)

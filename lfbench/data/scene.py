@@ -1,0 +1,299 @@
+"""Light fields: an HCI scene folder (lazy) or views held in memory.
+
+Views are float32 arrays (V, U, H, W) gray or (V, U, H, W, 3) RGB in [0, 1], where
+``views[v, u]`` is ``input_Cam{v * U + u:03d}.png`` (angular row v, column u), so that
+``views.reshape(V * U, H, W)[k]`` is view k. Disparity is in px per view step, (H, W) float32;
+positive = closer than the focus plane (HCI convention).
+"""
+
+from __future__ import annotations
+
+import functools
+import re
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from PIL import Image
+
+from lfbench.data.params import SceneParameters, read_parameters
+from lfbench.data.pfm import read_pfm
+from lfbench.utils.errors import DataError
+
+GRAY_WEIGHTS = (0.299, 0.587, 0.114)
+LOWRES, HIGHRES = "lowres", "highres"
+_MASK_RE = re.compile(r"^(?P<name>.+)_(?P<res>lowres|highres)\.png$")
+_NOT_MASKS = {"gt_disp", "gt_depth", "input_Cam040", "stratified_masks"}
+
+
+def rgb_to_gray(rgb: np.ndarray) -> np.ndarray:
+    """(..., 3) RGB in [0, 1] -> (...) gray = 0.299 R + 0.587 G + 0.114 B, float32."""
+    r, g, b = GRAY_WEIGHTS
+    out = rgb[..., 0] * r + rgb[..., 1] * g + rgb[..., 2] * b
+    return np.clip(out, 0.0, 1.0).astype(np.float32)
+
+
+def read_png(path: Path, what: str = "image", mode: str | None = None) -> np.ndarray:
+    """A PNG's pixels as stored (uint8/uint16, (H, W) or (H, W, C)), converted to PIL ``mode`` if given.
+
+    DataError naming the file ("missing <what>" / "cannot read <what>: ...") if it cannot be read.
+    """
+    try:
+        with Image.open(path) as img:
+            return np.asarray(img.convert(mode) if mode else img)
+    except FileNotFoundError:
+        raise DataError(f"missing {what}", path) from None
+    except (OSError, ValueError) as exc:
+        raise DataError(f"cannot read {what}: {exc}", path) from None
+
+
+def read_rgb(path: Path) -> np.ndarray:
+    """A PNG as float32 (H, W, 3) in [0, 1]; DataError naming the file if unreadable."""
+    return read_png(path, "view image", "RGB").astype(np.float32) / np.float32(255.0)
+
+
+def read_mask(path: Path) -> np.ndarray:
+    """A mask PNG as bool (H, W): True where any colour channel is non-zero (alpha ignored)."""
+    arr = read_png(path, "mask")
+    if arr.ndim == 3:
+        arr = arr[..., :3].any(axis=-1) if arr.shape[2] >= 3 else arr[..., 0]
+    return arr.astype(bool)
+
+
+class LightField:
+    """Anything a method can run on: a name, gray views and, where known, ground truth."""
+
+    name: str
+
+    @property
+    def angular_size(self) -> tuple[int, int]:
+        """(V, U): rows and columns of the camera grid."""
+        raise NotImplementedError
+
+    def gray_views(self) -> np.ndarray:
+        """(V, U, H, W) float32 gray in [0, 1]."""
+        raise NotImplementedError
+
+    def center_view(self) -> np.ndarray:
+        """(H, W, 3) RGB (or (H, W) gray when no colour is known), float32 in [0, 1]."""
+        v, u = self.angular_size
+        return self.gray_views()[v // 2, u // 2]
+
+    def gt_disparity(self) -> np.ndarray | None:
+        """(H, W) float32 ground-truth disparity at low resolution, or None."""
+        return None
+
+
+@dataclass
+class ArrayLightField(LightField):
+    """Views held in memory, e.g. from VIEWS.npy (H, W, 81) gray."""
+
+    views: np.ndarray
+    name: str = "array"
+    gt: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if self.views.ndim != 4:
+            raise ValueError(f"views must be (V, U, H, W), got {self.views.shape}")
+        self.views = np.asarray(self.views, dtype=np.float32)
+
+    @classmethod
+    def from_channels(cls, stack: np.ndarray, name: str = "array", angular: int | None = None) -> ArrayLightField:
+        """From (H, W, N) with channel k = view k of a square N = A x A grid."""
+        if stack.ndim != 3:
+            raise ValueError(f"expected (H, W, N) views, got shape {stack.shape}")
+        n = stack.shape[2]
+        a = angular or int(round(n**0.5))
+        if a * a != n:
+            raise ValueError(f"{n} channels is not a square angular grid")
+        views = np.moveaxis(stack, 2, 0).reshape(a, a, *stack.shape[:2])
+        return cls(views=views, name=name)
+
+    @property
+    def angular_size(self) -> tuple[int, int]:
+        return self.views.shape[0], self.views.shape[1]
+
+    def gray_views(self) -> np.ndarray:
+        return self.views
+
+    def gt_disparity(self) -> np.ndarray | None:
+        return self.gt
+
+
+class Scene(LightField):
+    """An HCI scene folder, loaded lazily: nothing is read until asked for."""
+
+    def __init__(self, path: str | Path, category: str | None = None) -> None:
+        self.path = Path(path)
+        if not self.path.is_dir():
+            raise DataError("scene folder not found", self.path)
+        self.params: SceneParameters = read_parameters(self.path / "parameters.cfg")
+        self.name = self.path.name
+        self.category = category or self.params.category or "other"
+
+    def __repr__(self) -> str:
+        return f"Scene({self.category}/{self.name})"
+
+    @property
+    def angular_size(self) -> tuple[int, int]:
+        return self.params.angular_size
+
+    @property
+    def spatial_size(self) -> tuple[int, int]:
+        return self.params.spatial_size
+
+    def view_path(self, k: int) -> Path:
+        return self.path / f"input_Cam{k:03d}.png"
+
+    def _check_views(self) -> None:
+        v, u = self.angular_size
+        missing = [k for k in range(v * u) if not self.view_path(k).is_file()]
+        if missing:
+            shown = ", ".join(self.view_path(k).name for k in missing[:3])
+            more = f" and {len(missing) - 3} more" if len(missing) > 3 else ""
+            raise DataError(f"missing {len(missing)} of {v * u} views: {shown}{more}", self.path)
+
+    @functools.cached_property
+    def _rgb(self) -> np.ndarray:
+        self._check_views()
+        v, u = self.angular_size
+        h, w = self.spatial_size
+        views = np.empty((v, u, h, w, 3), dtype=np.float32)
+        for k in range(v * u):
+            img = read_rgb(self.view_path(k))
+            if img.shape[:2] != (h, w):
+                raise DataError(f"view is {img.shape[1]}x{img.shape[0]}, parameters.cfg says {w}x{h}",
+                                self.view_path(k))
+            views[k // u, k % u] = img
+        return views
+
+    def rgb_views(self) -> np.ndarray:
+        """(V, U, H, W, 3) float32 RGB in [0, 1]."""
+        return self._rgb
+
+    @functools.cached_property
+    def _gray(self) -> np.ndarray:
+        return rgb_to_gray(self._rgb)
+
+    def gray_views(self) -> np.ndarray:
+        return self._gray
+
+    def center_view(self) -> np.ndarray:
+        v, u = self.angular_size
+        k = (v // 2) * u + u // 2
+        if "_rgb" in self.__dict__:
+            return self._rgb[v // 2, u // 2]
+        return read_rgb(self.view_path(k))
+
+    def has_gt(self, resolution: str = LOWRES) -> bool:
+        return (self.path / f"gt_disp_{resolution}.pfm").is_file()
+
+    def gt_disparity(self, resolution: str = LOWRES) -> np.ndarray | None:
+        """Ground-truth disparity (H, W) float32 at ``resolution``, or None if the file is absent."""
+        path = self.path / f"gt_disp_{resolution}.pfm"
+        if not path.is_file():
+            return None
+        gt = read_pfm(path)
+        h, w = self.spatial_size
+        scale = 1 if resolution == LOWRES else int(round(self.params.depth_map_scale))
+        if gt.shape != (h * scale, w * scale):
+            raise DataError(f"ground truth is {gt.shape[1]}x{gt.shape[0]}, expected {w * scale}x{h * scale}",
+                            path)
+        return gt
+
+    def mask_names(self, resolution: str = LOWRES) -> list[str]:
+        """Names of the evaluation masks present at ``resolution`` (``<name>_<resolution>.png``)."""
+        names = []
+        for p in sorted(self.path.glob(f"*_{resolution}.png")):
+            m = _MASK_RE.match(p.name)
+            if m and m["name"] not in _NOT_MASKS:
+                names.append(m["name"])
+        return names
+
+    def mask(self, name: str, resolution: str = LOWRES) -> np.ndarray:
+        """Evaluation mask ``<name>_<resolution>.png`` as bool (H, W)."""
+        path = self.path / f"{name}_{resolution}.png"
+        if not path.is_file():
+            raise DataError(f"no mask {name!r} at {resolution}", path)
+        return read_mask(path)
+
+    def valid_mask(self) -> np.ndarray | None:
+        """valid_mask.png as bool (H, W) (True = pixel may be scored), or None if absent."""
+        path = self.path / "valid_mask.png"
+        return read_mask(path) if path.is_file() else None
+
+
+# --------------------------------------------------------------------------- benchmark layout
+
+CATEGORIES = ("stratified", "training", "test", "additional")
+SPLITS: dict[str, tuple[str, ...]] = {
+    "train": ("additional",),
+    "validation": ("stratified", "training"),
+    "test": ("test",),
+}
+
+
+@dataclass(frozen=True)
+class Benchmark:
+    """The scenes under a data root laid out as ROOT/<category>/<scene>/parameters.cfg.
+
+    Category folders other than the four HCI ones are kept under their own name ('other' kind).
+    """
+
+    root: Path
+    scenes: tuple[Scene, ...]
+
+    @classmethod
+    def discover(cls, root: str | Path) -> Benchmark:
+        root = Path(root)
+        if not root.is_dir():
+            raise DataError("data root not found", root)
+        scenes = []
+        if (root / "parameters.cfg").is_file():  # the root is itself one scene
+            scenes.append(Scene(root))
+        else:
+            for cat_dir in sorted(p for p in root.iterdir() if p.is_dir()):
+                if (cat_dir / "parameters.cfg").is_file():  # a flat folder of scenes
+                    scenes.append(Scene(cat_dir, category="other"))
+                    continue
+                for scene_dir in sorted(p for p in cat_dir.iterdir() if p.is_dir()):
+                    if (scene_dir / "parameters.cfg").is_file():
+                        scenes.append(Scene(scene_dir, category=cat_dir.name))
+        if not scenes:
+            raise DataError("no scenes found (expected <root>/<category>/<scene>/parameters.cfg)", root)
+        return cls(root=root, scenes=tuple(scenes))
+
+    def __iter__(self) -> Iterator[Scene]:
+        return iter(self.scenes)
+
+    def __len__(self) -> int:
+        return len(self.scenes)
+
+    @property
+    def names(self) -> list[str]:
+        return [s.name for s in self.scenes]
+
+    def by_category(self, *categories: str) -> list[Scene]:
+        return [s for s in self.scenes if s.category in categories]
+
+    def split(self, name: str) -> list[Scene]:
+        """The paper's splits: train = additional, validation = stratified + training, test = test."""
+        if name not in SPLITS:
+            raise DataError(f"unknown split {name!r}; choose from {', '.join(SPLITS)}")
+        return self.by_category(*SPLITS[name])
+
+    def select(self, names: list[str] | None) -> list[Scene]:
+        """Scenes by name (or category name, or split name); all scenes when ``names`` is empty."""
+        if not names:
+            return list(self.scenes)
+        out: list[Scene] = []
+        for n in names:
+            if n in SPLITS:
+                hits = self.split(n)
+            else:
+                hits = [s for s in self.scenes if n in (s.name, s.category)]
+            if not hits:
+                raise DataError(f"no scene {n!r}; available: {', '.join(self.names)}", self.root)
+            out += [s for s in hits if s not in out]
+        return out

@@ -1,0 +1,324 @@
+"""The method registry: ``@register_method("name")``, ``create("name", **params)``, spec strings.
+
+Built-in methods and third-party plugins are found the same way: through the entry-point group
+``lfbench.methods``. An entry point names a module (importing it runs its ``@register_method``
+decorators) or a factory (registered under the entry point's name if it is not yet registered).
+
+A spec string selects a method and its parameters on the command line: ``name`` or
+``name:key=value,key=value``; values are converted to the types of the factory's signature.
+"""
+
+from __future__ import annotations
+
+import inspect
+import types
+import typing
+from collections.abc import Callable
+from dataclasses import dataclass
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+from lfbench.utils.errors import SpecError
+
+ENTRY_POINT_GROUP = "lfbench.methods"
+
+
+@dataclass(frozen=True)
+class Param:
+    """One parameter of a method: name, type, default and the help text from the docstring."""
+
+    name: str
+    kind: Any
+    default: Any
+    help: str = ""
+
+    @property
+    def type_name(self) -> str:
+        k = self.kind
+        if isinstance(k, type):
+            return k.__name__
+        return str(k).replace("typing.", "")
+
+
+@dataclass(frozen=True)
+class MethodInfo:
+    name: str
+    factory: Callable[..., Any]
+    params: dict[str, Param]
+    summary: str
+    doc: str
+    source: str
+
+    def describe(self) -> str:
+        lines = [f"{self.name}: {self.summary}", f"  source: {self.source}"]
+        if self.params:
+            lines.append("  parameters:")
+            for p in self.params.values():
+                default = "required" if p.default is inspect.Parameter.empty else f"default {p.default!r}"
+                lines.append(f"    {p.name} ({p.type_name}, {default}){': ' + p.help if p.help else ''}")
+        return "\n".join(lines)
+
+
+def _param_help(doc: str) -> dict[str, str]:
+    """Parameter help from a docstring's ``name: text`` lines (Google style 'Args:' or plain)."""
+    out = {}
+    for line in doc.splitlines():
+        s = line.strip()
+        if ":" in s and not s.endswith(":"):
+            key, text = s.split(":", 1)
+            key = key.split("(")[0].strip()
+            if key.isidentifier():
+                out.setdefault(key, text.strip())
+    return out
+
+
+def _introspect(name: str, factory: Callable[..., Any]) -> MethodInfo:
+    target = factory.__init__ if inspect.isclass(factory) else factory
+    try:
+        hints = typing.get_type_hints(target)
+    except Exception:  # unresolvable annotations: fall back to raw ones
+        hints = {}
+    doc = inspect.getdoc(factory) or ""
+    helps = _param_help(doc)
+    params = {}
+    for p in inspect.signature(target).parameters.values():
+        if p.name == "self" or p.kind in (p.VAR_POSITIONAL, p.VAR_KEYWORD):
+            continue
+        params[p.name] = Param(p.name, hints.get(p.name, p.annotation), p.default, helps.get(p.name, ""))
+    summary = doc.splitlines()[0] if doc else ""
+    module = getattr(factory, "__module__", "?")
+    return MethodInfo(name, factory, params, summary, doc, module)
+
+
+class MethodRegistry:
+    """Maps method names to factories. ``REGISTRY`` is the process-wide default instance."""
+
+    def __init__(self, group: str | None = ENTRY_POINT_GROUP) -> None:
+        self._methods: dict[str, MethodInfo] = {}
+        self._group = group
+        self._loaded = group is None
+        self.load_errors: dict[str, str] = {}
+
+    def register(self, name: str, factory: Callable[..., Any]) -> None:
+        if name in self._methods and self._methods[name].factory is not factory:
+            raise ValueError(f"method {name!r} is already registered by {self._methods[name].source}")
+        self._methods[name] = _introspect(name, factory)
+
+    def _load_entry_point(self, ep: metadata.EntryPoint) -> None:
+        try:
+            obj = ep.load()
+        except Exception as exc:  # a broken plugin must not break the others
+            self.load_errors[ep.name] = f"{type(exc).__name__}: {exc}"  # shown by `lfbench methods`
+            return
+        if isinstance(obj, types.ModuleType):
+            self._register_module(obj)
+        elif ep.name not in self._methods and callable(obj):
+            self.register(ep.name, obj)
+
+    def _load_entry_points(self, name: str | None = None) -> None:
+        """Load the plugins: only the entry point called ``name`` when there is one (so that using one
+        method does not import every plugin, e.g. torch for a metric-only run), else all of them."""
+        if self._loaded:
+            return
+        eps = list(metadata.entry_points(group=self._group))
+        if name is not None:
+            named = [ep for ep in eps if ep.name == name]
+            if named:
+                for ep in named:
+                    self._load_entry_point(ep)
+                if name in self._methods:
+                    return
+        self._loaded = True
+        for ep in eps:
+            self._load_entry_point(ep)
+
+    def _register_module(self, module: types.ModuleType) -> None:
+        """Register the factories a plugin module decorated with @register_method (its import registered
+        them in the registry the decorator named; a fresh registry learns them here)."""
+        for obj in list(vars(module).values()):
+            if getattr(obj, "__module__", None) != module.__name__:
+                continue
+            for name in _decorated_names(obj):
+                try:
+                    self.register(name, obj)
+                except ValueError as exc:
+                    self.load_errors[name] = str(exc)
+
+    def names(self) -> list[str]:
+        self._load_entry_points()
+        return sorted(self._methods)
+
+    def info(self, name: str) -> MethodInfo:
+        if name not in self._methods:
+            self._load_entry_points(name)
+        if name not in self._methods:
+            hint = f" (plugin failed to load: {self.load_errors[name]})" if name in self.load_errors else ""
+            raise SpecError(f"unknown method {name!r}{hint}; available: {', '.join(self.names())}")
+        return self._methods[name]
+
+    def create(self, name: str, **params: Any) -> Any:
+        info = self.info(name)
+        unknown = sorted(set(params) - set(info.params))
+        if unknown:
+            known = ", ".join(info.params) or "none"
+            raise SpecError(f"method {name!r} has no parameter {', '.join(map(repr, unknown))}; parameters: {known}")
+        missing = [p.name for p in info.params.values()
+                   if p.default is inspect.Parameter.empty and p.name not in params]
+        if missing:
+            raise SpecError(f"method {name!r} needs parameter {', '.join(missing)} (e.g. {name}:{missing[0]}=...)")
+        try:
+            method = info.factory(**params)
+        except (ValueError, TypeError) as exc:
+            raise SpecError(f"method {name!r}: {exc}") from None
+        try:  # record how it was made: results name a method by its canonical spec
+            method.name = name
+            method.params = dict(params)
+        except AttributeError:  # a plain function or a frozen object: leave it as it is
+            pass
+        return method
+
+    def create_from_spec(self, spec: str) -> Any:
+        name, raw = parse_spec(spec)
+        info = self.info(name)
+        params = {}
+        for key, text in raw.items():
+            if key not in info.params:
+                known = ", ".join(info.params) or "none"
+                raise SpecError(f"method {name!r} has no parameter {key!r}; parameters: {known}")
+            params[key] = coerce(text, info.params[key], name)
+        return self.create(name, **params)
+
+
+REGISTRY = MethodRegistry()
+
+
+def register_method(name: str, registry: MethodRegistry | None = None) -> Callable:
+    """Class or function decorator: make a method factory available as ``name``."""
+
+    def deco(factory: Callable[..., Any]) -> Callable[..., Any]:
+        (registry or REGISTRY).register(name, factory)
+        try:  # remember the name so that any registry loading the module finds the factory
+            setattr(factory, _NAMES_ATTR, (*_decorated_names(factory), name))
+        except (AttributeError, TypeError):
+            pass
+        return factory
+
+    return deco
+
+
+_NAMES_ATTR = "__lfbench_method_names__"
+
+
+def _decorated_names(obj: Any) -> tuple[str, ...]:
+    """Names given to ``obj`` itself by @register_method (not inherited from a registered base class)."""
+    try:
+        return tuple(vars(obj).get(_NAMES_ATTR, ()))
+    except TypeError:  # no __dict__
+        return ()
+
+
+def create(name: str, **params: Any) -> Any:
+    """Create a registered method with keyword parameters (variants are parameters)."""
+    return REGISTRY.create(name, **params)
+
+
+def create_from_spec(spec: str) -> Any:
+    """Create a method from ``name:key=value,key=value``."""
+    return REGISTRY.create_from_spec(spec)
+
+
+def list_methods() -> list[MethodInfo]:
+    return [REGISTRY.info(n) for n in REGISTRY.names()]
+
+
+def method_info(name: str) -> MethodInfo:
+    return REGISTRY.info(name)
+
+
+def offline_variants(name: str) -> list[dict[str, Any]]:
+    """Parameter sets under which ``name`` runs with what is installed: the method's own
+    ``offline_variants()`` (e.g. ``[{"width": 16}]``, the architecture of its shipped weights) when it
+    offers a non-empty list, else ``[{}]`` (its defaults)."""
+    variants = getattr(REGISTRY.info(name).factory, "offline_variants", None)
+    return (variants() if variants else None) or [{}]
+
+
+def parse_spec(spec: str) -> tuple[str, dict[str, str]]:
+    """``name:key=value,key=value`` -> (name, {key: raw value}). Values may not contain commas."""
+    spec = spec.strip()
+    name, _, rest = spec.partition(":")
+    name = name.strip()
+    if not name or not all(c.isalnum() or c in "_-." for c in name):
+        raise SpecError(f"bad method spec {spec!r}: expected name or name:key=value,key=value")
+    params: dict[str, str] = {}
+    if rest.strip():
+        for item in rest.split(","):
+            key, eq, value = item.partition("=")
+            key = key.strip()
+            if not eq or not key.isidentifier():
+                raise SpecError(f"bad method spec {spec!r}: {item.strip()!r} is not key=value")
+            if key in params:
+                raise SpecError(f"bad method spec {spec!r}: {key!r} given twice")
+            params[key] = value.strip()
+    return name, params
+
+
+def format_spec(name: str, params: dict[str, Any]) -> str:
+    """The inverse of parse_spec (for labels): ``name:key=value,...`` in the given order."""
+    if not params:
+        return name
+    return name + ":" + ",".join(f"{k}={v}" for k, v in params.items())
+
+
+_TRUE, _FALSE = {"1", "true", "yes", "on"}, {"0", "false", "no", "off"}
+
+
+def coerce(text: str, param: Param, method: str = "") -> Any:
+    """Convert a spec value to the parameter's annotated type (bool, int, float, str, Path, Optional, Literal)."""
+    kind = param.kind
+    origin = typing.get_origin(kind)
+    args = typing.get_args(kind)
+    where = f"{method}:{param.name}" if method else param.name
+    if origin in (typing.Union, types.UnionType):
+        if text.lower() in ("none", "null", "") and type(None) in args:
+            return None
+        errors = []
+        for a in args:
+            if a is type(None):
+                continue
+            try:
+                return coerce(text, Param(param.name, a, param.default), method)
+            except SpecError as exc:
+                errors.append(str(exc))
+        raise SpecError(errors[0] if errors else f"{where}: cannot use {text!r}")
+    if origin is typing.Literal:
+        for a in args:
+            if str(a) == text:
+                return a
+        raise SpecError(f"{where} must be one of {', '.join(map(str, args))}, got {text!r}")
+    if kind is inspect.Parameter.empty or kind is Any:
+        kind = type(param.default) if param.default not in (None, inspect.Parameter.empty) else str
+    try:
+        if kind is bool:
+            low = text.lower()
+            if low in _TRUE:
+                return True
+            if low in _FALSE:
+                return False
+            raise ValueError
+        if kind is int:
+            return int(text)
+        if kind is float:
+            return float(text)
+        if kind is Path:
+            return Path(text).expanduser()
+        if kind is str:
+            return text
+        return kind(text)
+    except (ValueError, TypeError):
+        raise SpecError(f"{where} expects {getattr(kind, '__name__', kind)}, got {text!r}") from None
+
+
+__all__ = ["register_method", "create", "create_from_spec", "list_methods", "method_info", "parse_spec",
+           "format_spec", "MethodRegistry", "REGISTRY", "ENTRY_POINT_GROUP", "Param", "MethodInfo"]

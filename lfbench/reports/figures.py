@@ -1,0 +1,596 @@
+"""Figures (matplotlib, Agg backend, PNG): per-scene overviews and BadPix-series curves.
+
+Conventions of the benchmark's toolkit (docs/hci-evaluation-reference.md, Outputs):
+
+- disparity maps (px per view step) in viridis over 0.9 * [disp_min, disp_max] of parameters.cfg,
+  or over the ground truth's range when the cfg has none;
+- BadPix maps: bad pixels (|gt - pred| > t, or a non-finite prediction) pure red, good pixels light
+  grey (a faint copy of the centre view), pixels outside the evaluation mask dark grey;
+- signed error maps gt - pred (px) in a diverging colormap over +-0.2, outside the mask grey,
+  non-finite predictions black;
+- BadPix-series curves: BadPix(t) in % for t = 0 .. 0.1 px, per scene and averaged over scenes.
+
+Every panel is first computed as an RGB array by a pure function (``badpix_image``,
+``signed_error_image``, ...), so tests can check exactly what is drawn. Files are written atomically.
+
+:class:`SceneFigureWriter` is the prediction hook of ``lfbench evaluate --figures``: each prediction is
+drawn into its own row PNG as it arrives, and the scene overview is re-assembled from the row PNGs
+on disk, so memory does not grow with the number of methods or scenes (only the BadPix curves,
+101 numbers per run, are kept).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from lfbench.data.scene import LOWRES, LightField
+from lfbench.method.base import Prediction
+from lfbench.scoring.metrics import bad_pix_curve
+from lfbench.scoring.rules import ScoringRules, align_prediction, border_mask, upsample_nearest
+from lfbench.utils.atomic import write_bytes, write_text
+
+BADPIX_THRESHOLD = 0.07  # px
+ERROR_LIMIT = 0.2  # px, range of the signed error maps
+CURVE_THRESHOLDS = np.round(np.arange(101) * 0.001, 3)  # 0 .. 0.1 px in steps of 0.001 (exact decimals)
+MARKED_THRESHOLDS = (0.01, 0.03, 0.07)
+
+# BadPix map codes and colours (RGB in [0, 1]); GOOD is a grey level, never pure red.
+OUTSIDE, GOOD, BAD = 0, 1, 2
+BAD_RGB = (1.0, 0.0, 0.0)
+NONFINITE_RGB = (0.0, 0.0, 0.0)
+OUTSIDE_GREY = 0.45
+GOOD_LIGHT = (0.80, 0.20)  # good pixel grey = 0.80 + 0.20 * centre-view gray (0.92 without a view)
+DISPARITY_CMAP, ERROR_CMAP, UNCERTAINTY_CMAP = "viridis", "seismic", "magma"
+
+PANEL_IN, ROW_HEIGHT_IN, DPI = 3.2, 3.0, 90
+
+
+# --------------------------------------------------------------------------- pure panel arrays
+
+def _as_gray(image: np.ndarray | None, shape: tuple[int, int]) -> np.ndarray | None:
+    """A centre view (H, W[, 3]) in [0, 1] as gray (H, W) float32, or None if absent or mis-shaped."""
+    if image is None:
+        return None
+    img = np.asarray(image, dtype=np.float32)
+    if img.ndim == 3:
+        img = img[..., :3] @ np.array([0.299, 0.587, 0.114], dtype=np.float32)
+    return np.clip(img, 0, 1) if img.shape == shape else None
+
+
+def _colormap(name: str):
+    import matplotlib
+
+    return matplotlib.colormaps[name]
+
+
+def badpix_codes(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = None,
+                 threshold: float = BADPIX_THRESHOLD) -> np.ndarray:
+    """(H, W) uint8: BAD where |gt - pred| > threshold or pred is non-finite, GOOD elsewhere, OUTSIDE
+    where the pixel is not scored (outside ``mask`` or non-finite gt). Same rule as metrics.bad_pix."""
+    gt = np.asarray(gt, dtype=np.float32)
+    pred = np.asarray(pred, dtype=np.float32)
+    scored = np.isfinite(gt) if mask is None else np.asarray(mask, dtype=bool) & np.isfinite(gt)
+    with np.errstate(invalid="ignore"):
+        bad = (np.abs(gt - pred) > threshold) | ~np.isfinite(pred)
+    return np.where(scored, np.where(bad, BAD, GOOD), OUTSIDE).astype(np.uint8)
+
+
+def badpix_image(codes: np.ndarray, background: np.ndarray | None = None) -> np.ndarray:
+    """The BadPix map drawn from :func:`badpix_codes`: (H, W, 3) float32 RGB; BAD pure red, GOOD light
+    grey (a faint copy of ``background``, the centre view, when given), OUTSIDE dark grey."""
+    gray = _as_gray(background, codes.shape)
+    light = np.full(codes.shape, GOOD_LIGHT[0] + GOOD_LIGHT[1] * 0.6, np.float32) if gray is None \
+        else GOOD_LIGHT[0] + GOOD_LIGHT[1] * gray
+    level = np.where(codes == GOOD, light, OUTSIDE_GREY).astype(np.float32)
+    rgb = np.repeat(level[..., None], 3, axis=2)
+    rgb[codes == BAD] = BAD_RGB
+    return rgb
+
+
+def disparity_image(disparity: np.ndarray, vmin: float, vmax: float, cmap: str = DISPARITY_CMAP) -> np.ndarray:
+    """(H, W, 3) float32 RGB: ``disparity`` (px) in ``cmap`` over [vmin, vmax]; non-finite black."""
+    d = np.asarray(disparity, dtype=np.float32)
+    finite = np.isfinite(d)
+    t = np.clip((np.where(finite, d, vmin) - vmin) / max(vmax - vmin, 1e-12), 0, 1)
+    rgb = _colormap(cmap)(t)[..., :3].astype(np.float32)
+    rgb[~finite] = NONFINITE_RGB
+    return rgb
+
+
+def signed_error(gt: np.ndarray, pred: np.ndarray) -> np.ndarray:
+    """gt - pred in px, (H, W) float32 (NaN where either is non-finite)."""
+    with np.errstate(invalid="ignore"):
+        err = np.asarray(gt, dtype=np.float32) - np.asarray(pred, dtype=np.float32)
+    return np.where(np.isfinite(err), err, np.nan).astype(np.float32)
+
+
+def signed_error_image(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = None,
+                       limit: float = ERROR_LIMIT, cmap: str = ERROR_CMAP) -> np.ndarray:
+    """(H, W, 3) float32 RGB of gt - pred in ``cmap`` over [-limit, +limit]; grey outside ``mask`` (and
+    where gt is non-finite), black where the prediction is non-finite inside it."""
+    err = signed_error(gt, pred)
+    rgb = _colormap(cmap)(np.clip((np.nan_to_num(err) + limit) / (2 * limit), 0, 1))[..., :3].astype(np.float32)
+    scored = np.isfinite(np.asarray(gt, dtype=np.float32))
+    if mask is not None:
+        scored &= np.asarray(mask, dtype=bool)
+    rgb[scored & ~np.isfinite(np.asarray(pred, dtype=np.float32))] = NONFINITE_RGB
+    rgb[~scored] = OUTSIDE_GREY
+    return rgb
+
+
+def uncertainty_range(uncertainty: np.ndarray, mask: np.ndarray | None = None) -> tuple[float, float]:
+    """Colour range of an uncertainty map: its 1st and 99th percentiles inside ``mask``."""
+    u = np.asarray(uncertainty, dtype=np.float32)
+    sel = np.isfinite(u) if mask is None or mask.shape != u.shape else np.isfinite(u) & mask
+    if not sel.any():
+        return 0.0, 1.0
+    lo, hi = (float(v) for v in np.percentile(u[sel], [1, 99]))
+    return (lo, hi) if hi > lo else (lo, lo + 1e-6)
+
+
+def uncertainty_image(uncertainty: np.ndarray, vmin: float, vmax: float,
+                      cmap: str = UNCERTAINTY_CMAP) -> np.ndarray:
+    """(H, W, 3) float32 RGB of an uncertainty map (larger = less sure) over [vmin, vmax]."""
+    return disparity_image(uncertainty, vmin, vmax, cmap)
+
+
+def disparity_range(lf: LightField, gt: np.ndarray | None = None,
+                    pred: np.ndarray | None = None) -> tuple[float, float]:
+    """Colour range (px) of disparity maps: 0.9 * [disp_min, disp_max] from the scene's parameters.cfg,
+    else the finite range of ``gt`` (or of ``pred``), else [-1, 1]."""
+    params = getattr(lf, "params", None)
+    lo, hi = getattr(params, "disp_min", None), getattr(params, "disp_max", None)
+    if lo is not None and hi is not None and hi > lo:
+        return 0.9 * float(lo), 0.9 * float(hi)
+    for arr in (gt, pred):
+        finite = None if arr is None else np.asarray(arr)[np.isfinite(arr)]
+        if finite is not None and finite.size:
+            lo, hi = float(finite.min()), float(finite.max())
+            return (lo, hi) if hi > lo else (lo - 0.5, hi + 0.5)
+    return -1.0, 1.0
+
+
+def evaluation_mask(lf: LightField, shape: tuple[int, int], border_px: int = 15) -> np.ndarray:
+    """The low-resolution evaluation mask: all but a ``border_px`` border, and valid_mask.png if any."""
+    mask = border_mask(shape, border_px)
+    valid_fn = getattr(lf, "valid_mask", None)
+    valid = valid_fn() if callable(valid_fn) else None
+    if valid is not None and valid.shape == shape:
+        mask &= valid
+    return mask
+
+
+@dataclass
+class MethodPanels:
+    """What one method's row of an overview shows, as RGB (H, W, 3) float32 arrays."""
+
+    label: str
+    disparity: np.ndarray
+    badpix: np.ndarray | None  # None without ground truth
+    badpix_codes: np.ndarray | None
+    badpix_percent: float  # BadPix(threshold) in % at low resolution (the map shown)
+    error: np.ndarray | None
+    uncertainty: np.ndarray | None
+    uncertainty_range: tuple[float, float] | None
+    disparity_range: tuple[float, float]
+    threshold: float = BADPIX_THRESHOLD
+
+
+def method_panels(label: str, lf: LightField, prediction: Prediction | np.ndarray, *,
+                  gt: np.ndarray | None = None, mask: np.ndarray | None = None,
+                  background: np.ndarray | None = None, disp_range: tuple[float, float] | None = None,
+                  threshold: float = BADPIX_THRESHOLD, border_px: int = 15) -> MethodPanels:
+    """The panels of one prediction on one light field at low resolution. ``gt``, ``mask`` and
+    ``background`` default to the scene's ground truth, evaluation mask and centre view."""
+    pred = prediction if isinstance(prediction, Prediction) else Prediction(disparity=np.asarray(prediction))
+    if gt is None:
+        gt = lf.gt_disparity()
+    shape = tuple(gt.shape) if gt is not None else tuple(np.asarray(pred.disparity).shape)
+    disp, _ = align_prediction(np.asarray(pred.disparity, dtype=np.float32), shape, f"{label} on {lf.name}")
+    if mask is None:
+        mask = evaluation_mask(lf, shape, border_px)
+    if disp_range is None:
+        disp_range = disparity_range(lf, gt, disp)
+    unc = unc_rgb = unc_range = None
+    if pred.uncertainty is not None:
+        unc = np.asarray(pred.uncertainty, dtype=np.float32)
+        if unc.shape != shape:
+            unc, _ = align_prediction(unc, shape, f"{label} uncertainty on {lf.name}")
+        unc_range = uncertainty_range(unc, mask)
+        unc_rgb = uncertainty_image(unc, *unc_range)
+    codes = bp = err = None
+    percent = float("nan")
+    if gt is not None:
+        codes = badpix_codes(gt, disp, mask, threshold)
+        scored = np.count_nonzero(codes != OUTSIDE)
+        percent = 100.0 * np.count_nonzero(codes == BAD) / scored if scored else float("nan")
+        bp = badpix_image(codes, background)
+        err = signed_error_image(gt, disp, mask)
+    return MethodPanels(label=label, disparity=disparity_image(disp, *disp_range), badpix=bp, badpix_codes=codes,
+                        badpix_percent=percent, error=err, uncertainty=unc_rgb, uncertainty_range=unc_range,
+                        disparity_range=disp_range, threshold=threshold)
+
+
+# --------------------------------------------------------------------------- drawing
+
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def save_figure(fig: Any, path: str | Path, dpi: int = DPI) -> Path:
+    """Write a matplotlib figure as PNG atomically and close it."""
+    plt = _pyplot()
+    buf = io.BytesIO()
+    try:
+        fig.savefig(buf, format="png", dpi=dpi)
+    finally:
+        plt.close(fig)
+    write_bytes(path, buf.getvalue())
+    return Path(path)
+
+
+def write_image(path: str | Path, rgb: np.ndarray) -> Path:
+    """Write an (H, W, 3) float RGB array in [0, 1] as a PNG, one pixel per array element (atomic)."""
+    from PIL import Image
+
+    arr = np.round(np.clip(np.asarray(rgb, dtype=np.float64), 0, 1) * 255).astype(np.uint8)
+    buf = io.BytesIO()
+    Image.fromarray(arr, "RGB").save(buf, format="PNG")
+    write_bytes(path, buf.getvalue())
+    return Path(path)
+
+
+def _colorbar(fig: Any, ax: Any, cmap: str, vmin: float, vmax: float, label: str = "") -> None:
+    import matplotlib as mpl
+
+    sm = mpl.cm.ScalarMappable(norm=mpl.colors.Normalize(vmin=vmin, vmax=vmax), cmap=cmap)
+    cb = fig.colorbar(sm, ax=ax, fraction=0.046, pad=0.03)
+    cb.ax.tick_params(labelsize=7)
+    if label:
+        cb.set_label(label, fontsize=7)
+
+
+def _row_figure(title: str):
+    plt = _pyplot()
+    fig, axes = plt.subplots(1, 4, figsize=(4 * PANEL_IN, ROW_HEIGHT_IN))
+    fig.subplots_adjust(left=0.01, right=0.95, top=0.83, bottom=0.03, wspace=0.28)
+    fig.suptitle(title, fontsize=9, x=0.01, ha="left")
+    for ax in axes:
+        ax.set_xticks([])
+        ax.set_yticks([])
+    return fig, axes
+
+
+def _blank(ax: Any, text: str) -> None:
+    ax.axis("off")
+    ax.text(0.5, 0.5, text, ha="center", va="center", fontsize=8, color="0.4", transform=ax.transAxes, wrap=True)
+
+
+def draw_method_row(panels: MethodPanels, path: str | Path, resolution_note: str = "") -> Path:
+    """One method's row: disparity | BadPix map | signed error | uncertainty, as a PNG of fixed size."""
+    fig, axes = _row_figure(panels.label + (f"  ({resolution_note})" if resolution_note else ""))
+    lo, hi = panels.disparity_range
+    axes[0].imshow(panels.disparity, interpolation="nearest")
+    axes[0].set_title("disparity (px)", fontsize=8)
+    _colorbar(fig, axes[0], DISPARITY_CMAP, lo, hi)
+    if panels.badpix is not None:
+        axes[1].imshow(panels.badpix, interpolation="nearest")
+        axes[1].set_title(f"BadPix({panels.threshold:g}) = {panels.badpix_percent:.2f}% (red = bad)", fontsize=8)
+        axes[2].imshow(panels.error, interpolation="nearest")
+        axes[2].set_title("gt - pred (px)", fontsize=8)
+        _colorbar(fig, axes[2], ERROR_CMAP, -ERROR_LIMIT, ERROR_LIMIT)
+    else:
+        _blank(axes[1], "no ground truth")
+        _blank(axes[2], "no ground truth")
+    if panels.uncertainty is not None and panels.uncertainty_range is not None:
+        axes[3].imshow(panels.uncertainty, interpolation="nearest")
+        axes[3].set_title("uncertainty", fontsize=8)
+        _colorbar(fig, axes[3], UNCERTAINTY_CMAP, *panels.uncertainty_range)
+    else:
+        _blank(axes[3], "no uncertainty map")
+    return save_figure(fig, path)
+
+
+def draw_scene_header(lf: LightField, path: str | Path, gt: np.ndarray | None,
+                      disp_range: tuple[float, float], threshold: float = BADPIX_THRESHOLD,
+                      border_px: int = 15) -> Path:
+    """The first row of a scene overview: centre view | ground truth | colour legend | notes."""
+    fig, axes = _row_figure(f"scene {lf.name}")
+    center = np.clip(np.asarray(lf.center_view(), dtype=np.float32), 0, 1)
+    axes[0].imshow(center, cmap="gray" if center.ndim == 2 else None, vmin=0, vmax=1, interpolation="nearest")
+    axes[0].set_title("centre view", fontsize=8)
+    if gt is not None:
+        axes[1].imshow(disparity_image(gt, *disp_range), interpolation="nearest")
+        axes[1].set_title("ground truth (px)", fontsize=8)
+        _colorbar(fig, axes[1], DISPARITY_CMAP, *disp_range)
+    else:
+        _blank(axes[1], "no ground truth")
+    ax = axes[2]
+    ax.axis("off")
+    legend = ((BAD_RGB, f"bad: |gt - pred| > {threshold:g} px or non-finite"),
+              ((GOOD_LIGHT[0] + GOOD_LIGHT[1] * 0.6,) * 3, "good"),
+              ((OUTSIDE_GREY,) * 3, "outside the evaluation mask"),
+              (NONFINITE_RGB, "non-finite prediction (maps)"))
+    for i, (colour, text) in enumerate(legend):
+        y = 0.85 - 0.2 * i
+        ax.add_patch(_pyplot().Rectangle((0.0, y - 0.05), 0.1, 0.1, color=colour, transform=ax.transAxes))
+        ax.text(0.14, y, text, va="center", fontsize=7, transform=ax.transAxes)
+    ax.set_title("BadPix map colours", fontsize=8)
+    h, w = (gt.shape if gt is not None else center.shape[:2])
+    notes = [f"{w}x{h} px (maps at low resolution)", f"evaluation mask: {border_px} px border",
+             f"disparity colours: {disp_range[0]:.2f} .. {disp_range[1]:.2f} px",
+             f"signed error colours: -{ERROR_LIMIT:g} .. +{ERROR_LIMIT:g} px"]
+    _blank(axes[3], "\n".join(notes))
+    return save_figure(fig, path)
+
+
+def stack_rows(row_paths: Sequence[str | Path], path: str | Path) -> Path:
+    """Stack row PNGs (equal widths, as drawn by this module) vertically into one PNG (atomic)."""
+    from PIL import Image
+
+    images = []
+    for p in row_paths:
+        with Image.open(p) as img:
+            images.append(img.convert("RGB"))
+    width = max(img.width for img in images)
+    canvas = Image.new("RGB", (width, sum(img.height for img in images)), "white")
+    y = 0
+    for img in images:
+        canvas.paste(img, (0, y))
+        y += img.height
+    buf = io.BytesIO()
+    canvas.save(buf, format="PNG")
+    write_bytes(path, buf.getvalue())
+    return Path(path)
+
+
+# --------------------------------------------------------------------------- BadPix-series curves
+
+@dataclass(frozen=True)
+class Curve:
+    """BadPix(t) in % of one method on one scene for t in ``thresholds`` (px), scored at ``resolution``."""
+
+    method: str
+    scene: str
+    resolution: str
+    thresholds: np.ndarray
+    values: np.ndarray
+
+
+def scene_curve(label: str, scene: LightField, disparity: np.ndarray, rules: ScoringRules = ScoringRules(),
+                thresholds: np.ndarray = CURVE_THRESHOLDS) -> Curve | None:
+    """The BadPix series of a prediction under the scene's scoring rule (resolution, border, valid
+    mask), as in lfbench.scoring.rules.score_scene, so BadPix(0.07) equals the table's. None without gt."""
+    res = rules.general_resolution(scene) if hasattr(scene, "has_gt") else LOWRES
+    gt = scene.gt_disparity(res) if hasattr(scene, "has_gt") else scene.gt_disparity()
+    if gt is None:
+        return None
+    h, w = getattr(scene, "spatial_size", None) or np.asarray(disparity).shape
+    pred, _ = align_prediction(np.asarray(disparity, dtype=np.float32), (h, w), f"{label} on {scene.name}")
+    scale = gt.shape[0] // h
+    if scale > 1:
+        pred = upsample_nearest(pred, scale)
+    mask = evaluation_mask(scene, gt.shape, rules.border_px * scale)
+    return Curve(label, scene.name, res, np.asarray(thresholds, dtype=np.float64),
+                 bad_pix_curve(gt, pred, thresholds, mask))
+
+
+def average_curves(curves: Sequence[Curve]) -> dict[str, tuple[np.ndarray, np.ndarray, int]]:
+    """Mean BadPix series per method over its scenes: method -> (thresholds, values, number of scenes)."""
+    out: dict[str, list[Curve]] = {}
+    for c in curves:
+        out.setdefault(c.method, []).append(c)
+    return {m: (cs[0].thresholds, np.mean([c.values for c in cs], axis=0), len(cs)) for m, cs in out.items()}
+
+
+def plot_badpix_series(series: Mapping[str, tuple[np.ndarray, np.ndarray]], path: str | Path, title: str,
+                       markers: bool = False) -> Path:
+    """BadPix(t) (%) against t (px), one line per method; dotted lines mark 0.01, 0.03 and 0.07."""
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(6.4, 4.2))
+    for label, (t, v) in series.items():
+        ax.plot(t, v, marker="o" if markers else None, markersize=4, linewidth=1.5, label=label)
+    for t in MARKED_THRESHOLDS:
+        ax.axvline(t, color="0.7", linestyle=":", linewidth=1)
+    ax.set_xlim(0, 0.1)
+    ax.set_ylim(bottom=0)
+    ax.set_xlabel("threshold t (px)")
+    ax.set_ylabel("BadPix(t) (%)")
+    ax.set_title(title, fontsize=9)
+    ax.grid(alpha=0.3)
+    if series:
+        ax.legend(fontsize=7, loc="upper right")
+    fig.tight_layout()
+    return save_figure(fig, path, dpi=110)
+
+
+CURVE_CSV_COLUMNS = ("method", "scene", "resolution", "threshold", "value")
+
+
+def write_curves_csv(curves: Sequence[Curve], path: str | Path) -> Path:
+    """The curves as tidy CSV: method, scene, resolution, threshold (px), value (%)."""
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(CURVE_CSV_COLUMNS)
+    for c in curves:
+        for t, v in zip(c.thresholds, c.values, strict=True):
+            w.writerow([c.method, c.scene, c.resolution, f"{t:.6g}", repr(float(v))])
+    write_text(path, buf.getvalue())
+    return Path(path)
+
+
+def read_curves_csv(path: str | Path) -> list[Curve]:
+    """Curves written by :func:`write_curves_csv`; DataError naming the file when malformed."""
+    from lfbench.utils.errors import DataError
+
+    path = Path(path)
+    rows: dict[tuple[str, str, str], list[tuple[float, float]]] = {}
+    try:
+        with open(path, encoding="utf-8", newline="") as f:
+            reader = csv.DictReader(f)
+            if tuple(reader.fieldnames or ()) != CURVE_CSV_COLUMNS:
+                raise DataError(f"expected columns {', '.join(CURVE_CSV_COLUMNS)}", path)
+            for i, r in enumerate(reader, start=2):
+                try:
+                    rows.setdefault((r["method"], r["scene"], r["resolution"]), []).append(
+                        (float(r["threshold"]), float(r["value"])))
+                except (TypeError, ValueError):
+                    raise DataError(f"line {i}: threshold and value must be numbers", path) from None
+    except FileNotFoundError:
+        raise DataError("curve file not found", path) from None
+    out = []
+    for (m, s, res), pts in rows.items():
+        arr = np.array(sorted(pts), dtype=np.float64)
+        out.append(Curve(m, s, res, arr[:, 0], arr[:, 1]))
+    return out
+
+
+def draw_badpix_curves(curves: Sequence[Curve], out_dir: str | Path) -> list[Path]:
+    """badpix_series.png (mean over scenes per method) in out_dir and <scene>/badpix_series.png per scene."""
+    out = Path(out_dir)
+    written = []
+    by_scene: dict[str, dict[str, tuple[np.ndarray, np.ndarray]]] = {}
+    res_of: dict[str, set[str]] = {}
+    for c in curves:
+        by_scene.setdefault(c.scene, {})[c.method] = (c.thresholds, c.values)
+        res_of.setdefault(c.scene, set()).add(c.resolution)
+    for scene, series in by_scene.items():
+        written.append(plot_badpix_series(series, out / safe_name(scene) / "badpix_series.png",
+                                          f"BadPix series, {scene} ({'/'.join(sorted(res_of[scene]))})"))
+    avg = average_curves(curves)
+    n = {m: k for m, (_, _, k) in avg.items()}
+    series = {f"{m} ({n[m]} scene{'s' if n[m] != 1 else ''})": (t, v) for m, (t, v, _) in avg.items()}
+    written.append(plot_badpix_series(series, out / "badpix_series.png", "BadPix series, mean over scenes"))
+    return written
+
+
+def curves_from_records(results: Any) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Mean BadPix at the thresholds a results file holds (badpix_<t>), per method: the coarse series
+    available without the maps. Only scenes where the method has every threshold are averaged."""
+    df = results.to_frame()
+    df = df[df["metric"].str.startswith("badpix_")].copy()
+    if df.empty:
+        return {}
+    df["t"] = df["metric"].str.slice(7).astype(float)
+    out = {}
+    for method, g in df.groupby("method", sort=False):
+        table = g.pivot_table(index="scene", columns="t", values="value", aggfunc="first").dropna()
+        if not table.empty:
+            out[f"{method} ({len(table)} scene{'s' if len(table) != 1 else ''})"] = (
+                table.columns.to_numpy(dtype=float), table.mean(axis=0).to_numpy(dtype=float))
+    return out
+
+
+# --------------------------------------------------------------------------- the evaluate hook
+
+def safe_name(label: str) -> str:
+    """A method label or scene name as a file name (as lfbench.runs.runner.save_prediction does)."""
+    return "".join(c if c.isalnum() or c in "._-=" else "_" for c in label) or "_"
+
+
+class SceneFigureWriter:
+    """Draws figures as predictions arrive; call it as the hook (method, scene, prediction) -> None.
+
+    Writes into ``out_dir``: ``<scene>/header.png`` (centre view, ground truth),
+    ``<scene>/<method>.png`` (one row per method), ``overview_<scene>.png`` (header and rows stacked),
+    and, when ``curves`` is set, ``badpix_series.csv``, ``badpix_series.png`` (mean over scenes) and
+    ``<scene>/badpix_series.png``. Only the row file names and the curves are kept in memory.
+    """
+
+    def __init__(self, out_dir: str | Path, rules: ScoringRules = ScoringRules(),
+                 threshold: float = BADPIX_THRESHOLD, curves: bool = True) -> None:
+        self.out = Path(out_dir)
+        self.rules = rules
+        self.threshold = threshold
+        self.curves_enabled = curves
+        self._rows: dict[str, dict[str, Path]] = {}  # scene -> method label -> row PNG (arrival order)
+        self._headers: dict[str, tuple[Path, tuple[float, float]]] = {}
+        self._curves: dict[tuple[str, str], Curve] = {}
+        self.written: set[Path] = set()
+
+    def __call__(self, method: Any, scene: LightField, prediction: Prediction) -> None:
+        self.add(method.label, scene, prediction)
+
+    @property
+    def curves(self) -> list[Curve]:
+        return list(self._curves.values())
+
+    def add(self, label: str, scene: LightField, prediction: Prediction | np.ndarray) -> list[Path]:
+        """Draw one prediction's row, re-assemble the scene's overview and update the curves."""
+        pred = prediction if isinstance(prediction, Prediction) else Prediction(disparity=np.asarray(prediction))
+        scene_dir = self.out / safe_name(scene.name)
+        gt = scene.gt_disparity()
+        written = []
+        center = None
+        if scene.name not in self._headers:
+            disp, _ = (align_prediction(np.asarray(pred.disparity), gt.shape) if gt is not None
+                       else (np.asarray(pred.disparity), None))
+            disp_range = disparity_range(scene, gt, disp)
+            header = draw_scene_header(scene, scene_dir / "header.png", gt, disp_range, self.threshold,
+                                       self.rules.border_px)
+            self._headers[scene.name] = (header, disp_range)
+            written.append(header)
+        header, disp_range = self._headers[scene.name]
+        if gt is not None:
+            center = scene.center_view()
+        panels = method_panels(label, scene, pred, gt=gt, background=center, disp_range=disp_range,
+                               threshold=self.threshold, border_px=self.rules.border_px)
+        rows = self._rows.setdefault(scene.name, {})
+        rows[label] = draw_method_row(panels, scene_dir / f"{safe_name(label)}.png", "low resolution")
+        del panels
+        written.append(rows[label])
+        written.append(stack_rows([header, *rows.values()], self.out / f"overview_{safe_name(scene.name)}.png"))
+        if self.curves_enabled:
+            curve = scene_curve(label, scene, pred.disparity, self.rules)
+            if curve is not None:
+                self._curves[(label, scene.name)] = curve
+                written.append(write_curves_csv(self.curves, self.out / "badpix_series.csv"))
+                scene_curves = [c for c in self.curves if c.scene == scene.name]
+                series = {c.method: (c.thresholds, c.values) for c in scene_curves}
+                written.append(plot_badpix_series(series, scene_dir / "badpix_series.png",
+                                                  f"BadPix series, {scene.name} ({curve.resolution})"))
+                avg = average_curves(self.curves)
+                written.append(plot_badpix_series(
+                    {f"{m} ({k} scene{'s' if k != 1 else ''})": (t, v) for m, (t, v, k) in avg.items()},
+                    self.out / "badpix_series.png", "BadPix series, mean over scenes"))
+        self.written.update(written)
+        return written
+
+
+def scene_figure_hook(out_dir: str | Path, rules: ScoringRules = ScoringRules(),
+                      threshold: float = BADPIX_THRESHOLD, curves: bool = True) -> SceneFigureWriter:
+    """The ``--figures`` hook of ``lfbench evaluate``: a callable (method, scene, prediction) -> None
+    that writes the per-scene overviews and BadPix-series curves into ``out_dir``."""
+    return SceneFigureWriter(out_dir, rules=rules, threshold=threshold, curves=curves)
+
+
+def figures_from_maps(scenes: Sequence[LightField], maps: Mapping[str, str | Path], out_dir: str | Path,
+                      rules: ScoringRules = ScoringRules(), progress: bool = False) -> SceneFigureWriter:
+    """Figures from saved maps: ``maps`` maps a method label to a submission folder
+    (disp_maps/<scene>.pfm, as written by ``evaluate --save-maps`` or a published submission).
+    Scenes without a map for a method are left out for that method. Returns the writer (its
+    ``written`` files and ``curves``)."""
+    from lfbench.data.submission import disp_map_path, read_submission_map
+
+    writer = SceneFigureWriter(out_dir, rules=rules)
+    for scene in scenes:
+        for label, folder in maps.items():
+            if not disp_map_path(folder, scene.name).is_file():
+                continue
+            disp, runtime = read_submission_map(folder, scene.name)
+            writer.add(label, scene, Prediction(disparity=disp, runtime_s=runtime))
+            if progress:
+                print(f"drew {label} on {scene.name}")
+    return writer

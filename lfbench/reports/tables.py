@@ -1,0 +1,92 @@
+"""Tables like the paper's: Table I (per scene x metric x method) and Table II (averages).
+
+Each table is a pandas DataFrame; :func:`render` writes it as markdown (tabulate), LaTeX or CSV.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from lfbench.runs.results import Results
+from lfbench.scoring.metrics import GENERAL_METRICS
+from lfbench.utils.atomic import write_text
+
+PAPER_METRIC_ORDER = ("badpix_0.07", "badpix_0.03", "badpix_0.01", "mse_x100", "q25_x100")
+_HEADERS = {m.id: m.name for m in GENERAL_METRICS}
+
+
+def _metric_order(metrics: Sequence[str]) -> list[str]:
+    first = [m for m in PAPER_METRIC_ORDER if m in metrics]
+    return first + [m for m in metrics if m not in first]
+
+
+def per_scene_table(results: Results, metrics: Sequence[str] | None = None) -> pd.DataFrame:
+    """Table I: rows (scene, metric), one column per method. Cells scored at high resolution are
+    marked in the 'resolution' column (lowres / highres, or mixed)."""
+    df = results.to_frame()
+    if df.empty:
+        return pd.DataFrame()
+    order = _metric_order(metrics or list(dict.fromkeys(df["metric"])))
+    df = df[df["metric"].isin(order)]
+    table = df.pivot_table(index=["scene", "metric"], columns="method", values="value", aggfunc="first", sort=False)
+    res = df.groupby(["scene", "metric"], sort=False)["resolution"].agg(lambda s: "/".join(sorted(set(s))))
+    table = table.reindex(columns=list(dict.fromkeys(df["method"])))
+    table.insert(0, "resolution", res)
+    scenes = list(dict.fromkeys(df["scene"]))
+    idx = [(s, m) for s in scenes for m in order if (s, m) in table.index]
+    return table.loc[idx]
+
+
+def average_table(results: Results, metrics: Sequence[str] | None = None) -> pd.DataFrame:
+    """Table II: mean over scenes per method (rows) and metric (columns), with runtime (s) and the
+    number of scenes averaged. A method missing a scene is averaged over the scenes it has."""
+    df = results.to_frame()
+    if df.empty:
+        return pd.DataFrame()
+    order = _metric_order(metrics or list(dict.fromkeys(df["metric"])))
+    table = df[df["metric"].isin(order)].pivot_table(index="method", columns="metric", values="value", aggfunc="mean",
+                                                      sort=False)
+    table = table.reindex(index=list(dict.fromkeys(df["method"])), columns=order)
+    table["scenes"] = df.groupby("method", sort=False)["scene"].nunique()
+    if results.runs:
+        rt = pd.DataFrame([(r.method, r.runtime_s) for r in results.runs], columns=["method", "runtime_s"])
+        table["runtime_s"] = rt.groupby("method")["runtime_s"].mean()
+    return table
+
+
+def render(table: pd.DataFrame, fmt: str = "markdown", floatfmt: str = ".3f") -> str:
+    """A table as 'markdown' (GitHub pipes), 'latex' (booktabs), 'csv' or 'plain' text."""
+    if table.empty:
+        return "(no results)\n"
+    flat = table.reset_index()
+    headers = [_HEADERS.get(str(c), str(c)) for c in flat.columns]
+    if fmt == "csv":
+        return flat.to_csv(index=False, float_format="%.6g")
+    from tabulate import tabulate
+
+    fmt_name = {"markdown": "github", "latex": "latex_booktabs", "plain": "simple"}.get(fmt)
+    if fmt_name is None:
+        raise ValueError(f"unknown table format {fmt!r}: markdown, latex, csv or plain")
+    def cell(v):
+        if isinstance(v, (float, np.floating)):
+            return "-" if np.isnan(v) else format(float(v), floatfmt)
+        return v
+
+    rows = [[cell(v) for v in row] for row in flat.itertuples(index=False)]
+    return tabulate(rows, headers=headers, tablefmt=fmt_name, disable_numparse=True) + "\n"
+
+
+def write_tables(results: Results, out_dir: str | Path, stem: str = "table") -> list[Path]:
+    """Write per-scene and average tables as .md, .tex and .csv into out_dir; returns the paths."""
+    out = Path(out_dir)
+    written = []
+    for name, table in (("per_scene", per_scene_table(results)), ("average", average_table(results))):
+        for fmt, ext in (("markdown", "md"), ("latex", "tex"), ("csv", "csv")):
+            path = out / f"{stem}_{name}.{ext}"
+            write_text(path, render(table, fmt))
+            written.append(path)
+    return written

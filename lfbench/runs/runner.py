@@ -1,0 +1,71 @@
+"""Run methods on scenes and score them: the engine behind ``lfbench evaluate`` and ``demo``."""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from lfbench.data.scene import Scene
+from lfbench.method.base import Method, Prediction
+from lfbench.runs.results import Record, Results, RunInfo
+from lfbench.scoring.metrics import GENERAL_METRICS, Metric
+from lfbench.scoring.rules import ScoringRules, score_scene
+
+PredictionHook = Callable[[Method, Scene, Prediction], None]
+_NONFINITE_RULE = {False: "counted as bad pixels",
+                   True: "toolkit rule: BadPix counts NaN as good, MSE and Q25 leave them out"}
+
+
+def evaluate(methods: Sequence[Method], scenes: Sequence[Scene], *,
+             metrics: Sequence[Metric] | Callable[[Scene], Sequence[Metric]] = GENERAL_METRICS,
+             rules: ScoringRules = ScoringRules(), on_prediction: PredictionHook | None = None,
+             progress: bool = True) -> Results:
+    """Run every method on every scene with ground truth and score it.
+
+    ``metrics``: the metrics for every scene, or a function of the scene giving them (e.g.
+    ``lfbench.scoring.region_metrics.applicable_metrics``).
+
+    A (method, scene) pair the method cannot serve (e.g. no stored map) is skipped with a note on
+    stderr. ``on_prediction`` sees each prediction (to save maps or draw figures).
+    """
+    results = Results(meta={"scoring": {"border_px": rules.border_px, "toolkit_nonfinite": rules.toolkit,
+                                        "highres_scenes": sorted(rules.highres_scenes)}})
+    pairs = [(m, s) for m in methods for s in scenes]
+    bar = tqdm(pairs, desc="evaluate", unit="run", disable=None if progress else True, file=sys.stderr, leave=False)
+    for method, scene in bar:
+        bar.set_postfix_str(f"{method.label} / {scene.name}"[-60:])
+        reason = method.available_for(scene)
+        if reason is not None:
+            tqdm.write(f"lfbench: skipping {method.label} on {scene.name}: {reason}", file=sys.stderr)
+            continue
+        pred = method.run(scene)
+        if on_prediction is not None:
+            on_prediction(method, scene, pred)
+        scene_metrics = metrics(scene) if callable(metrics) else metrics
+        score = score_scene(scene, pred.disparity, scene_metrics, rules, source=f"{method.label} on {scene.name}")
+        for metric_id, value in score.values.items():
+            results.records.append(Record(method.label, scene.name, metric_id, value, score.resolution[metric_id]))
+        results.runs.append(RunInfo(method.label, scene.name, float(pred.runtime_s or np.nan), score.nonfinite_pixels,
+                                    list(score.aligned_from) if score.aligned_from else None, score.notes))
+        for note in score.notes:
+            tqdm.write(f"lfbench: {method.label} on {scene.name}: {note}", file=sys.stderr)
+        if score.nonfinite_pixels:
+            tqdm.write(f"lfbench: {method.label} on {scene.name}: {score.nonfinite_pixels} non-finite pixels "
+                       f"inside the evaluation mask ({_NONFINITE_RULE[rules.toolkit]})", file=sys.stderr)
+    return results
+
+
+def save_prediction(out_dir: Path) -> PredictionHook:
+    """A hook writing each prediction in the submission layout under out_dir/<method label>/."""
+    from lfbench.data.submission import write_submission_map
+
+    def hook(method: Method, scene: Scene, pred: Prediction) -> None:
+        safe = "".join(c if c.isalnum() or c in "._-=" else "_" for c in method.label)
+        runtime = pred.runtime_s if pred.runtime_s and np.isfinite(pred.runtime_s) and pred.runtime_s > 0 else 1e-9
+        write_submission_map(out_dir / safe, scene.name, pred.disparity, runtime)
+
+    return hook

@@ -1,0 +1,487 @@
+"""Region and stratified metrics of the HCI 4D Light Field Benchmark, as pure functions of arrays.
+
+Disparity maps ``gt`` and ``pred`` are in px per view step, (H, W) float arrays of one shape;
+``mask`` is a bool (H, W) of the pixels to score (None = all). Definitions follow the official
+evaluation toolkit (docs: hci-evaluation-reference.md, "Region metrics", "Stratified metrics"):
+
+- bumpiness: 100 x mean over the mask of min(||Scharr Hessian of (pred - gt)||_F, 0.05);
+- MAE: median angle (degrees) between the surface normals of the depth maps of gt and pred;
+- fine fattening / thinning: % of pixels with gt - pred < -0.15 / > 0.15 px;
+- backgammon fattening / thinning: % of pixels nearer to the foreground / background than half
+  way between the ground truth and the foreground / background disparity of the same row;
+- missed dots: % of dots (one size label inside one box) with BadPix(0.4) >= 50 %;
+- discontinuities, stripes and dots background: BadPix(0.07) and MSE x100 on their masks.
+
+Non-finite predictions, default (``toolkit=False``): a bad pixel for every percentage metric, the
+clip value 0.05 for bumpiness and a 180 degree normal error for MAE; pixels whose ground truth
+(or reference) is non-finite are not scored. ``toolkit=True`` reproduces the toolkit: percentage
+metrics count NaN as good, bumpiness and MAE leave non-finite values out, a (box, size) pair
+without pixels counts as a missed dot.
+
+Each metric is also a :class:`lfbench.scoring.metrics.Metric` (ids in :data:`REGION_METRICS` and
+:data:`STRATIFIED_METRICS`) and :func:`applicable_metrics` lists what applies to a scene: the
+general metrics plus those whose mask files exist, so that
+``score_scene(scene, pred, applicable_metrics(scene))`` scores everything the scene supports.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from scipy import ndimage
+
+from lfbench.data.params import SceneParameters
+from lfbench.data.scene import Scene, read_png
+from lfbench.scoring.metrics import GENERAL_METRICS, Metric, _prepare, bad_pix, mse_x100
+from lfbench.scoring.rules import ScoringRules, metric_resolution
+from lfbench.utils.errors import DataError
+
+__all__ = [
+    "scharr_derivative",
+    "bumpiness_map",
+    "bumpiness_x100",
+    "depth_normals",
+    "angular_error_deg",
+    "median_angular_error",
+    "fine_fattening",
+    "fine_thinning",
+    "backgammon_fattening",
+    "backgammon_thinning",
+    "missed_dots",
+    "read_label_mask",
+    "REGION_METRICS",
+    "STRATIFIED_METRICS",
+    "applicable_metrics",
+    "scene_metric_by_id",
+]
+
+BUMPINESS_CLIP = 0.05  # px per px^2 (Scharr response units), the toolkit's clip
+FINE_THRESHOLD = 0.15  # px
+DOT_THRESHOLD = 0.4  # px, BadPix threshold on a dot
+DOT_MISSED_PERCENT = 50.0  # a dot with BadPix >= this is missed
+DOT_MAX_LABEL = 8  # only size labels 1..8 (the biggest dots of each box) are scored
+BACKGAMMON_FG_COLUMN = 14  # low-res column whose gt is the foreground disparity of each row (scaled)
+BACKGAMMON_BG_FROM_RIGHT = 11  # column width - 11 holds the background disparity (not scaled, as the toolkit)
+
+_SMOOTH = np.array([3.0, 10.0, 3.0]) / 16.0
+_DIFF = np.array([-1.0, 0.0, 1.0])  # correlation: f[i + 1] - f[i - 1]
+
+
+# --------------------------------------------------------------------------- shared helpers
+
+def _percentage(total: int, part: int) -> float:
+    return float("nan") if total == 0 else 100.0 * part / float(total)
+
+
+def _percent_bad(bad: np.ndarray, reference: np.ndarray, pred: np.ndarray, mask: np.ndarray, toolkit: bool) -> float:
+    """% of scored pixels that are bad. ``bad`` was computed with NaN comparisons False;
+    ``reference`` (gt or a value derived from it) must be finite for a pixel to be scored."""
+    if toolkit:  # the toolkit: every mask pixel is scored, NaN comparisons are good
+        return _percentage(int(np.count_nonzero(mask)), int(np.count_nonzero(bad & mask)))
+    scored = mask & np.isfinite(reference)
+    bad = bad | ~np.isfinite(pred)
+    return _percentage(int(np.count_nonzero(scored)), int(np.count_nonzero(bad & scored)))
+
+
+def scharr_derivative(image: np.ndarray, axis: int, mode: str = "reflect", zero_border: bool = True) -> np.ndarray:
+    """Scharr derivative of a (H, W) array along ``axis`` (0 = rows, 1 = columns), float64.
+
+    Kernel: difference [-1, 0, 1] (f[i+1] - f[i-1], i.e. twice the central difference) along
+    ``axis`` times the smoothing [3, 10, 3] / 16 across it: scikit-image's ``scharr_h`` (axis 0)
+    and ``scharr_v`` (axis 1). ``zero_border`` sets the outermost 1 px ring to 0, as the
+    scikit-image of the toolkit's era did (only pixels within 2 px of the edge are affected).
+    """
+    out = ndimage.correlate1d(np.asarray(image, dtype=np.float64), _DIFF, axis=axis, mode=mode)
+    out = ndimage.correlate1d(out, _SMOOTH, axis=1 - axis, mode=mode)
+    if zero_border:
+        out[0, :] = out[-1, :] = 0.0
+        out[:, 0] = out[:, -1] = 0.0
+    return out
+
+
+def _hessian_norm(diff: np.ndarray) -> np.ndarray:
+    """Frobenius norm of the Scharr Hessian (d/dx d/dx, d/dy d/dx, d/dy d/dy, d/dx d/dy) of a (H, W) map.
+
+    On a smooth map it is 4 x the Frobenius norm of the true Hessian (each Scharr pass doubles)."""
+    dx = scharr_derivative(diff, axis=1)
+    dy = scharr_derivative(diff, axis=0)
+    parts = (scharr_derivative(dx, axis=1), scharr_derivative(dx, axis=0),
+             scharr_derivative(dy, axis=0), scharr_derivative(dy, axis=1))
+    return np.sqrt(sum(np.square(p) for p in parts))
+
+
+# --------------------------------------------------------------------------- bumpiness
+
+def bumpiness_map(gt: np.ndarray, pred: np.ndarray, clip: float = BUMPINESS_CLIP) -> np.ndarray:
+    """Per-pixel bumpiness (H, W) float64: min(||Scharr Hessian of (pred - gt)||_F, clip).
+
+    The difference is taken in the inputs' precision (float32 for PFM data), then filtered in
+    float64 with reflecting borders; NaN where a non-finite value lies within 2 px."""
+    gt, pred, _ = _prepare(gt, pred, None)
+    with np.errstate(invalid="ignore"):
+        diff = (pred - gt).astype(np.float64)
+        return np.clip(_hessian_norm(diff), 0.0, clip)
+
+
+def bumpiness_x100(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = None, *, clip: float = BUMPINESS_CLIP,
+                   toolkit: bool = False) -> float:
+    """Bumpiness: 100 x the mean clipped Scharr-Hessian norm of (pred - gt) over the mask.
+
+    Units: 100 x px / px^2 (Scharr response); 0 for any prediction that differs from gt by a
+    constant or a plane; 100 * clip (5) for a very rough one."""
+    gt, pred, mask = _prepare(gt, pred, mask)
+    bump = bumpiness_map(gt, pred, clip)
+    if toolkit:
+        scored = mask & np.isfinite(bump)
+    else:  # non-finite from the prediction: the clip value; from the ground truth: not scored
+        with np.errstate(invalid="ignore"):
+            gt_ok = np.isfinite(_hessian_norm(np.where(np.isfinite(gt), 0.0, np.nan)))
+        scored = mask & gt_ok
+        bump = np.where(np.isfinite(bump), bump, clip)
+    n = int(np.count_nonzero(scored))
+    return float("nan") if n == 0 else 100.0 * float(np.sum(bump[scored])) / float(n)
+
+
+# --------------------------------------------------------------------------- surface normals
+
+def depth_normals(depth: np.ndarray, focal_length_mm: float, sensor_size_mm: float) -> np.ndarray:
+    """Unit surface normals (H, W, 3) float64 of a depth map (H, W) (any length unit).
+
+    Camera coordinates as the toolkit builds them: X = 0.5 * col / (W - 1) * s / f * Z,
+    Y = 0.5 * row / (H - 1) * s / f * Z (s sensor size, f focal length, both mm; note the
+    toolkit's factor 0.5 and origin at the top-left pixel, kept so that angles match its
+    numbers), Z = depth. Tangents: derivatives along rows and columns with the Scharr kernel
+    ([3, 10, 3] smoothing, periodic borders); normal = row tangent x column tangent, normalised,
+    pointing towards the camera (negative Z). The toolkit's normal maps differ from these by a
+    fixed relabelling of the axes (an orthogonal map), which leaves every angle unchanged.
+    """
+    z = np.asarray(depth, dtype=np.float64)
+    if z.ndim != 2 or min(z.shape) < 3:
+        raise ValueError(f"depth must be a (H, W) map of at least 3x3, got {z.shape}")
+    h, w = z.shape
+    k = 0.5 * sensor_size_mm / focal_length_mm
+    x = k * (np.arange(w) / (w - 1.0))[None, :] * z
+    y = k * (np.arange(h) / (h - 1.0))[:, None] * z
+    points = (x, y, z)
+    d_row = np.stack([scharr_derivative(c, axis=0, mode="wrap", zero_border=False) for c in points], axis=-1)
+    d_col = np.stack([scharr_derivative(c, axis=1, mode="wrap", zero_border=False) for c in points], axis=-1)
+    normal = np.cross(d_row, d_col)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return normal / np.linalg.norm(normal, axis=-1, keepdims=True)
+
+
+def angular_error_deg(normals_a: np.ndarray, normals_b: np.ndarray) -> np.ndarray:
+    """Angle in degrees (H, W) between two unit-normal maps (H, W, 3); NaN where either is NaN."""
+    with np.errstate(invalid="ignore"):
+        cos = np.clip(np.sum(normals_a * normals_b, axis=-1), -1.0, 1.0)
+    return np.degrees(np.arccos(cos))
+
+
+def median_angular_error(gt: np.ndarray, pred: np.ndarray, params: SceneParameters, mask: np.ndarray | None = None,
+                         *, toolkit: bool = False) -> float:
+    """MAE: median angle (degrees) between the surface normals of gt and pred over the mask.
+
+    Disparities are converted to depth with the scene's parameters.cfg (``params``), normals
+    from :func:`depth_normals`; computed in float64."""
+    gt, pred, mask = _prepare(gt, pred, mask)
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        n_gt = depth_normals(params.disparity_to_depth(gt), params.focal_length_mm, params.sensor_size_mm)
+        n_pred = depth_normals(params.disparity_to_depth(pred), params.focal_length_mm, params.sensor_size_mm)
+    angle = angular_error_deg(n_gt, n_pred)
+    if toolkit:
+        scored = mask & np.isfinite(pred) & np.isfinite(angle)
+    else:  # a normal the prediction cannot give is the worst angle; gt without a normal is not scored
+        scored = mask & np.isfinite(n_gt).all(axis=-1)
+        angle = np.where(np.isfinite(angle), angle, 180.0)
+    values = angle[scored]
+    return float("nan") if values.size == 0 else float(np.median(values))
+
+
+# --------------------------------------------------------------------------- fattening / thinning
+
+def fine_fattening(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = None,
+                   threshold: float = FINE_THRESHOLD, *, toolkit: bool = False) -> float:
+    """Fine fattening: % of scored pixels with gt - pred < -threshold (px), i.e. the prediction
+    is nearer than the ground truth (scored on mask_fine_surrounding)."""
+    gt, pred, mask = _prepare(gt, pred, mask)
+    with np.errstate(invalid="ignore"):
+        bad = (gt - pred) < -threshold
+    return _percent_bad(bad, gt, pred, mask, toolkit)
+
+
+def fine_thinning(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = None,
+                  threshold: float = FINE_THRESHOLD, *, toolkit: bool = False) -> float:
+    """Fine thinning: % of scored pixels with gt - pred > threshold (px), i.e. the prediction is
+    farther than the ground truth (scored on mask_fine)."""
+    gt, pred, mask = _prepare(gt, pred, mask)
+    with np.errstate(invalid="ignore"):
+        bad = (gt - pred) > threshold
+    return _percent_bad(bad, gt, pred, mask, toolkit)
+
+
+def backgammon_fattening(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = None, *, fg_column: int,
+                         toolkit: bool = False) -> float:
+    """Backgammon fattening: % of scored pixels with pred > (gt + fg) / 2, where fg (per row) is
+    the gt at column ``fg_column`` (the foreground extrapolated along each row): the prediction
+    is nearer to the foreground than to the true (background) disparity."""
+    gt, pred, mask = _prepare(gt, pred, mask)
+    half = 0.5 * (gt[:, fg_column:fg_column + 1] + gt)
+    with np.errstate(invalid="ignore"):
+        bad = pred > half
+    return _percent_bad(bad, half, pred, mask, toolkit)
+
+
+def backgammon_thinning(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = None, *, bg_column: int,
+                        toolkit: bool = False) -> float:
+    """Backgammon thinning: % of scored pixels with pred < (gt + bg) / 2, where bg (per row) is
+    the gt at column ``bg_column`` (the background extrapolated along each row): the prediction
+    is nearer to the background than to the true (foreground) disparity."""
+    gt, pred, mask = _prepare(gt, pred, mask)
+    half = 0.5 * (gt[:, bg_column:bg_column + 1] + gt)
+    with np.errstate(invalid="ignore"):
+        bad = pred < half
+    return _percent_bad(bad, half, pred, mask, toolkit)
+
+
+# --------------------------------------------------------------------------- dots
+
+def missed_dots(gt: np.ndarray, pred: np.ndarray, boxes: np.ndarray, dots_by_size: np.ndarray, *,
+                threshold: float = DOT_THRESHOLD, missed_percent: float = DOT_MISSED_PERCENT,
+                max_label: int = DOT_MAX_LABEL, toolkit: bool = False) -> float:
+    """Missed dots: % of dots whose BadPix(threshold) is >= ``missed_percent``.
+
+    ``boxes`` (H, W) int labels the cells of the dots scene (0 = none); ``dots_by_size`` (H, W)
+    int labels each dot by its size rank (0 = background). A dot is the set of pixels with one
+    label 1..max_label inside one box. As in the toolkit the border mask does not apply; every
+    pixel of a dot counts. Default: pixels with non-finite gt are left out, non-finite
+    predictions are bad, (box, label) pairs without pixels are not dots. ``toolkit=True``: NaN is
+    good and an empty pair counts as a missed dot (the toolkit's NaN < 50 is False).
+    """
+    gt, pred, _ = _prepare(gt, pred, None)
+    boxes = np.asarray(boxes)
+    dots_by_size = np.asarray(dots_by_size)
+    if boxes.shape != gt.shape or dots_by_size.shape != gt.shape:
+        raise ValueError(f"boxes {boxes.shape} and dots {dots_by_size.shape} must match gt {gt.shape}")
+    if boxes.size and (boxes.min() < 0 or dots_by_size.min() < 0):
+        raise ValueError("box and dot labels must be non-negative integers")
+    box_lut = _label_lut(boxes, 1, None)  # label value -> index of the box, -1 for none
+    dot_lut = _label_lut(dots_by_size, 1, max_label)
+    n_boxes, n_labels = int(box_lut.max()) + 1, int(dot_lut.max()) + 1
+    n_pairs = n_boxes * n_labels
+    if n_pairs == 0:
+        return float("nan")
+    box_idx = box_lut[boxes]
+    dot_idx = dot_lut[dots_by_size]
+    in_dot = (box_idx >= 0) & (dot_idx >= 0)
+    key = box_idx * n_labels + dot_idx
+    with np.errstate(invalid="ignore"):
+        bad = np.abs(gt - pred) > threshold
+    if toolkit:
+        scored = in_dot
+    else:
+        scored = in_dot & np.isfinite(gt)
+        bad = bad | ~np.isfinite(pred)
+    n = np.bincount(key[scored], minlength=n_pairs)
+    n_bad = np.bincount(key[scored & bad], minlength=n_pairs)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        dot_bad_pix = 100.0 * n_bad / n
+    missed = (n > 0) & (dot_bad_pix >= missed_percent)
+    if toolkit:
+        return _percentage(n_pairs, int(np.count_nonzero(missed | (n == 0))))
+    return _percentage(int(np.count_nonzero(n > 0)), int(np.count_nonzero(missed)))
+
+
+def _label_lut(labels: np.ndarray, lowest: int, highest: int | None) -> np.ndarray:
+    """A lookup table: label value -> rank among the values present in [lowest, highest], else -1."""
+    present = np.bincount(labels.ravel().astype(np.intp, copy=False)) > 0 if labels.size else np.zeros(1, bool)
+    present[:lowest] = False
+    if highest is not None:
+        present[highest + 1:] = False
+    return np.where(present, np.cumsum(present) - 1, -1)
+
+
+def read_label_mask(path: str | Path) -> np.ndarray:
+    """A label PNG (e.g. mask_boxes, mask_dots_by_size) as int32 (H, W): the gray value of each
+    pixel. An RGB(A) image is accepted when its colour channels are equal."""
+    path = Path(path)
+    arr = read_png(path, "label mask")
+    if arr.ndim == 3:
+        rgb = arr[..., :3]
+        if not (rgb == rgb[..., :1]).all():
+            raise DataError("label mask must be gray (its colour channels differ)", path)
+        arr = rgb[..., 0]
+    return arr.astype(np.int32)
+
+
+# --------------------------------------------------------------------------- metric descriptors
+# Metrics with needs_scene get scene= and resolution= from score_scene (lfbench.scoring.rules).
+
+def _scale(scene: Scene, gt: np.ndarray) -> int:
+    return max(1, gt.shape[1] // scene.spatial_size[1])
+
+
+def _bad_pix_fn(t: float):
+    def fn(gt, pred, mask=None, *, toolkit=False):
+        return bad_pix(gt, pred, t, mask, toolkit=toolkit)
+    return fn
+
+
+def _bump_fn(gt, pred, mask=None, *, toolkit=False):
+    return bumpiness_x100(gt, pred, mask, toolkit=toolkit)
+
+
+def _mae_fn(gt, pred, mask=None, *, toolkit=False, scene: Scene, resolution: str):
+    return median_angular_error(gt, pred, scene.params, mask, toolkit=toolkit)
+
+
+def _fine_fat_fn(gt, pred, mask=None, *, toolkit=False):
+    return fine_fattening(gt, pred, mask, toolkit=toolkit)
+
+
+def _fine_thin_fn(gt, pred, mask=None, *, toolkit=False):
+    return fine_thinning(gt, pred, mask, toolkit=toolkit)
+
+
+def _bg_fat_fn(gt, pred, mask=None, *, toolkit=False, scene: Scene, resolution: str):
+    return backgammon_fattening(gt, pred, mask, fg_column=int(BACKGAMMON_FG_COLUMN * _scale(scene, gt)),
+                                toolkit=toolkit)
+
+
+def _bg_thin_fn(gt, pred, mask=None, *, toolkit=False, scene: Scene, resolution: str):
+    return backgammon_thinning(gt, pred, mask, bg_column=gt.shape[1] - BACKGAMMON_BG_FROM_RIGHT, toolkit=toolkit)
+
+
+def _missed_dots_fn(gt, pred, mask=None, *, toolkit=False, scene: Scene, resolution: str):
+    boxes = read_label_mask(scene.path / f"mask_boxes_{resolution}.png")
+    dots = read_label_mask(scene.path / f"mask_dots_by_size_{resolution}.png")
+    for name, arr in (("mask_boxes", boxes), ("mask_dots_by_size", dots)):
+        if arr.shape != gt.shape:
+            raise DataError(f"mask is {arr.shape[1]}x{arr.shape[0]}, ground truth is {gt.shape[1]}x{gt.shape[0]}",
+                            scene.path / f"{name}_{resolution}.png")
+    return missed_dots(gt, pred, boxes, dots, toolkit=toolkit)
+
+
+_SLANTED_MASKS = ("mask_sphere_in", "mask_sphere_out", "mask_pyramids")
+
+
+def _scene_mask(scene: Scene, name: str, resolution: str, shape: tuple[int, ...]) -> np.ndarray:
+    mask = scene.mask(name, resolution)
+    if mask.shape != shape:
+        raise DataError(f"mask is {mask.shape[1]}x{mask.shape[0]}, ground truth is {shape[1]}x{shape[0]}",
+                        scene.path / f"{name}_{resolution}.png")
+    return mask
+
+
+def _slanted_fn(gt, pred, mask=None, *, toolkit=False, scene: Scene, resolution: str):
+    union = np.zeros(gt.shape, dtype=bool)
+    for name in _SLANTED_MASKS:
+        union |= _scene_mask(scene, name, resolution, gt.shape)
+    return bumpiness_x100(gt, pred, union if mask is None else mask & union, toolkit=toolkit)
+
+
+def _region(id, name, description, unit, fn, toolkit_id, mask_name, resolution, vmin, vmax, cmap, *,
+            category="region", extra_masks=(), needs_scene=False) -> Metric:
+    return Metric(id=id, name=name, description=description, unit=unit, fn=fn, toolkit_id=toolkit_id,
+                  mask_name=mask_name, resolution=resolution, vmin=vmin, vmax=vmax, cmap=cmap, category=category,
+                  extra_masks=tuple(extra_masks), needs_scene=needs_scene)
+
+
+_BUMP_UNIT = "px/px^2 x 100"
+_BUMP_DESC = ("100 x the mean of min(||Scharr Hessian of (pred - gt)||_F, 0.05) over {}: 0 = as smooth as the ground "
+              "truth (a constant or planar offset is not penalised).")
+
+REGION_METRICS: tuple[Metric, ...] = (
+    _region("discontinuities", "Discontinuities",
+            "BadPix(0.07): % of pixels at depth discontinuities (mask_discontinuities) with |gt - pred| > 0.07 px.",
+            "%", _bad_pix_fn(0.07), "discontinuities_0070", "mask_discontinuities", "highres", 0, 1, "RdYlGn_r"),
+    _region("bumpiness_planes", "Bumpiness Planes", _BUMP_DESC.format("planar regions (mask_planes)"), _BUMP_UNIT,
+            _bump_fn, "bumpiness_planes_100_0050", "mask_planes", "lowres", 0, 5, "viridis"),
+    _region("bumpiness_contin_surfaces", "Bumpiness Contin. Surfaces",
+            _BUMP_DESC.format("smooth non-planar regions (mask_smooth_surfaces)"), _BUMP_UNIT,
+            _bump_fn, "bumpiness_contin_surfaces_100_0050", "mask_smooth_surfaces", "lowres", 0, 5, "viridis"),
+    _region("mae_planes", "MAE Planes",
+            "Median angle (degrees) between surface normals of gt and pred depth on planar regions (mask_planes).",
+            "deg", _mae_fn, "mae_planes", "mask_planes", "lowres", 0, 80, "RdYlGn_r", needs_scene=True),
+    _region("mae_contin_surfaces", "MAE Contin. Surfaces",
+            "Median angle (degrees) between surface normals of gt and pred depth on smooth non-planar regions "
+            "(mask_smooth_surfaces).",
+            "deg", _mae_fn, "mae_contin_surfaces", "mask_smooth_surfaces", "lowres", 0, 80, "RdYlGn_r",
+            needs_scene=True),
+    _region("fine_fattening", "Fine Fattening",
+            "% of pixels around fine structures (mask_fine_surrounding) with gt - pred < -0.15 px.",
+            "%", _fine_fat_fn, "fine_fattening_0150", "mask_fine_surrounding", "highres", 0, 1, "RdYlGn_r"),
+    _region("fine_thinning", "Fine Thinning",
+            "% of pixels on fine structures (mask_fine) with gt - pred > 0.15 px.",
+            "%", _fine_thin_fn, "fine_thinning_0150", "mask_fine", "highres", 0, 1, "RdYlGn_r"),
+)
+
+
+def _strat(*args, **kwargs) -> Metric:
+    return _region(*args, category="stratified", **kwargs)
+
+
+# The benchmark's rule data: which stratified metrics belong to which stratified scene.
+STRATIFIED_METRICS: dict[str, tuple[Metric, ...]] = {
+    "backgammon": (
+        _strat("backgammon_fattening", "Backgammon: Fattening",
+               "% of background pixels between the foreground bars (mask_foreground_fattening) whose prediction is "
+               "nearer to the foreground than half way from the ground truth.",
+               "%", _bg_fat_fn, "backgammon_fattening_0070", "mask_foreground_fattening", "highres", 0, 1, "RdYlGn_r",
+               needs_scene=True),
+        _strat("backgammon_thinning", "Backgammon: Thinning",
+               "% of pixels on the foreground bars (mask_foreground_thinning) whose prediction is nearer to the "
+               "background than half way from the ground truth.",
+               "%", _bg_thin_fn, "backgammon_thinning_0070", "mask_foreground_thinning", "highres", 0, 1, "RdYlGn_r",
+               needs_scene=True),
+    ),
+    "dots": (
+        _strat("dots_background_mse", "Dots: Background MSE",
+               "Mean squared disparity error (px^2) x 100 on the noisy background (mask_background).",
+               "px^2 x 100", mse_x100, "background_mse_100", "mask_background", "highres", -0.2, 0.2, "seismic"),
+        _strat("missed_dots", "Dots: Missed Dots",
+               "% of dots (size labels 1-8 of mask_dots_by_size in each cell of mask_boxes) with BadPix(0.4) >= 50%.",
+               "% of dots", _missed_dots_fn, "missed_dots_50_0400", None, "highres", 0, 1, "RdYlGn_r",
+               extra_masks=("mask_boxes", "mask_dots_by_size"), needs_scene=True),
+    ),
+    "pyramids": (
+        _strat("pyramids_bumpiness_slanted", "Pyramids: Bump. Slanted",
+               _BUMP_DESC.format("the slanted surfaces (mask_sphere_in | mask_sphere_out | mask_pyramids)"),
+               _BUMP_UNIT, _slanted_fn, "bumpiness_slanted_100_0050", None, "lowres", 0, 5, "viridis",
+               extra_masks=_SLANTED_MASKS, needs_scene=True),
+        _strat("pyramids_bumpiness_parallel", "Pyramids: Bump. Parallel",
+               _BUMP_DESC.format("the fronto-parallel plane (mask_plane)"),
+               _BUMP_UNIT, _bump_fn, "bumpiness_parallel_100_0050", "mask_plane", "lowres", 0, 5, "viridis"),
+    ),
+    "stripes": (
+        _strat("stripes_low_texture", "Stripes: Low Texture",
+               "BadPix(0.07) on the low-texture region (mask_low_texture).",
+               "%", _bad_pix_fn(0.07), "low_texture_0070", "mask_low_texture", "highres", 0, 1, "RdYlGn_r"),
+        _strat("stripes_dark", "Stripes: Dark Stripes",
+               "BadPix(0.07) on the high-contrast (dark) stripes (mask_high_contrast).",
+               "%", _bad_pix_fn(0.07), "dark_stripes_0070", "mask_high_contrast", "highres", 0, 1, "RdYlGn_r"),
+        _strat("stripes_bright", "Stripes: Bright Stripes",
+               "BadPix(0.07) on the low-contrast (bright) stripes (mask_low_contrast).",
+               "%", _bad_pix_fn(0.07), "bright_stripes_0070", "mask_low_contrast", "highres", 0, 1, "RdYlGn_r"),
+    ),
+}
+
+
+def scene_metrics(scene: Scene) -> tuple[Metric, ...]:
+    """The region or stratified metrics defined for a scene, whether or not its masks exist:
+    a stratified scene's own metrics, the region metrics for every other (photorealistic) scene."""
+    return STRATIFIED_METRICS.get(scene.name, REGION_METRICS)
+
+
+def applicable_metrics(scene: Scene, rules: ScoringRules = ScoringRules()) -> list[Metric]:
+    """The general metrics plus the region / stratified metrics whose mask files exist for ``scene``
+    (at a resolution :func:`lfbench.scoring.rules.metric_resolution` can score them at)."""
+    return list(GENERAL_METRICS) + [m for m in scene_metrics(scene) if metric_resolution(scene, m, rules) is not None]
+
+
+def scene_metric_by_id(metric_id: str) -> Metric:
+    """A region or stratified metric by its id or the toolkit's id."""
+    for m in REGION_METRICS + tuple(m for ms in STRATIFIED_METRICS.values() for m in ms):
+        if metric_id in (m.id, m.toolkit_id):
+            return m
+    raise KeyError(f"unknown region/stratified metric {metric_id!r}")

@@ -1,0 +1,1 @@
+"""Small shared helpers: user-facing errors (errors), atomic writes (atomic), TOML reading (tomlfile)."""
