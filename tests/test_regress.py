@@ -67,8 +67,8 @@ def test_missing_metric_and_resolution_change_fail(golden):
 
 def test_skip_absent_scenes_only_skips_whole_scenes(golden):
     other = Results(records=[Record("planesweep", "other_scene", "badpix_0.07", 1.0, "lowres")])
-    assert compare(read_golden(golden), other, skip_absent_scenes=True) == []
-    assert len(compare(read_golden(golden), other)) == 2
+    assert [f.kind for f in compare(read_golden(golden), other, skip_absent_scenes=True)] == ["new"]
+    assert [f.kind for f in compare(read_golden(golden), other)] == ["missing", "missing", "new"]
 
 
 def test_cli_exit_codes_and_diff(golden, tmp_path, capsys):
@@ -90,3 +90,112 @@ def test_cli_bad_golden_is_one_line_exit_2(tmp_path, capsys):
     assert main(["regress", str(path), str(tmp_path / "new")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "golden record 0 is malformed" in err[0] and str(path) in err[0]
+
+
+# --------------------------------------------------------------------------- hostile golden files (issue 12.1)
+
+def _golden_text(tmp_path, text: str):
+    path = tmp_path / "golden.json"
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+_REC = '{{"method": "planesweep", "scene": "synth_0", "metric": "{metric}", "value": {value}, "tolerance": {tol}, ' \
+       '"resolution": "lowres"}}'
+
+
+@pytest.mark.parametrize(("text", "problem"), [
+    ("[" + _REC.format(metric="badpix_0.07", value="NaN", tol=0) + "]", "NaN is not a JSON number"),
+    ("[" + _REC.format(metric="badpix_0.07", value="Infinity", tol=0) + "]", "Infinity is not a JSON number"),
+    ("[" + _REC.format(metric="badpix_0.07", value='"NaN"', tol=0) + "]", "value must be a JSON number"),
+    ("[" + _REC.format(metric="badpix_0.07", value='"inf"', tol=0) + "]", "value must be a JSON number"),
+    ("[" + _REC.format(metric="badpix_0.07", value="true", tol=0) + "]", "value must be a JSON number"),
+    ("[" + _REC.format(metric="badpix_0.07", value=1, tol="NaN") + "]", "NaN is not a JSON number"),
+    ("[" + _REC.format(metric="badpix_0.07", value=1, tol=-1) + "]", "tolerance must be a finite number >= 0"),
+    ("[" + _REC.format(metric="badpix_0.07", value="1e999", tol=0) + "]", "value must be a finite number"),
+    ("[" + _REC.format(metric="badpixx_0.07", value=1, tol=0) + "]", "unknown metric 'badpixx_0.07'"),
+    ("[" + _REC.format(metric="badpix_0.07", value=1, tol=0) + "," + _REC.format(metric="badpix_0.07", value=9, tol=0)
+     + "]", "duplicate record"),
+    ('[{"method": "planesweep", "scene": "s", "metric": "mse_x100", "metric": "badpix_0.07", "value": 1, '
+     '"tolerance": 0, "resolution": "lowres"}]', "duplicate key 'metric'"),
+    ("[" * 5000 + "]" * 5000, "nested 5000 levels deep"),
+    ('{"records": 5}', "expected a JSON list of golden records"),
+    ("[5]", "golden record 0 is malformed"),
+])
+def test_invalid_golden_is_refused_before_comparing(tmp_path, capsys, text, problem):
+    """A NaN/Infinity golden value used to pass every check ("OK: 0 regressions", exit 0); a
+    duplicate record silently let the last one win."""
+    path = _golden_text(tmp_path, text)
+    _results(**{"badpix_0.07": 1000.0}).write(tmp_path / "new")
+    assert main(["regress", str(path), str(tmp_path / "new")]) == 2
+    captured = capsys.readouterr()
+    err = captured.err.strip().splitlines()
+    assert len(err) == 1 and problem in err[0] and str(path) in err[0], err
+    assert "OK" not in captured.out
+
+
+def test_nonfinite_new_value_is_a_regression(golden, tmp_path, capsys):
+    for value in ("NaN", "Infinity", "null"):
+        new = tmp_path / f"new_{value}.json"
+        new.write_text('[{"method": "planesweep", "scene": "synth_0", "metric": "badpix_0.07", "value": %s, '
+                       '"resolution": "lowres"}, {"method": "planesweep", "scene": "synth_0", "metric": "mse_x100", '
+                       '"value": 2.0, "resolution": "lowres"}]' % value)
+        assert main(["regress", str(golden), str(new)]) == 1
+        assert "INVALID  planesweep/synth_0/badpix_0.07" in capsys.readouterr().out
+
+
+def _new_with(tmp_path, extra: Record):
+    res = _results()
+    res.records.append(extra)
+    res.write(tmp_path / "new")
+
+
+def test_new_records_absent_from_golden_are_reported_and_fail_on_request(golden, tmp_path, capsys):
+    _new_with(tmp_path, Record("planesweep", "synth_0", "q25_x100", 3.0, "lowres"))
+    assert main(["regress", str(golden), str(tmp_path / "new")]) == 0
+    out = capsys.readouterr().out
+    assert "NEW      planesweep/synth_0/q25_x100: 3 is not in the golden file" in out
+    assert "1 new records not in the golden file" in out
+    assert main(["regress", "--fail-on-new", str(golden), str(tmp_path / "new")]) == 1
+    assert "FAIL: 2 golden metrics, 1 regressions" in capsys.readouterr().out
+
+
+def test_duplicate_new_records_are_refused(golden, tmp_path, capsys):
+    _new_with(tmp_path, Record("planesweep", "synth_0", "badpix_0.07", 99.0, "lowres"))
+    assert main(["regress", str(golden), str(tmp_path / "new")]) == 2
+    assert "appears twice" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("tolerance", ["-5", "nan", "inf", "*=0.01,mse_x100=-1", "x"])
+def test_bad_tolerance_is_refused_and_golden_untouched(golden, tmp_path, capsys, tolerance):
+    before = golden.read_bytes()
+    _results().write(tmp_path / "new")
+    assert main(["regress", "--update", "--tolerance", tolerance, str(golden), str(tmp_path / "new")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--tolerance" in err[0]
+    assert golden.read_bytes() == before
+
+
+def test_update_refuses_a_folder_and_unknown_metrics(tmp_path, capsys):
+    _results().write(tmp_path / "new")
+    assert main(["regress", "--update", str(tmp_path), str(tmp_path / "new")]) == 2
+    assert "is a folder" in capsys.readouterr().err
+    Results(records=[Record("m", "s", "my_metric", 1.0, "lowres")]).write(tmp_path / "odd")
+    assert main(["regress", "--update", str(tmp_path / "g.json"), str(tmp_path / "odd")]) == 2
+    assert "unknown metric 'my_metric'" in capsys.readouterr().err
+    assert not (tmp_path / "g.json").exists()
+
+
+@pytest.mark.parametrize("runs", ['5', '[5]', '[{"method": "m"}]', '[{"method": "m", "scene": "s", "bogus": 1}]',
+                                  '[{"method": "m", "scene": "s", "runtime_s": "x"}]',
+                                  '[{"method": "m", "scene": "s", "notes": "abc"}]'])
+def test_malformed_runs_in_results_are_one_line(tmp_path, runs):
+    from lfbench.utils.errors import DataError
+
+    path = tmp_path / "results.json"
+    path.write_text('{"records": [], "runs": %s}' % runs)
+    if runs.endswith('"bogus": 1}]'):  # unknown fields are ignored (older/newer versions)
+        assert Results.read(path).runs[0].method == "m"
+        return
+    with pytest.raises(DataError, match="results.json"):
+        Results.read(path)

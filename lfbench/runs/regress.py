@@ -3,8 +3,10 @@
 Golden file: a JSON list of records {method, scene, metric, value, tolerance, resolution}. A check
 fails when a metric worsens by more than its tolerance (in the metric's own units; lower is better
 for every benchmark metric unless the metric says otherwise), when a golden (method, scene, metric)
-is missing from the new results, or when its resolution changed. Improvements beyond the tolerance
-are reported (so the golden file can be refreshed) but do not fail.
+is missing from the new results, when its resolution changed or when the new value is not finite.
+Improvements beyond the tolerance and new records absent from the golden file are reported (so the
+golden file can be refreshed) but do not fail (new records fail on request). Golden files are
+validated before any comparison: a NaN golden value would otherwise pass every check.
 """
 
 from __future__ import annotations
@@ -18,9 +20,23 @@ from pathlib import Path
 
 from lfbench.runs.results import Results
 from lfbench.utils.atomic import write_text
-from lfbench.utils.errors import DataError
+from lfbench.utils.errors import DataError, SpecError
+from lfbench.utils.jsonfile import read_json
 
-HIGHER_IS_BETTER: frozenset[str] = frozenset()
+RESOLUTIONS = ("lowres", "highres")
+
+
+def known_metric(metric_id: str):
+    """The :class:`~lfbench.scoring.metrics.Metric` with this id (general, region or stratified), or None."""
+    from lfbench.scoring.metrics import metric_by_id
+    from lfbench.scoring.region_metrics import scene_metric_by_id
+
+    for lookup in (metric_by_id, scene_metric_by_id):
+        try:
+            return lookup(metric_id)
+        except KeyError:
+            pass
+    return None
 
 
 @dataclass(frozen=True)
@@ -41,46 +57,76 @@ class GoldenRecord:
 class Finding:
     """One line of the regression report; ``failed`` decides the exit code."""
 
-    kind: str  # "worse", "missing", "resolution", "nan", "better"
+    kind: str  # "worse", "missing", "resolution", "nan", "new", "better"
     key: tuple[str, str, str]
     message: str
-
-    @property
-    def failed(self) -> bool:
-        return self.kind != "better"
+    failed: bool = True
 
 
 def read_golden(path: str | Path) -> list[GoldenRecord]:
+    """Golden records of ``path``, validated: every value and tolerance a finite JSON number (no NaN,
+    Infinity or "NaN" strings), tolerance >= 0, a known metric id, resolution lowres/highres, no
+    duplicate keys or records. DataError naming the file and the record otherwise."""
     path = Path(path)
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise DataError("golden file not found", path) from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise DataError(f"not valid JSON: {exc}", path) from None
+    data = read_json(path, "golden file")
     items = data.get("records") if isinstance(data, dict) else data
     if not isinstance(items, list):
         raise DataError("expected a JSON list of golden records", path)
-    out = []
+    out: list[GoldenRecord] = []
+    seen: set[tuple[str, str, str]] = set()
     for i, item in enumerate(items):
         try:
-            rec = GoldenRecord(str(item["method"]), str(item["scene"]), str(item["metric"]), float(item["value"]),
-                               float(item["tolerance"]), str(item["resolution"]))
+            if not isinstance(item, dict):
+                raise TypeError("not an object")
+            names = [item[k] for k in ("method", "scene", "metric", "resolution")]
+            if not all(isinstance(v, str) and v for v in names):
+                raise TypeError("method, scene, metric and resolution must be non-empty strings")
+            value, tolerance = _number(item["value"], "value"), _number(item["tolerance"], "tolerance")
         except (KeyError, TypeError, ValueError) as exc:
             raise DataError(f"golden record {i} is malformed (needs method, scene, metric, value, tolerance, "
                             f"resolution): {exc}", path) from None
+        rec = GoldenRecord(names[0], names[1], names[2], value, tolerance, names[3])
+        where = f"golden record {i} ({'/'.join(rec.key)})"
+        if not math.isfinite(rec.value):
+            raise DataError(f"{where}: value must be a finite number, got {rec.value}", path)
         if rec.tolerance < 0 or not math.isfinite(rec.tolerance):
-            raise DataError(f"golden record {i}: tolerance must be a finite number >= 0", path)
+            raise DataError(f"{where}: tolerance must be a finite number >= 0", path)
+        if known_metric(rec.metric) is None:
+            raise DataError(f"{where}: unknown metric {rec.metric!r}", path)
+        if rec.resolution not in RESOLUTIONS:
+            raise DataError(f"{where}: resolution must be one of {', '.join(RESOLUTIONS)}", path)
+        if rec.key in seen:
+            raise DataError(f"{where}: duplicate record", path)
+        seen.add(rec.key)
         out.append(rec)
     return out
 
 
-def compare(golden: list[GoldenRecord], new: Results, skip_absent_scenes: bool = False) -> list[Finding]:
+def check_unique(results: Results, path: str | Path) -> None:
+    """DataError naming ``path`` when ``results`` hold one (method, scene, metric) twice."""
+    seen: set[tuple[str, str, str]] = set()
+    for r in results.records:
+        key = (r.method, r.scene, r.metric)
+        if key in seen:
+            raise DataError(f"record {'/'.join(key)} appears twice", path)
+        seen.add(key)
+
+
+def _number(v: object, name: str) -> float:
+    """A JSON number (not a bool or a string such as "NaN") as float."""
+    if isinstance(v, bool) or not isinstance(v, int | float):
+        raise TypeError(f"{name} must be a JSON number, got {type(v).__name__} {v!r}"[:120])
+    return float(v)
+
+
+def compare(golden: list[GoldenRecord], new: Results, skip_absent_scenes: bool = False,
+            fail_on_new: bool = False) -> list[Finding]:
     """All findings of ``new`` against ``golden``, failures first in golden order.
 
     ``skip_absent_scenes``: golden records of scenes that no new record mentions are left out (e.g.
     real-data scenes on a machine without the data); a method or metric missing on a scene that
-    was evaluated still fails.
+    was evaluated still fails. New records absent from the golden file are reported ("NEW"), and
+    fail only with ``fail_on_new``. A non-finite new value always fails.
     """
     current = {(r.method, r.scene, r.metric): r for r in new.records}
     scenes = {r.scene for r in new.records}
@@ -101,13 +147,19 @@ def compare(golden: list[GoldenRecord], new: Results, skip_absent_scenes: bool =
         if not math.isfinite(r.value):
             findings.append(Finding("nan", g.key, f"INVALID  {name}: new value is {r.value}"))
             continue
-        sign = -1.0 if g.metric in HIGHER_IS_BETTER else 1.0
+        metric = known_metric(g.metric)
+        sign = -1.0 if metric is not None and metric.higher_is_better else 1.0
         change = sign * (r.value - g.value)  # > 0 means worse
         detail = f"{name}: {g.value:.6g} -> {r.value:.6g} ({r.value - g.value:+.3g}, tolerance {g.tolerance:g})"
         if change > g.tolerance:
             findings.append(Finding("worse", g.key, f"WORSE    {detail}"))
         elif change < -g.tolerance:
-            findings.append(Finding("better", g.key, f"better   {detail}"))
+            findings.append(Finding("better", g.key, f"better   {detail}", failed=False))
+    known = {g.key for g in golden}
+    for key, r in current.items():
+        if key not in known:
+            findings.append(Finding("new", key, f"NEW      {'/'.join(key)}: {r.value:.6g} is not in the golden file",
+                                    failed=fail_on_new or not math.isfinite(r.value)))
     findings.sort(key=lambda f: not f.failed)
     return findings
 
@@ -129,10 +181,29 @@ def tolerance_for(method: str, metric: str, tolerance: float | Mapping[str, floa
     return 0.0
 
 
+def check_tolerance(tolerance: float | Mapping[str, float]) -> None:
+    """SpecError unless every tolerance is a finite number >= 0 (a negative one fails every check,
+    an infinite one passes every check)."""
+    values = tolerance.values() if isinstance(tolerance, Mapping) else [tolerance]
+    for v in values:
+        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v) or v < 0:
+            raise SpecError(f"tolerance must be a finite number >= 0, got {v!r}")
+
+
 def make_golden(results: Results, tolerance: float | Mapping[str, float], path: str | Path) -> int:
-    """Write results as golden records; ``tolerance`` as in :func:`tolerance_for`."""
+    """Write the finite records of ``results`` as golden records; ``tolerance`` as in :func:`tolerance_for`.
+    Every tolerance is checked first, and every record's metric must be known (the file must read back)."""
+    check_tolerance(tolerance)
+    path = Path(path)
+    if path.is_dir():
+        raise DataError("golden file is a folder, expected a file", path)
+    for r in results.records:
+        if known_metric(r.metric) is None:
+            raise DataError(f"record {r.method}/{r.scene}/{r.metric}: unknown metric {r.metric!r}, "
+                            "cannot make it golden", path)
+    check_unique(results, path)
     records = [{"method": r.method, "scene": r.scene, "metric": r.metric, "value": r.value,
                 "tolerance": tolerance_for(r.method, r.metric, tolerance), "resolution": r.resolution}
                for r in results.records if math.isfinite(r.value)]
-    write_text(path, json.dumps(records, indent=1) + "\n")
+    write_text(path, json.dumps(records, indent=1, allow_nan=False) + "\n")
     return len(records)

@@ -18,6 +18,7 @@ from typing import Any
 
 from lfbench.utils.atomic import write_text
 from lfbench.utils.errors import DataError
+from lfbench.utils.jsonfile import read_json
 
 CSV_COLUMNS = ("method", "scene", "metric", "value", "resolution")
 
@@ -102,36 +103,82 @@ class Results:
 
     @classmethod
     def read(cls, path: str | Path) -> Results:
-        """Read results.json (or a folder holding one), or a golden/records JSON list."""
+        """Read results.json (or a folder holding one), or a golden/records JSON list.
+
+        Every record needs string method/scene/metric and a numeric (or null) value; every run entry
+        string method/scene and numeric fields; DataError naming the file otherwise."""
         path = Path(path)
         if path.is_dir():
             path = path / "results.json"
-        try:
-            data = json.loads(path.read_text(encoding="utf-8"))
-        except FileNotFoundError:
-            raise DataError("results file not found", path) from None
-        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-            raise DataError(f"not valid JSON: {exc}", path) from None
+        data = read_json(path, "results file", allow_nonfinite=True)
         raw = data if isinstance(data, list) else data.get("records") if isinstance(data, dict) else None
         if not isinstance(raw, list):
             raise DataError("expected a list of records or an object with 'records'", path)
         records = []
         for i, item in enumerate(raw):
             try:
-                records.append(Record(str(item["method"]), str(item["scene"]), str(item["metric"]),
-                                      _num(item["value"]), str(item.get("resolution", "lowres"))))
-            except (KeyError, TypeError, ValueError) as exc:
+                if not isinstance(item, dict):
+                    raise TypeError("not an object")
+                names = [_text(item[k], k) for k in ("method", "scene", "metric")]
+                records.append(Record(*names, _num(item["value"], "value"),
+                                      _text(item.get("resolution", "lowres"), "resolution")))
+            except KeyError as exc:
+                raise DataError(f"record {i} is malformed (no {exc})", path) from None
+            except (TypeError, ValueError) as exc:
                 raise DataError(f"record {i} is malformed ({exc})", path) from None
-        runs = []
-        if isinstance(data, dict):
-            for item in data.get("runs", []):
-                runs.append(RunInfo(**{k: v for k, v in item.items() if k in RunInfo.__dataclass_fields__}))
+        runs = [_run_info(item, i, path) for i, item in enumerate(_list(data, "runs", path))]
         meta = data.get("meta", {}) if isinstance(data, dict) else {}
+        if not isinstance(meta, dict):
+            raise DataError("'meta' must be an object", path)
         return cls(records=records, runs=runs, meta=meta)
 
 
-def _num(v: Any) -> float:
-    return float("nan") if v is None else float(v)
+def _list(data: Any, key: str, path: Path) -> list[Any]:
+    value = data.get(key, []) if isinstance(data, dict) else []
+    if not isinstance(value, list):
+        raise DataError(f"{key!r} must be a list", path)
+    return value
+
+
+def _run_info(item: Any, i: int, path: Path) -> RunInfo:
+    """One entry of 'runs', type-checked field by field."""
+    try:
+        if not isinstance(item, dict):
+            raise TypeError("not an object")
+        aligned = item.get("aligned_from")
+        notes = item.get("notes", [])
+        if aligned is not None and not (isinstance(aligned, list) and all(_is_int(a) for a in aligned)):
+            raise TypeError("aligned_from must be a list of integers or null")
+        if not (isinstance(notes, list) and all(isinstance(n, str) for n in notes)):
+            raise TypeError("notes must be a list of strings")
+        nonfinite = item.get("nonfinite_pixels", 0)
+        if not _is_int(nonfinite):
+            raise TypeError("nonfinite_pixels must be an integer")
+        return RunInfo(_text(item["method"], "method"), _text(item["scene"], "scene"),
+                       _num(item.get("runtime_s"), "runtime_s"), nonfinite, aligned, notes)
+    except KeyError as exc:
+        raise DataError(f"run {i} is malformed (no {exc})", path) from None
+    except (TypeError, ValueError) as exc:
+        raise DataError(f"run {i} is malformed ({exc})", path) from None
+
+
+def _is_int(v: Any) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+def _text(v: Any, name: str) -> str:
+    if not isinstance(v, str):
+        raise TypeError(f"{name} must be a string, got {type(v).__name__}")
+    return v
+
+
+def _num(v: Any, name: str = "value") -> float:
+    """A JSON number or null (NaN) as float; strings and booleans are refused."""
+    if v is None:
+        return float("nan")
+    if isinstance(v, bool) or not isinstance(v, int | float):
+        raise TypeError(f"{name} must be a number or null, got {type(v).__name__}")
+    return float(v)
 
 
 def _clean(d: dict[str, Any]) -> dict[str, Any]:

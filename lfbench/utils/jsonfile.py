@@ -1,0 +1,91 @@
+"""Read a JSON file written by lfbench (results, golden records, markers) strictly, with one-line errors.
+
+Strict means: UTF-8, no duplicate object keys (Python's json keeps the last one silently), no
+``NaN``/``Infinity`` literals (not JSON; lfbench writes ``null`` for a missing number) unless
+asked for, bounded size and nesting depth (a deeply nested file raises RecursionError in json).
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+from typing import Any
+
+from lfbench.utils.errors import DataError
+
+__all__ = ["MAX_JSON_BYTES", "MAX_JSON_DEPTH", "read_json", "parse_json"]
+
+MAX_JSON_BYTES = 256 * 1024**2
+MAX_JSON_DEPTH = 64
+
+
+def read_json(path: str | Path, what: str = "JSON file", *, allow_nonfinite: bool = False) -> Any:
+    """The parsed content of ``path``; DataError naming the file when it is missing, unreadable,
+    larger than MAX_JSON_BYTES, not UTF-8, not valid JSON, nested deeper than MAX_JSON_DEPTH, has a
+    duplicate key or (unless ``allow_nonfinite``) a NaN/Infinity literal. ``what`` names it in errors."""
+    path = Path(path)
+    try:
+        if path.is_dir():
+            raise DataError(f"{what} is a folder, expected a file", path)
+        if path.stat().st_size > MAX_JSON_BYTES:
+            raise DataError(f"{what} is larger than {MAX_JSON_BYTES // 1024**2} MiB", path)
+        raw = path.read_bytes()
+    except FileNotFoundError:
+        raise DataError(f"{what} not found", path) from None
+    except OSError as exc:
+        raise DataError(f"cannot read {what}: {exc.strerror or exc}", path) from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError:
+        raise DataError(f"{what} is not UTF-8 text", path) from None
+    return parse_json(text, path, what, allow_nonfinite=allow_nonfinite)
+
+
+def parse_json(text: str, path: str | Path | None = None, what: str = "JSON", *, allow_nonfinite: bool = False) -> Any:
+    """Parse ``text`` with the rules of :func:`read_json`; ``path`` names the source in errors."""
+    depth = _max_depth(text)
+    if depth > MAX_JSON_DEPTH:
+        raise DataError(f"{what} is nested {depth} levels deep (at most {MAX_JSON_DEPTH})", path)
+
+    def constant(name: str) -> float:
+        if not allow_nonfinite:
+            raise _Refused(f"{name} is not a JSON number (write null for a missing value)")
+        return float(name)
+
+    def pairs(items: list[tuple[str, Any]]) -> dict[str, Any]:
+        out: dict[str, Any] = {}
+        for key, value in items:
+            if key in out:
+                raise _Refused(f"duplicate key {key!r}")
+            out[key] = value
+        return out
+
+    try:
+        return json.loads(text, object_pairs_hook=pairs, parse_constant=constant)
+    except _Refused as exc:
+        raise DataError(f"{what}: {exc}", path) from None
+    except json.JSONDecodeError as exc:
+        raise DataError(f"{what} is not valid JSON: {exc}", path) from None
+    except RecursionError:  # pragma: no cover - the depth check comes first
+        raise DataError(f"{what} is nested too deeply", path) from None
+
+
+class _Refused(ValueError):
+    """Raised inside the json hooks; becomes a DataError naming the file."""
+
+
+_STRING = re.compile(r'"(?:[^"\\]|\\.)*"', re.DOTALL)
+_BRACKET = re.compile(r"[\[\]{}]")
+
+
+def _max_depth(text: str) -> int:
+    """Deepest nesting of [ and { outside strings (a scan, no recursion)."""
+    depth = deepest = 0
+    for m in _BRACKET.finditer(_STRING.sub("", text)):
+        if m.group() in "[{":
+            depth += 1
+            deepest = max(deepest, depth)
+        else:
+            depth -= 1
+    return deepest
