@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from lfbench.runs import bench
 from lfbench.cli import main
+from lfbench.runs import bench
 
 CONTRACT = {"size", "interval", "precision", "seconds", "peak_memory_gb", "gflops_per_s"}
 

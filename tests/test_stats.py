@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 from scipy import stats as sps
 
-from lfbench.scoring import stats
 from lfbench.runs.results import Record, Results
+from lfbench.scoring import stats
 from lfbench.scoring.metrics import bad_pix, mse_x100, q25_x100
 from lfbench.utils.errors import SpecError
 

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from lfbench.data import synth
 from lfbench.cli import main
+from lfbench.data import synth
 from lfbench.data.params import read_parameters
 from lfbench.data.pfm import read_pfm
 from lfbench.data.scene import Benchmark, Scene, rgb_to_gray
