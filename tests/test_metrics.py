@@ -13,16 +13,20 @@ import pytest
 
 from lfbench.scoring.metrics import (
     GENERAL_METRICS,
+    METRICS,
+    SCENE_AGGREGATES,
     bad_pix,
     bad_pix_curve,
     bad_pix_metric,
-    metric_by_id,
+    get_metric,
+    list_metrics,
     mse_x100,
     nonfinite_count,
     q25_x100,
     quantile_x100,
 )
 from lfbench.scoring.rules import border_mask
+from lfbench.utils.errors import SpecError
 
 # --------------------------------------------------------------------------- toolkit re-statement
 
@@ -225,10 +229,26 @@ def test_metric_ids_and_toolkit_ids():
     assert [m.id for m in GENERAL_METRICS] == ["badpix_0.01", "badpix_0.03", "badpix_0.07", "mse_x100", "q25_x100"]
     assert [m.toolkit_id for m in GENERAL_METRICS] == ["badpix_0010", "badpix_0030", "badpix_0070", "mse_100",
                                                        "q_25_100"]
-    assert metric_by_id("badpix_0070").id == "badpix_0.07"
-    assert metric_by_id("q_25_100").id == "q25_x100"
-    m = metric_by_id("badpix_0.04")
+    assert get_metric("badpix_0070").id == "badpix_0.07"
+    assert get_metric("q_25_100").id == "q25_x100"
+    m = get_metric("badpix_0.04")
     assert m.id == "badpix_0.04" and m(GT4, PRED4) == 50.0
+    assert get_metric("badpix_0040").id == "badpix_0.04"  # the toolkit's spelling of any threshold
     assert bad_pix_metric(0.2)(GT4, PRED4) == 0.0
-    with pytest.raises(KeyError):
-        metric_by_id("psnr")
+
+
+def test_one_registry_for_every_metric():
+    ids = [m.id for m in list_metrics()]
+    assert ids[:5] == [m.id for m in GENERAL_METRICS] and len(ids) == len(set(ids)) == 21
+    assert get_metric("discontinuities").category == "region"
+    assert get_metric("missed_dots_50_0400").id == "missed_dots"
+    with pytest.raises(SpecError, match=r"Unknown metric 'psnr'\. Available: badpix_0\.01, .*missed_dots.*badpix_<t>"):
+        get_metric("psnr")
+    with pytest.raises(TypeError, match="needs a lfbench Metric"):
+        METRICS.register(object())
+    with pytest.raises(ValueError, match="already registered"):
+        METRICS.register(bad_pix_metric(0.5).__class__(**{**vars(GENERAL_METRICS[3]), "name": "other"}))
+    for m in list_metrics():  # every definition says how it aggregates over scenes, in what unit, which way
+        assert m.unit and m.description and m.scene_aggregate in SCENE_AGGREGATES and m.lower_is_better
+        assert (m.bootstrap is not None) == (m.category == "general")
+    assert get_metric("mse_x100").aggregate([1.0, np.nan, 3.0]) == 2.0

@@ -17,7 +17,7 @@ from PIL import Image
 from lfbench.data.params import SceneParameters
 from lfbench.data.pfm import write_pfm
 from lfbench.data.scene import Benchmark, Scene
-from lfbench.scoring.metrics import GENERAL_METRICS
+from lfbench.scoring.metrics import GENERAL_METRICS, get_metric
 from lfbench.scoring.region_metrics import (
     REGION_METRICS,
     STRATIFIED_METRICS,
@@ -33,7 +33,6 @@ from lfbench.scoring.region_metrics import (
     median_angular_error,
     missed_dots,
     read_label_mask,
-    scene_metric_by_id,
     scharr_derivative,
 )
 from lfbench.scoring.rules import ScoringRules, metric_resolution, score_scene
@@ -358,7 +357,7 @@ def test_a_lowres_metric_is_skipped_when_only_the_highres_mask_exists(tmp_path):
     gt = np.zeros((N, N), dtype=np.float32)
     scene = _make_scene(tmp_path, "training", "hionly", gt,
                         masks={"mask_planes_highres": np.ones((10 * N, 10 * N), dtype=bool)})
-    planes = scene_metric_by_id("bumpiness_planes")
+    planes = get_metric("bumpiness_planes")
     assert metric_resolution(scene, planes) is None
     assert [m.id for m in applicable_metrics(scene)] == GENERAL_IDS
     assert "bumpiness_planes" not in score_scene(scene, gt, [*GENERAL_METRICS, planes]).values
@@ -435,9 +434,9 @@ def test_metric_descriptors_are_complete_and_unique():
     for m in all_metrics:
         assert m.description and m.unit and m.toolkit_id and m.required_masks
         assert m.resolution in ("lowres", "highres") and m.category in ("region", "stratified")
-        assert scene_metric_by_id(m.toolkit_id) is m
-    assert scene_metric_by_id("mae_planes").resolution == "lowres"
-    assert scene_metric_by_id("discontinuities").resolution == "highres"
+        assert get_metric(m.toolkit_id) is m
+    assert get_metric("mae_planes").resolution == "lowres"
+    assert get_metric("discontinuities").resolution == "highres"
 
 
 def test_cli_evaluate_all_metrics(tmp_path):

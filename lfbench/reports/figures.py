@@ -32,7 +32,7 @@ import numpy as np
 
 from lfbench.data.scene import LOWRES, LightField
 from lfbench.method.base import Prediction
-from lfbench.scoring.metrics import bad_pix_curve
+from lfbench.scoring.metrics import bad_pix_curve, find_metric
 from lfbench.scoring.rules import ScoringRules, align_prediction, border_mask, upsample_nearest
 from lfbench.utils.atomic import write_bytes, write_text
 
@@ -480,10 +480,15 @@ def curves_from_records(results: Any) -> dict[str, tuple[np.ndarray, np.ndarray]
     """Mean BadPix at the thresholds a results file holds (badpix_<t>), per method: the coarse series
     available without the maps. Only scenes where the method has every threshold are averaged."""
     df = results.to_frame()
-    df = df[df["metric"].str.startswith("badpix_")].copy()
+    thresholds = {}
+    for metric_id in dict.fromkeys(df["metric"]):
+        m = find_metric(metric_id)  # the general BadPix(t) metrics, by their definition
+        if m is not None and m.category == "general" and m.bootstrap is not None and m.bootstrap.name == "badpix":
+            thresholds[metric_id] = float(m.bootstrap.param)
+    df = df[df["metric"].isin(list(thresholds))].copy()
     if df.empty:
         return {}
-    df["t"] = df["metric"].str.slice(7).astype(float)
+    df["t"] = df["metric"].map(thresholds).astype(float)
     out = {}
     for method, g in df.groupby("method", sort=False):
         table = g.pivot_table(index="scene", columns="t", values="value", aggfunc="first").dropna()

@@ -12,11 +12,23 @@ import numpy as np
 import pandas as pd
 
 from lfbench.runs.results import Results
-from lfbench.scoring.metrics import GENERAL_METRICS
+from lfbench.scoring.metrics import find_metric, list_metrics
 from lfbench.utils.atomic import write_text
 
 PAPER_METRIC_ORDER = ("badpix_0.07", "badpix_0.03", "badpix_0.01", "mse_x100", "q25_x100")
-_HEADERS = {m.id: m.name for m in GENERAL_METRICS}
+
+
+def _header(column: str) -> str:
+    """A column's header: a registered general metric's name (BadPix(0.07), MSE x100, ...), else as is."""
+    for m in list_metrics("general"):
+        if m.id == column:
+            return m.name
+    return column
+
+
+def _scene_aggregate(metric_id: str) -> str:
+    metric = find_metric(metric_id)
+    return metric.scene_aggregate if metric is not None else "mean"
 
 
 def _metric_order(metrics: Sequence[str]) -> list[str]:
@@ -42,14 +54,18 @@ def per_scene_table(results: Results, metrics: Sequence[str] | None = None) -> p
 
 
 def average_table(results: Results, metrics: Sequence[str] | None = None) -> pd.DataFrame:
-    """Table II: mean over scenes per method (rows) and metric (columns), with runtime (s) and the
-    number of scenes averaged. A method missing a scene is averaged over the scenes it has."""
+    """Table II: per method (rows) and metric (columns) the metric's aggregate over scenes (the mean for
+    every benchmark metric, see ``Metric.scene_aggregate``), with runtime (s)
+    and the number of scenes. A method missing a scene is averaged over the scenes it has."""
     df = results.to_frame()
     if df.empty:
         return pd.DataFrame()
     order = _metric_order(metrics or list(dict.fromkeys(df["metric"])))
-    table = df[df["metric"].isin(order)].pivot_table(index="method", columns="metric", values="value", aggfunc="mean",
-                                                      sort=False)
+    how = {m: _scene_aggregate(m) for m in order}  # each metric aggregates over scenes as it defines
+    parts = [df[df["metric"].isin([m for m in order if how[m] == agg])]
+             .pivot_table(index="method", columns="metric", values="value", aggfunc=agg, sort=False)
+             for agg in dict.fromkeys(how.values())]
+    table = pd.concat(parts, axis=1) if parts else pd.DataFrame()
     table = table.reindex(index=list(dict.fromkeys(df["method"])), columns=order)
     table["scenes"] = df.groupby("method", sort=False)["scene"].nunique()
     if results.runs:
@@ -63,7 +79,7 @@ def render(table: pd.DataFrame, fmt: str = "markdown", floatfmt: str = ".3f") ->
     if table.empty:
         return "(no results)\n"
     flat = table.reset_index()
-    headers = [_HEADERS.get(str(c), str(c)) for c in flat.columns]
+    headers = [_header(str(c)) for c in flat.columns]
     if fmt == "csv":
         return flat.to_csv(index=False, float_format="%.6g")
     from tabulate import tabulate

@@ -19,24 +19,12 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from lfbench.runs.results import Results
+from lfbench.scoring.metrics import find_metric
 from lfbench.utils.atomic import write_text
 from lfbench.utils.errors import DataError, SpecError
 from lfbench.utils.jsonfile import read_json
 
 RESOLUTIONS = ("lowres", "highres")
-
-
-def known_metric(metric_id: str):
-    """The :class:`~lfbench.scoring.metrics.Metric` with this id (general, region or stratified), or None."""
-    from lfbench.scoring.metrics import metric_by_id
-    from lfbench.scoring.region_metrics import scene_metric_by_id
-
-    for lookup in (metric_by_id, scene_metric_by_id):
-        try:
-            return lookup(metric_id)
-        except KeyError:
-            pass
-    return None
 
 
 @dataclass(frozen=True)
@@ -91,7 +79,7 @@ def read_golden(path: str | Path) -> list[GoldenRecord]:
             raise DataError(f"{where}: value must be a finite number, got {rec.value}", path)
         if rec.tolerance < 0 or not math.isfinite(rec.tolerance):
             raise DataError(f"{where}: tolerance must be a finite number >= 0", path)
-        if known_metric(rec.metric) is None:
+        if find_metric(rec.metric) is None:
             raise DataError(f"{where}: unknown metric {rec.metric!r}", path)
         if rec.resolution not in RESOLUTIONS:
             raise DataError(f"{where}: resolution must be one of {', '.join(RESOLUTIONS)}", path)
@@ -147,7 +135,7 @@ def compare(golden: list[GoldenRecord], new: Results, skip_absent_scenes: bool =
         if not math.isfinite(r.value):
             findings.append(Finding("nan", g.key, f"INVALID  {name}: new value is {r.value}"))
             continue
-        metric = known_metric(g.metric)
+        metric = find_metric(g.metric)  # unknown ids (a plugin's column) are error measures
         sign = -1.0 if metric is not None and metric.higher_is_better else 1.0
         change = sign * (r.value - g.value)  # > 0 means worse
         detail = f"{name}: {g.value:.6g} -> {r.value:.6g} ({r.value - g.value:+.3g}, tolerance {g.tolerance:g})"
@@ -198,7 +186,7 @@ def make_golden(results: Results, tolerance: float | Mapping[str, float], path: 
     if path.is_dir():
         raise DataError("golden file is a folder, expected a file", path)
     for r in results.records:
-        if known_metric(r.metric) is None:
+        if find_metric(r.metric) is None:
             raise DataError(f"record {r.method}/{r.scene}/{r.metric}: unknown metric {r.metric!r}, "
                             "cannot make it golden", path)
     check_unique(results, path)

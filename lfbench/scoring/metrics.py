@@ -21,6 +21,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from lfbench.utils.errors import SpecError
+
 __all__ = [
     "bad_pix",
     "bad_pix_curve",
@@ -28,9 +30,16 @@ __all__ = [
     "q25_x100",
     "quantile_x100",
     "nonfinite_count",
+    "bad_pix_metric",
     "Metric",
+    "PixelStatistic",
+    "MetricRegistry",
+    "METRICS",
+    "SCENE_AGGREGATES",
     "GENERAL_METRICS",
-    "metric_by_id",
+    "get_metric",
+    "find_metric",
+    "list_metrics",
 ]
 
 
@@ -124,21 +133,53 @@ def q25_x100(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = None, *
     return quantile_x100(gt, pred, 25, mask, toolkit=toolkit)
 
 
-# --------------------------------------------------------------------------- metric descriptors
+# --------------------------------------------------------------------------- metric definitions
 
 MetricFn = Callable[..., float]
 
 
+
+def _mean_of_finite(values: np.ndarray) -> float:
+    v = values[~np.isnan(values)]
+    return float(v.mean()) if v.size else float("nan")
+
+
+#: How a metric's per-scene values are combined into one number per method (average tables, the
+#: '(mean)' rows of CI tables): name -> reduction of a float64 array (NaN scenes are left out).
+SCENE_AGGREGATES: dict[str, Callable[[np.ndarray], float]] = {"mean": _mean_of_finite}
+
+
+@dataclass(frozen=True)
+class PixelStatistic:
+    """What a metric is as a statistic of the per-pixel errors, which is how it bootstraps.
+
+    ``name``: 'badpix' (percentage of |error| > ``param`` px, non-finite = bad), 'mse' (100 x the mean
+    squared error over finite errors) or 'quantile' (100 x the |error| at index int(n * ``param`` / 100)
+    of the sorted errors). :mod:`lfbench.scoring.stats` resamples the per-pixel values accordingly.
+    """
+
+    name: str
+    param: float = 0.0
+
+    def __post_init__(self) -> None:
+        if self.name not in ("badpix", "mse", "quantile"):
+            raise ValueError(f"unknown pixel statistic {self.name!r}: badpix, mse or quantile")
+
+
 @dataclass(frozen=True)
 class Metric:
-    """A metric with its id, description and plot settings.
+    """The one definition of a metric: what it computes, its unit and direction, how it is drawn,
+    how its per-scene values aggregate and how it bootstraps.
 
-    ``fn(gt, pred, mask, toolkit=...)`` returns the score. ``mask_name`` is the evaluation mask the
-    metric needs (None = general metric, scored under the border mask); ``resolution`` is
+    ``fn(gt, pred, mask, toolkit=...)`` returns the score in ``unit``. ``mask_name`` is the evaluation
+    mask the metric needs (None = general metric, scored under the border mask); ``resolution`` is
     'scene' (the scene's rule), 'lowres' or 'highres'. Region / stratified metrics
     (lfbench.scoring.region_metrics) may also need ``extra_masks`` (further mask files the metric reads
     itself; it is skipped unless all exist) and, with ``needs_scene``, are called with the keywords
     ``scene`` and ``resolution`` too. ``category``: 'general', 'region' or 'stratified'.
+    ``vmin``/``vmax``/``cmap``: plot settings. ``scene_aggregate``: a key of :data:`SCENE_AGGREGATES`.
+    ``bootstrap``: the metric as a :class:`PixelStatistic` of the general scoring's per-pixel errors,
+    or None when it cannot be resampled from them (region metrics score other pixels).
     """
 
     id: str
@@ -156,15 +197,86 @@ class Metric:
     category: str = "general"
     extra_masks: tuple[str, ...] = ()
     needs_scene: bool = False
+    scene_aggregate: str = "mean"
+    bootstrap: PixelStatistic | None = None
+
+    def __post_init__(self) -> None:
+        if self.scene_aggregate not in SCENE_AGGREGATES:
+            raise ValueError(f"metric {self.id!r}: unknown scene_aggregate {self.scene_aggregate!r}; "
+                             f"use one of {', '.join(SCENE_AGGREGATES)}")
+
+    @property
+    def lower_is_better(self) -> bool:
+        return not self.higher_is_better
 
     @property
     def required_masks(self) -> tuple[str, ...]:
         """Every mask file (``<name>_<resolution>.png``) the metric needs."""
         return ((self.mask_name,) if self.mask_name else ()) + self.extra_masks
 
+    def aggregate(self, values: Sequence[float] | np.ndarray) -> float:
+        """The per-scene ``values`` combined as the metric says (NaN scenes left out)."""
+        return SCENE_AGGREGATES[self.scene_aggregate](np.asarray(values, dtype=np.float64))
+
     def __call__(self, gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = None, *,
                  toolkit: bool = False, **context) -> float:
         return self.fn(gt, pred, mask, toolkit=toolkit, **context)
+
+
+class MetricRegistry:
+    """Every metric by id (and by the toolkit's id), plus parametrised families such as ``badpix_<t>``.
+
+    ``register`` refuses anything but a :class:`Metric` and a second metric under a taken id;
+    ``get`` raises :class:`~lfbench.utils.errors.SpecError` "Unknown metric X. Available: ...".
+    """
+
+    def __init__(self) -> None:
+        self._metrics: dict[str, Metric] = {}
+        self._aliases: dict[str, str] = {}
+        self._families: list[tuple[str, Callable[[str], Metric | None]]] = []
+
+    def register(self, metric: Metric) -> Metric:
+        if not isinstance(metric, Metric):
+            raise TypeError(f"register() needs a lfbench Metric, got {type(metric).__name__}")
+        for key in (metric.id, metric.toolkit_id):
+            owner = self._aliases.get(key) if key else None
+            if owner is not None and self._metrics[owner] != metric:
+                raise ValueError(f"metric id {key!r} is already registered (by {owner!r})")
+        self._metrics[metric.id] = metric
+        self._aliases[metric.id] = metric.id
+        if metric.toolkit_id:
+            self._aliases.setdefault(metric.toolkit_id, metric.id)
+        return metric
+
+    def register_family(self, pattern: str, make: Callable[[str], Metric | None]) -> None:
+        """A parametrised family: ``make(id)`` returns the metric for an id it understands, else None;
+        ``pattern`` (e.g. 'badpix_<t>') is what the 'Available' list shows."""
+        self._families.append((pattern, make))
+
+    def find(self, metric_id: str) -> Metric | None:
+        """The metric with this id or toolkit id (or from a family), or None."""
+        key = self._aliases.get(str(metric_id))
+        if key is not None:
+            return self._metrics[key]
+        for _, make in self._families:
+            metric = make(str(metric_id))
+            if metric is not None:
+                return metric
+        return None
+
+    def get(self, metric_id: str) -> Metric:
+        metric = self.find(metric_id)
+        if metric is None:
+            available = ", ".join([*self._metrics, *(p for p, _ in self._families)])
+            raise SpecError(f"Unknown metric {metric_id!r}. Available: {available}")
+        return metric
+
+    def all(self, category: str | None = None) -> tuple[Metric, ...]:
+        """The registered metrics (families excluded), in registration order, optionally of one category."""
+        return tuple(m for m in self._metrics.values() if category is None or m.category == category)
+
+    def __contains__(self, metric_id: object) -> bool:
+        return isinstance(metric_id, str) and self.find(metric_id) is not None
 
 
 def _bad_pix_metric(t: float) -> Metric:
@@ -175,6 +287,7 @@ def _bad_pix_metric(t: float) -> Metric:
         id=f"badpix_{t:g}", name=f"BadPix({t:g})",
         description=f"Percentage of pixels with |gt - pred| > {t:g} px (non-finite predictions count as bad).",
         unit="%", fn=fn, toolkit_id=("badpix_%0.3f" % t).replace(".", ""), vmin=0, vmax=1, cmap="RdYlGn_r",
+        bootstrap=PixelStatistic("badpix", t),
     )
 
 
@@ -182,6 +295,7 @@ def _mse_metric() -> Metric:
     return Metric(
         id="mse_x100", name="MSE x100", description="Mean squared disparity error (px^2) multiplied by 100.",
         unit="px^2 x 100", fn=mse_x100, toolkit_id="mse_100", vmin=-0.2, vmax=0.2, cmap="seismic",
+        bootstrap=PixelStatistic("mse"),
     )
 
 
@@ -189,6 +303,7 @@ def _q25_metric() -> Metric:
     return Metric(
         id="q25_x100", name="Q25", description="25th percentile of the absolute disparity error, x100.",
         unit="px x 100", fn=q25_x100, toolkit_id="q_25_100", vmin=0, vmax=0.5, cmap="YlOrRd",
+        bootstrap=PixelStatistic("quantile", 25.0),
     )
 
 
@@ -196,21 +311,51 @@ GENERAL_METRICS: tuple[Metric, ...] = (
     _bad_pix_metric(0.01), _bad_pix_metric(0.03), _bad_pix_metric(0.07), _mse_metric(), _q25_metric(),
 )
 
+#: The process-wide registry: the general metrics here, the region and stratified ones from
+#: :mod:`lfbench.scoring.region_metrics` (registered when :func:`get_metric` first needs them).
+METRICS = MetricRegistry()
+for _m in GENERAL_METRICS:
+    METRICS.register(_m)
+
+
+def _badpix_family(metric_id: str) -> Metric | None:
+    """``badpix_<t>`` for any threshold t in px ('badpix_0.04'); the toolkit's 'badpix_0040' is t x 1000."""
+    if not metric_id.startswith("badpix_"):
+        return None
+    text = metric_id.split("_", 1)[1]
+    try:
+        t = float(text) if "." in text or not text.isdigit() else int(text) / 1000.0
+    except ValueError:
+        return None
+    return _bad_pix_metric(t) if np.isfinite(t) and t >= 0 else None
+
+
+METRICS.register_family("badpix_<t>", _badpix_family)
+
 
 def bad_pix_metric(threshold: float) -> Metric:
     """The BadPix metric for any threshold (px)."""
     return _bad_pix_metric(float(threshold))
 
 
-def metric_by_id(metric_id: str) -> Metric:
-    """A general metric by id; ``badpix_<t>`` works for any threshold t."""
-    for m in GENERAL_METRICS:
-        if metric_id in (m.id, m.toolkit_id):
-            return m
-    if metric_id.startswith("badpix_"):
-        try:
-            return bad_pix_metric(float(metric_id.split("_", 1)[1]))
-        except ValueError:
-            pass
-    known = ", ".join(m.id for m in GENERAL_METRICS)
-    raise KeyError(f"unknown metric {metric_id!r}; known: {known}, badpix_<t>")
+def _registry() -> MetricRegistry:
+    import lfbench.scoring.region_metrics  # noqa: F401  (registers the region and stratified metrics)
+
+    return METRICS
+
+
+def get_metric(metric_id: str) -> Metric:
+    """Any metric (general, region, stratified, ``badpix_<t>``) by its id or the toolkit's id.
+
+    Raises SpecError "Unknown metric X. Available: ..." otherwise."""
+    return _registry().get(metric_id)
+
+
+def find_metric(metric_id: str) -> Metric | None:
+    """Like :func:`get_metric`, but None for an unknown id (e.g. a plugin's own column)."""
+    return _registry().find(metric_id)
+
+
+def list_metrics(category: str | None = None) -> tuple[Metric, ...]:
+    """Every registered metric (optionally of one category: 'general', 'region', 'stratified')."""
+    return _registry().all(category)

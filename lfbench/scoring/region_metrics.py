@@ -19,7 +19,8 @@ metrics count NaN as good, bumpiness and MAE leave non-finite values out, a (box
 without pixels counts as a missed dot.
 
 Each metric is also a :class:`lfbench.scoring.metrics.Metric` (ids in :data:`REGION_METRICS` and
-:data:`STRATIFIED_METRICS`) and :func:`applicable_metrics` lists what applies to a scene: the
+:data:`STRATIFIED_METRICS`), registered in :data:`lfbench.scoring.metrics.METRICS` (look one up with
+:func:`lfbench.scoring.metrics.get_metric`), and :func:`applicable_metrics` lists what applies to a scene: the
 general metrics plus those whose mask files exist, so that
 ``score_scene(scene, pred, applicable_metrics(scene))`` scores everything the scene supports.
 """
@@ -33,7 +34,7 @@ from scipy import ndimage
 
 from lfbench.data.params import SceneParameters
 from lfbench.data.scene import Scene, read_png
-from lfbench.scoring.metrics import GENERAL_METRICS, Metric, _prepare, bad_pix, mse_x100
+from lfbench.scoring.metrics import GENERAL_METRICS, METRICS, Metric, _prepare, bad_pix, mse_x100
 from lfbench.scoring.rules import ScoringRules, metric_resolution
 from lfbench.utils.errors import DataError
 
@@ -53,7 +54,6 @@ __all__ = [
     "REGION_METRICS",
     "STRATIFIED_METRICS",
     "applicable_metrics",
-    "scene_metric_by_id",
 ]
 
 BUMPINESS_CLIP = 0.05  # px per px^2 (Scharr response units), the toolkit's clip
@@ -479,9 +479,5 @@ def applicable_metrics(scene: Scene, rules: ScoringRules = ScoringRules()) -> li
     return list(GENERAL_METRICS) + [m for m in scene_metrics(scene) if metric_resolution(scene, m, rules) is not None]
 
 
-def scene_metric_by_id(metric_id: str) -> Metric:
-    """A region or stratified metric by its id or the toolkit's id."""
-    for m in REGION_METRICS + tuple(m for ms in STRATIFIED_METRICS.values() for m in ms):
-        if metric_id in (m.id, m.toolkit_id):
-            return m
-    raise KeyError(f"unknown region/stratified metric {metric_id!r}")
+for _m in REGION_METRICS + tuple(m for ms in STRATIFIED_METRICS.values() for m in ms):
+    METRICS.register(_m)

@@ -42,7 +42,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from lfbench.scoring.metrics import Metric, metric_by_id
+from lfbench.scoring.metrics import Metric, get_metric, list_metrics
+from lfbench.scoring.metrics import PixelStatistic as _Kind
 from lfbench.utils.errors import SpecError
 
 __all__ = [
@@ -102,25 +103,13 @@ class PairedTest:
 
 # --------------------------------------------------------------------------- metric kinds
 
-@dataclass(frozen=True)
-class _Kind:
-    name: str  # 'badpix', 'mse', 'quantile'
-    param: float = 0.0  # threshold (px) or percentage
-
-
 def _kind_of(metric: str | Metric) -> tuple[str, _Kind]:
-    """(canonical id, kind) of a general metric id or descriptor."""
-    try:
-        m = metric if isinstance(metric, Metric) else metric_by_id(str(metric))
-    except KeyError as exc:
-        raise SpecError(str(exc.args[0])) from None
-    if m.id.startswith("badpix_"):
-        return m.id, _Kind("badpix", float(m.id.split("_", 1)[1]))
-    if m.id == "mse_x100":
-        return m.id, _Kind("mse")
-    if m.id == "q25_x100":
-        return m.id, _Kind("quantile", 25.0)
-    raise SpecError(f"no bootstrap for metric {m.id!r}: supported are badpix_<t>, mse_x100, q25_x100")
+    """(canonical id, pixel statistic) of a metric id or definition; SpecError when it has no bootstrap."""
+    m = metric if isinstance(metric, Metric) else get_metric(str(metric))
+    if m.bootstrap is None:
+        bootstrapped = ", ".join(x.id for x in list_metrics() if x.bootstrap is not None)
+        raise SpecError(f"no bootstrap for metric {m.id!r}: supported are {bootstrapped}, badpix_<t>")
+    return m.id, m.bootstrap
 
 
 # --------------------------------------------------------------------------- per-pixel errors
@@ -428,18 +417,18 @@ def pixel_loss(errors: np.ndarray, measure: str) -> tuple[np.ndarray, str, str]:
     if name in ("abs", "epe", "mae"):
         with np.errstate(invalid="ignore"):
             return np.where(np.isfinite(e), np.abs(e), np.inf).astype(np.float64), "abs", "px"
-    if name in ("sq", "mse", "mse_x100"):
+    name = {"sq": "mse_x100", "mse": "mse_x100", "badpix": "badpix_0.07"}.get(name, name)
+    try:
+        metric = get_metric(name)
+    except SpecError:
+        raise SpecError(f"unknown measure {measure!r}: use abs, mse_x100 or badpix_<t>") from None
+    kind = metric.bootstrap
+    if kind is not None and kind.name == "mse":
         with np.errstate(invalid="ignore", over="ignore"):
-            return np.where(np.isfinite(e), 100.0 * np.square(e.astype(np.float64)), np.inf), "mse_x100", "px^2 x 100"
-    if name.startswith("badpix"):
-        t = 0.07 if name == "badpix" else None
-        if t is None:
-            try:
-                t = float(name.split("_", 1)[1])
-            except (IndexError, ValueError):
-                raise SpecError(f"bad measure {measure!r}: use abs, mse_x100 or badpix_<t>") from None
-        return 100.0 * _badpix_flags(e, t, False), f"badpix_{t:g}", "%"
-    raise SpecError(f"unknown measure {measure!r}: use abs, mse_x100 or badpix_<t>")
+            return np.where(np.isfinite(e), 100.0 * np.square(e.astype(np.float64)), np.inf), metric.id, metric.unit
+    if kind is not None and kind.name == "badpix":
+        return 100.0 * _badpix_flags(e, kind.param, False), metric.id, metric.unit
+    raise SpecError(f"measure {measure!r} is not a mean of per-pixel losses: use abs, mse_x100 or badpix_<t>")
 
 
 def _signflip_p(sums: np.ndarray, n: int, rng: np.random.Generator) -> float:

@@ -29,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from lfbench.scoring.metrics import find_metric
 from lfbench.scoring.stats import pixel_loss
 from lfbench.utils.atomic import write_bytes, write_text
 
@@ -51,11 +52,14 @@ __all__ = [
 ]
 
 DEFAULT_FRACTIONS = np.round(np.arange(100) * 0.01, 2)  # 0, 0.01, ..., 0.99 removed
-_UNITS = {"abs": "px", "mse_x100": "px^2 x 100"}
 
 
 def _unit_of(measure: str) -> str:
-    return _UNITS.get(measure, "%" if measure.startswith("badpix") else "")
+    """The unit of a measure: px for 'abs', else the metric's own (lfbench.scoring.metrics registry)."""
+    if measure == "abs":
+        return "px"
+    metric = find_metric(measure)
+    return metric.unit if metric is not None else ""
 
 
 @dataclass(frozen=True)
