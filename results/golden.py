@@ -25,8 +25,8 @@ import torch
 from lfbench.data.scene import Benchmark
 from lfbench.data.synth import write_benchmark
 from lfbench.method.registry import REGISTRY, create, offline_variants
+from lfbench.runs.folder import evaluate_to_folder
 from lfbench.runs.regress import make_golden
-from lfbench.runs.runner import evaluate
 
 SYNTH = {"seed": 0, "size": 96, "scenes": 3}
 SYNTH_METHODS = ("planesweep", "subfocal", "lfattnet")
@@ -53,14 +53,14 @@ def main(argv: list[str] | None = None) -> int:
             method = create(name, **params)
             if method.available_for(scenes[0]) is None:
                 methods.append(method)
-    results = evaluate(methods, scenes, progress=False)
+    more = []
     if args.hci is not None:
         published = args.hci.parent / "published" / "subfocal"
         if published.is_dir():
             real = [s for s in Benchmark.discover(args.hci) if s.has_gt()]
-            results.extend(evaluate([create("published", path=published)], real, progress=False))
-    results.meta["golden_setup"] = {"synthetic": SYNTH, "hci": str(args.hci) if args.hci else None}
-    results.write(args.out)
+            more.append(([create("published", path=published)], real))
+    meta = {"golden_setup": {"synthetic": SYNTH, "hci": str(args.hci) if args.hci else None}}
+    results = evaluate_to_folder(methods, scenes, args.out, more=more, tables=False, meta=meta, progress=False)
     print(f"{len(results.records)} records from {', '.join(results.methods)} -> {args.out / 'results.json'}")
     if args.update is not None:
         n = make_golden(results, TOLERANCES, args.update)

@@ -404,5 +404,5 @@ def test_evaluate_rates_uncertainty_maps(data, capsys):
         ("planesweep:interval=0.5", "alpha", m) for m in ("abs", "badpix_0.07")}
     for r in rows:
         assert float(r["ause"]) >= 0 and int(r["n_pixels"]) == (SIZE - 30) ** 2
-    assert "note: gt predicts no uncertainty map" in out and "AUSE" in out
+    assert "note: gt predicts no uncertainty map" in err and "AUSE" in out  # notes are log messages (stderr)
     assert (data["out"] / "figures" / "sparsification_abs.png").is_file()

@@ -2,6 +2,7 @@
 ``HELP``, ``add_arguments(parser)`` and ``run(args) -> int``; heavy imports happen inside run().
 
 Errors caused by input (files, specs, options) print one line on stderr and exit with code 2.
+Library messages go through ``logging`` and are shown on stderr (``-v``: also debug, ``-q``: only warnings).
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ import sys
 from collections.abc import Sequence
 
 from lfbench.utils.errors import LFBenchError
+from lfbench.utils.log import configure_cli_logging
 
 COMMANDS = {
     "evaluate": "lfbench.cli.evaluate",
@@ -42,6 +44,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     parser = _Parser(prog="lfbench", description="Light-field depth estimation on the HCI 4D Light Field Benchmark.")
     parser.add_argument("--version", action="version", version=f"lfbench {__version__}")
+    parser.add_argument("-v", "--verbose", action="count", default=0, help="more messages (debug)")
+    parser.add_argument("-q", "--quiet", dest="log_quiet", action="store_true",
+                        help="only warnings and errors on stderr")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     for name, module_name in COMMANDS.items():
         module = importlib.import_module(module_name)
@@ -57,6 +62,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not getattr(args, "_run", None):
         parser.print_help()
         return 2
+    configure_cli_logging(-1 if args.log_quiet else args.verbose)
     try:
         return int(args._run(args) or 0)
     except LFBenchError as exc:

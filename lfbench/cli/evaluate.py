@@ -41,74 +41,26 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import functools
-
     from lfbench.data.scene import Benchmark
     from lfbench.method.registry import create_from_spec
-    from lfbench.reports.tables import per_scene_table, render, write_tables
-    from lfbench.runs.runner import evaluate, save_prediction
-    from lfbench.scoring.metrics import GENERAL_METRICS
+    from lfbench.reports.tables import per_scene_table, render
+    from lfbench.runs.folder import CIOptions, evaluate_to_folder
     from lfbench.scoring.rules import ScoringRules
+    from lfbench.utils.errors import DataError
 
     methods = [create_from_spec(spec) for spec in args.method]  # spec errors before any work
-    bench = Benchmark.discover(args.data)
-    scenes = bench.select([s for s in args.scenes.split(",") if s.strip()])
+    scenes = Benchmark.discover(args.data).select([s for s in args.scenes.split(",") if s.strip()])
     scenes = [s for s in scenes if s.has_gt()]
     if not scenes:
-        from lfbench.utils.errors import DataError
-
         raise DataError("none of the selected scenes has ground truth (gt_disp_lowres.pfm)", args.data)
     rules = ScoringRules(toolkit=args.toolkit_nonfinite, allow_highres=not args.lowres_only)
-    hooks = []
-    if args.save_maps:
-        hooks.append(save_prediction(args.out / "maps"))
-    if args.figures:
-        from lfbench.reports.figures import scene_figure_hook
-
-        hooks.append(scene_figure_hook(args.out / "figures", rules=rules))
-
-    if args.ci:
-        from lfbench.scoring.stats import ErrorCollector
-
-        collector = ErrorCollector(rules)
-        hooks.append(collector)
-
-    if args.uncertainty:
-        from lfbench.scoring.uncertainty import UncertaintyCollector
-
-        rater = UncertaintyCollector(rules)
-        hooks.append(rater)
-
-    def on_prediction(method, scene, pred):
-        for hook in hooks:
-            hook(method, scene, pred)
-
-    metrics = GENERAL_METRICS
-    if args.all_metrics:
-        from lfbench.scoring.region_metrics import applicable_metrics
-
-        metrics = functools.partial(applicable_metrics, rules=rules)
-    results = evaluate(methods, scenes, metrics=metrics, rules=rules, on_prediction=on_prediction if hooks else None,
-                       progress=not args.no_progress)
-    results.meta["data_root"] = str(args.data)
-    results.write(args.out)
-    write_tables(results, args.out)
-    if args.ci:
-        from lfbench.scoring.stats import ci_records, format_ci_table
-        from lfbench.utils.atomic import write_text
-
-        long = ci_records(results, collector.errors, n=args.ci_resamples, block=args.ci_block,
-                          progress=not args.no_progress)
-        write_text(args.out / "ci.csv", long.to_csv(index=False))
-        for fmt, ext in (("markdown", "md"), ("latex", "tex"), ("csv", "csv")):
-            write_text(args.out / f"table_ci_per_scene.{ext}", render(format_ci_table(long), fmt))
-    if args.uncertainty:
-        from lfbench.scoring.uncertainty import write_uncertainty_report
-
-        if write_uncertainty_report(rater, args.out):
-            print((args.out / "table_uncertainty.md").read_text(encoding="utf-8"))
-        for label in sorted(rater.without):
-            print(f"note: {label} predicts no uncertainty map; not rated")
+    results = evaluate_to_folder(
+        methods, scenes, args.out, rules=rules, all_metrics=args.all_metrics, save_maps=args.save_maps,
+        figures=args.figures,
+        ci=CIOptions(resamples=args.ci_resamples, block=args.ci_block) if args.ci else None,
+        uncertainty=args.uncertainty, meta={"data_root": str(args.data)}, progress=not args.no_progress)
+    if args.out / "table_uncertainty.md" in results.files:
+        print((args.out / "table_uncertainty.md").read_text(encoding="utf-8"))
     print(render(per_scene_table(results), "markdown"), end="")
     print(f"\nwrote {args.out / 'results.json'} and {args.out / 'results.csv'}")
     return 0

@@ -69,9 +69,8 @@ def _map_folders(maps: Path, labels: list[str]) -> dict[str, Path]:
 
 def run(args: argparse.Namespace) -> int:
     from lfbench.reports import figures as fig
-    from lfbench.reports.tables import average_table, per_scene_table, render
+    from lfbench.reports.tables import average_table, per_scene_table, render, write_table
     from lfbench.runs.results import Results
-    from lfbench.utils.atomic import write_text
     from lfbench.utils.errors import DataError
 
     formats = parse_formats(args.format)
@@ -98,12 +97,8 @@ def run(args: argparse.Namespace) -> int:
 
         tables["per_scene_paper"] = per_scene_with_paper(per_scene, paper, paper_methods)
         tables["average_paper"] = average_with_paper(average, paper, results.scenes, paper_methods)
-    written = []
-    for name, table in tables.items():
-        for fmt, ext in formats:
-            path = args.out / f"table_{name}.{ext}"
-            write_text(path, render(table, fmt))
-            written.append(path)
+    written = [path for name, table in tables.items() for path in write_table(table, args.out, f"table_{name}",
+                                                                              formats=formats)]
 
     fig_dir = args.out / "figures"
     if args.maps is not None:

@@ -96,13 +96,38 @@ def render(table: pd.DataFrame, fmt: str = "markdown", floatfmt: str = ".3f") ->
     return tabulate(rows, headers=headers, tablefmt=fmt_name, disable_numparse=True) + "\n"
 
 
+#: The formats every table is written in: (render format, file extension).
+TABLE_FORMATS: tuple[tuple[str, str], ...] = (("markdown", "md"), ("latex", "tex"), ("csv", "csv"))
+
+
+def render_with_caption(table: pd.DataFrame, fmt: str, caption: Sequence[str] = ()) -> str:
+    """:func:`render` with caption lines above the table: Markdown lines (hard breaks) or LaTeX
+    comments; CSV stays a plain table."""
+    body = render(table, fmt)
+    if not caption:
+        return body
+    if fmt == "markdown":
+        return "".join(f"{line}  \n" for line in caption) + "\n" + body
+    if fmt == "latex":
+        return "".join(f"% {line}\n" for line in caption) + body
+    return body
+
+
+def write_table(table: pd.DataFrame, out_dir: str | Path, stem: str, caption: Sequence[str] = (), *,
+                formats: Sequence[tuple[str, str]] = TABLE_FORMATS) -> list[Path]:
+    """Write one table as OUT/<stem>.<ext> for each (format, ext) of ``formats`` (atomically);
+    returns the paths."""
+    written = []
+    for fmt, ext in formats:
+        path = Path(out_dir) / f"{stem}.{ext}"
+        write_text(path, render_with_caption(table, fmt, caption))
+        written.append(path)
+    return written
+
+
 def write_tables(results: Results, out_dir: str | Path, stem: str = "table") -> list[Path]:
     """Write per-scene and average tables as .md, .tex and .csv into out_dir; returns the paths."""
-    out = Path(out_dir)
     written = []
     for name, table in (("per_scene", per_scene_table(results)), ("average", average_table(results))):
-        for fmt, ext in (("markdown", "md"), ("latex", "tex"), ("csv", "csv")):
-            path = out / f"{stem}_{name}.{ext}"
-            write_text(path, render(table, fmt))
-            written.append(path)
+        written += write_table(table, out_dir, f"{stem}_{name}")
     return written

@@ -14,9 +14,9 @@ from __future__ import annotations
 
 import inspect
 import json
+import logging
 import os
 import shutil
-import sys
 import tempfile
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -30,10 +30,7 @@ CATEGORY = "synthetic"
 DEFAULT_SEED, DEFAULT_SIZE, DEFAULT_SCENES = 0, 128, 4
 
 Log = Callable[[str], None]
-
-
-def _stderr(msg: str) -> None:
-    print(msg, file=sys.stderr)
+_log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -61,7 +58,7 @@ def _describe(s: dict) -> str:
     return f"seed={s.get('seed')}, size={s.get('size')}, scenes={s.get('scenes')} ({s.get('generator')})"
 
 
-def prepare_data(out: Path, seed: int, size: int, scenes: int, log: Log = _stderr) -> tuple[Path, bool]:
+def prepare_data(out: Path, seed: int, size: int, scenes: int, log: Log = _log.info) -> tuple[Path, bool]:
     """The demo's data root OUT/data, generated now or reused. Returns (root, reused).
 
     Refuses (DataError) a folder holding data of other settings, or a non-empty folder that is not
@@ -126,7 +123,7 @@ def split_specs(text: str) -> list[str]:
     return specs
 
 
-def select_methods(requested: Sequence | None, scenes: Sequence, log: Log = _stderr) -> tuple[list, dict[str, str]]:
+def select_methods(requested: Sequence | None, scenes: Sequence, log: Log = _log.info) -> tuple[list, dict[str, str]]:
     """The methods to run and the skipped ones (name -> one-line reason).
 
     Without ``requested`` methods: every registered method whose parameters all have defaults
@@ -173,50 +170,25 @@ def select_methods(requested: Sequence | None, scenes: Sequence, log: Log = _std
 
 def run_demo(out: str | Path = "lfbench-demo", *, seed: int = DEFAULT_SEED, size: int = DEFAULT_SIZE,
              scenes: int = DEFAULT_SCENES, methods: Sequence[str] | None = None, figures: bool = True,
-             progress: bool = True, log: Log = _stderr) -> DemoOutcome:
+             progress: bool = True, log: Log = _log.info) -> DemoOutcome:
     """Generate (or reuse) the demo data under ``out``, run and score the methods, write results,
-    tables and figures. Returns a :class:`DemoOutcome`."""
+    tables and figures (lfbench.runs.folder.evaluate_to_folder). Returns a :class:`DemoOutcome`."""
     from lfbench.data.scene import Benchmark
-    from lfbench.reports.tables import write_tables
-    from lfbench.runs.runner import evaluate
-    from lfbench.scoring.rules import ScoringRules
+    from lfbench.method.registry import create_from_spec
+    from lfbench.runs.folder import evaluate_to_folder
 
     if int(scenes) != scenes or scenes < 1:
         raise SpecError(f"--scenes must be a positive integer, got {scenes}")
-    from lfbench.method.registry import create_from_spec
-
     out = Path(out)
     requested = [create_from_spec(s) for s in methods] if methods else None  # spec errors before any work
     root, reused = prepare_data(out, seed, size, scenes, log)
     scene_list = [s for s in Benchmark.discover(root) if s.has_gt()]
     chosen, skipped = select_methods(requested, scene_list, log)
-    rules = ScoringRules()
-    hook = tmp_fig = None
+    results = evaluate_to_folder(chosen, scene_list, out, figures=figures, progress=progress, meta={
+        "data_root": str(root), "demo": data_settings(seed, size, scenes), "skipped_methods": skipped})
+    files: dict[str, Path] = {"results.json": out / "results.json", "results.csv": out / "results.csv",
+                              "tables": out, "data": root}
     if figures:
-        from lfbench.reports.figures import scene_figure_hook
-
-        tmp_fig = Path(tempfile.mkdtemp(prefix=f".{FIGURES_DIR}.", suffix=".tmp", dir=out))
-        hook = scene_figure_hook(tmp_fig, rules=rules)
-    try:
-        results = evaluate(chosen, scene_list, rules=rules, on_prediction=hook, progress=progress)
-        files: dict[str, Path] = {}
-        if tmp_fig is not None:  # replace the figures of an earlier run as a whole: never a mix of two runs
-            final = out / FIGURES_DIR
-            if final.exists():
-                old = Path(tempfile.mkdtemp(prefix=f".{FIGURES_DIR}.", suffix=".old", dir=out))
-                os.replace(final, old / FIGURES_DIR)
-                shutil.rmtree(old, ignore_errors=True)
-            os.replace(tmp_fig, final)
-            tmp_fig = None
-            files["figures"] = final
-    finally:
-        if tmp_fig is not None:
-            shutil.rmtree(tmp_fig, ignore_errors=True)
-    results.meta.update({"data_root": str(root), "demo": data_settings(seed, size, scenes),
-                         "skipped_methods": skipped})
-    files["results.json"], files["results.csv"] = results.write(out)
-    tables = write_tables(results, out)
-    files["tables"] = tables[0].parent
-    files["data"] = root
+        files["figures"] = out / FIGURES_DIR
     return DemoOutcome(results=results, methods=[m.label for m in chosen], skipped=skipped, files=files,
                        reused_data=reused)

@@ -51,6 +51,7 @@ class Results:
     records: list[Record] = field(default_factory=list)
     runs: list[RunInfo] = field(default_factory=list)
     meta: dict[str, Any] = field(default_factory=dict)
+    files: list[Path] = field(default_factory=list, repr=False, compare=False)  # written by this run; not saved
 
     # ------------------------------------------------------------------ access
     @property

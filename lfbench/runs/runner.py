@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -14,6 +15,8 @@ from lfbench.method.base import Method, Prediction
 from lfbench.runs.results import Record, Results, RunInfo
 from lfbench.scoring.metrics import GENERAL_METRICS, Metric
 from lfbench.scoring.rules import ScoringRules, score_scene
+
+log = logging.getLogger(__name__)
 
 PredictionHook = Callable[[Method, Scene, Prediction], None]
 _NONFINITE_RULE = {False: "counted as bad pixels",
@@ -29,8 +32,8 @@ def evaluate(methods: Sequence[Method], scenes: Sequence[Scene], *,
     ``metrics``: the metrics for every scene, or a function of the scene giving them (e.g.
     ``lfbench.scoring.region_metrics.applicable_metrics``).
 
-    A (method, scene) pair the method cannot serve (e.g. no stored map) is skipped with a note on
-    stderr. ``on_prediction`` sees each prediction (to save maps or draw figures).
+    A (method, scene) pair the method cannot serve (e.g. no stored map) is skipped with a warning
+    (logger ``lfbench.runs.runner``). ``on_prediction`` sees each prediction (to save maps or draw figures).
     """
     results = Results(meta={"scoring": {"border_px": rules.border_px, "toolkit_nonfinite": rules.toolkit,
                                         "highres_scenes": sorted(rules.highres_scenes)}})
@@ -40,7 +43,7 @@ def evaluate(methods: Sequence[Method], scenes: Sequence[Scene], *,
         bar.set_postfix_str(f"{method.label} / {scene.name}"[-60:])
         reason = method.available_for(scene)
         if reason is not None:
-            tqdm.write(f"lfbench: skipping {method.label} on {scene.name}: {reason}", file=sys.stderr)
+            log.warning("lfbench: skipping %s on %s: %s", method.label, scene.name, reason)
             continue
         pred = method.run(scene)
         if on_prediction is not None:
@@ -52,10 +55,10 @@ def evaluate(methods: Sequence[Method], scenes: Sequence[Scene], *,
         results.runs.append(RunInfo(method.label, scene.name, float(pred.runtime_s or np.nan), score.nonfinite_pixels,
                                     list(score.aligned_from) if score.aligned_from else None, score.notes))
         for note in score.notes:
-            tqdm.write(f"lfbench: {method.label} on {scene.name}: {note}", file=sys.stderr)
+            log.warning("lfbench: %s on %s: %s", method.label, scene.name, note)
         if score.nonfinite_pixels:
-            tqdm.write(f"lfbench: {method.label} on {scene.name}: {score.nonfinite_pixels} non-finite pixels "
-                       f"inside the evaluation mask ({_NONFINITE_RULE[rules.toolkit]})", file=sys.stderr)
+            log.warning("lfbench: %s on %s: %d non-finite pixels inside the evaluation mask (%s)", method.label,
+                        scene.name, score.nonfinite_pixels, _NONFINITE_RULE[rules.toolkit])
     return results
 
 

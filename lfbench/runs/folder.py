@@ -1,0 +1,154 @@
+"""Evaluate into a folder: run methods on scenes, score them as the benchmark does and write every
+output file of a run. The one orchestration behind ``lfbench evaluate``, ``lfbench demo``,
+results/golden.py and the ablation cells.
+
+Files in OUT: results.json, results.csv (always); table_per_scene.{md,tex,csv} and
+table_average.{md,tex,csv} (``tables``); maps/<method>/ in the submission layout (``save_maps``);
+figures/ (``figures``: per-scene overviews and BadPix series, drawn into a temporary folder that
+replaces OUT/figures as a whole, so figures of two runs never mix); ci.csv and
+table_ci_per_scene.{md,tex,csv} (``ci``); uncertainty.csv, table_uncertainty.md and
+figures/sparsification_*.png (``uncertainty``, when a method predicts an uncertainty map).
+"""
+
+from __future__ import annotations
+
+import functools
+import logging
+import os
+import shutil
+import tempfile
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+from lfbench.data.scene import Scene
+from lfbench.method.base import Method
+from lfbench.runs.results import Results
+from lfbench.runs.runner import PredictionHook, evaluate, save_prediction
+from lfbench.scoring.metrics import GENERAL_METRICS, Metric
+from lfbench.scoring.rules import ScoringRules
+
+__all__ = ["CIOptions", "evaluate_to_folder", "replace_folder"]
+
+log = logging.getLogger(__name__)
+
+FIGURES_DIR = "figures"
+
+
+@dataclass(frozen=True)
+class CIOptions:
+    """Bootstrap confidence intervals of every number (lfbench.scoring.stats.ci_records).
+
+    resamples: bootstrap resamples; block: tile size in prediction px of the block bootstrap
+    (None or 1: independent pixels); seed: of the resampling."""
+
+    resamples: int = 1000
+    block: int | None = 16
+    seed: int = 0
+
+
+def replace_folder(tmp: Path, final: Path) -> None:
+    """Move the finished folder ``tmp`` to ``final``, replacing an existing ``final`` as a whole."""
+    if final.exists():
+        old = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".old", dir=final.parent))
+        os.replace(final, old / final.name)
+        shutil.rmtree(old, ignore_errors=True)
+    os.replace(tmp, final)
+
+
+def evaluate_to_folder(methods: Sequence[Method], scenes: Sequence[Scene], out: str | Path, *,
+                       rules: ScoringRules = ScoringRules(), metrics: Sequence[Metric] | None = None,
+                       all_metrics: bool = False,
+                       more: Sequence[tuple[Sequence[Method], Sequence[Scene]]] = (),
+                       label: str | None = None, on_prediction: PredictionHook | None = None,
+                       save_maps: bool = False, figures: bool = False, ci: CIOptions | None = None,
+                       uncertainty: bool = False, tables: bool = True, meta: Mapping[str, Any] | None = None,
+                       progress: bool = True) -> Results:
+    """Run every method on every scene, score and write the run into ``out``; returns the Results.
+
+    metrics: the metrics of every scene (default the general ones); all_metrics: also the region and
+    stratified metrics wherever the scene has their mask files. more: further (methods, scenes)
+    groups scored with the same rules into the same results (e.g. stored maps on real scenes beside
+    a synthetic run). label: the name the records get instead of the method's label (one method
+    only). on_prediction: a further hook that sees each prediction. meta: added to results.meta.
+    The other options add the files listed in the module docstring; ``results.files`` lists every
+    file and folder written.
+    """
+    out = Path(out)
+    if label is not None and len(methods) != 1:
+        raise ValueError("label= names the records of a single method")
+    hooks: list[PredictionHook] = [] if on_prediction is None else [on_prediction]
+    if save_maps:
+        hooks.append(save_prediction(out / "maps"))
+    tmp_fig = None
+    if figures:
+        from lfbench.reports.figures import scene_figure_hook
+
+        out.mkdir(parents=True, exist_ok=True)
+        tmp_fig = Path(tempfile.mkdtemp(prefix=f".{FIGURES_DIR}.", suffix=".tmp", dir=out))
+        hooks.append(scene_figure_hook(tmp_fig, rules=rules))
+    collector = rater = None
+    if ci is not None:
+        from lfbench.scoring.stats import ErrorCollector
+
+        collector = ErrorCollector(rules)
+        hooks.append(collector)
+    if uncertainty:
+        from lfbench.scoring.uncertainty import UncertaintyCollector
+
+        rater = UncertaintyCollector(rules)
+        hooks.append(rater)
+
+    def each_prediction(method, scene, pred) -> None:
+        for hook in hooks:
+            hook(method, scene, pred)
+
+    chosen = metrics if metrics is not None else GENERAL_METRICS
+    if all_metrics:
+        from lfbench.scoring.region_metrics import applicable_metrics
+
+        chosen = functools.partial(applicable_metrics, rules=rules)
+    run = functools.partial(evaluate, metrics=chosen, rules=rules, on_prediction=each_prediction if hooks else None,
+                            progress=progress)
+    try:
+        results = run(methods, scenes)
+        for group_methods, group_scenes in more:
+            results.extend(run(group_methods, group_scenes))
+        if tmp_fig is not None:
+            replace_folder(tmp_fig, out / FIGURES_DIR)
+            tmp_fig = None
+    finally:
+        if tmp_fig is not None:
+            shutil.rmtree(tmp_fig, ignore_errors=True)
+    if label is not None:
+        results.records = [replace(r, method=label) for r in results.records]
+        results.runs = [replace(r, method=label) for r in results.runs]
+    results.meta.update(meta or {})
+    files: list[Path] = list(results.write(out))
+    if figures:
+        files.append(out / FIGURES_DIR)
+    if save_maps:
+        files.append(out / "maps")
+    if tables:
+        from lfbench.reports.tables import write_tables
+
+        files += write_tables(results, out)
+    if collector is not None:
+        from lfbench.reports.tables import write_table
+        from lfbench.scoring.stats import ci_records, format_ci_table
+        from lfbench.utils.atomic import write_text
+
+        long = ci_records(results, collector.errors, n=ci.resamples, seed=ci.seed, block=ci.block,
+                          progress=progress)
+        write_text(out / "ci.csv", long.to_csv(index=False))
+        files.append(out / "ci.csv")
+        files += write_table(format_ci_table(long), out, "table_ci_per_scene")
+    if rater is not None:
+        from lfbench.scoring.uncertainty import write_uncertainty_report
+
+        files += write_uncertainty_report(rater, out)
+        for name in sorted(rater.without):
+            log.info("note: %s predicts no uncertainty map; not rated", name)
+    results.files = files
+    return results

@@ -1,0 +1,43 @@
+"""Logging for the command line. Library modules log through ``logging.getLogger(__name__)`` and never
+print; the CLI installs one handler (:func:`configure_cli_logging`) that writes the messages as they
+are to stderr, through tqdm so that progress bars stay intact."""
+
+from __future__ import annotations
+
+import logging
+import sys
+from typing import IO
+
+__all__ = ["LOGGERS", "configure_cli_logging"]
+
+#: The loggers the CLI shows: the library and the bundled methods.
+LOGGERS = ("lfbench", "lfbench_methods")
+
+
+class _TqdmHandler(logging.StreamHandler):
+    """A stream handler that writes through ``tqdm.write`` (progress bars are redrawn below)."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        try:
+            from tqdm import tqdm
+
+            tqdm.write(self.format(record), file=self.stream)
+            self.flush()
+        except Exception:  # logging must never raise
+            self.handleError(record)
+
+
+def configure_cli_logging(verbosity: int = 0, stream: IO[str] | None = None) -> logging.Handler:
+    """Show INFO and above on ``stream`` (default: the current sys.stderr); ``verbosity`` > 0 adds
+    DEBUG, < 0 shows only warnings and errors. Replaces the handler of an earlier call (a process may
+    run main() more than once, e.g. in tests)."""
+    level = logging.DEBUG if verbosity > 0 else logging.WARNING if verbosity < 0 else logging.INFO
+    handler = _TqdmHandler(stream if stream is not None else sys.stderr)
+    handler.setFormatter(logging.Formatter("%(message)s"))
+    for name in LOGGERS:
+        logger = logging.getLogger(name)
+        for old in [h for h in logger.handlers if isinstance(h, _TqdmHandler)]:
+            logger.removeHandler(old)
+        logger.addHandler(handler)
+        logger.setLevel(level)
+    return handler
