@@ -58,6 +58,22 @@ def test_demo_writes_scored_results_tables_and_figures(demo):
         assert all(v > 0 for v in ps)
 
 
+def test_demo_saves_its_maps_and_an_html_report_ranking_its_methods(demo):
+    import re
+
+    out, stdout, _ = demo
+    for m in _methods():
+        assert {p.stem for p in (out / "maps" / m / "disp_maps").glob("*.pfm")} == SCENES
+    index = (out / "html" / "index.html").read_text(encoding="utf-8")
+    overview = index.split('id="table-overview"', 1)[1].split("</table>", 1)[0]
+    ranked = re.findall(r'<th scope="row" data-v="([^"]*)"', overview)
+    assert ranked[0] == "gt" and sorted(ranked) == sorted(_methods())  # the oracle ranks first
+    for scene in SCENES:
+        page = (out / "html" / f"scene-{scene}.html").read_text(encoding="utf-8")
+        assert all(f"img/{scene}/{m}.badpix.png" in page for m in _methods())
+    assert str(out / "html" / "index.html") in stdout
+
+
 def test_rerun_reuses_matching_data_and_refuses_other_settings(demo, capsys):
     out, _, _ = demo
     manifest = out / "data" / MANIFEST

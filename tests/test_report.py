@@ -111,7 +111,8 @@ def test_no_copy_of_the_paper_tables_ships_with_lfbench():
     shipped = [p for top in ("lfbench", "methods") for p in (ROOT / top).rglob("table*.csv")]
     assert shipped == []
     package_data = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["package-data"]
-    assert package_data["lfbench"] == ["py.typed"]
+    assert package_data["lfbench"] == ["py.typed", "reports/site_assets/*"]  # the HTML report's templates
+    assert not [p for p in (ROOT / "lfbench" / "reports" / "site_assets").iterdir() if p.suffix == ".csv"]
 
 
 def test_find_paper_dir_order_and_error(tmp_path, monkeypatch):

@@ -3,8 +3,9 @@ run offline, score them as the benchmark does, and write results, tables and fig
 
 Files: OUT/data/ (the synthetic scenes, HCI layout), OUT/results.json, OUT/results.csv,
 OUT/table_per_scene.{md,tex,csv}, OUT/table_average.{md,tex,csv}, OUT/figures/ (per-scene overviews,
-BadPix-series curves). Re-running into OUT reuses its data when seed, size and scenes match, and
-refuses otherwise.
+BadPix-series curves), OUT/maps/ (every method's disparity maps) and OUT/html/index.html (the HTML
+report: open it in a browser, no server needed). Re-running into OUT reuses its data when seed, size
+and scenes match, and refuses otherwise.
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--methods", action="append", metavar="SPEC,...",
                    help="methods to run, comma-separated specs (default: every registered method that runs offline)")
     p.add_argument("--no-figures", action="store_true", help="skip the figures")
+    p.add_argument("--no-html", action="store_true", help="skip the HTML report (OUT/html/index.html)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
@@ -40,7 +42,7 @@ def run(args: argparse.Namespace) -> int:
     specs = [s for text in (args.methods or []) for s in split_specs(text)] or None
     start = time.perf_counter()
     outcome = run_demo(args.out, seed=args.seed, size=args.size, scenes=args.scenes, methods=specs,
-                       figures=not args.no_figures, progress=not args.no_progress)
+                       figures=not args.no_figures, html=not args.no_html, progress=not args.no_progress)
     print(f"lfbench demo: {len(outcome.results.scenes)} synthetic scene(s), {len(outcome.methods)} method(s), "
           f"{time.perf_counter() - start:.1f} s\n")
     print(render(average_table(outcome.results), "markdown"), end="")
@@ -50,5 +52,7 @@ def run(args: argparse.Namespace) -> int:
     if "figures" in outcome.files:
         print(f"figures: {outcome.files['figures']}/overview_<scene>.png, "
               f"{outcome.files['figures'] / 'badpix_series.png'}")
+    if "html" in outcome.files:
+        print(f"report:  {outcome.files['html']} (open it in a browser)")
     print(f"data:    {outcome.files['data']} (HCI layout; try `lfbench evaluate --data {outcome.files['data']} ...`)")
     return 0

@@ -33,6 +33,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="tile size of the block bootstrap (1 = independent pixels; errors of neighbours correlate)")
     p.add_argument("--ci-resamples", type=int, default=1000, metavar="N", help="bootstrap resamples")
     p.add_argument("--figures", action="store_true", help="also draw per-scene figures into OUT/figures/")
+    p.add_argument("--html", action="store_true",
+                   help="also write a static HTML report OUT/html/index.html (implies --save-maps; opens offline)")
     p.add_argument("--uncertainty", action="store_true",
                    help="also rate each method's uncertainty map (SubFocal: std of its distribution): "
                         "sparsification curves and AUSE/AURG in OUT/uncertainty.csv, OUT/table_uncertainty.md "
@@ -55,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
         raise DataError("none of the selected scenes has ground truth (gt_disp_lowres.pfm)", args.data)
     rules = ScoringRules(toolkit=args.toolkit_nonfinite, allow_highres=not args.lowres_only)
     results = evaluate_to_folder(
-        methods, scenes, args.out, rules=rules, all_metrics=args.all_metrics, save_maps=args.save_maps,
+        methods, scenes, args.out, rules=rules, all_metrics=args.all_metrics, save_maps=args.save_maps or args.html,
         figures=args.figures,
         ci=CIOptions(resamples=args.ci_resamples, block=args.ci_block) if args.ci else None,
         uncertainty=args.uncertainty, meta={"data_root": str(args.data)}, progress=not args.no_progress)
@@ -63,4 +65,8 @@ def run(args: argparse.Namespace) -> int:
         print((args.out / "table_uncertainty.md").read_text(encoding="utf-8"))
     print(render(per_scene_table(results), "markdown"), end="")
     print(f"\nwrote {args.out / 'results.json'} and {args.out / 'results.csv'}")
+    if args.html:
+        from lfbench.reports.html import build_site_from_dir
+
+        print(f"HTML report: {build_site_from_dir(args.out, data_root=args.data)}")
     return 0

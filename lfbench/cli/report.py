@@ -8,6 +8,12 @@ $LFBENCH_HCI_ROOT/../paper. The BadPix series (t = 0 .. 0.1 px) come from the cu
 `evaluate --figures` run saved (RESULTS_DIR/figures/badpix_series.csv, or --curves CSV); without them, from the BadPix
 thresholds the results hold (0.01, 0.03, 0.07). With --maps (maps saved by `evaluate --save-maps`)
 the per-scene overviews and exact curves are drawn from the saved maps.
+
+With --html, OUT/html/index.html: a self-contained static site (leaderboard with ranks, a page per
+scene with every method's maps, a page per method; opens from the file system, no network) drawn
+from the results, the saved maps (--maps, default RESULTS_DIR/maps) and the scenes (--data, default
+the data root the results record). With saved maps, OUT/figures/toolkit/ holds the toolkit's figure
+types for papers (radar, error heatmaps, pairwise comparisons) in --figure-format.
 """
 
 from __future__ import annotations
@@ -37,6 +43,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="saved maps (OUT/maps of `evaluate --save-maps`): draw per-scene overviews from them")
     p.add_argument("--data", type=Path, metavar="ROOT",
                    help="the data root of the scenes, for --maps (default: the one recorded in the results)")
+    p.add_argument("--html", action="store_true",
+                   help="also write a static HTML report OUT/html/index.html (opens offline, no server)")
+    p.add_argument("--figure-format", default="png", metavar="FMTS",
+                   help="comma-separated formats of the toolkit figures drawn from saved maps: png, pdf, svg")
 
 
 def parse_formats(text: str) -> list[tuple[str, str]]:
@@ -53,18 +63,16 @@ def parse_formats(text: str) -> list[tuple[str, str]]:
     return out
 
 
-def _map_folders(maps: Path, labels: list[str]) -> dict[str, Path]:
-    """Method label -> submission folder under ``maps`` (folder names as evaluate --save-maps writes them)."""
-    from lfbench.reports.figures import safe_name
-    from lfbench.utils.errors import DataError
+def parse_figure_formats(text: str) -> list[str]:
+    from lfbench.reports.toolkit_figures import FIGURE_FORMATS
+    from lfbench.utils.errors import SpecError
 
-    if (maps / "disp_maps").is_dir():
-        return {maps.name: maps}
-    folders = {p.name: p for p in sorted(maps.iterdir()) if (p / "disp_maps").is_dir()} if maps.is_dir() else {}
-    if not folders:
-        raise DataError("no saved maps found (expected <method>/disp_maps/<scene>.pfm)", maps)
-    by_safe = {safe_name(label): label for label in labels}
-    return {by_safe.get(name, name): path for name, path in folders.items()}
+    out = list(dict.fromkeys(s.strip().lower() for s in text.split(",") if s.strip()))
+    bad = [f for f in out if f not in FIGURE_FORMATS]
+    if bad or not out:
+        raise SpecError(f"--figure-format: unknown format {', '.join(bad) or '(none)'}; "
+                        f"use {', '.join(FIGURE_FORMATS)}")
+    return out
 
 
 def run(args: argparse.Namespace) -> int:
@@ -74,6 +82,7 @@ def run(args: argparse.Namespace) -> int:
     from lfbench.utils.errors import DataError
 
     formats = parse_formats(args.format)
+    figure_formats = parse_figure_formats(args.figure_format)
     results = Results.read(args.results)
     if not results.records:
         raise DataError("the results hold no records", args.results)
@@ -109,8 +118,14 @@ def run(args: argparse.Namespace) -> int:
             raise DataError("--maps needs --data ROOT (the results do not record their data root)", args.results)
         bench = Benchmark.discover(root)
         scenes = [s for s in bench if s.name in set(results.scenes) and s.has_gt()]
-        writer = fig.figures_from_maps(scenes, _map_folders(args.maps, results.methods), fig_dir)
+        from lfbench.reports.maps import map_folders
+        from lfbench.reports.toolkit_figures import write_toolkit_figures
+
+        folders = map_folders(args.maps, results.methods)
+        writer = fig.figures_from_maps(scenes, folders, fig_dir)
         written += sorted(writer.written)
+        written += write_toolkit_figures(results, scenes, folders, fig_dir / "toolkit", formats=figure_formats,
+                                         border_px=int((results.meta.get("scoring") or {}).get("border_px", 15)))
         source = f"saved maps in {args.maps}"
     elif curves_path.is_file():
         written += fig.draw_badpix_curves(fig.read_curves_csv(curves_path), fig_dir)
@@ -122,6 +137,14 @@ def run(args: argparse.Namespace) -> int:
                                               markers=True))
         source = "the BadPix thresholds in the results (no curves saved: run evaluate --figures for full curves)"
 
+    if args.html:
+        from lfbench.reports.html import SITE_DIR, build_site, site_inputs_from_dir
+
+        inputs = site_inputs_from_dir(args.results, data_root=args.data, maps=args.maps, paper=paper,
+                                      paper_methods=paper_methods or ("SubFocal",))
+        index = build_site(inputs, args.out / SITE_DIR)
+        written.append(index)
+        print(f"HTML report: {index}")
     print(render(tables.get("average_paper", average), "markdown"), end="")
     print(f"\nBadPix series from {source}")
     print(f"wrote {len(written)} files into {args.out}: tables table_*.{{{','.join(e for _, e in formats)}}}, "

@@ -230,11 +230,12 @@ def _pyplot():
 
 
 def save_figure(fig: Any, path: str | Path, dpi: int = DPI) -> Path:
-    """Write a matplotlib figure as PNG atomically and close it."""
+    """Write a matplotlib figure as PNG atomically and close it (no 'Software' metadata: the PNG
+    carries no link, so it can go into the offline HTML report)."""
     plt = _pyplot()
     buf = io.BytesIO()
     try:
-        fig.savefig(buf, format="png", dpi=dpi)
+        fig.savefig(buf, format="png", dpi=dpi, metadata={"Software": None})
     finally:
         plt.close(fig)
     write_bytes(path, buf.getvalue())

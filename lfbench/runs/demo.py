@@ -2,12 +2,13 @@
 
 Generates synthetic light fields (lfbench.data.synth, HCI layout with exact ground truth) under
 OUT/data/, runs every registered method that can run offline on them, scores them as the benchmark
-does, and writes OUT/results.json, OUT/results.csv, the tables (table_per_scene.*, table_average.*)
-and the figures (OUT/figures/).
+does, and writes OUT/results.json, OUT/results.csv, the tables (table_per_scene.*, table_average.*),
+the figures (OUT/figures/), every method's disparity maps (OUT/maps/<method>/, submission layout) and
+the HTML report (OUT/html/index.html, rebuilt from those files by ``lfbench report OUT --html``).
 
 Re-running into the same folder reuses the generated data when it was made with the same seed,
 size and number of scenes (OUT/data/demo.json records them) and refuses otherwise: data of two
-settings are never mixed. Results, tables and figures of a re-run replace the old ones.
+settings are never mixed. Results, tables, figures, maps and report of a re-run replace the old ones.
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ from pathlib import Path
 from lfbench.utils.errors import DataError, LFBenchError, SpecError
 
 MANIFEST = "demo.json"
-DATA_DIR, FIGURES_DIR = "data", "figures"
+DATA_DIR, FIGURES_DIR, MAPS_DIR, HTML_DIR = "data", "figures", "maps", "html"
 CATEGORY = "synthetic"
 DEFAULT_SEED, DEFAULT_SIZE, DEFAULT_SCENES = 0, 128, 4
 
@@ -170,12 +171,15 @@ def select_methods(requested: Sequence | None, scenes: Sequence, log: Log = _log
 
 def run_demo(out: str | Path = "lfbench-demo", *, seed: int = DEFAULT_SEED, size: int = DEFAULT_SIZE,
              scenes: int = DEFAULT_SCENES, methods: Sequence[str] | None = None, figures: bool = True,
-             progress: bool = True, log: Log = _log.info) -> DemoOutcome:
+             html: bool = True, progress: bool = True, log: Log = _log.info) -> DemoOutcome:
     """Generate (or reuse) the demo data under ``out``, run and score the methods, write results,
-    tables and figures (lfbench.runs.folder.evaluate_to_folder). Returns a :class:`DemoOutcome`."""
+    tables and figures (lfbench.runs.folder.evaluate_to_folder), every method's maps (OUT/maps,
+    replacing an earlier run's as a whole) and, with ``html``, the HTML report (OUT/html).
+    Returns a :class:`DemoOutcome`."""
     from lfbench.data.scene import Benchmark
     from lfbench.method.registry import create_from_spec
-    from lfbench.runs.folder import evaluate_to_folder
+    from lfbench.runs.folder import evaluate_to_folder, replace_folder
+    from lfbench.runs.runner import save_prediction
 
     if int(scenes) != scenes or scenes < 1:
         raise SpecError(f"--scenes must be a positive integer, got {scenes}")
@@ -184,11 +188,22 @@ def run_demo(out: str | Path = "lfbench-demo", *, seed: int = DEFAULT_SEED, size
     root, reused = prepare_data(out, seed, size, scenes, log)
     scene_list = [s for s in Benchmark.discover(root) if s.has_gt()]
     chosen, skipped = select_methods(requested, scene_list, log)
-    results = evaluate_to_folder(chosen, scene_list, out, figures=figures, progress=progress, meta={
-        "data_root": str(root), "demo": data_settings(seed, size, scenes), "skipped_methods": skipped})
+    tmp_maps = Path(tempfile.mkdtemp(prefix=f".{MAPS_DIR}.", suffix=".tmp", dir=out))
+    try:
+        results = evaluate_to_folder(chosen, scene_list, out, figures=figures, progress=progress,
+                                     on_prediction=save_prediction(tmp_maps), meta={
+                                         "data_root": str(root), "demo": data_settings(seed, size, scenes),
+                                         "skipped_methods": skipped})
+        replace_folder(tmp_maps, out / MAPS_DIR)
+    finally:
+        shutil.rmtree(tmp_maps, ignore_errors=True)
     files: dict[str, Path] = {"results.json": out / "results.json", "results.csv": out / "results.csv",
-                              "tables": out, "data": root}
+                              "tables": out, "data": root, "maps": out / MAPS_DIR}
     if figures:
         files["figures"] = out / FIGURES_DIR
+    if html:
+        from lfbench.reports.html import build_site_from_dir
+
+        files["html"] = build_site_from_dir(out, out / HTML_DIR)
     return DemoOutcome(results=results, methods=[m.label for m in chosen], skipped=skipped, files=files,
                        reused_data=reused)

@@ -1,0 +1,557 @@
+"""A self-contained static HTML report of a run: opens from the file system with no server and no
+network (the CSS, the table-sorting script and every image are files of the site; nothing refers to
+an http(s) resource).
+
+Layout of the site folder (``OUT/html`` by default)::
+
+    index.html              leaderboard: average ranks, one sortable table per metric (value and rank per
+                            scene, mean, average rank; bootstrap intervals when computed; the paper's
+                            numbers in labelled columns with --paper), radar chart, BadPix series
+    scene-<scene>.html      centre view, ground truth, and every method's disparity, BadPix and signed
+                            error maps at one colour scale; pairwise comparisons, error heatmaps
+    method-<method>.html    one method's numbers and ranks on every scene, its radar chart and maps
+    assets/                 site.css, site.js
+    img/                    PNG images (maps are drawn from the saved maps at low resolution)
+
+Every number states its resolution (lowres / highres) as the tables do. The site is written into a
+temporary folder and renamed into place when complete.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+import shutil
+import tempfile
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from lfbench.reports import figures as fig
+from lfbench.reports import toolkit_figures as tk
+from lfbench.reports.leaderboard import metric_info, metric_table, overall_ranks
+from lfbench.reports.maps import MAPS_DIR, SceneMaps, load_scene_maps, map_folders
+from lfbench.runs.results import Results
+from lfbench.scoring.rules import ScoringRules
+from lfbench.utils.atomic import write_text
+from lfbench.utils.errors import DataError
+
+__all__ = ["SITE_DIR", "SiteInputs", "build_site", "build_site_from_dir", "site_inputs_from_dir"]
+
+log = logging.getLogger(__name__)
+
+SITE_DIR = "html"
+ASSETS = ("site.css", "site.js")
+MAX_ALL_PAIRS = 5  # up to this many methods: every pair on a scene page; more: each against the best
+FLOATFMT = ".3f"
+
+
+@dataclass
+class SiteInputs:
+    """Everything a site is drawn from. ``scenes``: light fields (ground truth, centre view);
+    ``maps``: method label -> submission folder of its saved maps; ``ci``: the long bootstrap frame
+    of lfbench.scoring.stats.ci_records (ci.csv), or None; ``paper``: PaperTables or None."""
+
+    results: Results
+    scenes: Sequence[Any] = ()
+    maps: Mapping[str, Path] = field(default_factory=dict)
+    ci: pd.DataFrame | None = None
+    paper: Any = None
+    paper_methods: Sequence[str] = ("SubFocal",)
+    title: str = "lfbench results"
+    notes: Sequence[str] = ()
+
+
+# --------------------------------------------------------------------------- helpers
+
+def _fmt(v: Any, floatfmt: str = FLOATFMT) -> str:
+    if v is None or (isinstance(v, float) and math.isnan(v)):
+        return "–"
+    if isinstance(v, (float, np.floating)):
+        return "∞" if math.isinf(v) else format(float(v), floatfmt)
+    return str(v)
+
+
+def _sort_value(v: Any) -> str:
+    """The data-v attribute the sorting script reads: a number, or '' (sorted last)."""
+    try:
+        f = float(v)
+    except (TypeError, ValueError):
+        return ""
+    return repr(f) if math.isfinite(f) else ""
+
+
+def page_name(kind: str, label: str) -> str:
+    """File name of a scene or method page."""
+    return f"{kind}-{fig.safe_name(label)}.html"
+
+
+def _ci_lookup(ci: pd.DataFrame | None) -> dict[tuple[str, str, str], tuple[float, float]]:
+    if ci is None or ci.empty:
+        return {}
+    out = {}
+    for r in ci.itertuples(index=False):
+        if np.isfinite(r.low) and np.isfinite(r.high):
+            out[(r.method, r.scene, r.metric)] = (float(r.low), float(r.high))
+    return out
+
+
+def _cell(value: Any, rank: Any = None, resolution: str | None = None, ci: tuple[float, float] | None = None,
+          best: bool = False) -> dict[str, Any]:
+    return {"text": _fmt(value), "v": _sort_value(value), "rank": None if rank is None or not np.isfinite(rank)
+            else int(rank), "res": resolution, "ci": None if ci is None else f"[{_fmt(ci[0])}, {_fmt(ci[1])}]",
+            "best": best}
+
+
+# --------------------------------------------------------------------------- tables
+
+def _metric_section(results: Results, metric: str, ci: Mapping, scene_pages: Mapping[str, str],
+                    method_pages: Mapping[str, str]) -> dict[str, Any]:
+    info = metric_info(metric)
+    table = metric_table(results, metric)
+    scenes = list(dict.fromkeys(s for s, k in table.columns if s not in ("mean", "average rank")))
+    header = []
+    for s in scenes:
+        res = sorted(set(table[(s, "resolution")].dropna()))
+        header.append({"label": s, "res": "/".join(res), "href": scene_pages.get(s)})
+    rows = []
+    for method in table.index:
+        r = table.loc[method]
+        cells = []
+        for s, h in zip(scenes, header, strict=True):
+            res = r[(s, "resolution")]
+            rank = r[(s, "rank")]
+            cells.append(_cell(r[(s, "value")], rank, res if isinstance(res, str) and res != h["res"] else None,
+                               ci.get((method, s, metric)), best=rank == 1))
+        mean_ci = ci.get((method, "(mean)", metric))
+        rows.append({"method": method, "href": method_pages.get(method), "cells": cells,
+                     "mean": _cell(r[("mean", "value")], ci=mean_ci), "mean_res": r[("mean", "resolution")],
+                     "avg_rank": _cell(r[("average rank", "value")])})
+    mean_res = "+".join(sorted({x for row in rows for x in str(row["mean_res"]).split("+") if x and x != "nan"}))
+    return {"id": metric, "name": info.name, "unit": info.unit, "description": info.description,
+            "direction": "higher is better" if info.higher_is_better else "lower is better",
+            "scenes": header, "rows": rows, "mean_res": mean_res}
+
+
+def _paper_section(results: Results, metric: str, paper: Any, paper_methods: Sequence[str]) -> dict[str, Any] | None:
+    """Rows scene (our scenes the paper reports), columns our methods then the paper's, labelled."""
+    from lfbench.reports.paper import PAPER_RESOLUTION_COLUMN, paper_column, per_scene_with_paper
+    from lfbench.reports.tables import per_scene_table
+
+    table = per_scene_with_paper(per_scene_table(results, [metric]), paper, paper_methods)
+    if table.empty:
+        return None
+    table = table.xs(metric, level="metric")
+    ours = [c for c in table.columns if c not in ("resolution", PAPER_RESOLUTION_COLUMN)
+            and not str(c).endswith(" (paper)")]
+    theirs = [paper_column(paper.resolve_method(m)) for m in paper_methods]
+    if table[theirs].isna().all().all():
+        return None
+    rows = []
+    for scene, r in table.iterrows():
+        rows.append({"scene": scene, "res": r["resolution"], "paper_res": r[PAPER_RESOLUTION_COLUMN],
+                     "ours": [_cell(r[c]) for c in ours], "theirs": [_cell(r[c]) for c in theirs]})
+    return {"ours": ours, "theirs": theirs, "rows": rows, "source": str(paper.source)}
+
+
+def _overview(results: Results, method_pages: Mapping[str, str], paper: Any,
+              paper_methods: Sequence[str]) -> dict[str, Any]:
+    from lfbench.reports.tables import _metric_order
+
+    metrics = _metric_order(results.metrics)
+    ranks = overall_ranks(results)
+    df = results.to_frame()
+    runtime = {}
+    for r in results.runs:
+        runtime.setdefault(r.method, []).append(r.runtime_s)
+    columns = []
+    for m in metrics:
+        res = "+".join(sorted(set(df.loc[df["metric"] == m, "resolution"])))
+        columns.append({"id": m, "name": metric_info(m).name, "res": res})
+    from lfbench.reports.tables import average_table
+
+    means = average_table(results)
+    rows = []
+    for method in results.methods:
+        cells = [_cell(means.loc[method, m] if m in means.columns else float("nan")) for m in metrics]
+        rt = [v for v in runtime.get(method, []) if v is not None and np.isfinite(v)]
+        n = df.loc[df["method"] == method, "scene"].nunique()
+        rows.append({"method": method, "href": method_pages.get(method), "rank": _cell(ranks.get(method)),
+                     "cells": cells, "runtime": _cell(float(np.mean(rt)) if rt else float("nan")), "scenes": n})
+    rows.sort(key=lambda r: (r["rank"]["v"] == "", float(r["rank"]["v"] or 0)))
+    for pos, row in enumerate(rows, start=1):
+        row["pos"] = pos
+    paper_rows = []
+    if paper is not None:
+        from lfbench.reports.paper import average_with_paper
+
+        table = average_with_paper(means, paper, results.scenes, paper_methods)
+        for label in table.index[len(results.methods):]:
+            paper_rows.append({"method": label, "cells": [_cell(table.loc[label].get(m)) for m in metrics],
+                               "scenes": int(table.loc[label, "scenes"])})
+    return {"columns": columns, "rows": rows, "paper_rows": paper_rows}
+
+
+# --------------------------------------------------------------------------- images
+
+class _Images:
+    """Writes the site's PNGs under img/ and hands back their relative paths."""
+
+    def __init__(self, root: Path) -> None:
+        self.root = root
+
+    def rgb(self, rel: str, rgb: np.ndarray) -> str:
+        fig.write_image(self.root / rel, rgb)
+        return rel
+
+    def colorbar(self, cmap: str) -> str:
+        rel = f"img/colorbar_{cmap}.png"
+        if not (self.root / rel).is_file():
+            import matplotlib
+
+            row = matplotlib.colormaps[cmap](np.linspace(0, 1, 256))[None, :, :3]
+            fig.write_image(self.root / rel, np.repeat(row, 12, axis=0))
+        return rel
+
+
+def _legend(images: _Images, disp_range: tuple[float, float]) -> list[dict[str, Any]]:
+    return [
+        {"label": "disparity (px)", "src": images.colorbar(fig.DISPARITY_CMAP),
+         "lo": f"{disp_range[0]:.2f}", "hi": f"{disp_range[1]:.2f}"},
+        {"label": "gt − pred (px)", "src": images.colorbar(fig.ERROR_CMAP),
+         "lo": f"−{fig.ERROR_LIMIT:g}", "hi": f"+{fig.ERROR_LIMIT:g}"},
+        {"label": "|A − gt| − |B − gt| (px): blue A better, red B better", "src": images.colorbar(tk.PAIRWISE_CMAP),
+         "lo": f"−{tk.PAIRWISE_LIMIT:g}", "hi": f"+{tk.PAIRWISE_LIMIT:g}"},
+        {"label": "median |gt − pred| over methods (px)", "src": images.colorbar(tk.HEATMAP_CMAP),
+         "lo": "0", "hi": f"≥ {tk.MEDIAN_ERROR_LIMIT:g}"},
+    ]
+
+
+def _scene_images(sm: SceneMaps, images: _Images, threshold: float, pair_threshold: float,
+                  order: Sequence[str]) -> dict[str, Any]:
+    """Draw one scene's panels; returns what the scene page and method pages show."""
+    d = f"img/{fig.safe_name(sm.name)}"
+    out: dict[str, Any] = {"centre": images.rgb(f"{d}/centre.png", sm.centre), "gt": None, "methods": {},
+                           "pairs": [], "heatmaps": None, "size": f"{sm.centre.shape[1]}×{sm.centre.shape[0]}"}
+    if sm.gt is not None:
+        out["gt"] = images.rgb(f"{d}/gt.png", fig.disparity_image(sm.gt, *sm.disp_range))
+    labels = [m for m in order if m in sm.preds]
+    for label in labels:
+        pred = sm.preds[label]
+        stem = f"{d}/{fig.safe_name(label)}"
+        entry = {"disp": images.rgb(f"{stem}.disp.png", fig.disparity_image(pred, *sm.disp_range)),
+                 "badpix": None, "error": None, "badpix_percent": None}
+        if sm.gt is not None:
+            codes = fig.badpix_codes(sm.gt, pred, sm.mask, threshold)
+            scored = np.count_nonzero(codes != fig.OUTSIDE)
+            entry["badpix_percent"] = 100.0 * np.count_nonzero(codes == fig.BAD) / scored if scored else None
+            entry["badpix"] = images.rgb(f"{stem}.badpix.png", fig.badpix_image(codes, sm.centre))
+            entry["error"] = images.rgb(f"{stem}.error.png", fig.signed_error_image(sm.gt, pred, sm.mask))
+        out["methods"][label] = entry
+    if sm.gt is None or not labels:
+        return out
+    preds = [sm.preds[m] for m in labels]
+    med = tk.median_error_map(sm.gt, preds, sm.mask)
+    frac = tk.bad_fraction_map(sm.gt, preds, sm.mask, threshold)
+    out["heatmaps"] = {"median": images.rgb(f"{d}/heatmap_median.png", tk.heatmap_image(med, 0, tk.MEDIAN_ERROR_LIMIT)),
+                       "fraction": images.rgb(f"{d}/heatmap_badfraction.png", tk.heatmap_image(frac, 0, 100)),
+                       "n": len(labels), "threshold": threshold}
+    if len(labels) <= MAX_ALL_PAIRS:
+        pairs = [(a, b) for i, a in enumerate(labels) for b in labels[i + 1:]]
+    else:
+        pairs = [(labels[0], b) for b in labels[1:]]
+    for k, (a, b) in enumerate(pairs):
+        codes = tk.pairwise_classes(sm.gt, sm.preds[a], sm.preds[b], sm.mask, pair_threshold)
+        share = tk.pairwise_shares(codes)
+        rgb = tk.pairwise_image(sm.gt, sm.preds[a], sm.preds[b], sm.mask, pair_threshold, background=sm.centre)
+        out["pairs"].append({"a": a, "b": b, "src": images.rgb(f"{d}/pairwise_{k}.png", rgb),
+                             "a_better": _fmt(share["a_better"], ".1f"), "b_better": _fmt(share["b_better"], ".1f"),
+                             "tie": _fmt(share["tie"], ".1f")})
+    return out
+
+
+# --------------------------------------------------------------------------- the site
+
+def _environment():
+    import jinja2
+
+    return jinja2.Environment(loader=jinja2.PackageLoader("lfbench.reports", "site_assets"),
+                              autoescape=jinja2.select_autoescape(["html"]), undefined=jinja2.StrictUndefined,
+                              trim_blocks=True, lstrip_blocks=True)
+
+
+def _meta_lines(results: Results) -> list[str]:
+    meta = results.meta
+    lines = []
+    scoring = meta.get("scoring") or {}
+    if scoring:
+        rule = ("toolkit rule (BadPix counts NaN as good)" if scoring.get("toolkit_nonfinite")
+                else "non-finite predictions count as bad pixels")
+        highres = ", ".join(scoring.get("highres_scenes", [])) or "no scene"
+        lines.append(f"Scoring: {scoring.get('border_px', 15)} px border ignored; {rule}; "
+                     f"high resolution where available for {highres}.")
+    if meta.get("created"):
+        lines.append(f"Created {meta['created']} with lfbench {meta.get('lfbench_version', '?')}.")
+    return lines
+
+
+def build_site(inputs: SiteInputs, out: str | Path, *, threshold: float = fig.BADPIX_THRESHOLD,
+               pairwise_threshold: float = tk.PAIRWISE_THRESHOLD, border_px: int | None = None) -> Path:
+    """Write the site into folder ``out`` (replacing an earlier site there as a whole); returns the
+    path of index.html."""
+    results = inputs.results
+    if not results.records:
+        raise DataError("the results hold no records; nothing to report")
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise DataError("exists and is not a folder", out)
+    border = border_px if border_px is not None else int((results.meta.get("scoring") or {}).get("border_px", 15))
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent))
+    try:
+        _write_site(inputs, tmp, threshold, pairwise_threshold, border)
+        if out.exists():
+            old = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".old", dir=out.parent))
+            os.replace(out, old / out.name)
+            shutil.rmtree(old, ignore_errors=True)
+        os.replace(tmp, out)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return out / "index.html"
+
+
+def _write_site(inputs: SiteInputs, root: Path, threshold: float, pair_threshold: float, border: int) -> None:
+    from importlib.resources import files
+
+    results = inputs.results
+    env = _environment()
+    assets = files("lfbench.reports").joinpath("site_assets")
+    for name in ASSETS:
+        write_text(root / "assets" / name, assets.joinpath(name).read_text(encoding="utf-8"))
+    images = _Images(root)
+    methods = results.methods
+    scenes_by_name = {s.name: s for s in inputs.scenes}
+    scene_names = [s for s in results.scenes]
+    scene_pages = {s: page_name("scene", s) for s in scene_names}
+    method_pages = {m: page_name("method", m) for m in methods}
+    ci = _ci_lookup(inputs.ci)
+    metrics = _metric_order(results.metrics)
+    sections = [_metric_section(results, m, ci, scene_pages, method_pages) for m in metrics]
+    paper_sections = {}
+    if inputs.paper is not None:
+        for m in metrics:
+            sec = _paper_section(results, m, inputs.paper, inputs.paper_methods)
+            if sec is not None:
+                paper_sections[m] = sec
+    overview = _overview(results, method_pages, inputs.paper, inputs.paper_methods)
+
+    # maps, drawn scene by scene (one scene's arrays in memory at a time)
+    drawn: dict[str, dict[str, Any]] = {}
+    curves: list[fig.Curve] = []
+    rules = _rules(results)
+    for name in scene_names:
+        scene = scenes_by_name.get(name)
+        if scene is None:
+            continue
+        sm = load_scene_maps(scene, inputs.maps, border)
+        order = [m for m in _scene_order(results, name) if m in sm.preds]
+        drawn[name] = _scene_images(sm, images, threshold, pair_threshold, order)
+        drawn[name]["legend"] = _legend(images, sm.disp_range)
+        for label in order:
+            if hasattr(scene, "has_gt"):
+                c = fig.scene_curve(label, scene, sm.preds[label], rules)
+                if c is not None:
+                    curves.append(c)
+        if curves and any(c.scene == name for c in curves):
+            series = {c.method: (c.thresholds, c.values) for c in curves if c.scene == name}
+            res = "/".join(sorted({c.resolution for c in curves if c.scene == name}))
+            path = root / "img" / fig.safe_name(name) / "badpix_series.png"
+            fig.plot_badpix_series(series, path, f"BadPix series, {name} ({res})")
+            drawn[name]["series"] = f"img/{fig.safe_name(name)}/badpix_series.png"
+        del sm
+    figures = {}
+    if curves:
+        avg = fig.average_curves(curves)
+        series = {f"{m} ({k} scene{'s' if k != 1 else ''})": (t, v) for m, (t, v, k) in avg.items()}
+        fig.plot_badpix_series(series, root / "img" / "badpix_series.png", "BadPix series, mean over scenes")
+        figures["series"] = "img/badpix_series.png"
+    else:
+        series = fig.curves_from_records(results)
+        if series:
+            fig.plot_badpix_series(series, root / "img" / "badpix_series.png",
+                                   "BadPix at the thresholds in the results, mean over scenes", markers=True)
+            figures["series"] = "img/badpix_series.png"
+    radar = tk.radar_scores(results)
+    radar_ok = len(radar.index) >= 3
+    if radar_ok:
+        tk.plot_radar(radar, root / "img" / "radar.png")
+        figures["radar"] = "img/radar.png"
+        figures["radar_metrics"] = ", ".join(metric_info(m).name for m in radar.index)
+
+    common = {"title": inputs.title, "methods": [{"label": m, "href": method_pages[m]} for m in methods],
+              "scenes": [{"label": s, "href": scene_pages[s]} for s in scene_names],
+              "meta": _meta_lines(results) + list(inputs.notes)}
+    index = env.get_template("index.html").render(
+        **common, page="index", overview=overview, sections=sections, paper=paper_sections,
+        paper_source=str(inputs.paper.source) if inputs.paper is not None else None, figures=figures,
+        scene_cards=[{"label": s, "href": scene_pages[s], "thumb": drawn.get(s, {}).get("centre"),
+                      "res": "/".join(sorted({r.resolution for r in results.records if r.scene == s}))}
+                     for s in scene_names],
+        has_ci=bool(ci), threshold=threshold)
+    write_text(root / "index.html", index)
+    for s in scene_names:
+        write_text(root / scene_pages[s], env.get_template("scene.html").render(
+            **common, page="scene", scene=s, maps=drawn.get(s), scene_table=_scene_table(results, s, method_pages),
+            threshold=threshold, pair_threshold=pair_threshold, border=border))
+    for m in methods:
+        radar_src = None
+        if radar_ok and m in radar.columns:
+            rel = f"img/radar_{fig.safe_name(m)}.png"
+            tk.plot_radar(radar, root / rel, highlight=m, title=f"{m} against the other methods (median over scenes)")
+            radar_src = rel
+        write_text(root / method_pages[m], env.get_template("method.html").render(
+            **common, page="method", method=m, method_table=_method_table(results, m, scene_pages, ci),
+            radar=radar_src, maps=[{"scene": s, "href": scene_pages[s], **drawn[s]["methods"][m]}
+                                   for s in scene_names if s in drawn and m in drawn[s]["methods"]],
+            threshold=threshold))
+
+
+def _metric_order(metrics: Sequence[str]) -> list[str]:
+    from lfbench.reports.tables import _metric_order as order
+
+    return order(metrics)
+
+
+def _rules(results: Results) -> ScoringRules:
+    scoring = results.meta.get("scoring") or {}
+    kwargs: dict[str, Any] = {}
+    if "border_px" in scoring:
+        kwargs["border_px"] = int(scoring["border_px"])
+    if "highres_scenes" in scoring:
+        kwargs["highres_scenes"] = frozenset(scoring["highres_scenes"])
+    if "toolkit_nonfinite" in scoring:
+        kwargs["toolkit"] = bool(scoring["toolkit_nonfinite"])
+    highres_used = any(r.resolution == "highres" for r in results.records)
+    return ScoringRules(**kwargs, allow_highres=highres_used or not results.records)
+
+
+def _scene_order(results: Results, scene: str) -> list[str]:
+    """Methods on a scene, best BadPix(0.07) (else first metric) first."""
+    from lfbench.reports.leaderboard import metric_ranks
+
+    metric = "badpix_0.07" if "badpix_0.07" in results.metrics else _metric_order(results.metrics)[0]
+    ranks = metric_ranks(results, metric)
+    ranks = ranks[ranks["scene"] == scene]
+    order = dict(zip(ranks["method"], ranks["rank"].fillna(np.inf), strict=True))
+    return sorted(results.methods, key=lambda m: (order.get(m, np.inf), results.methods.index(m)))
+
+
+def _scene_table(results: Results, scene: str, method_pages: Mapping[str, str]) -> dict[str, Any]:
+    """Rows method, columns metric: the value with its rank on this scene."""
+    from lfbench.reports.leaderboard import metric_ranks
+
+    metrics = [m for m in _metric_order(results.metrics)]
+    cols, by = [], {}
+    for m in metrics:
+        long = metric_ranks(results, m)
+        long = long[long["scene"] == scene]
+        if long.empty:
+            continue
+        cols.append({"id": m, "name": metric_info(m).name, "res": "/".join(sorted(set(long["resolution"])))})
+        for r in long.itertuples(index=False):
+            by[(r.method, m)] = (r.value, r.rank)
+    rows = []
+    for method in _scene_order(results, scene):
+        if not any((method, c["id"]) in by for c in cols):
+            continue
+        cells = [_cell(*by.get((method, c["id"]), (float("nan"), None)), best=by.get((method, c["id"]),
+                                                                                     (0, 0))[1] == 1) for c in cols]
+        rows.append({"method": method, "href": method_pages.get(method), "cells": cells})
+    return {"columns": cols, "rows": rows}
+
+
+def _method_table(results: Results, method: str, scene_pages: Mapping[str, str], ci: Mapping) -> dict[str, Any]:
+    """Rows scene, columns metric: the method's value and rank among all methods on that scene."""
+    from lfbench.reports.leaderboard import metric_ranks
+
+    metrics = _metric_order(results.metrics)
+    by, res = {}, {}
+    for m in metrics:
+        long = metric_ranks(results, m)
+        n = long.groupby("scene")["rank"].count()
+        for r in long[long["method"] == method].itertuples(index=False):
+            by[(r.scene, m)] = (r.value, r.rank, int(n.get(r.scene, 0)))
+            res[(r.scene, m)] = r.resolution
+    cols = [{"id": m, "name": metric_info(m).name} for m in metrics if any(k[1] == m for k in by)]
+    rows = []
+    for s in results.scenes:
+        if not any((s, c["id"]) in by for c in cols):
+            continue
+        cells = []
+        for c in cols:
+            v, rank, _ = by.get((s, c["id"]), (float("nan"), None, 0))
+            cells.append(_cell(v, rank, res.get((s, c["id"])), ci.get((method, s, c["id"])), best=rank == 1))
+        rows.append({"scene": s, "href": scene_pages.get(s), "cells": cells})
+    return {"columns": cols, "rows": rows, "n_methods": len(results.methods)}
+
+
+# --------------------------------------------------------------------------- from a results folder
+
+def site_inputs_from_dir(results_path: str | Path, *, data_root: str | Path | None = None,
+                         maps: str | Path | None = None, paper: Any = None,
+                         paper_methods: Sequence[str] = ("SubFocal",), title: str | None = None) -> SiteInputs:
+    """What a results folder holds for a site: results.json, ci.csv (when ``--ci`` ran), the saved maps
+    (``maps`` or RESULTS_DIR/maps when present) and the scenes of ``data_root`` (default: the data
+    root the results record, when it exists)."""
+    from lfbench.data.scene import Benchmark
+
+    results_path = Path(results_path)
+    results = Results.read(results_path)
+    folder = results_path if results_path.is_dir() else results_path.parent
+    ci = None
+    if (folder / "ci.csv").is_file():
+        try:
+            ci = pd.read_csv(folder / "ci.csv")
+        except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
+            raise DataError(f"not a readable CSV table: {str(exc).splitlines()[0]}", folder / "ci.csv") from None
+        missing = {"method", "scene", "metric", "low", "high"} - set(ci.columns)
+        if missing:
+            raise DataError(f"missing column(s) {', '.join(sorted(missing))}", folder / "ci.csv")
+    maps_dir = Path(maps) if maps is not None else folder / MAPS_DIR
+    folders = map_folders(maps_dir, results.methods) if (maps is not None or maps_dir.is_dir()) else {}
+    root = Path(data_root) if data_root is not None else (
+        Path(results.meta["data_root"]) if results.meta.get("data_root") else None)
+    scenes: list[Any] = []
+    notes = []
+    if root is not None and (data_root is not None or root.is_dir()):
+        wanted = set(results.scenes)
+        scenes = [s for s in Benchmark.discover(root) if s.name in wanted]
+    elif root is not None:
+        notes.append(f"The data root {root} recorded in the results is not here: no maps are shown "
+                     "(give --data ROOT).")
+    if not folders:
+        notes.append("No saved maps: scene pages show the numbers only (evaluate with --save-maps or --html).")
+    return SiteInputs(results=results, scenes=scenes, maps=folders, ci=ci, paper=paper, paper_methods=paper_methods,
+                      title=title or _default_title(results), notes=notes)
+
+
+def _default_title(results: Results) -> str:
+    if results.meta.get("demo"):
+        return "lfbench demo"
+    if (results.meta.get("ablation") or {}).get("title"):
+        return str(results.meta["ablation"]["title"])
+    return "lfbench results"
+
+
+def build_site_from_dir(results_path: str | Path, out: str | Path | None = None, **kwargs: Any) -> Path:
+    """:func:`site_inputs_from_dir` then :func:`build_site` into ``out`` (default RESULTS_DIR/html)."""
+    results_path = Path(results_path)
+    folder = results_path if results_path.is_dir() else results_path.parent
+    inputs = site_inputs_from_dir(results_path, **kwargs)
+    return build_site(inputs, Path(out) if out is not None else folder / SITE_DIR)

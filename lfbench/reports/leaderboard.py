@@ -1,0 +1,92 @@
+"""The benchmark's leaderboard numbers from a Results: per metric, each method's value and rank on every
+scene, its mean over scenes and its average rank; and the overall average rank over every (scene,
+metric). Pure DataFrames, used by the HTML report (lfbench.reports.html) and tested against
+hand-ranked cases.
+
+Ranking as on the benchmark's site: on each scene, methods are ranked by the metric's value (lower is
+better unless the metric says otherwise), 1 = best, ties share the best rank ("min" ranking), a
+method without a finite value on a scene is not ranked there. The average rank of a method is the
+mean of its ranks over the scenes (or scene x metric pairs) where it is ranked.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+__all__ = ["MetricInfo", "metric_info", "metric_ranks", "metric_table", "overall_ranks"]
+
+
+@dataclass(frozen=True)
+class MetricInfo:
+    """What the report says about a metric id."""
+
+    id: str
+    name: str
+    unit: str
+    description: str
+    higher_is_better: bool = False
+
+
+def metric_info(metric_id: str) -> MetricInfo:
+    """Name, unit and direction of a general, region or stratified metric id (the id itself, unit
+    unknown, lower better, for ids lfbench does not define)."""
+    from lfbench.scoring.metrics import find_metric
+
+    m = find_metric(metric_id)
+    if m is None:
+        return MetricInfo(metric_id, metric_id, "", "", False)
+    return MetricInfo(metric_id, m.name, m.unit, m.description, m.higher_is_better)
+
+
+def metric_ranks(results, metric: str) -> pd.DataFrame:
+    """Long frame of one metric: columns method, scene, value, resolution, rank (float, NaN where
+    the value is not finite)."""
+    df = results.to_frame()
+    df = df[df["metric"] == metric][["method", "scene", "value", "resolution"]].copy()
+    if df.empty:
+        return df.assign(rank=pd.Series(dtype=float))
+    ascending = not metric_info(metric).higher_is_better
+    finite = df["value"].where(np.isfinite(df["value"].astype(float)))
+    df["rank"] = finite.groupby(df["scene"]).rank(method="min", ascending=ascending)
+    return df.reset_index(drop=True)
+
+
+def metric_table(results, metric: str) -> pd.DataFrame:
+    """Wide frame of one metric, one row per method (in the results' order): columns
+    ``(scene, 'value' | 'rank' | 'resolution')`` for every scene, then ``('mean', 'value')`` (the
+    metric's aggregate over the method's scenes, the mean for every benchmark metric),
+    ``('mean', 'resolution')`` (the resolutions averaged, e.g.
+    'highres+lowres') and ``('average rank', 'value')``."""
+    long = metric_ranks(results, metric)
+    methods = [m for m in results.methods if m in set(long["method"])]
+    scenes = [s for s in results.scenes if s in set(long["scene"])]
+    cols = pd.MultiIndex.from_tuples([(s, k) for s in scenes for k in ("value", "rank", "resolution")]
+                                     + [("mean", "value"), ("mean", "resolution"), ("average rank", "value")])
+    table = pd.DataFrame(index=pd.Index(methods, name="method"), columns=cols, dtype=object)
+    for r in long.itertuples(index=False):
+        table.loc[r.method, (r.scene, "value")] = float(r.value)
+        table.loc[r.method, (r.scene, "rank")] = float(r.rank)
+        table.loc[r.method, (r.scene, "resolution")] = r.resolution
+    from lfbench.scoring.metrics import find_metric
+
+    found = find_metric(metric)
+    for method, g in long.groupby("method", sort=False):
+        values = g["value"].astype(float).to_numpy()
+        table.loc[method, ("mean", "value")] = float(found.aggregate(values) if found else np.nanmean(values))
+        table.loc[method, ("mean", "resolution")] = "+".join(sorted(set(g["resolution"])))
+        ranks = g["rank"].dropna()
+        table.loc[method, ("average rank", "value")] = float(ranks.mean()) if len(ranks) else float("nan")
+    return table
+
+
+def overall_ranks(results, metrics=None) -> pd.Series:
+    """Average rank of each method over every (scene, metric) where it is ranked, for ``metrics``
+    (default: all in the results); index method in the results' order."""
+    metrics = list(metrics) if metrics is not None else results.metrics
+    frames = [metric_ranks(results, m) for m in metrics]
+    long = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(columns=["method", "rank"])
+    mean = long.groupby("method")["rank"].mean()
+    return mean.reindex([m for m in results.methods]).astype(float)

@@ -1,0 +1,374 @@
+"""The official toolkit's comparison figures for any set of methods: pairwise comparison maps, error
+heatmaps over methods and radar charts over the region / stratified metrics (the BadPix series are in
+lfbench.reports.figures).
+
+Definitions (docs/hci-evaluation-reference.md, Figures; the toolkit's evaluations/*.py):
+
+- pairwise comparison of A and B on a scene: ``|A - gt| - |B - gt|`` (px) per pixel, drawn in the
+  diverging map over +-0.1 px (blue: A is better, red: B is better). Here a pixel is classed as
+  "A better" / "B better" when the difference exceeds ``threshold`` px, "tie" otherwise; a
+  non-finite prediction counts as an infinite error (as lfbench's BadPix counts it as bad);
+- error heatmaps: per pixel, the median over methods of ``|gt - pred|`` (px), and the toolkit's
+  percentage of methods with ``|gt - pred| > t`` (non-finite = bad);
+- radar chart: per method, the median (or mean) over scenes of each region / stratified metric (the
+  general metrics when the results hold none); each axis runs from 0 to 1.2 x the largest value
+  on it, offset by one ring as in the toolkit.
+
+The maps are compared at low resolution (the resolution of the saved maps). Every figure is first a
+pure array or DataFrame (tested against numpy), then drawn by ``plot_*`` into PNG (and PDF / SVG
+with ``formats``).
+"""
+
+from __future__ import annotations
+
+import io
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from lfbench.utils.atomic import write_bytes
+from lfbench.utils.errors import SpecError
+
+__all__ = [
+    "A_BETTER", "B_BETTER", "HEATMAP_CMAP", "OUTSIDE", "PAIRWISE_LIMIT", "PAIRWISE_THRESHOLD", "TIE",
+    "absolute_error", "bad_fraction_map", "heatmap_image", "median_error_map", "pairwise_classes",
+    "pairwise_difference", "pairwise_image", "pairwise_shares", "plot_error_heatmaps", "plot_pairwise",
+    "plot_radar", "radar_metric_ids", "radar_radii", "radar_scores", "save_formats", "write_toolkit_figures",
+]
+
+PAIRWISE_LIMIT = 0.1  # px, colour range of the pairwise maps (the toolkit's)
+PAIRWISE_THRESHOLD = 0.01  # px: smaller differences of absolute error are a tie
+HEATMAP_CMAP, PAIRWISE_CMAP = "inferno", "seismic"
+MEDIAN_ERROR_LIMIT = 0.2  # px, colour range of the median-error heatmap
+FIGURE_FORMATS = ("png", "pdf", "svg")
+
+# pairwise class codes
+OUTSIDE, TIE, A_BETTER, B_BETTER = 0, 1, 2, 3
+OUTSIDE_GREY, TIE_LIGHT = 0.45, 0.88
+
+
+# --------------------------------------------------------------------------- pure arrays
+
+def absolute_error(gt: np.ndarray, pred: np.ndarray) -> np.ndarray:
+    """|gt - pred| in px, (H, W) float32: +inf where the prediction is non-finite, NaN where gt is."""
+    gt = np.asarray(gt, dtype=np.float32)
+    pred = np.asarray(pred, dtype=np.float32)
+    if gt.shape != pred.shape:
+        raise SpecError(f"ground truth {gt.shape} and prediction {pred.shape} differ in shape")
+    with np.errstate(invalid="ignore"):
+        err = np.abs(gt - pred)
+    err = np.where(np.isfinite(pred), err, np.float32(np.inf))
+    return np.where(np.isfinite(gt), err, np.float32(np.nan)).astype(np.float32)
+
+
+def _scored(gt: np.ndarray, mask: np.ndarray | None) -> np.ndarray:
+    scored = np.isfinite(np.asarray(gt, dtype=np.float32))
+    return scored if mask is None else scored & np.asarray(mask, dtype=bool)
+
+
+def pairwise_difference(gt: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """|a - gt| - |b - gt| in px, (H, W) float32 (negative: A is better). +-inf where exactly one
+    prediction is non-finite, NaN where both are or gt is."""
+    with np.errstate(invalid="ignore"):
+        return (absolute_error(gt, a) - absolute_error(gt, b)).astype(np.float32)
+
+
+def pairwise_classes(gt: np.ndarray, a: np.ndarray, b: np.ndarray, mask: np.ndarray | None = None,
+                     threshold: float = PAIRWISE_THRESHOLD) -> np.ndarray:
+    """(H, W) uint8 codes: A_BETTER where |a - gt| < |b - gt| - threshold, B_BETTER where
+    |b - gt| < |a - gt| - threshold, TIE otherwise (both non-finite included), OUTSIDE outside
+    ``mask`` or where gt is non-finite."""
+    if threshold < 0:
+        raise SpecError(f"the pairwise threshold must be >= 0 px, got {threshold}")
+    diff = pairwise_difference(gt, a, b)
+    with np.errstate(invalid="ignore"):
+        codes = np.where(diff < -threshold, A_BETTER, np.where(diff > threshold, B_BETTER, TIE))
+    return np.where(_scored(gt, mask), codes, OUTSIDE).astype(np.uint8)
+
+
+def pairwise_shares(codes: np.ndarray) -> dict[str, float]:
+    """% of the scored pixels where A is better, B is better, and tied."""
+    scored = np.count_nonzero(codes != OUTSIDE)
+    if not scored:
+        return {"a_better": float("nan"), "b_better": float("nan"), "tie": float("nan")}
+    return {name: 100.0 * np.count_nonzero(codes == code) / scored
+            for name, code in (("a_better", A_BETTER), ("b_better", B_BETTER), ("tie", TIE))}
+
+
+def _cmap(name: str):
+    import matplotlib
+
+    return matplotlib.colormaps[name]
+
+
+def _gray(background: np.ndarray | None, shape: tuple[int, ...]) -> np.ndarray | None:
+    from lfbench.reports.figures import _as_gray
+
+    return _as_gray(background, shape)
+
+
+def pairwise_image(gt: np.ndarray, a: np.ndarray, b: np.ndarray, mask: np.ndarray | None = None,
+                   threshold: float = PAIRWISE_THRESHOLD, limit: float = PAIRWISE_LIMIT,
+                   background: np.ndarray | None = None) -> np.ndarray:
+    """(H, W, 3) float32 RGB: the difference in the diverging map over +-``limit`` (blue: A better,
+    red: B better) where one method is better by more than ``threshold``; ties light grey (a faint
+    copy of ``background``, the centre view), outside the mask dark grey."""
+    diff = pairwise_difference(gt, a, b)
+    codes = pairwise_classes(gt, a, b, mask, threshold)
+    t = np.clip((np.nan_to_num(diff, nan=0.0, posinf=limit, neginf=-limit) + limit) / (2 * limit), 0, 1)
+    rgb = _cmap(PAIRWISE_CMAP)(t)[..., :3].astype(np.float32)
+    gray = _gray(background, codes.shape)
+    tie = np.full(codes.shape, TIE_LIGHT, np.float32) if gray is None else 0.80 + 0.15 * gray
+    rgb[codes == TIE] = np.repeat(tie[..., None], 3, axis=2)[codes == TIE]
+    rgb[codes == OUTSIDE] = OUTSIDE_GREY
+    return rgb
+
+
+def median_error_map(gt: np.ndarray, preds: Sequence[np.ndarray], mask: np.ndarray | None = None) -> np.ndarray:
+    """Per pixel, the median over the methods' predictions of |gt - pred| (px), (H, W) float32; a
+    non-finite prediction is an infinite error; NaN outside ``mask`` and where gt is non-finite."""
+    if not len(preds):
+        raise SpecError("the median-error heatmap needs at least one method")
+    errors = np.stack([absolute_error(gt, p) for p in preds])
+    med = np.median(errors, axis=0).astype(np.float32)
+    return np.where(_scored(gt, mask), med, np.float32(np.nan))
+
+
+def bad_fraction_map(gt: np.ndarray, preds: Sequence[np.ndarray], mask: np.ndarray | None = None,
+                     threshold: float = 0.07) -> np.ndarray:
+    """The toolkit's error heatmap: per pixel, the % of methods with |gt - pred| > ``threshold`` px
+    (non-finite = bad), (H, W) float32; NaN outside ``mask`` and where gt is non-finite."""
+    if not len(preds):
+        raise SpecError("the error heatmap needs at least one method")
+    bad = np.stack([absolute_error(gt, p) > threshold for p in preds])
+    pct = (100.0 * bad.sum(axis=0) / len(preds)).astype(np.float32)
+    return np.where(_scored(gt, mask), pct, np.float32(np.nan))
+
+
+def heatmap_image(values: np.ndarray, vmin: float, vmax: float, cmap: str = HEATMAP_CMAP) -> np.ndarray:
+    """(H, W, 3) float32 RGB of ``values`` in ``cmap`` over [vmin, vmax] (clipped; +inf at the top);
+    NaN (outside the mask) dark grey."""
+    v = np.asarray(values, dtype=np.float64)
+    nan = np.isnan(v)
+    t = np.clip((np.nan_to_num(v, nan=vmin, posinf=vmax) - vmin) / max(vmax - vmin, 1e-12), 0, 1)
+    rgb = _cmap(cmap)(t)[..., :3].astype(np.float32)
+    rgb[nan] = OUTSIDE_GREY
+    return rgb
+
+
+# --------------------------------------------------------------------------- radar
+
+def radar_metric_ids(results: Any) -> list[str]:
+    """The metrics a radar chart shows: the region and stratified metrics the results hold, else the
+    general ones (in the tables' order)."""
+    from lfbench.reports.tables import _metric_order
+    from lfbench.scoring.metrics import find_metric
+
+    held = list(dict.fromkeys(r.metric for r in results.records))
+    region = [m for m in held if getattr(find_metric(m), "category", "general") in ("region", "stratified")]
+    return region or _metric_order(held)
+
+
+def radar_scores(results: Any, methods: Sequence[str] | None = None, metrics: Sequence[str] | None = None,
+                 average: str = "median") -> pd.DataFrame:
+    """The radar chart's numbers: rows metric ids, columns methods; each the median (or mean) over the
+    scenes where the method has that metric. Metrics no method has are dropped."""
+    if average not in ("median", "mean"):
+        raise SpecError(f"radar average must be 'median' or 'mean', got {average!r}")
+    df = results.to_frame()
+    methods = list(methods) if methods is not None else list(dict.fromkeys(df["method"]))
+    metrics = list(metrics) if metrics is not None else radar_metric_ids(results)
+    df = df[df["method"].isin(methods) & df["metric"].isin(metrics)]
+    table = df.groupby(["metric", "method"])["value"].agg(average).unstack("method")
+    table = table.reindex(index=[m for m in metrics if m in table.index], columns=methods)
+    return table.dropna(how="all")
+
+
+def radar_radii(scores: pd.DataFrame, rings: int = 4) -> pd.DataFrame:
+    """Radii in [0, 1] of :func:`radar_scores`, per axis as the toolkit draws them: the axis runs from 0
+    to vmax = 1.2 x the largest value on it (1 if that is <= 0), offset by one ring so 0 is not the
+    centre: r = (value + vmax / rings) / (vmax + vmax / rings)."""
+    vmax = scores.max(axis=1, skipna=True) * 1.2
+    vmax = vmax.where(vmax > 0, 1.0)
+    step = vmax / rings
+    return scores.add(step, axis=0).div(vmax + step, axis=0)
+
+
+# --------------------------------------------------------------------------- drawing
+
+def save_formats(fig: Any, path: str | Path, formats: Sequence[str] = ("png",), dpi: int = 110) -> list[Path]:
+    """Write ``fig`` as path.<format> for each of png / pdf / svg (atomically) and close it. The
+    files carry no metadata link (PNG 'Software', PDF 'Producer' and 'Creator' are left out)."""
+    import matplotlib.pyplot as plt
+
+    unknown = [f for f in formats if f not in FIGURE_FORMATS]
+    if unknown or not formats:
+        plt.close(fig)
+        raise SpecError(f"unknown figure format {', '.join(unknown) or '(none)'}; use {', '.join(FIGURE_FORMATS)}")
+    meta = {"png": {"Software": None}, "pdf": {"Producer": None, "Creator": None}, "svg": {"Creator": None}}
+    written = []
+    try:
+        for fmt in dict.fromkeys(formats):
+            buf = io.BytesIO()
+            fig.savefig(buf, format=fmt, dpi=dpi, metadata=meta[fmt])
+            target = Path(path).with_suffix(f".{fmt}")
+            write_bytes(target, buf.getvalue())
+            written.append(target)
+    finally:
+        plt.close(fig)
+    return written
+
+
+def _pyplot():
+    from lfbench.reports.figures import _pyplot as pyplot
+
+    return pyplot()
+
+
+def _colorbar(fig: Any, ax: Any, cmap: str, vmin: float, vmax: float, label: str) -> None:
+    from lfbench.reports.figures import _colorbar as colorbar
+
+    colorbar(fig, ax, cmap, vmin, vmax, label)
+
+
+def plot_pairwise(gt_by_scene: Mapping[str, np.ndarray], a_by_scene: Mapping[str, np.ndarray],
+                  b_by_scene: Mapping[str, np.ndarray], labels: tuple[str, str], path: str | Path, *,
+                  masks: Mapping[str, np.ndarray] | None = None, backgrounds: Mapping[str, np.ndarray] | None = None,
+                  threshold: float = PAIRWISE_THRESHOLD, formats: Sequence[str] = ("png",),
+                  per_row: int = 4) -> list[Path]:
+    """Pairwise comparison maps of methods A and B (``labels``), one panel per scene both have, with
+    the shares of pixels where each is better. Written as ``path`` in ``formats``."""
+    scenes = [s for s in gt_by_scene if s in a_by_scene and s in b_by_scene]
+    if not scenes:
+        raise SpecError(f"{labels[0]} and {labels[1]} share no scene with ground truth")
+    plt = _pyplot()
+    cols = min(per_row, len(scenes))
+    rows = -(-len(scenes) // cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(3.4 * cols, 3.3 * rows + 0.7), squeeze=False)
+    for ax in axes.flat:
+        ax.axis("off")
+    for ax, scene in zip(axes.flat, scenes, strict=False):
+        mask = None if masks is None else masks.get(scene)
+        bg = None if backgrounds is None else backgrounds.get(scene)
+        gt, a, b = gt_by_scene[scene], a_by_scene[scene], b_by_scene[scene]
+        ax.imshow(pairwise_image(gt, a, b, mask, threshold, background=bg), interpolation="nearest")
+        share = pairwise_shares(pairwise_classes(gt, a, b, mask, threshold))
+        ax.set_title(f"{scene}\nA better {share['a_better']:.1f}%, B better {share['b_better']:.1f}%", fontsize=8)
+    _colorbar(fig, list(axes.flat), PAIRWISE_CMAP, -PAIRWISE_LIMIT, PAIRWISE_LIMIT, "|A - gt| - |B - gt| (px)")
+    fig.suptitle(f"A = {labels[0]}  vs  B = {labels[1]}: blue = A better, red = B better by > {threshold:g} px, "
+                 "grey = tie (low resolution)", fontsize=9)
+    return save_formats(fig, path, formats)
+
+
+def plot_error_heatmaps(gt_by_scene: Mapping[str, np.ndarray], preds_by_scene: Mapping[str, Sequence[np.ndarray]],
+                        path: str | Path, *, masks: Mapping[str, np.ndarray] | None = None, threshold: float = 0.07,
+                        methods: Sequence[str] = (), formats: Sequence[str] = ("png",)) -> list[Path]:
+    """One row per scene: the per-pixel median |gt - pred| over the methods (px, 0 .. 0.2) and the % of
+    methods with |gt - pred| > ``threshold`` (the toolkit's heatmap)."""
+    scenes = [s for s in gt_by_scene if preds_by_scene.get(s)]
+    if not scenes:
+        raise SpecError("no scene has both ground truth and maps for the error heatmaps")
+    plt = _pyplot()
+    fig, axes = plt.subplots(len(scenes), 2, figsize=(7.4, 3.2 * len(scenes) + 0.6), squeeze=False)
+    for row, scene in zip(axes, scenes, strict=True):
+        mask = None if masks is None else masks.get(scene)
+        preds = preds_by_scene[scene]
+        med = median_error_map(gt_by_scene[scene], preds, mask)
+        frac = bad_fraction_map(gt_by_scene[scene], preds, mask, threshold)
+        row[0].imshow(heatmap_image(med, 0.0, MEDIAN_ERROR_LIMIT), interpolation="nearest")
+        row[0].set_title(f"{scene}: median |gt - pred| over {len(preds)} methods", fontsize=8)
+        row[1].imshow(heatmap_image(frac, 0.0, 100.0), interpolation="nearest")
+        row[1].set_title(f"{scene}: % of methods with |gt - pred| > {threshold:g} px", fontsize=8)
+        _colorbar(fig, row[0], HEATMAP_CMAP, 0.0, MEDIAN_ERROR_LIMIT, "px")
+        _colorbar(fig, row[1], HEATMAP_CMAP, 0.0, 100.0, "%")
+        for ax in row:
+            ax.set_xticks([])
+            ax.set_yticks([])
+    names = f" ({', '.join(methods)})" if methods else ""
+    fig.suptitle(f"Error heatmaps over methods{names}, low resolution", fontsize=9)
+    fig.tight_layout()
+    return save_formats(fig, path, formats)
+
+
+def plot_radar(scores: pd.DataFrame, path: str | Path, *, title: str = "", highlight: str | None = None,
+               labels: Mapping[str, str] | None = None, formats: Sequence[str] = ("png",)) -> list[Path]:
+    """A radar chart of :func:`radar_scores` (rows metrics, columns methods): one closed line per
+    method, axes scaled by :func:`radar_radii`, ring values printed on each axis. ``highlight``: a
+    method drawn thicker (the others thinner). Needs at least 3 metrics."""
+    if len(scores.index) < 3:
+        raise SpecError(f"a radar chart needs at least 3 metrics, got {len(scores.index)}")
+    plt = _pyplot()
+    radii = radar_radii(scores)
+    n = len(scores.index)
+    angles = (np.pi / 2 + np.arange(n) * 2 * np.pi / n) % (2 * np.pi)
+    fig = plt.figure(figsize=(6.6, 5.6))
+    ax = fig.add_axes((0.1, 0.08, 0.58, 0.78), projection="polar")
+    ax.set_ylim(0, 1)
+    ax.set_yticks([0.2, 0.4, 0.6, 0.8, 1.0])
+    ax.set_yticklabels([])
+    ax.set_xticks(angles)
+    names = [(labels or {}).get(m, _metric_name(m)) for m in scores.index]
+    ax.set_xticklabels([n.replace(": ", ":\n") for n in names], fontsize=8)
+    ax.set_thetalim(0, 2 * np.pi)  # set_xticks may have narrowed the view to the ticks
+    ax.grid(alpha=0.35)
+    vmax = (scores.max(axis=1) * 1.2).where(scores.max(axis=1) > 0, 1.0)
+    for angle, top in zip(angles, vmax, strict=True):
+        for k in (1, 2, 3, 4):
+            ax.text(angle, 0.2 * (k + 1), f"{top * k / 4:.3g}", fontsize=6, color="0.45", ha="center", va="center")
+    closed = np.r_[angles, angles[:1]]
+    for method in scores.columns:
+        r = radii[method].to_numpy(dtype=float)
+        width = 2.6 if method == highlight else (1.0 if highlight else 1.8)
+        ax.plot(closed, np.r_[r, r[:1]], linewidth=width, label=method, alpha=1.0 if method == highlight or
+                not highlight else 0.7)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.12, 1.05), fontsize=8, frameon=False)
+    fig.suptitle(title or "Median over scenes (outer ring = 1.2 x the largest value per axis; lower is better)",
+                 fontsize=9)
+    return save_formats(fig, path, formats)
+
+
+def _metric_name(metric_id: str) -> str:
+    from lfbench.scoring.metrics import find_metric
+
+    found = find_metric(metric_id)
+    return found.name if found is not None else metric_id
+
+
+def write_toolkit_figures(results: Any, scenes: Sequence[Any], maps: Mapping[str, str | Path], out_dir: str | Path,
+                          *, formats: Sequence[str] = ("png",), border_px: int = 15,
+                          threshold: float = PAIRWISE_THRESHOLD) -> list[Path]:
+    """The toolkit's figures for papers into ``out_dir``: ``radar`` (from the results), and from the saved
+    ``maps`` (method label -> submission folder) on ``scenes``: ``error_heatmaps`` and
+    ``pairwise_<A>_vs_<B>`` for every pair of methods, each in ``formats``."""
+    from lfbench.reports.figures import safe_name
+    from lfbench.reports.maps import load_scene_maps
+
+    out = Path(out_dir)
+    written: list[Path] = []
+    scores = radar_scores(results)
+    if len(scores.index) >= 3:
+        written += plot_radar(scores, out / "radar", formats=formats)
+    gts, masks, centres, preds = {}, {}, {}, {}
+    for scene in scenes:
+        sm = load_scene_maps(scene, maps, border_px)
+        if sm.gt is None or not sm.preds:
+            continue
+        gts[sm.name], masks[sm.name], centres[sm.name] = sm.gt, sm.mask, sm.centre
+        preds[sm.name] = sm.preds
+    if not gts:
+        return written
+    labels = [m for m in results.methods if any(m in p for p in preds.values())]
+    written += plot_error_heatmaps(gts, {s: [p[m] for m in labels if m in p] for s, p in preds.items()},
+                                   out / "error_heatmaps", masks=masks, methods=labels, formats=formats)
+    for i, a in enumerate(labels):
+        for b in labels[i + 1:]:
+            a_maps = {s: p[a] for s, p in preds.items() if a in p}
+            b_maps = {s: p[b] for s, p in preds.items() if b in p}
+            if set(a_maps) & set(b_maps):
+                name = f"pairwise_{safe_name(a)}_vs_{safe_name(b)}"
+                written += plot_pairwise(gts, a_maps, b_maps, (a, b), out / name, masks=masks, backgrounds=centres,
+                                         threshold=threshold, formats=formats)
+    return written

@@ -1,0 +1,243 @@
+"""The static HTML report: built by `evaluate --html` and `report --html` from the results and the saved
+maps, self-contained (every referenced file exists, nothing refers to http(s)), numbers with ranks,
+resolutions, bootstrap intervals and the paper's labelled columns; and, in a real headless Chromium
+where one is installed, images load, sorting works, pages link back and nothing logs an error."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import re
+import shutil
+from html.parser import HTMLParser
+from pathlib import Path
+
+import numpy as np
+import pytest
+from helpers import write_scene, write_submission
+from test_report import write_paper
+
+from lfbench.cli import main
+from lfbench.reports.figures import safe_name
+
+SCENES = ("boxes", "dots")
+SIZE = 40
+
+
+class _Refs(HTMLParser):
+    """Every src / href of a page, and the text of each table's rows (by table id)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.refs: list[str] = []
+
+    def handle_starttag(self, tag, attrs):
+        for key, value in attrs:
+            if key in ("src", "href") and value is not None:
+                self.refs.append(value)
+
+
+def _run(argv: list[str]) -> tuple[int, str, str]:
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        rc = main(argv)
+    return rc, out.getvalue(), err.getvalue()
+
+
+@pytest.fixture(scope="module")
+def site(tmp_path_factory) -> Path:
+    """Two tiny scenes, the oracle and two submissions (one worse everywhere), evaluated with --html --ci."""
+    base = tmp_path_factory.mktemp("site")
+    root = base / "data"
+    rng = np.random.default_rng(0)
+    maps_good, maps_bad = {}, {}
+    for i, name in enumerate(SCENES):
+        gt = rng.uniform(-1, 1, size=(SIZE, SIZE)).astype(np.float32)
+        write_scene(root, name, "training", size=SIZE, seed=i, gt=gt)
+        maps_good[name] = gt + rng.normal(scale=0.05, size=gt.shape).astype(np.float32)
+        maps_bad[name] = gt + rng.normal(scale=0.3, size=gt.shape).astype(np.float32)
+    good = write_submission(base / "good", maps_good)
+    bad = write_submission(base / "bad", maps_bad)
+    out = base / "run"
+    rc, _, err = _run(["evaluate", "--data", str(root), "--method", "gt", "--method", f"published:path={good}",
+                       "--method", f"published:path={bad}", "--out", str(out), "--html", "--ci",
+                       "--ci-resamples", "40", "--no-progress"])
+    assert rc == 0, err
+    return out
+
+
+def _pages(folder: Path) -> list[Path]:
+    return sorted(folder.glob("*.html"))
+
+
+def test_site_has_an_index_a_page_per_scene_and_per_method(site):
+    html = site / "html"
+    names = {p.name for p in _pages(html)}
+    assert names == {"index.html", *(f"scene-{s}.html" for s in SCENES),
+                     *(f"method-{safe_name(m)}.html" for m in ("gt", "published:good", "published:bad"))}
+    assert (site / "maps" / "gt" / "disp_maps" / "boxes.pfm").is_file()  # the maps the site was drawn from
+
+
+def test_every_reference_is_a_file_of_the_site_and_nothing_is_fetched(site):
+    html = site / "html"
+    for page in _pages(html):
+        parser = _Refs()
+        parser.feed(page.read_text(encoding="utf-8"))
+        for ref in parser.refs:
+            if ref.startswith(("data:", "#")):
+                continue
+            from urllib.parse import unquote
+
+            target = html / unquote(ref.split("#")[0])
+            assert target.is_file(), f"{page.name} refers to missing {ref}"
+    for path in html.rglob("*"):
+        if path.is_file():
+            data = path.read_bytes()
+            assert b"http://" not in data and b"https://" not in data, path
+
+
+def _table_rows(page: str, table_id: str) -> list[str]:
+    body = page.split(f'id="{table_id}"', 1)[1].split("</table>", 1)[0]
+    return re.findall(r'<th scope="row" data-v="([^"]*)"', body)
+
+
+def test_index_ranks_methods_and_states_resolutions_and_intervals(site):
+    page = (site / "html" / "index.html").read_text(encoding="utf-8")
+    # the oracle is best, the noisy submission worst, on average rank
+    assert _table_rows(page, "table-overview") == ["gt", "published:good", "published:bad"]
+    section = page.split('id="table-badpix_0.07"', 1)[1].split("</table>", 1)[0]
+    assert section.count("#1</span>") == len(SCENES)  # the oracle ranks first on each scene
+    assert 'class="res">lowres</span>' in section
+    assert re.search(r'class="ci"[^>]*>\[\d+\.\d{3}, \d+\.\d{3}\]', section)  # bootstrap intervals
+    # the mean column holds the mean of the per-scene values
+    good = re.search(r'data-v="published:good">.*?</tr>', section, re.S).group(0)
+    values = [float(v) for v in re.findall(r'data-v="([-0-9.e]+)"', good)]
+    assert values[len(SCENES)] == pytest.approx(np.mean(values[:len(SCENES)]))
+
+
+def test_scene_page_shows_every_methods_maps_at_one_scale(site):
+    page = (site / "html" / "scene-boxes.html").read_text(encoding="utf-8")
+    for m in ("gt", "published:good", "published:bad"):
+        for kind in ("disp", "badpix", "error"):
+            assert f"img/boxes/{safe_name(m)}.{kind}.png".replace("=", "%3D").replace(":", "%3A") in page or \
+                f"img/boxes/{safe_name(m)}.{kind}.png" in page
+    assert 'href="index.html"' in page and "centre view" in page and "ground truth" in page
+    assert "pairwise_0.png" in page and "heatmap_median.png" in page
+
+
+def test_report_rebuilds_the_site_with_the_papers_labelled_columns(site, tmp_path):
+    paper = write_paper(tmp_path / "paper")
+    out = tmp_path / "rep"
+    rc, stdout, err = _run(["report", str(site), "--out", str(out), "--html", "--paper", str(paper),
+                            "--maps", str(site / "maps"), "--figure-format", "png,svg"])
+    assert rc == 0, err
+    page = (out / "html" / "index.html").read_text(encoding="utf-8")
+    section = page.split('id="paper-badpix_0.07"', 1)[1].split("</table>", 1)[0]
+    assert "SubFocal (paper)" in section
+    assert ">8.500<" in section and ">0.750<" in section  # Table I of the tiny paper: boxes, dots
+    assert 'class="res">highres</span>' in section  # the paper scored dots at high resolution
+    assert "SubFocal (paper, Table II, 4 scenes)" in page
+    assert (out / "figures" / "toolkit" / "radar.svg").is_file()
+    assert (out / "figures" / "toolkit" / "error_heatmaps.png").is_file()
+    assert (out / "figures" / "toolkit" / f"pairwise_gt_vs_{safe_name('published:good')}.png").is_file()
+    assert "HTML report:" in stdout
+
+
+def test_report_refuses_unknown_figure_formats_before_writing(site, tmp_path, capsys):
+    rc = main(["report", str(site), "--out", str(tmp_path / "x"), "--figure-format", "gif"])
+    assert rc == 2
+    assert "--figure-format: unknown format gif" in capsys.readouterr().err
+    assert not (tmp_path / "x").exists()
+
+
+# --------------------------------------------------------------------------- a real browser
+
+CHROMIUM_FLAGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage", "--disable-quic",
+                  "--no-first-run", "--disable-background-networking", "--disable-component-update",
+                  "--disable-sync", "--window-size=1366,768")
+
+
+def _browser_paths() -> tuple[str, str] | None:
+    binary = next((shutil.which(n) for n in ("chromium", "chromium-browser", "google-chrome") if shutil.which(n)),
+                  None)
+    driver = shutil.which("chromedriver")
+    return (binary, driver) if binary and driver else None
+
+
+@pytest.fixture(scope="module")
+def browser(tmp_path_factory):
+    webdriver = pytest.importorskip("selenium.webdriver", reason="selenium is not installed (pip install -e .[test])")
+    from selenium.webdriver.chrome.service import Service
+
+    paths = _browser_paths()
+    if paths is None:
+        pytest.skip("no headless Chromium here (apt-get install chromium chromium-driver; .ci/run does)")
+    opts = webdriver.ChromeOptions()
+    for flag in (*CHROMIUM_FLAGS, f"--user-data-dir={tmp_path_factory.mktemp('chromium-profile')}"):
+        opts.add_argument(flag)
+    opts.binary_location = paths[0]
+    opts.set_capability("goog:loggingPrefs", {"browser": "ALL"})
+    try:
+        driver = webdriver.Chrome(service=Service(paths[1]), options=opts)
+    except Exception as exc:  # noqa: BLE001 - any start-up failure means no usable browser here
+        pytest.skip(f"headless Chromium does not start here: {str(exc).splitlines()[0]}")
+    yield driver
+    driver.quit()
+
+
+def _errors(driver) -> list[str]:
+    return [e["message"] for e in driver.get_log("browser") if e.get("level") == "SEVERE"]
+
+
+def _images_loaded(driver) -> list[str]:
+    """The src of every image that did not load."""
+    return driver.execute_script(
+        "return Array.from(document.images).filter(i => !(i.complete && i.naturalWidth > 0)).map(i => i.src);")
+
+
+def test_site_in_a_headless_browser(site, browser, tmp_path):
+    from selenium.webdriver.common.by import By
+
+    html = site / "html"
+    browser.get((html / "index.html").as_uri())
+    assert browser.title.startswith("lfbench")
+    assert _images_loaded(browser) == []
+    assert browser.execute_script("return document.images.length") >= 3
+    assert _errors(browser) == []
+    browser.save_screenshot(str(tmp_path / "index.png"))
+
+    def order(table_id: str) -> list[str]:
+        return [th.get_attribute("data-v")
+                for th in browser.find_elements(By.CSS_SELECTOR, f"#{table_id} tbody tr th[scope=row]")]
+
+    # sort the BadPix(0.07) table by the first scene's column: ascending, then descending
+    table = "table-badpix_0\\.07"
+    assert order(table) == ["gt", "published:good", "published:bad"]
+    header = browser.find_elements(By.CSS_SELECTOR, f"#{table} thead th")[1]
+    header.find_element(By.CSS_SELECTOR, "button").click()
+    values = [float(td.get_attribute("data-v"))
+              for td in browser.find_elements(By.CSS_SELECTOR, f"#{table} tbody tr td:nth-of-type(1)")]
+    assert values == sorted(values) and order(table) == ["gt", "published:good", "published:bad"]
+    assert header.get_attribute("aria-sort") == "ascending"
+    header.find_element(By.CSS_SELECTOR, "button").click()
+    assert order(table) == ["published:bad", "published:good", "gt"]
+    assert header.get_attribute("aria-sort") == "descending"
+    # sort by method name
+    browser.find_elements(By.CSS_SELECTOR, f"#{table} thead th")[0].find_element(By.CSS_SELECTOR, "button").click()
+    assert order(table) == sorted(["gt", "published:good", "published:bad"])
+    browser.save_screenshot(str(tmp_path / "index_sorted.png"))
+    assert (tmp_path / "index.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+    # a scene page: every map loads, and it links back to the index
+    browser.find_element(By.CSS_SELECTOR, "a.card").click()
+    assert "scene-" in browser.current_url
+    assert _images_loaded(browser) == []
+    assert len(browser.find_elements(By.CSS_SELECTOR, ".method-row img")) == 3 * 3
+    browser.save_screenshot(str(tmp_path / "scene.png"))
+    browser.find_element(By.CSS_SELECTOR, "a.back").click()
+    assert browser.current_url.endswith("/index.html")
+
+    # a method page
+    browser.get((html / f"method-{safe_name('published:good')}.html").as_uri())
+    assert _images_loaded(browser) == []
+    assert _errors(browser) == []
