@@ -39,9 +39,7 @@ def require(path: Path) -> Path:
 @pytest.fixture()
 def one_torch_thread():
     """Run a test with one torch thread: tiny tensors avoid OpenMP barrier stalls on a shared, loaded machine."""
-    import torch
+    from lfbench.utils.threads import torch_threads
 
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+    with torch_threads(1):
+        yield

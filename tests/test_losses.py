@@ -1,4 +1,4 @@
-"""Losses against values derived by hand from the fact sheet's definitions."""
+"""Losses against values derived by hand from the definitions in docs/subfocal-training.md."""
 
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """Metrics against hand-computed cases and against an independent re-statement of the toolkit's code.
 
-The toolkit (docs/hci-evaluation-reference.md) computes, on the evaluation mask M:
+The toolkit (docs/benchmark-rules.md, General metrics) computes, on the evaluation mask M:
   BadPix(t) = 100 * count(|gt - algo| > t on M) / count(M)        (NaN compares False: counted good)
   MSE x100  = 100 * mean((gt - algo)^2) on M & finite(algo) & finite(gt)
   Q25       = (sorted 100 |gt - algo| on M & finite)[int(0.25 n)]

@@ -20,6 +20,7 @@ from lfbench.data.shift import angular_offsets, shift_views
 from lfbench.method.registry import create, create_from_spec
 from lfbench.scoring.rules import ScoringRules, score_scene
 from lfbench.utils.errors import DataError, SpecError
+from lfbench.utils.threads import torch_threads
 
 SIZE, ANGULAR = 64, 9
 
@@ -303,14 +304,10 @@ def test_issue_targets_on_real_scenes(hci_root, scene_name, max_badpix, max_mse)
         pytest.skip(f"{scene_name} not under {hci_root}")
     scene = scenes[0]
     scene.gray_views()  # PNG decoding is not the method's time
-    threads = torch.get_num_threads()
-    torch.set_num_threads(2)
-    try:
+    with torch_threads(2):
         start = time.perf_counter()
         pred = create("planesweep").predict(scene)
         elapsed = time.perf_counter() - start
-    finally:
-        torch.set_num_threads(threads)
     score = score_scene(scene, pred.disparity, rules=ScoringRules(allow_highres=False))
     assert all(r == "lowres" for r in score.resolution.values())
     assert score.values["badpix_0.07"] <= max_badpix, score.values

@@ -100,7 +100,8 @@ def test_keras_glorot_uniform_init_and_bn_conventions():
 
 
 def test_keras_same_average_pooling_excludes_padding():
-    # The fact sheet's TF check: p = 4 on 0..9 gives 1, 4.5, 8 (pad 2 split 1 before, 1 after).
+    # TensorFlow's 'same' average pooling (the authors' Keras model): p = 4 on 0..9 gives 1, 4.5, 8
+    # (pad 2 split 1 before, 1 after).
     x = torch.arange(10, dtype=torch.float32)[None, None, None, :].expand(1, 1, 4, 10)
     y = keras_avg_pool_same(x, 4)
     assert y.shape == (1, 1, 1, 3)

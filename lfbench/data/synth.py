@@ -1,6 +1,6 @@
 """Synthetic light fields in the HCI layout with exact ground truth (the embedded default benchmark).
 
-Geometry is the benchmark's (hci-evaluation-reference.md, Geometry): a surface point with disparity
+Geometry is the benchmark's (docs/benchmark-rules.md, Geometry): a surface point with disparity
 d (px per view step) seen at centre-view pixel p = (x, y) appears in view (u, v) at ``p - s d`` with
 ``s = (u - c, v - c)``, ``c = A // 2`` (A x A views, view k at row v = k // A, column u = k % A), so
 ``centre(x, y) = view_{u,v}(x - s_u d, y - s_v d)`` wherever the point is visible in both.

@@ -1,6 +1,6 @@
 """Figures (matplotlib, Agg backend, PNG): per-scene overviews and BadPix-series curves.
 
-Conventions of the benchmark's toolkit (docs/hci-evaluation-reference.md, Outputs):
+Conventions of the benchmark's toolkit (docs/benchmark-rules.md, Outputs):
 
 - disparity maps (px per view step) in viridis over 0.9 * [disp_min, disp_max] of parameters.cfg,
   or over the ground truth's range when the cfg has none;

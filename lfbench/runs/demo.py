@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from lfbench.utils.errors import DataError, LFBenchError, SpecError
+from lfbench.utils.jsonfile import read_json
 
 MANIFEST = "demo.json"
 DATA_DIR, FIGURES_DIR, MAPS_DIR, HTML_DIR = "data", "figures", "maps", "html"
@@ -72,10 +73,9 @@ def prepare_data(out: Path, seed: int, size: int, scenes: int, log: Log = _log.i
     manifest = root / MANIFEST
     if manifest.is_file():
         try:
-            stored = json.loads(manifest.read_text(encoding="utf-8"))
-        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-            raise DataError(f"unreadable demo manifest ({exc}); remove {out} or choose another --out", manifest) \
-                from None
+            stored = read_json(manifest, "demo manifest")
+        except DataError as exc:
+            raise DataError(f"unreadable: {exc}; remove {out} or choose another --out") from None
         if not isinstance(stored, dict) or stored.get("settings") != wanted:
             got = stored.get("settings", {}) if isinstance(stored, dict) else {}
             raise DataError(f"holds demo data generated with {_describe(got)}, not {_describe(wanted)}; "

@@ -2,7 +2,7 @@
 
 Disparity maps ``gt`` and ``pred`` are in px per view step, (H, W) float arrays of one shape;
 ``mask`` is a bool (H, W) of the pixels to score (None = all). Definitions follow the official
-evaluation toolkit (docs: hci-evaluation-reference.md, "Region metrics", "Stratified metrics"):
+evaluation toolkit (docs/benchmark-rules.md, "Region metrics", "Stratified metrics"):
 
 - bumpiness: 100 x mean over the mask of min(||Scharr Hessian of (pred - gt)||_F, 0.05);
 - MAE: median angle (degrees) between the surface normals of the depth maps of gt and pred;

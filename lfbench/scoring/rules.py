@@ -1,7 +1,8 @@
 """Scoring a disparity map on a scene under the benchmark's rules.
 
-Rules (docs: hci-evaluation-reference.md): a 15 px border is ignored (scaled with resolution);
-backgammon, dots and stripes are scored at high resolution when ``gt_disp_highres.pfm`` exists
+Rules (the official toolkit's; docs/benchmark-rules.md, General metrics): a 15 px border is ignored
+(scaled with resolution); backgammon, dots and stripes are scored at high resolution when
+``gt_disp_highres.pfm`` exists
 (the 512x512 prediction upsampled x10 by nearest neighbour exactly as ``scipy.ndimage.zoom(order=0)``,
 border 150 px), otherwise at low resolution; the resolution is recorded beside every number.
 Region and stratified metrics (lfbench.scoring.region_metrics) are scored wherever their mask files exist,

@@ -6,7 +6,8 @@ column u, and labels (n, P, P) disparity in px per view step. The light-field ge
 sign: flipping the image rows also flips the angular row index v, and a rotation by k * 90
 degrees turns the angular (v, u) axes together with the spatial (y, x) axes.
 
-Order (fact sheet): gamma x^g, g ~ U(0.8, 1.2); row flip with p = 0.5; rotation by k * 90
+Order (the authors' code; docs/subfocal-training.md, Augmentation): gamma x^g, g ~ U(0.8, 1.2);
+row flip with p = 0.5; rotation by k * 90
 degrees, k uniform in {0..3}; Gaussian noise with p = 1/12, std ~ U(0, 1) * sqrt(0.2); clip to [0, 1].
 """
 

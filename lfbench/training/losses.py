@@ -8,8 +8,8 @@ Every loss takes ``(disparity, prob, target, disparities)``:
 - target: (B, H, W) ground-truth disparity in px per view step;
 - disparities: (D,) the candidate disparities, evenly spaced (d_min, d_min + interval, ...);
 
-and returns a scalar: the mean over all pixels. Definitions follow the authors' code (fact sheet
-docs/subfocal-reference.md, "Losses and schedule"):
+and returns a scalar: the mean over all pixels. Definitions follow the SubFocal authors' public code
+(summarised in docs/subfocal-training.md, "Losses and schedule"):
 
 - target distribution: ``t = d - d_min``, ``l = floor(t / interval)``, ``r = l + 1``,
   ``w_l = (r * interval - t) / interval``, ``w_r = (t - l * interval) / interval`` on bins l and r;

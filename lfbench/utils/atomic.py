@@ -4,23 +4,38 @@ from __future__ import annotations
 
 import contextlib
 import os
+import stat
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 from typing import IO
 
+__all__ = ["FILE_MODE", "atomic_open", "write_bytes", "write_text"]
+
+
+#: The mode of a new file (rw-r--r--): a result is readable by others, as a file made by open() under
+#: the usual umask 022 is. An existing file keeps its own mode.
+FILE_MODE = 0o644
+
 
 @contextlib.contextmanager
-def atomic_open(path: str | Path, mode: str = "wb", **kwargs) -> Iterator[IO]:
+def atomic_open(path: str | Path, mode: str = "wb", *, file_mode: int | None = None, **kwargs) -> Iterator[IO]:
     """Open a temporary file beside ``path``; on clean exit fsync it and rename it over ``path``.
 
-    On an exception the temporary file is removed and ``path`` is left untouched.
+    On an exception the temporary file is removed and ``path`` is left untouched. The file gets
+    ``file_mode`` if given, else the mode of the file it replaces, else :data:`FILE_MODE` (set on the
+    file itself: the process umask is never changed, which would race with other threads).
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
+    if file_mode is None:
+        try:
+            file_mode = stat.S_IMODE(path.stat().st_mode)
+        except OSError:
+            file_mode = FILE_MODE
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
-        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; a result file gets the usual mode
+        os.fchmod(fd, file_mode)  # mkstemp makes 0600
         with os.fdopen(fd, mode, **kwargs) as handle:
             yield handle
             handle.flush()
@@ -30,12 +45,6 @@ def atomic_open(path: str | Path, mode: str = "wb", **kwargs) -> Iterator[IO]:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
         raise
-
-
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
 
 
 def write_bytes(path: str | Path, data: bytes) -> None:

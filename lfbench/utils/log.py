@@ -14,25 +14,31 @@ __all__ = ["LOGGERS", "configure_cli_logging"]
 LOGGERS = ("lfbench", "lfbench_methods")
 
 
-class _TqdmHandler(logging.StreamHandler):
-    """A stream handler that writes through ``tqdm.write`` (progress bars are redrawn below)."""
+class _TqdmHandler(logging.Handler):
+    """Writes each message through ``tqdm.write`` (progress bars are redrawn below) to ``stream``, or
+    to whatever sys.stderr is when the message comes (None)."""
+
+    def __init__(self, stream: IO[str] | None = None) -> None:
+        super().__init__()
+        self.stream = stream
 
     def emit(self, record: logging.LogRecord) -> None:
         try:
             from tqdm import tqdm
 
-            tqdm.write(self.format(record), file=self.stream)
-            self.flush()
+            stream = self.stream if self.stream is not None else sys.stderr
+            tqdm.write(self.format(record), file=stream)
+            stream.flush()
         except Exception:  # logging must never raise
             self.handleError(record)
 
 
 def configure_cli_logging(verbosity: int = 0, stream: IO[str] | None = None) -> logging.Handler:
-    """Show INFO and above on ``stream`` (default: the current sys.stderr); ``verbosity`` > 0 adds
+    """Show INFO and above on ``stream`` (default: sys.stderr as it is at each message); ``verbosity`` > 0 adds
     DEBUG, < 0 shows only warnings and errors. Replaces the handler of an earlier call (a process may
     run main() more than once, e.g. in tests)."""
     level = logging.DEBUG if verbosity > 0 else logging.WARNING if verbosity < 0 else logging.INFO
-    handler = _TqdmHandler(stream if stream is not None else sys.stderr)
+    handler = _TqdmHandler(stream)
     handler.setFormatter(logging.Formatter("%(message)s"))
     for name in LOGGERS:
         logger = logging.getLogger(name)
