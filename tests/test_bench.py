@@ -85,8 +85,10 @@ def test_metrics_bench_scores_every_scene_and_method():
 
 
 def test_volume_bench_measures_both_paths_in_process():
+    from lfbench_methods.subfocal.bench import bench_volume
+
     for method in ("gather", "grid_sample"):
-        r = bench.bench_volume(size=10, interval=1.0, precision="bf16", method=method, threads=1)
+        r = bench_volume(size=10, interval=1.0, precision="bf16", method=method, threads=1)
         item = 2 if method == "gather" else 4  # grid_sample is the fp32 reference path
         assert r["volume_gb"] == pytest.approx(9 * 10 * 10 * 324 * item / 1e9)
         assert r["gb_per_s"] == pytest.approx(r["volume_gb"] / r["seconds"])

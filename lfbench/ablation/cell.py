@@ -1,5 +1,6 @@
 """One ablation cell: train it (``lfbench train`` in-process, resuming from its own checkpoint), score
-its final weights on the evaluation scenes with the ``subfocal`` method, and write the marker
+its final weights on the evaluation scenes with the method that runs the network's checkpoints
+(``Trainable.runner``; ``subfocal`` for SubFocal), and write the marker
 ``cell.json`` last (atomically): a cell with a marker of the same config is finished and is not run
 again. The test time (one whole-scene prediction) is measured afterwards by :func:`time_cell`, one
 cell at a time, so that parallel cells do not slow each other's timings.
@@ -29,6 +30,7 @@ import numpy as np
 
 from lfbench.ablation.spec import Evaluation
 from lfbench.ablation.toml_text import dumps
+from lfbench.method.trainable import DEFAULT_TRAINABLE
 from lfbench.utils.atomic import write_bytes, write_text
 from lfbench.utils.errors import DataError, SpecError
 
@@ -56,6 +58,11 @@ class CellTask:
     @property
     def path(self) -> Path:
         return Path(self.cell_dir)
+
+    @property
+    def network(self) -> str:
+        """The registered trainable network the cell trains."""
+        return self.config.get("method", DEFAULT_TRAINABLE)
 
 
 def read_marker(cell_dir: str | Path) -> dict[str, Any] | None:
@@ -151,15 +158,13 @@ def resolve_device(name: str) -> str:
     return name
 
 
-def make_method(weights: Path, ev: Evaluation, threads: int):
-    """The ``subfocal`` method on these weights, its network moved to the evaluation device."""
-    from lfbench.method.registry import create
+def make_method(weights: Path, ev: Evaluation, threads: int, network: str = DEFAULT_TRAINABLE):
+    """The method running these weights of the trainable ``network`` (its ``Trainable.runner``), on the
+    evaluation device, with the evaluation's threads, tile, memory budget and precision where it has them."""
+    from lfbench.method.trainable import get_trainable
 
-    method = create("subfocal", weights=weights, threads=threads, tile=ev.tile, max_memory_gb=ev.max_memory_gb,
-                    precision=ev.precision)
-    net = method.load_network()
-    net.to(resolve_device(ev.device))
-    return method
+    return get_trainable(network).runner(weights, device=resolve_device(ev.device), threads=threads, tile=ev.tile,
+                                         max_memory_gb=ev.max_memory_gb, precision=ev.precision)
 
 
 def time_whole_scene(method, size: int, repeats: int, warmup: int, seed: int = 0) -> list[float]:
@@ -207,12 +212,13 @@ def load_scenes(pairs: tuple[tuple[str, str], ...]):
     return [Scene(path, category=category) for path, category in pairs]
 
 
-def evaluate_weights(label: str, weights: Path, ev: Evaluation, scenes, threads: int, maps_dir: Path | None):
-    """Score the weights on the scenes; the records are named ``label``."""
+def evaluate_weights(label: str, weights: Path, ev: Evaluation, scenes, threads: int, maps_dir: Path | None,
+                     network: str = DEFAULT_TRAINABLE):
+    """Score the weights (of the trainable ``network``) on the scenes; the records are named ``label``."""
     from lfbench.runs.runner import evaluate
     from lfbench.scoring.rules import ScoringRules
 
-    method = make_method(weights, ev, threads)
+    method = make_method(weights, ev, threads, network)
     rules = ScoringRules(allow_highres=not ev.lowres_only)
     results = evaluate([method], scenes, rules=rules, on_prediction=save_maps(maps_dir) if maps_dir else None,
                        progress=False)
@@ -227,7 +233,7 @@ def timing_key(ev: Evaluation, threads: int) -> dict[str, Any]:
             "precision": ev.precision}
 
 
-def time_cell(cell_dir: str | Path, ev: Evaluation, threads: int) -> dict[str, Any]:
+def time_cell(cell_dir: str | Path, ev: Evaluation, threads: int, network: str = DEFAULT_TRAINABLE) -> dict[str, Any]:
     """Test time of a finished cell (CELL/timing.json, reused when the timing settings are the same):
     the median of ``time_repeats`` whole-scene predictions. Run one cell at a time, with nothing else
     of the ablation running, so that the cells' times compare."""
@@ -241,7 +247,7 @@ def time_cell(cell_dir: str | Path, ev: Evaluation, threads: int) -> dict[str, A
             return old
     before = torch.get_num_threads()
     try:
-        method = make_method(Path(cell_dir) / "final.pt", ev, threads)
+        method = make_method(Path(cell_dir) / "final.pt", ev, threads, network)
         times = time_whole_scene(method, ev.time_size, ev.time_repeats, ev.time_warmup)
     finally:
         torch.set_num_threads(before)
@@ -286,7 +292,7 @@ def _run(task: CellTask) -> dict[str, Any]:
     train_s = float(summary["elapsed_s"])
 
     results = evaluate_weights(task.cell_id, task.path / "final.pt", task.evaluation, load_scenes(task.scenes),
-                               task.evaluation.threads or task.threads, task.path / MAPS)
+                               task.evaluation.threads or task.threads, task.path / MAPS, task.network)
     marker: dict[str, Any] = {
         "id": task.cell_id, "values": task.values, "fingerprint": task.fingerprint,
         "eval_fingerprint": task.eval_fingerprint, "steps": int(summary["steps"]),

@@ -60,6 +60,14 @@ def uafl_beta(config: dict[str, Any]) -> float | None:
     return float(params.get("beta", PAPER_UAFL_BETA)) if loss == "uafl" else None
 
 
+def _model_value(config: dict[str, Any], key: str, kind: type, missing: Any) -> Any:
+    """[model] ``key`` of a cell's config, else the network's default; ``missing`` if it has no such parameter."""
+    from lfbench.ablation.spec import network_default
+
+    value = config["model"].get(key, network_default(config, key))
+    return missing if value is None else kind(value)
+
+
 def cell_frame(spec: AblationSpec, results: Results, markers: Sequence[dict[str, Any]]) -> pd.DataFrame:
     """One row per cell (index: cell id): grid values, interval, interpolation, loss, beta, mean metrics
     over the evaluation scenes, train_s, own_train_s, test_s, time_size, scenes."""
@@ -68,11 +76,10 @@ def cell_frame(spec: AblationSpec, results: Results, markers: Sequence[dict[str,
     rows = []
     for cell in spec.cells:
         m = by_id.get(cell.id, {})
-        model = cell.config["model"]
         loss, params = last_stage_loss(cell.config)
         row: dict[str, Any] = {"cell": cell.id, **{f"grid:{k}": v for k, v in cell.values.items()},
-                               "interval": float(model.get("interval", 0.5)),
-                               "interpolation": model.get("interpolation", "bilinear"),
+                               "interval": _model_value(cell.config, "interval", float, np.nan),
+                               "interpolation": _model_value(cell.config, "interpolation", str, ""),
                                "loss": loss + ("" if not params else "(" + ", ".join(f"{k}={v}" for k, v in
                                                                                        params.items()) + ")"),
                                "beta": uafl_beta(cell.config)}

@@ -233,7 +233,7 @@ def time_cells(tasks: list[CellTask], threads: int, progress: bool | None, log: 
     out = []
     for t in tqdm(tasks, desc="test time", unit="cell", disable=None if progress is None else not progress,
                   file=sys.stderr, leave=False):
-        timing = time_cell(t.cell_dir, t.evaluation, threads)
+        timing = time_cell(t.cell_dir, t.evaluation, threads, t.network)
         log(f"cell {t.cell_id}: test time {timing['test_s']:.2f} s for 9x9x{timing['time_size']}x{timing['time_size']}"
             f" ({timing['device']}, {threads} thread{'s' if threads != 1 else ''})")
         out.append(timing)

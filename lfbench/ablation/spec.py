@@ -14,7 +14,7 @@ Layout (paths are relative to the spec file's folder; ``~`` and ``${VARS}`` are 
     [budget]                    # every cell's training budget (written over the base config)
     steps = [48, 12]            # steps per stage, one number per [[stages]] of the base
     batch = 4                   # training.batch_size
-    width = 8                   # model.width (3D aggregation channels; paper 150)
+    width = 8                   # model.width (SubFocal: 3D aggregation channels; paper 150)
     patch = 32                  # data.patch
     threads = 0                 # torch threads per cell (0: cores / --jobs)
 
@@ -53,10 +53,12 @@ Layout (paths are relative to the spec file's folder; ``~`` and ``${VARS}`` are 
     [report]
     paper_methods = ["SubFocal"]  # paper methods beside ours in Tables I/II
 
-Grid axes: interval, interpolation, width, attention, d_min, d_max (the model's); seed; loss (the
-last stage's loss: a name, or a table {loss = "uafl", beta = 0.5}; its parameters are replaced and
-the stage is renamed finetune_<loss>); beta and lr (the last stage's); or any dotted training-config
-key as in [set]. The cell id is ``axis=value`` joined by ``_`` (e.g. ``interval=0.5_interpolation=phase``).
+Grid axes: the network's own parameters (the base config's ``method``, a registered trainable:
+SubFocal's interval, interpolation, width, attention, d_min, d_max; ``Trainable.axes``), written into
+[model]; seed; loss (the last stage's loss: a name, or a table {loss = "uafl", beta = 0.5}; its
+parameters are replaced and the stage is renamed finetune_<loss>); beta and lr (the last stage's); or
+any dotted training-config key as in [set]. The cell id is ``axis=value`` joined by ``_`` (e.g.
+``interval=0.5_interpolation=phase``).
 """
 
 from __future__ import annotations
@@ -76,7 +78,6 @@ from lfbench.training.config import STAGE_KEYS, TrainConfig, _Table
 from lfbench.utils.errors import SpecError
 
 TABLES = ("table4", "table5", "beta", "tables12", "none")
-MODEL_AXES = ("interval", "interpolation", "width", "attention", "d_min", "d_max")
 SPECIAL_AXES = ("loss", "beta", "lr", "seed")
 DEVICES = ("cpu", "cuda", "auto")
 _VAR_RE = re.compile(r"\$\{(\w+)\}|\$(\w+)")
@@ -94,10 +95,12 @@ class Budget:
     threads: int = 0
 
     def describe(self, config: dict[str, Any]) -> str:
-        """A short label of the budget actually used, e.g. 'width 8, batch 4, patch 32, 48+12 steps, cpu'."""
+        """A short label of the budget actually used, e.g. 'width 8, batch 4, patch 32, 48+12 steps, cpu'
+        (the width when the network has one: the config's, else the network's default)."""
         steps = "+".join(str(s["steps"]) for s in config["stages"])
         device = config.get("training", {}).get("device", "auto")
-        return (f"width {config['model'].get('width', 150)}, batch {config['training']['batch_size']}, "
+        width = config["model"].get("width", network_default(config, "width"))
+        return (f"{f'width {width}, ' if width is not None else ''}batch {config['training']['batch_size']}, "
                 f"patch {config['data']['patch']}, {steps} steps, {device}")
 
 
@@ -189,6 +192,19 @@ class AblationSpec:
         return cfg
 
 
+def trainable_of(config: dict[str, Any]):
+    """The registered trainable network a training config (dict layout) trains."""
+    from lfbench.method.trainable import DEFAULT_TRAINABLE, get_trainable
+
+    return get_trainable(config.get("method", DEFAULT_TRAINABLE))
+
+
+def network_default(config: dict[str, Any], key: str) -> Any:
+    """The network's default for parameter ``key`` (None when it has no such parameter)."""
+    param = trainable_of(config).parameters().get(key)
+    return None if param is None else param.default
+
+
 def _sha(obj: Any) -> str:
     return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()
 
@@ -229,7 +245,7 @@ def parse_spec(raw: dict[str, Any], source: Path, text: str = "") -> AblationSpe
         top._fail("table", f"expected one of {', '.join(TABLES)}, got {table!r}")
     out = top.get("out", str, None)
     base_cfg, base_source = _parse_base(top, source)
-    budget = _parse_budget(top.table("budget"), base_cfg)
+    budget = _parse_budget(top.table("budget"), base_cfg, source)
     set_t = top.table("set")
     overrides = flatten(set_t.raw)
     set_t.used |= set(set_t.raw)
@@ -308,7 +324,7 @@ def _parse_base(top: _Table, source: Path) -> tuple[TrainConfig | None, str]:
     raise AssertionError  # unreachable
 
 
-def _parse_budget(t: _Table, base: TrainConfig | None) -> Budget:
+def _parse_budget(t: _Table, base: TrainConfig | None, source: Path) -> Budget:
     steps = t.get("steps", (list, int), None)
     if isinstance(steps, int) and not isinstance(steps, bool):
         steps = [steps]
@@ -324,6 +340,12 @@ def _parse_budget(t: _Table, base: TrainConfig | None) -> Budget:
                     patch=t.number("patch", None, low=8, integer=True) if "patch" in t.raw else None,
                     threads=t.number("threads", 0, low=0, integer=True))
     t.done()
+    if budget.width is not None and base is not None:
+        from lfbench.method.trainable import get_trainable
+
+        if "width" not in get_trainable(base.method).parameters():
+            _fail(source, "budget.width", f"network {base.method!r} has no width parameter; set its [model] "
+                                          "parameters with [set] instead")
     return budget
 
 
@@ -473,7 +495,8 @@ def apply_axis(cfg: dict[str, Any], axis: str, value: Any, fail: Callable[[str],
     """Write one grid value into a training config (dict layout of TrainConfig.to_dict())."""
     stages = cfg["stages"]
     last = stages[-1]
-    if axis in MODEL_AXES:
+    model_axes = trainable_of(cfg).ablation_axes()
+    if axis in model_axes:
         cfg["model"][axis] = value
     elif axis == "seed":
         cfg["seed"] = value
@@ -497,33 +520,19 @@ def apply_axis(cfg: dict[str, Any], axis: str, value: Any, fail: Callable[[str],
     elif "." in axis:
         _set_dotted(cfg, axis, value, fail)
     else:
-        fail(f"unknown axis; use {', '.join(MODEL_AXES + SPECIAL_AXES)} or a dotted training-config key "
+        fail(f"unknown axis; use {', '.join(model_axes + SPECIAL_AXES)} or a dotted training-config key "
              "(e.g. model.width, stages.2.lr)")
 
 
 def _check_config(cfg: dict[str, Any], source: Path, where: str) -> TrainConfig:
-    """Parse the config and build its network once (catches bad [model] values); SpecError naming ``where``."""
+    """Parse the config and check its [model] with the network's ``Trainable.check_params`` (unknown keys, bad
+    values); SpecError naming ``where``."""
     try:
         tc = TrainConfig.from_dict(cfg, source)
     except SpecError as exc:
         _fail(source, where, _strip_path(exc))
     try:
-        from lfbench.data.shift import INTERPOLATIONS, disparity_grid
-
-        model = tc.model
-        if "interpolation" in model and model["interpolation"] not in INTERPOLATIONS:
-            raise ValueError(f"interpolation must be one of {', '.join(INTERPOLATIONS)}, "
-                             f"got {model['interpolation']!r}")
-        disparity_grid(float(model.get("d_min", -4.0)), float(model.get("d_max", 4.0)),
-                       float(model.get("interval", 0.5)))
-        import inspect
-
-        from lfbench_methods.subfocal.network import SubFocalNet
-
-        accepted = set(inspect.signature(SubFocalNet).parameters)
-        unknown = sorted(set(model) - accepted)
-        if unknown:
-            raise ValueError(f"unknown [model] key(s) {', '.join(unknown)} (accepted: {', '.join(sorted(accepted))})")
+        trainable_of(cfg).check_params(tc.model)
     except (TypeError, ValueError) as exc:
         _fail(source, where, f"[model]: {exc}")
     return tc

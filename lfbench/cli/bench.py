@@ -1,5 +1,7 @@
-"""Speed and memory benchmarks (not part of the tests): SubFocal inference per interval and precision,
-the cost volume alone, training steps, the metric engine, and the conv3d peak they are judged against.
+"""Speed and memory benchmarks (not part of the tests): inference per interval and precision, training
+steps, the metric engine, and what the network contributes (SubFocal: the cost volume alone and the conv3d
+peak the others are judged against). ``--model NAME[:key=value,...]`` times any registered trainable
+network (default ``subfocal``; ``--interval`` and ``--width`` set those parameters when it has them).
 
 Every case runs in a fresh Python process; peak_memory_gb is that process's peak RSS. Records (JSON
 list) carry the machine (CPU, cores, torch threads and version, load average). Without a subcommand
@@ -28,13 +30,16 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--table", type=Path, metavar="OUT.md", help="also write the table (Markdown) here")
     p.add_argument("--threads", type=int, default=0, help="torch threads (0 = all cores)")
     p.add_argument("--timeout", type=float, default=None, metavar="S", help="give up a case after S seconds")
+    p.add_argument("--model", default="subfocal", metavar="NAME[:key=value,...]",
+                   help="trainable network to time, with parameters (default subfocal; see lfbench.method.trainable)")
 
 
-def _inference_options(p: argparse.ArgumentParser, size: int, intervals: list[float]) -> None:
+def _inference_options(p: argparse.ArgumentParser, size: int, intervals: list[float] | None) -> None:
     p.add_argument("--size", type=int, default=size, help="image size in px (a size x size scene, 81 views)")
-    p.add_argument("--interval", type=float, nargs="+", default=intervals, help="disparity intervals (px)")
+    p.add_argument("--interval", type=float, nargs="+", default=intervals,
+                   help="disparity intervals (px; default: the network's, SubFocal 0.5)")
     p.add_argument("--precision", nargs="+", default=["fp32", "bf16"], choices=["fp32", "bf16"])
-    p.add_argument("--width", type=int, default=150, help="aggregation width (150 = the paper)")
+    p.add_argument("--width", type=int, default=None, help="aggregation width (default: the network's, SubFocal 150)")
     p.add_argument("--weights", help="checkpoint .pt (default: random weights)")
     p.add_argument("--max-memory", type=float, default=4.0, metavar="GB", help="memory budget of inference")
     p.add_argument("--tile", type=int, default=0, help="core tile size in px (0 = from --max-memory)")
@@ -45,7 +50,7 @@ def _inference_options(p: argparse.ArgumentParser, size: int, intervals: list[fl
 def add_arguments(p: argparse.ArgumentParser) -> None:
     sub = p.add_subparsers(dest="which", metavar="BENCH")
     s = sub.add_parser("suite", help="all benches (default)", description="All benches; see lfbench bench --help.")
-    _inference_options(s, 512, [0.5])
+    _inference_options(s, 512, None)
     s.add_argument("--quick", action="store_true", help="64x64 scene, tiny training and metric cases (seconds)")
     s.add_argument("--skip", nargs="+", default=[], choices=["peak", "inference", "volume", "train", "metrics"])
     s.add_argument("--train-batch", type=int, default=2)
@@ -53,7 +58,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     s.add_argument("--small-width", type=int, default=16, help="the small width of the training bench")
     _common(s)
     i = sub.add_parser("inference", help="one scene per interval x precision (seconds, peak memory, GFLOP/s)")
-    _inference_options(i, 512, [0.5])
+    _inference_options(i, 512, None)
     _common(i)
     v = sub.add_parser("volume", help="the cost volume alone (GB/s)")
     v.add_argument("--size", type=int, default=512)
@@ -63,11 +68,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     v.add_argument("--repeat", type=int, default=1)
     _common(v)
     t = sub.add_parser("train", help="training steps per second (Adam + L1 on random patches)")
-    t.add_argument("--width", type=int, nargs="+", default=[150, 16])
+    t.add_argument("--width", type=int, nargs="+", default=None, help="widths (default SubFocal: 150 16)")
     t.add_argument("--batch", type=int, default=2)
     t.add_argument("--patch", type=int, default=32)
     t.add_argument("--steps", type=int, default=2)
-    t.add_argument("--interval", type=float, default=0.5)
+    t.add_argument("--interval", type=float, default=None)
     t.add_argument("--no-channels-last", action="store_true")
     _common(t)
     m = sub.add_parser("metrics", help="the metric engine over synthetic scenes x methods")
@@ -82,38 +87,69 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     _common(k)
 
 
+def _model(args: argparse.Namespace) -> tuple[str, dict, object]:
+    """(network name, its parameters from --model, the trainable); SpecError for an unknown one."""
+    from lfbench.method.registry import coerce_params, parse_spec
+    from lfbench.method.trainable import get_trainable
+
+    name, raw = parse_spec(args.model)
+    trainable = get_trainable(name)
+    return name, coerce_params(raw, trainable.parameters(), name, "network"), trainable
+
+
+def _given(trainable, key: str, values: list) -> list:
+    """``values`` of a flag that sets the network parameter ``key`` ([None] when not given). SpecError when
+    it is given and the network has no such parameter."""
+    from lfbench.utils.errors import SpecError
+
+    if values is None:
+        return [None]
+    if key not in trainable.parameters():
+        raise SpecError(f"--{key}: network {trainable.name!r} has no parameter {key!r}")
+    return list(values)
+
+
+def _with(params: dict, **values) -> dict:
+    return {**params, **{k: v for k, v in values.items() if v is not None}}
+
+
 def _cases(args: argparse.Namespace) -> list[tuple[str, dict]]:
     """(bench, params) in the order they run."""
     which = args.which
     th = {"threads": args.threads}
+    model, model_params, trainable = _model(args)
+    net = {"model": model, **model_params}
+    has = trainable.benches  # the network's own benches (SubFocal: peak, volume)
     cases: list[tuple[str, dict]] = []
     if which in ("inference", "suite"):
         skip = set(getattr(args, "skip", []))
         size = 64 if getattr(args, "quick", False) else args.size
+        width = _given(trainable, "width", None if args.width is None else [args.width])[0]
         if which == "inference" or "inference" not in skip:
-            peaks = not args.no_peak and not (which == "suite" and "peak" in skip)
-            for interval in args.interval:
+            peaks = "peak" in has and not args.no_peak and not (which == "suite" and "peak" in skip)
+            for interval in _given(trainable, "interval", args.interval):
                 for precision in args.precision:
                     if peaks:
-                        cases.append(("peak", {"precision": precision, **th}))
-                    cases.append(("inference", {"size": size, "interval": interval, "precision": precision,
-                                                "width": args.width, "weights": args.weights,
+                        cases.append(("peak", {"model": model, "precision": precision, **th}))
+                    cases.append(("inference", {**_with(net, interval=interval, width=width), "size": size,
+                                                "precision": precision, "weights": args.weights,
                                                 "max_memory_gb": args.max_memory, "tile": args.tile,
                                                 "repeat": args.repeat, **th}))
             if peaks:  # the peak again after the last case: each case sits between two peak measurements
-                cases += [("peak", {"precision": p, **th}) for p in args.precision]
-        elif "peak" not in skip:  # the suite without inference: the peaks still sit beside the training bench
-            cases += [("peak", {"precision": p, **th}) for p in args.precision]
+                cases += [("peak", {"model": model, "precision": p, **th}) for p in args.precision]
+        elif "peak" not in skip and "peak" in has:  # the suite without inference: peaks beside the training bench
+            cases += [("peak", {"model": model, "precision": p, **th}) for p in args.precision]
         if which == "suite":
             quick = args.quick
-            if "volume" not in skip:
-                cases += [("volume", {"size": size, "interval": 0.5, "precision": p, "method": "gather", **th})
-                          for p in args.precision]
-                cases.append(("volume", {"size": size, "interval": 0.5, "precision": "fp32", "method": "grid_sample",
-                                         **th}))
+            if "volume" not in skip and "volume" in has:
+                cases += [("volume", {"model": model, "size": size, "interval": 0.5, "precision": p,
+                                      "method": "gather", **th}) for p in args.precision]
+                cases.append(("volume", {"model": model, "size": size, "interval": 0.5, "precision": "fp32",
+                                         "method": "grid_sample", **th}))
             if "train" not in skip:
-                for width in (150, args.small_width):
-                    cases.append(("train", {"width": width, "batch": 1 if quick else args.train_batch,
+                widths = [150, args.small_width] if "width" in trainable.parameters() else [None]
+                for w in widths:
+                    cases.append(("train", {**_with(net, width=w), "batch": 1 if quick else args.train_batch,
                                             "patch": 16 if quick else 32, "steps": 1 if quick else args.train_steps,
                                             **th}))
             if "metrics" not in skip:
@@ -122,17 +158,20 @@ def _cases(args: argparse.Namespace) -> list[tuple[str, dict]]:
         for interval in args.interval:
             for method in args.method:
                 for precision in (args.precision if method == "gather" else ["fp32"]):
-                    cases.append(("volume", {"size": args.size, "interval": interval, "precision": precision,
-                                             "method": method, "repeat": args.repeat, **th}))
+                    cases.append(("volume", {"model": model, "size": args.size, "interval": interval,
+                                             "precision": precision, "method": method, "repeat": args.repeat, **th}))
     elif which == "train":
-        cases = [("train", {"width": w, "batch": args.batch, "patch": args.patch, "steps": args.steps,
-                            "interval": args.interval, "channels_last": not args.no_channels_last, **th})
-                 for w in args.width]
+        widths = args.width if args.width is not None else ([150, 16] if "width" in trainable.parameters()
+                                                             else None)
+        interval = _given(trainable, "interval", None if args.interval is None else [args.interval])[0]
+        cases = [("train", {**_with(net, width=w, interval=interval), "batch": args.batch, "patch": args.patch,
+                            "steps": args.steps, "channels_last": not args.no_channels_last, **th})
+                 for w in _given(trainable, "width", widths)]
     elif which == "metrics":
         cases = [("metrics", {"scenes": args.scenes, "methods": args.methods, "size": args.size,
                               "repeat": args.repeat})]
     elif which == "peak":
-        cases = [("peak", {"precision": p, "repeat": args.repeat, **th}) for p in args.precision]
+        cases = [("peak", {"model": model, "precision": p, "repeat": args.repeat, **th}) for p in args.precision]
     return cases
 
 

@@ -1,9 +1,10 @@
-"""Train SubFocal from a TOML config (see lfbench/training/config.py and configs/*.toml).
+"""Train a network from a TOML config (see lfbench/training/config.py and configs/*.toml): SubFocal by
+default, or any registered trainable network named by the config's ``method`` (lfbench.method.trainable).
 
 Runs the config's stages in order (e.g. L1, then UAFL from the stage-1 weights with a fresh
 Adam), validating on the chosen scenes every N steps. Checkpoints go to OUT/checkpoint.pt
 (atomic); re-running the same command after a kill or Ctrl-C resumes from the last one. The
-final weights are OUT/final.pt, loadable by the subfocal method. For data-parallel training
+final weights are OUT/final.pt, runnable as ``METHOD:weights=OUT/final.pt`` (e.g. subfocal). For data-parallel training
 start it with torchrun, e.g. ``torchrun --nproc-per-node 4 -m lfbench train CONFIG.toml``.
 """
 
@@ -12,7 +13,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-HELP = "train SubFocal from a TOML config (resumable, multi-process with torchrun)"
+HELP = "train SubFocal or a plugin's network from a TOML config (resumable, multi-process with torchrun)"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

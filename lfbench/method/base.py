@@ -52,6 +52,11 @@ class Method:
     def predict(self, lf: LightField) -> Prediction:
         raise NotImplementedError
 
+    def to(self, device: str) -> Method:
+        """Run on ``device`` (``cpu``, ``cuda``, ``cuda:1``): a method with a network moves it there.
+        The default (a method without one) runs where it is and returns itself."""
+        return self
+
     def run(self, lf: LightField) -> Prediction:
         """predict() with the wall time recorded (unless the prediction carries its own runtime)."""
         start = time.perf_counter()

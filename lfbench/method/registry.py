@@ -73,37 +73,62 @@ def _param_help(doc: str) -> dict[str, str]:
     return out
 
 
-def _introspect(name: str, factory: Callable[..., Any]) -> MethodInfo:
-    target = factory.__init__ if inspect.isclass(factory) else factory
+def signature_params(target: Callable[..., Any], doc: str) -> dict[str, Param]:
+    """The keyword parameters of ``target`` (a function, or a class's ``__init__``) with their type hints,
+    defaults and the help of ``doc``'s ``name: text`` lines (``self`` and ``*args/**kwargs`` left out)."""
+    if inspect.isclass(target):
+        target = target.__init__
     try:
         hints = typing.get_type_hints(target)
     except Exception:  # unresolvable annotations: fall back to raw ones
         hints = {}
-    doc = inspect.getdoc(factory) or ""
     helps = _param_help(doc)
     params = {}
     for p in inspect.signature(target).parameters.values():
         if p.name == "self" or p.kind in (p.VAR_POSITIONAL, p.VAR_KEYWORD):
             continue
         params[p.name] = Param(p.name, hints.get(p.name, p.annotation), p.default, helps.get(p.name, ""))
+    return params
+
+
+def _introspect(name: str, factory: Callable[..., Any]) -> MethodInfo:
+    doc = inspect.getdoc(factory) or ""
     summary = doc.splitlines()[0] if doc else ""
     module = getattr(factory, "__module__", "?")
-    return MethodInfo(name, factory, params, summary, doc, module)
+    return MethodInfo(name, factory, signature_params(factory, doc), summary, doc, module)
 
 
-class MethodRegistry:
-    """Maps method names to factories. ``REGISTRY`` is the process-wide default instance."""
+class PluginRegistry:
+    """Names -> registered objects of one kind, filled by decorators and by the plugins of an
+    entry-point group. Subclasses say what they hold (``kind``, ``names_attr``, :meth:`_make`)."""
+
+    kind = "object"
+    names_attr = "__lfbench_names__"  # the names a decorator gave an object (see :func:`decorated_names`)
 
     def __init__(self, group: str | None = ENTRY_POINT_GROUP) -> None:
-        self._methods: dict[str, MethodInfo] = {}
+        self._items: dict[str, Any] = {}
         self._group = group
         self._loaded = group is None
         self.load_errors: dict[str, str] = {}
 
-    def register(self, name: str, factory: Callable[..., Any]) -> None:
-        if name in self._methods and self._methods[name].factory is not factory:
-            raise ValueError(f"method {name!r} is already registered by {self._methods[name].source}")
-        self._methods[name] = _introspect(name, factory)
+    def _make(self, name: str, obj: Any) -> Any:
+        """The stored entry for ``obj`` registered as ``name`` (TypeError if it is of the wrong kind)."""
+        return obj
+
+    def _factory(self, entry: Any) -> Any:
+        return entry
+
+    def _source(self, entry: Any) -> str:
+        return getattr(self._factory(entry), "__module__", "?")
+
+    def register(self, name: str, obj: Any) -> None:
+        if name in self._items and self._factory(self._items[name]) is not obj:
+            raise ValueError(f"{self.kind} {name!r} is already registered by {self._source(self._items[name])}")
+        self._items[name] = self._make(name, obj)
+
+    def _accepts(self, obj: Any) -> bool:
+        """Whether an entry point's object (not a module) is registered under the entry point's name."""
+        return callable(obj)
 
     def _load_entry_point(self, ep: metadata.EntryPoint) -> None:
         try:
@@ -113,8 +138,11 @@ class MethodRegistry:
             return
         if isinstance(obj, types.ModuleType):
             self._register_module(obj)
-        elif ep.name not in self._methods and callable(obj):
-            self.register(ep.name, obj)
+        elif ep.name not in self._items and self._accepts(obj):
+            try:
+                self.register(ep.name, obj)
+            except (TypeError, ValueError) as exc:
+                self.load_errors[ep.name] = str(exc)
 
     def _load_entry_points(self, name: str | None = None) -> None:
         """Load the plugins: only the entry point called ``name`` when there is one (so that using one
@@ -127,35 +155,56 @@ class MethodRegistry:
             if named:
                 for ep in named:
                     self._load_entry_point(ep)
-                if name in self._methods:
+                if name in self._items:
                     return
         self._loaded = True
         for ep in eps:
             self._load_entry_point(ep)
 
     def _register_module(self, module: types.ModuleType) -> None:
-        """Register the factories a plugin module decorated with @register_method (its import registered
-        them in the registry the decorator named; a fresh registry learns them here)."""
+        """Register what a plugin module's decorators named (its import registered them in the registry
+        the decorator named; a fresh registry learns them here), including objects it imported."""
+        seen: set[int] = set()
         for obj in list(vars(module).values()):
-            if getattr(obj, "__module__", None) != module.__name__:
+            if id(obj) in seen:
                 continue
-            for name in _decorated_names(obj):
+            seen.add(id(obj))
+            for name in decorated_names(obj, self.names_attr):
                 try:
                     self.register(name, obj)
-                except ValueError as exc:
+                except (TypeError, ValueError) as exc:
                     self.load_errors[name] = str(exc)
 
     def names(self) -> list[str]:
         self._load_entry_points()
-        return sorted(self._methods)
+        return sorted(self._items)
+
+    def _get(self, name: str) -> Any:
+        if name not in self._items:
+            self._load_entry_points(name)
+        if name not in self._items:
+            hint = f" (plugin failed to load: {self.load_errors[name]})" if name in self.load_errors else ""
+            raise SpecError(f"unknown {self.kind} {name!r}{hint}; available: {', '.join(self.names()) or 'none'}")
+        return self._items[name]
+
+
+class MethodRegistry(PluginRegistry):
+    """Maps method names to factories. ``REGISTRY`` is the process-wide default instance."""
+
+    kind = "method"
+    names_attr = "__lfbench_method_names__"
+
+    def _make(self, name: str, obj: Any) -> MethodInfo:
+        return _introspect(name, obj)
+
+    def _factory(self, entry: MethodInfo) -> Any:
+        return entry.factory
+
+    def _source(self, entry: MethodInfo) -> str:
+        return entry.source
 
     def info(self, name: str) -> MethodInfo:
-        if name not in self._methods:
-            self._load_entry_points(name)
-        if name not in self._methods:
-            hint = f" (plugin failed to load: {self.load_errors[name]})" if name in self.load_errors else ""
-            raise SpecError(f"unknown method {name!r}{hint}; available: {', '.join(self.names())}")
-        return self._methods[name]
+        return self._get(name)
 
     def create(self, name: str, **params: Any) -> Any:
         info = self.info(name)
@@ -181,13 +230,18 @@ class MethodRegistry:
     def create_from_spec(self, spec: str) -> Any:
         name, raw = parse_spec(spec)
         info = self.info(name)
-        params = {}
-        for key, text in raw.items():
-            if key not in info.params:
-                known = ", ".join(info.params) or "none"
-                raise SpecError(f"method {name!r} has no parameter {key!r}; parameters: {known}")
-            params[key] = coerce(text, info.params[key], name)
-        return self.create(name, **params)
+        return self.create(name, **coerce_params(raw, info.params, name))
+
+
+def coerce_params(raw: dict[str, str], params: dict[str, Param], owner: str, kind: str = "method") -> dict[str, Any]:
+    """Spec values (text) converted to the types of ``params``; SpecError for a name not among them."""
+    out = {}
+    for key, text in raw.items():
+        if key not in params:
+            known = ", ".join(params) or "none"
+            raise SpecError(f"{kind} {owner!r} has no parameter {key!r}; parameters: {known}")
+        out[key] = coerce(text, params[key], owner)
+    return out
 
 
 REGISTRY = MethodRegistry()
@@ -195,25 +249,25 @@ REGISTRY = MethodRegistry()
 
 def register_method(name: str, registry: MethodRegistry | None = None) -> Callable:
     """Class or function decorator: make a method factory available as ``name``."""
+    return _decorator(name, registry or REGISTRY)
 
-    def deco(factory: Callable[..., Any]) -> Callable[..., Any]:
-        (registry or REGISTRY).register(name, factory)
-        try:  # remember the name so that any registry loading the module finds the factory
-            setattr(factory, _NAMES_ATTR, (*_decorated_names(factory), name))
+
+def _decorator(name: str, registry: PluginRegistry) -> Callable:
+    def deco(obj: Any) -> Any:
+        registry.register(name, obj)
+        try:  # remember the name so that any registry loading the module finds the object
+            setattr(obj, registry.names_attr, (*decorated_names(obj, registry.names_attr), name))
         except (AttributeError, TypeError):
             pass
-        return factory
+        return obj
 
     return deco
 
 
-_NAMES_ATTR = "__lfbench_method_names__"
-
-
-def _decorated_names(obj: Any) -> tuple[str, ...]:
-    """Names given to ``obj`` itself by @register_method (not inherited from a registered base class)."""
+def decorated_names(obj: Any, attr: str = MethodRegistry.names_attr) -> tuple[str, ...]:
+    """Names given to ``obj`` itself by a registering decorator (not inherited from a registered base class)."""
     try:
-        return tuple(vars(obj).get(_NAMES_ATTR, ()))
+        return tuple(vars(obj).get(attr, ()))
     except TypeError:  # no __dict__
         return ()
 
@@ -321,4 +375,5 @@ def coerce(text: str, param: Param, method: str = "") -> Any:
 
 
 __all__ = ["register_method", "create", "create_from_spec", "list_methods", "method_info", "parse_spec",
-           "format_spec", "MethodRegistry", "REGISTRY", "ENTRY_POINT_GROUP", "Param", "MethodInfo"]
+           "format_spec", "MethodRegistry", "PluginRegistry", "REGISTRY", "ENTRY_POINT_GROUP", "Param", "MethodInfo",
+           "signature_params", "coerce_params", "decorated_names"]

@@ -6,18 +6,22 @@ also gives the RSS just before the measured work (interpreter, torch, weights), 
 difference. Each record carries the machine it ran on (CPU model, cores, torch threads, torch version,
 load average before and after).
 
-Benches (functions ``bench_<name>``, each returning one record, a dict):
+Benches (each returns one record, a dict). lfbench's own time the network of any registered trainable
+(``model``, default ``subfocal``; lfbench.method.trainable) through its seam:
 
-- ``peak``: a 150 -> 150 3x3x3 channels-last conv3d of the paper's shape through the op SubFocal's fast path
-  uses, fp32 or bf16: the GFLOP/s the hardware reaches here, against which the network is judged;
-- ``inference``: one H x W scene through ``lfbench_methods.subfocal.inference.infer`` (paper network, width
-  150, random weights unless a checkpoint is given; tiles from ``max_memory_gb``): seconds, peak memory,
-  achieved GFLOP/s (the network's FLOPs on the image, halos not counted), the phases;
-- ``volume``: the bilinear cost volume alone (GB/s of volume written), fast gather or the reference
-  grid_sample path;
+- ``inference``: one H x W scene through ``Trainable.infer`` (random weights unless a checkpoint is given;
+  SubFocal: the paper network, width 150, tiles from ``max_memory_gb``): seconds, peak memory, achieved
+  GFLOP/s when the trainable counts its FLOPs (halos not counted), the phases it reports;
 - ``train``: optimizer steps per second (Adam + L1 on random patches, training mode, channels-last);
 - ``metrics``: the metric engine (``lfbench.scoring.rules.score_scene``, general metrics) over synthetic scenes
   x methods written in the HCI layout.
+
+A trainable contributes its own benches (``Trainable.benches``); SubFocal's (lfbench_methods.subfocal.bench):
+
+- ``peak``: a 150 -> 150 3x3x3 channels-last conv3d of the paper's shape through the op SubFocal's fast path
+  uses, fp32 or bf16: the GFLOP/s the hardware reaches here, against which the network is judged;
+- ``volume``: the bilinear cost volume alone (GB/s of volume written), fast gather or the reference
+  grid_sample path.
 
 :func:`attach_peaks` puts the peak measured next to each inference record beside it (fraction of peak by
 wall time and per CPU second, the floor = network FLOPs / peak, and seconds / floor). On a shared machine
@@ -37,12 +41,13 @@ import tempfile
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any
 
 from lfbench.utils.errors import SpecError
 
 PRECISIONS = ("fp32", "bf16")
-BENCHES = ("peak", "inference", "volume", "train", "metrics")
-PAPER_WIDTH = 150
+BENCHES = ("peak", "inference", "volume", "train", "metrics")  # the order of the tables
+DEFAULT_MODEL = "subfocal"
 
 
 # --------------------------------------------------------------------------- machine and memory
@@ -101,7 +106,7 @@ def current_rss_gb() -> float:
         return peak_rss_gb()
 
 
-def _set_threads(threads: int) -> int:
+def set_threads(threads: int) -> int:
     import torch
 
     n = threads if threads > 0 else (os.cpu_count() or 1)
@@ -109,25 +114,25 @@ def _set_threads(threads: int) -> int:
     return n
 
 
-def _cpu_s() -> float:
+def cpu_seconds() -> float:
     """CPU seconds (user + system) this process has used."""
     r = resource.getrusage(resource.RUSAGE_SELF)
     return r.ru_utime + r.ru_stime
 
 
-def _timed(fn: Callable[[], object], repeat: int) -> tuple[float, float]:
+def timed(fn: Callable[[], object], repeat: int) -> tuple[float, float]:
     """(best wall time, mean CPU time) of ``repeat`` calls, s. CPU time counts the work itself and is
     much less inflated than wall time when other processes compete for the cores."""
     best = math.inf
-    cpu0 = _cpu_s()
+    cpu0 = cpu_seconds()
     for _ in range(max(1, repeat)):
         t = time.perf_counter()
         fn()
         best = min(best, time.perf_counter() - t)
-    return best, (_cpu_s() - cpu0) / max(1, repeat)
+    return best, (cpu_seconds() - cpu0) / max(1, repeat)
 
 
-def _dtype(precision: str):
+def torch_dtype(precision: str):
     import torch
 
     if precision not in PRECISIONS:
@@ -137,137 +142,87 @@ def _dtype(precision: str):
 
 # --------------------------------------------------------------------------- the benches
 
-def bench_peak(precision: str = "fp32", depth: int = 17, size: int = 64, width: int = PAPER_WIDTH,
-               repeat: int = 3, threads: int = 0) -> dict:
-    """GFLOP/s of a width -> width 3x3x3 conv3d (+ bias, ReLU) on (1, width, depth, size, size) channels-last,
-    through the fused op of SubFocal's fast path; best of ``repeat`` after one warm-up."""
+def _network(model: str, params: dict[str, Any], weights: str | None, seed: int):
+    """(trainable, network in eval mode): built from ``params`` with seed ``seed`` (random weights), or
+    loaded from ``weights`` with ``params`` written over the stored config."""
     import torch
-    from lfbench_methods.subfocal.fast import conv
 
-    _set_threads(threads)
-    dtype = _dtype(precision)
-    g = torch.Generator().manual_seed(0)
-    x = torch.rand((1, width, depth, size, size), generator=g).to(dtype).contiguous(
-        memory_format=torch.channels_last_3d)
-    w = (torch.randn((width, width, 3, 3, 3), generator=g) * 0.01).to(dtype).contiguous(
-        memory_format=torch.channels_last_3d)
-    b = torch.zeros(width)
-    flops = 2.0 * 27 * width * width * depth * size * size
-    with torch.inference_mode():
-        conv(x, w, b, (1, 1, 1), relu=True)
-        seconds, cpu = _timed(lambda: conv(x, w, b, (1, 1, 1), relu=True), repeat)
-    return {"bench": "peak", "precision": precision, "shape": [width, depth, size, size], "seconds": seconds,
-            "cpu_seconds": cpu, "gflops_per_s": flops / seconds / 1e9, "gflops_per_cpu_s": flops / cpu / 1e9}
+    from lfbench.method.trainable import get_trainable
 
-
-def _paper_net(interval: float, width: int, weights: str | None, seed: int = 0):
-    import torch
-    from lfbench_methods.subfocal.network import SubFocalNet
-
+    trainable = get_trainable(model)
+    unknown = sorted(set(params) - set(trainable.parameters()))
+    if unknown:
+        raise SpecError(f"network {model!r} has no parameter {', '.join(unknown)} "
+                        f"(parameters: {', '.join(trainable.parameters())})")
     if weights:
-        from lfbench_methods.subfocal.keras_import import build_from_checkpoint
-
-        net = build_from_checkpoint(Path(weights))
-        if abs(net.config()["interval"] - interval) > 1e-9:
-            cfg = {**net.config(), "interval": interval}
-            state = net.state_dict()
-            net = SubFocalNet(**cfg)
-            net.load_state_dict(state)
-        return net.eval()
+        return trainable, trainable.load(Path(weights), **params).eval()
     torch.manual_seed(seed)
-    return SubFocalNet(interval=interval, width=width).eval()
+    return trainable, trainable.build(**params).eval()
 
 
-def bench_inference(size: int = 512, interval: float = 0.5, precision: str = "fp32", width: int = PAPER_WIDTH,
-                    weights: str | None = None, max_memory_gb: float = 4.0, tile: int = 0, threads: int = 0,
-                    repeat: int = 1, seed: int = 0) -> dict:
-    """One size x size light field (81 random views) through ``infer``; best of ``repeat`` runs."""
+def _described(record: dict, net, params: dict[str, Any]) -> dict:
+    """The record plus the network's config (its parameters as built) and its disparity count, if any."""
+    config = getattr(net, "config", None)
+    config = dict(config()) if callable(config) else dict(params)
+    for key, value in config.items():
+        record.setdefault(key, value)
+    disparities = getattr(net, "disparities", None)
+    if disparities is not None:
+        record["disparities"] = int(disparities.numel())
+    return record
+
+
+def bench_inference(size: int = 512, precision: str = "fp32", *, model: str = DEFAULT_MODEL, weights: str | None = None,
+                    max_memory_gb: float = 4.0, tile: int = 0, threads: int = 0, repeat: int = 1, seed: int = 0,
+                    **params: Any) -> dict:
+    """One size x size light field (random views) through the network's ``Trainable.infer``; best of
+    ``repeat`` runs. ``params``: the network's parameters (e.g. SubFocal's interval, width; default: its
+    defaults, random weights unless ``weights`` names a checkpoint)."""
     import torch
-    from lfbench_methods.subfocal.inference import infer, plan_tiles
 
-    _set_threads(threads)
-    _dtype(precision)
-    net = _paper_net(interval, width, weights, seed)
-    views = torch.rand((1, 81, size, size), generator=torch.Generator().manual_seed(seed))
-    flops = net.flops(size, size)
-    tiles = plan_tiles(net, size, size, max_memory_gb=max_memory_gb, precision=precision) if tile == 0 else (tile,
-                                                                                                               tile)
+    set_threads(threads)
+    torch_dtype(precision)
+    trainable, net = _network(model, params, weights, seed)
+    angular = int(getattr(net, "angular", 9))
+    views = torch.rand((1, angular * angular, size, size), generator=torch.Generator().manual_seed(seed))
     baseline = current_rss_gb()
     phases: dict = {}
-    seconds, cpu = _timed(lambda: infer(net, views, tile=tile, max_memory_gb=max_memory_gb, precision=precision,
-                                        timings=phases), repeat)
-    return {"bench": "inference", "size": size, "interval": interval, "precision": precision, "seconds": seconds,
-            "peak_memory_gb": peak_rss_gb(), "baseline_memory_gb": baseline,
-            "gflops_per_s": flops["total"] / seconds / 1e9, "cpu_seconds": cpu,
-            "gflops_per_cpu_s": flops["total"] / cpu / 1e9, "width": net.config()["width"],
-            "disparities": net.disparities.numel(), "weights": weights or "random", "max_memory_gb": max_memory_gb,
-            "tile": list(phases.get("tile", tiles)), "tiles": phases.get("tiles"),
-            "tflop": flops["total"] / 1e12, "tflop_aggregation": flops["aggregation"] / 1e12,
-            "tflop_extractor": flops["extractor"] / 1e12,
-            "phases_s": {k: round(v, 3) for k, v in phases.items() if k.endswith("_s")}}
+    seconds, cpu = timed(lambda: trainable.infer(net, views, precision=precision, max_memory_gb=max_memory_gb,
+                                                 tile=tile, timings=phases), repeat)
+    record = {"bench": "inference", "model": model, "size": size, **params, "precision": precision,
+              "seconds": seconds, "peak_memory_gb": peak_rss_gb(), "baseline_memory_gb": baseline,
+              "cpu_seconds": cpu, "weights": weights or "random", "max_memory_gb": max_memory_gb}
+    flops = trainable.flops(net, size, size)
+    if flops:
+        record.update({"gflops_per_s": flops["total"] / seconds / 1e9, "gflops_per_cpu_s": flops["total"] / cpu / 1e9,
+                       "tflop": flops["total"] / 1e12,
+                       **{f"tflop_{k}": v / 1e12 for k, v in flops.items() if k != "total"}})
+    if "tile" in phases:
+        record["tile"] = list(phases["tile"])
+    if "tiles" in phases:
+        record["tiles"] = phases["tiles"]
+    record["phases_s"] = {k: round(v, 3) for k, v in phases.items() if k.endswith("_s")}
+    return _described(record, net, params)
 
 
-def bench_volume(size: int = 512, interval: float = 0.5, precision: str = "fp32", method: str = "gather",
-                 threads: int = 0, repeat: int = 1, chunk_disparities: int = 2) -> dict:
-    """The whole bilinear cost volume (1, 4N, D, size, size) of random features, built ``chunk_disparities``
-    planes at a time into one reused buffer: GB/s = volume bytes / seconds. method: ``gather`` (the fast
-    path, channels-last in ``precision``) or ``grid_sample`` (lfbench.data.shift.shift_views, fp32)."""
+def bench_train(batch: int = 2, patch: int = 32, steps: int = 2, channels_last: bool = True, threads: int = 0,
+                seed: int = 0, *, model: str = DEFAULT_MODEL, **params: Any) -> dict:
+    """Training steps per second: the network (``params`` over its defaults) in training mode, Adam (lr 1e-3,
+    eps 1e-7) on an L1 loss of its disparity for random (batch, N, patch, patch) views against random
+    disparities in [-4, 4); one warm-up step, then ``steps``."""
     import torch
-    from lfbench_methods.subfocal.fast import VolumeGather, pad_features, shift_plan
-    from lfbench_methods.subfocal.network import FEATURES
 
-    from lfbench.data.shift import angular_offsets, disparity_grid, shift_views
+    from lfbench.training.loop import to_channels_last
 
-    _set_threads(threads)
-    dtype = _dtype(precision) if method == "gather" else torch.float32
-    if method not in ("gather", "grid_sample"):
-        raise SpecError(f"volume method must be gather or grid_sample, got {method!r}")
-    grid = disparity_grid(-4.0, 4.0, interval)
-    d, n = grid.numel(), 81
-    offsets = angular_offsets(9)
-    feats = torch.rand((1, n, FEATURES, size, size), generator=torch.Generator().manual_seed(0))
-    k = max(1, chunk_disparities)
-    baseline = current_rss_gb()
-
-    def run_gather() -> None:
-        plan = shift_plan(-4.0, interval, d, offsets)
-        gather = VolumeGather(plan, pad_features(feats, plan.pad), 0, size, 0, size, dtype)
-        buf = torch.empty((1, k, size, size, n * FEATURES), dtype=dtype)
-        for d0 in range(0, d, k):
-            gather.fill(buf[:, :min(k, d - d0)], d0, min(d0 + k, d))
-
-    def run_grid() -> None:
-        for d0 in range(0, d, k):
-            shift_views(feats, offsets, grid[d0:d0 + k], "bilinear")
-
-    with torch.inference_mode():
-        seconds, cpu = _timed(run_gather if method == "gather" else run_grid, repeat)
-    item = torch.empty((), dtype=dtype).element_size()
-    gb = d * size * size * n * FEATURES * item / 1e9
-    return {"bench": "volume", "size": size, "interval": interval, "precision": precision if method == "gather"
-            else "fp32", "method": method, "seconds": seconds, "cpu_seconds": cpu, "volume_gb": gb,
-            "gb_per_s": gb / seconds, "peak_memory_gb": peak_rss_gb(), "baseline_memory_gb": baseline}
-
-
-def bench_train(width: int = PAPER_WIDTH, batch: int = 2, patch: int = 32, steps: int = 2, interval: float = 0.5,
-                channels_last: bool = True, threads: int = 0, seed: int = 0) -> dict:
-    """Training steps per second: SubFocalNet(width) in training mode, Adam (lr 1e-3, eps 1e-7) on an L1 loss
-    of random (batch, 81, patch, patch) views against random disparities; one warm-up step, then ``steps``."""
-    import torch
-    from lfbench_methods.subfocal.network import SubFocalNet
-
-    _set_threads(threads)
-    torch.manual_seed(seed)
-    net = SubFocalNet(width=width, interval=interval).train()
+    set_threads(threads)
+    trainable, net = _network(model, params, None, seed)
+    net.train()
     if channels_last:
-        for m in net.modules():
-            if isinstance(m, torch.nn.Conv2d):
-                m.to(memory_format=torch.channels_last)
-            elif isinstance(m, torch.nn.Conv3d):
-                m.to(memory_format=torch.channels_last_3d)
+        to_channels_last(net)
     opt = torch.optim.Adam(net.parameters(), lr=1e-3, eps=1e-7)
     g = torch.Generator().manual_seed(seed)
-    views = torch.rand((batch, 81, patch, patch), generator=g)
+    angular = int(getattr(net, "angular", 9))
+    views = torch.rand((batch, angular * angular, patch, patch), generator=g)
     target = torch.rand((batch, patch, patch), generator=g) * 8 - 4
 
     def step() -> None:
@@ -278,17 +233,20 @@ def bench_train(width: int = PAPER_WIDTH, batch: int = 2, patch: int = 32, steps
 
     baseline = current_rss_gb()
     step()
-    t, cpu0 = time.perf_counter(), _cpu_s()
+    t, cpu0 = time.perf_counter(), cpu_seconds()
     for _ in range(max(1, steps)):
         step()
     seconds = (time.perf_counter() - t) / max(1, steps)
-    cpu = (_cpu_s() - cpu0) / max(1, steps)
-    forward = net.flops(patch, patch)["total"] * batch
-    return {"bench": "train", "width": width, "batch": batch, "patch": patch, "interval": interval,
-            "channels_last": channels_last, "steps": max(1, steps), "seconds": seconds, "seconds_per_step": seconds,
-            "steps_per_s": 1.0 / seconds, "gflops_per_s": 3 * forward / seconds / 1e9, "cpu_seconds": cpu,
-            "gflops_per_cpu_s": 3 * forward / cpu / 1e9,
-            "peak_memory_gb": peak_rss_gb(), "baseline_memory_gb": baseline, "precision": "fp32"}
+    cpu = (cpu_seconds() - cpu0) / max(1, steps)
+    record = {"bench": "train", "model": model, **params, "batch": batch, "patch": patch,
+              "channels_last": channels_last, "steps": max(1, steps), "seconds": seconds, "seconds_per_step": seconds,
+              "steps_per_s": 1.0 / seconds, "cpu_seconds": cpu, "peak_memory_gb": peak_rss_gb(),
+              "baseline_memory_gb": baseline, "precision": "fp32"}
+    flops = trainable.flops(net, patch, patch)
+    if flops:
+        forward = flops["total"] * batch
+        record.update({"gflops_per_s": 3 * forward / seconds / 1e9, "gflops_per_cpu_s": 3 * forward / cpu / 1e9})
+    return _described(record, net, params)
 
 
 def _write_synthetic_scene(folder: Path, size: int, seed: int):
@@ -339,7 +297,7 @@ def bench_metrics(scenes: int = 12, methods: int = 5, size: int = 512, repeat: i
                 for pred in per_scene:
                     score_scene(scene, pred, GENERAL_METRICS)
 
-        seconds, cpu = _timed(run, repeat)
+        seconds, cpu = timed(run, repeat)
     pairs = scenes * methods
     return {"bench": "metrics", "scenes": scenes, "methods": methods, "size": size, "metrics": len(GENERAL_METRICS),
             "seconds": seconds, "cpu_seconds": cpu, "scores_per_s": pairs / seconds,
@@ -347,18 +305,35 @@ def bench_metrics(scenes: int = 12, methods: int = 5, size: int = 512, repeat: i
             "peak_memory_gb": peak_rss_gb(), "baseline_memory_gb": baseline}
 
 
-_FUNCTIONS = {"peak": bench_peak, "inference": bench_inference, "volume": bench_volume, "train": bench_train,
-              "metrics": bench_metrics}
+_FUNCTIONS = {"inference": bench_inference, "train": bench_train, "metrics": bench_metrics}
 
 
 # --------------------------------------------------------------------------- running cases
 
+def bench_function(bench: str, model: str = DEFAULT_MODEL) -> Callable[..., dict]:
+    """The function of a bench: lfbench's own (inference, train, metrics) or one the network ``model``
+    contributes (``Trainable.benches``, e.g. SubFocal's peak and volume)."""
+    if bench in _FUNCTIONS:
+        return _FUNCTIONS[bench]
+    from lfbench.method.trainable import get_trainable
+
+    extra = get_trainable(model).benches
+    if bench not in extra:
+        raise SpecError(f"unknown bench {bench!r} (one of {', '.join([*_FUNCTIONS, *extra])}; "
+                        f"network {model!r})")
+    return extra[bench]
+
+
 def run_case(bench: str, params: dict) -> dict:
-    """Run one case in this process: the bench's record plus ``machine`` (load average before and after)."""
-    if bench not in _FUNCTIONS:
-        raise SpecError(f"unknown bench {bench!r} (one of {', '.join(BENCHES)})")
+    """Run one case in this process: the bench's record plus ``machine`` (load average before and after).
+    A bench contributed by a network takes the network's name as ``model`` in ``params``."""
+    params = dict(params)
+    if bench in _FUNCTIONS:
+        fn = _FUNCTIONS[bench]
+    else:
+        fn = bench_function(bench, params.pop("model", DEFAULT_MODEL))
     load_before = _load()
-    record = _FUNCTIONS[bench](**params)
+    record = fn(**params)
     machine = machine_info()
     machine["load_average_before"] = load_before
     record["machine"] = machine

@@ -1,5 +1,6 @@
-"""Training SubFocal: TOML configs, the authors' patch sampling and augmentation, the two-stage
-loop with atomic checkpoints and resume, and distributed data-parallel training.
+"""Training any registered trainable network (lfbench.method.trainable; SubFocal by default): TOML
+configs, the authors' patch sampling and augmentation, the two-stage loop with atomic checkpoints and
+resume, and distributed data-parallel training.
 
 Modules: config (TrainConfig from TOML), data (scenes in memory, patch sampling), augment
 (gamma, flip, rotation, noise with the angular axes), distributed (torch.distributed setup),

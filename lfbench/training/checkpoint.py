@@ -87,9 +87,11 @@ def parameters_sha256(module: torch.nn.Module) -> str:
 
 
 def export_weights(path: str | Path, model: torch.nn.Module, training: dict[str, Any] | None = None,
-                   method: str = "subfocal") -> None:
-    """Write the inference format ``{"format", "method", "state_dict", "config", "training"}`` atomically."""
-    config = model.config() if hasattr(model, "config") else {}
+                   method: str = "subfocal", config: dict[str, Any] | None = None) -> None:
+    """Write the inference format ``{"format", "method", "state_dict", "config", "training"}`` atomically:
+    ``method`` runs it as ``method:weights=PATH``; ``config`` (default ``model.config()``) rebuilds the network."""
+    if config is None:
+        config = model.config() if hasattr(model, "config") else {}
     save(path, {"format": WEIGHTS_FORMAT, "version": VERSION, "method": method,
                 "state_dict": {k: v.detach().cpu().contiguous() for k, v in model.state_dict().items()},
                 "config": config, "training": training or {}})

@@ -5,6 +5,7 @@ Layout (every table optional except ``[[stages]]``; defaults are the authors' se
 
     seed = 42
     out = "runs/name"                       # default output folder (--out overrides)
+    method = "subfocal"                     # the registered trainable network (lfbench.method.trainable)
 
     [data]
     roots = ["${LFBENCH_HCI_ROOT}"]         # HCI-layout roots (ROOT/<category>/<scene>)
@@ -24,7 +25,7 @@ Layout (every table optional except ``[[stages]]``; defaults are the authors' se
     [augment]                               # the authors' order: gamma, flip, rotate, noise, clip
     enabled = true; gamma = [0.8, 1.2]; flip = 0.5; rotate = true; noise = 0.08333; noise_std = 0.4472
 
-    [model]                                 # SubFocalNet keyword arguments
+    [model]                                 # the network's build parameters (here SubFocal's)
     width = 150; interval = 0.5; interpolation = "bilinear"; attention = true
 
     [training]
@@ -51,6 +52,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+from lfbench.method.trainable import DEFAULT_TRAINABLE
 from lfbench.utils.errors import SpecError
 
 STAGE_KEYS = {"name", "loss", "lr", "steps", "eps", "betas"}
@@ -139,13 +141,17 @@ class TrainConfig:
     model: dict[str, Any] = field(default_factory=dict)
     training: TrainingConfig = field(default_factory=TrainingConfig)
     validation: ValidationConfig = field(default_factory=ValidationConfig)
+    method: str = DEFAULT_TRAINABLE
     source: str | None = field(default=None, compare=False)
 
     def to_dict(self) -> dict[str, Any]:
         """The config in its TOML layout as plain values (storable in a weights-only checkpoint);
-        ``TrainConfig.from_dict(cfg.to_dict()) == cfg``."""
+        ``TrainConfig.from_dict(cfg.to_dict()) == cfg``. The default ``method`` is left out, so that configs
+        and cell fingerprints written before the key existed stay the same."""
         d = _plain(asdict(self))
         d.pop("source", None)
+        if d["method"] == DEFAULT_TRAINABLE:
+            del d["method"]
         for st in d["stages"]:  # the TOML layout: loss parameters beside the stage's keys
             st.update(st.pop("loss_params"))
         return d
@@ -247,6 +253,7 @@ def _parse(raw: dict[str, Any], source: str | None) -> TrainConfig:
     top = _Table(raw, "", source)
     seed = top.number("seed", 42, low=0, integer=True)
     out = top.get("out", str, None)
+    method = top.get("method", str, DEFAULT_TRAINABLE)
     data = _parse_data(top.table("data"), source)
     augment = _parse_augment(top.table("augment"))
     model_t = top.table("model")
@@ -262,8 +269,24 @@ def _parse(raw: dict[str, Any], source: str | None) -> TrainConfig:
     names = [s.name for s in stages]
     if len(set(names)) != len(names):
         raise SpecError(f"stage names must be unique, got {names}", source)
+    _check_method(method, stages, source)
     return TrainConfig(stages=stages, seed=seed, out=out, data=data, augment=augment, model=model,
-                       training=training, validation=validation, source=source)
+                       training=training, validation=validation, method=method, source=source)
+
+
+def _check_method(method: str, stages: tuple[StageConfig, ...], source: str | None) -> None:
+    """The network is registered, and has a distribution if a stage's loss needs one."""
+    from lfbench.method.trainable import get_trainable
+    from lfbench.training.losses import NEEDS_DISTRIBUTION
+
+    try:
+        trainable = get_trainable(method)
+    except SpecError as exc:
+        raise SpecError(f"method: {exc}", source) from None
+    for i, st in enumerate(stages):
+        if st.loss in NEEDS_DISTRIBUTION and not trainable.distribution:
+            raise SpecError(f"stages[{i}].loss: {st.loss!r} needs a distribution over disparities, which network "
+                            f"{method!r} does not return (use l1 or mse)", source)
 
 
 def _parse_data(t: _Table, source: str | None) -> DataConfig:

@@ -39,6 +39,7 @@ import numpy as np
 import torch
 
 from lfbench.data.scene import Benchmark, Scene
+from lfbench.method.trainable import get_trainable
 from lfbench.training import checkpoint as ckpt
 from lfbench.training.config import TrainConfig, expand_path
 from lfbench.training.data import PatchSampler, ValidationScene, load_scene_data, load_validation_scene
@@ -232,13 +233,22 @@ def to_channels_last(model: torch.nn.Module) -> torch.nn.Module:
 
 
 def build_model(cfg: TrainConfig) -> torch.nn.Module:
-    """SubFocalNet(**cfg.model); SpecError naming the config for bad keyword arguments."""
-    from lfbench_methods.subfocal.network import SubFocalNet
+    """The config's trainable network built from [model]; SpecError naming the config for bad parameters."""
+    from lfbench.method.trainable import get_trainable
 
+    trainable = get_trainable(cfg.method)
     try:
-        return SubFocalNet(**cfg.model)
+        trainable.check_params(cfg.model)
+        return trainable.build(**cfg.model)
     except (TypeError, ValueError) as exc:
         raise SpecError(f"[model]: {exc}", cfg.source) from None
+
+
+def network_config(cfg: TrainConfig, model: torch.nn.Module) -> dict[str, Any]:
+    """What the weights files store as the network's config (``model.config()``, else the [model] table)."""
+    from lfbench.method.trainable import get_trainable
+
+    return get_trainable(cfg.method).config_of(model, cfg.model)
 
 
 # --------------------------------------------------------------------------- the trainer
@@ -319,6 +329,11 @@ class Trainer:
                             "use another --out folder to start a new run", self.cfg.source)
         return state
 
+    def export(self, path: Path, model, info: dict | None = None) -> None:
+        """Write inference weights (runnable as ``<method>:weights=PATH``)."""
+        ckpt.export_weights(path, model, info if info is not None else self.training_info(),
+                            method=get_trainable(self.cfg.method).method_name, config=network_config(self.cfg, model))
+
     def training_info(self) -> dict:
         return {"command": self.command, "config": self.cfg.to_dict(), "steps": self.global_step,
                 "elapsed_s": self.elapsed(), "world_size": self.ctx.world_size,
@@ -340,7 +355,7 @@ class Trainer:
                      f"MSE x100 {res['mse_x100']:.3f} ({per})")
             if res["badpix"] < self.best_badpix:
                 self.best_badpix = res["badpix"]
-                ckpt.export_weights(self.paths.best, model, self.training_info())
+                self.export(self.paths.best, model)
         self.ctx.barrier()
 
     # -- main ----------------------------------------------------------------------------------
@@ -391,9 +406,10 @@ class Trainer:
         torch.manual_seed(cfg.seed)
         np.random.seed(cfg.seed % 2**32)
         model = build_model(cfg)
-        if model.angular != sampler.angular[0] or sampler.angular[0] != sampler.angular[1]:
+        angular = int(getattr(model, "angular", 9))
+        if angular != sampler.angular[0] or sampler.angular[0] != sampler.angular[1]:
             raise DataError(f"the scenes have {sampler.angular[0]}x{sampler.angular[1]} views, the model expects "
-                            f"{model.angular}x{model.angular}", cfg.source)
+                            f"{angular}x{angular}", cfg.source)
         start_stage, start_step, opt_state = 0, 0, None
         if state is not None:
             model.load_state_dict(state["model"])
@@ -421,7 +437,7 @@ class Trainer:
         if ctx.is_main:
             info = self.training_info()
             info["rank_parameters_sha256"] = digests
-            ckpt.export_weights(paths.final, model, info)
+            self.export(paths.final, model, info)
             summary = {k: v for k, v in info.items() if k != "config"}
             write_text(paths.summary, json.dumps(summary, indent=2, sort_keys=True) + "\n")
             self.log(f"done: {self.global_step} steps in {self.elapsed():.1f} s; final weights {paths.final}")
@@ -444,6 +460,7 @@ class Trainer:
 
             net = DistributedDataParallel(model, device_ids=[ctx.device.index] if ctx.device.type == "cuda" else None)
         micro = local_batch // tc.accumulate
+        disparities = getattr(model, "disparities", None)  # what the distribution is over (distribution losses)
         label = f"stage {si + 1}/{len(cfg.stages)} {st.name}"
         self.log(f"[{label}] loss {loss_fn.__name__}, Adam lr {st.lr:g} eps {st.eps:g}, {st.steps} steps of batch "
                  f"{tc.batch_size} ({ctx.world_size} process(es) x {tc.accumulate} micro-batch(es) of {micro}), "
@@ -468,7 +485,7 @@ class Trainer:
                     sync = contextlib.nullcontext() if (not ctx.enabled or m == tc.accumulate - 1) else net.no_sync()
                     with sync:
                         disp, prob = net(v[sl])
-                        loss = loss_fn(disp, prob, t[sl], model.disparities) / tc.accumulate
+                        loss = loss_fn(disp, prob, t[sl], disparities) / tc.accumulate
                         loss.backward()
                     step_loss += float(loss.detach())
                 if ctx.any(not np.isfinite(step_loss)):
@@ -514,7 +531,7 @@ class Trainer:
         st = self.cfg.stages[si]
         self.run_validation(model, validation, si, st.steps)
         if self.ctx.is_main:
-            ckpt.export_weights(self.paths.stage_weights(si, st.name), model, self.training_info())
+            self.export(self.paths.stage_weights(si, st.name), model)
         self.save_checkpoint(model, None, si + 1, 0)
         self.ctx.barrier()
 

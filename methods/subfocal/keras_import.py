@@ -227,17 +227,10 @@ def load_checkpoint(path: str | Path) -> tuple[dict, dict, str]:
 def build_from_checkpoint(path: str | Path, **overrides) -> SubFocalNet:
     """A SubFocalNet (eval mode) from a torch checkpoint; ``overrides`` replace config entries that
     do not change the weights' shapes (the caller checks conflicts)."""
+    from lfbench.method.trainable import network_from_state
+
     state, config, _ = load_checkpoint(path)
-    config = {**config, **overrides}
-    try:
-        net = SubFocalNet(**config)
-    except (TypeError, ValueError) as exc:
-        raise DataError(f"checkpoint config {config} is not valid: {exc}", path) from None
-    try:
-        net.load_state_dict(state)
-    except RuntimeError as exc:
-        raise DataError(f"weights do not fit the stored config: {str(exc).splitlines()[0]}", path) from None
-    return net.eval()
+    return network_from_state(SubFocalNet, state, {**config, **overrides}, path)
 
 
 __all__ = ["load_keras_checkpoint", "read_keras_layers", "save_checkpoint", "load_checkpoint",

@@ -17,6 +17,7 @@ from typing import Literal
 
 import numpy as np
 import torch
+from lfbench_methods.subfocal.trainable import LFAttNetTrainable, SubFocalTrainable  # noqa: F401 (registers them)
 
 from lfbench.data.scene import LightField
 from lfbench.data.shift import INTERPOLATIONS, disparity_grid
@@ -146,6 +147,11 @@ class _SubFocalBase(Method):
             self._checkpoint_config(net.config())
             self._net = net
         return self._net
+
+    def to(self, device: str) -> _SubFocalBase:
+        """Load the network (once) and move it to ``device``."""
+        self.load_network().to(device)
+        return self
 
     def describe_variant(self) -> dict:
         """Facts about the configured variant: trainable parameters, disparity grid, weights."""

@@ -1,0 +1,218 @@
+"""Trainable networks: what a plugin declares so that ``lfbench train``, ``lfbench ablate`` and
+``lfbench bench`` work for its network without a line of lfbench changing.
+
+A plugin subclasses :class:`Trainable`, decorates it with ``@register_trainable("name")`` in a module of
+its ``lfbench.methods`` entry points (the same group and usually the same module as the :class:`Method`
+that runs its checkpoints), and says:
+
+- how to build the network from the ``[model]`` table of a training config: :meth:`Trainable.build`
+  (default ``network(**params)``); its keyword parameters, documented by ``name: help`` lines of the
+  class docstring, are the ``[model]`` keys and the ablation axes (:attr:`Trainable.axes`);
+- what the network returns (the contract below) and whether it has a distribution over disparities
+  (:attr:`Trainable.distribution`; the distribution losses js, kl, l1+js, l1+kl, uafl need one);
+- how a trained checkpoint becomes a runnable method: :attr:`Trainable.method` (the registered
+  method that takes ``weights=PATH``, default the same name) and :meth:`Trainable.runner`;
+- what ``lfbench bench`` times: :meth:`Trainable.infer` (one whole light field), :meth:`Trainable.flops`
+  and extra benches (:attr:`Trainable.benches`).
+
+The network contract (a ``torch.nn.Module``):
+
+- ``forward(views)``: views (B, N, H, W) float32 gray in [0, 1], N = angular^2, view k at angular row
+  ``k // angular``, column ``k % angular`` -> ``(disparity, probability)``: disparity (B, H, W) in px per
+  view step, probability (B, D, H, W) over ``disparities`` (softmax over D) or None;
+- ``angular`` (int, default 9): views per angular row;
+- ``disparities``: (D,) tensor of the candidate disparities (px), evenly spaced, when it has a distribution;
+- ``config()`` (optional): the build keyword arguments that rebuild it (stored in checkpoints; default:
+  the ``[model]`` parameters it was built with).
+
+Checkpoints (``final.pt``, ``best.pt``, ``stage<k>_<name>.pt``) hold ``{"format", "method",
+"state_dict", "config", "training"}``; :meth:`Trainable.load` rebuilds the network from one
+(``torch.load(weights_only=True)``).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import inspect
+from collections.abc import Callable
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, ClassVar
+
+from lfbench.method.registry import ENTRY_POINT_GROUP, Param, PluginRegistry, _decorator, signature_params
+from lfbench.utils.errors import DataError
+
+if TYPE_CHECKING:  # torch is imported where a network is built, not by `lfbench methods`
+    import torch
+
+    from lfbench.method.base import Method
+
+DEFAULT_TRAINABLE = "subfocal"  # what a training config without ``method = ...`` trains
+
+
+class Trainable:
+    """A network that lfbench can train, ablate and time (see the module docstring for the contract).
+
+    Subclasses set :attr:`network` (or override :meth:`build`) and document the parameters with
+    ``name: help`` lines in their docstring. The registry sets :attr:`name`.
+    """
+
+    name: str = ""
+    #: The nn.Module class that :meth:`build` instantiates with the [model] parameters.
+    network: ClassVar[type | None] = None
+    #: The registered method that runs a checkpoint as ``method:weights=PATH`` ("" = this trainable's name).
+    method: ClassVar[str] = ""
+    #: Whether forward returns a probability over ``disparities`` (needed by the distribution losses).
+    distribution: ClassVar[bool] = False
+    #: The parameters an ablation may vary (None = every build parameter), in the order error messages list.
+    axes: ClassVar[tuple[str, ...] | None] = None
+    #: Defaults that replace the network's own (a variant: e.g. ``lfattnet`` is SubFocal with interval 1).
+    defaults: ClassVar[dict[str, Any]] = {}
+    #: Extra ``lfbench bench`` cases: name -> function(**params) returning a record dict with "bench".
+    benches: ClassVar[dict[str, Callable[..., dict]]] = {}
+
+    # -- building ------------------------------------------------------------------------------
+
+    def build(self, **params: Any) -> torch.nn.Module:
+        """The network for the ``[model]`` parameters (ValueError/TypeError for bad values)."""
+        if self.network is None:
+            raise NotImplementedError(f"{type(self).__name__} sets no network and does not override build()")
+        return self.network(**{**self.defaults, **params})
+
+    def parameters(self) -> dict[str, Param]:
+        """The build keyword parameters (types, defaults, help from the class docstring)."""
+        target = self.build if type(self).build is not Trainable.build else self.network
+        if target is None:
+            return {}
+        docs = [c.__doc__ for c in type(self).__mro__ if issubclass(c, Trainable) and c is not Trainable]
+        doc = "\n".join(inspect.cleandoc(d) for d in (*docs, inspect.getdoc(target)) if d)
+        params = signature_params(target, doc)
+        return {k: dataclasses.replace(p, default=self.defaults[k]) if k in self.defaults else p
+                for k, p in params.items()}
+
+    def ablation_axes(self) -> tuple[str, ...]:
+        """The parameters an ablation grid may vary."""
+        return tuple(self.axes) if self.axes is not None else tuple(self.parameters())
+
+    def check(self, params: dict[str, Any]) -> None:
+        """Raise ValueError/TypeError if ``params`` cannot build the network. Unknown keys are checked by
+        :meth:`check_params`; this default builds the network once (override with a cheaper check)."""
+        self.build(**params)
+
+    def check_params(self, params: dict[str, Any]) -> None:
+        """ValueError naming unknown [model] keys, then :meth:`check`."""
+        accepted = set(self.parameters())
+        unknown = sorted(set(params) - accepted)
+        if unknown:
+            raise ValueError(f"unknown [model] key(s) {', '.join(unknown)} (accepted: {', '.join(sorted(accepted))})")
+        self.check(params)
+
+    def config_of(self, net: torch.nn.Module, params: dict[str, Any]) -> dict[str, Any]:
+        """What a checkpoint stores as ``config``: ``net.config()`` when the network has one, else ``params``."""
+        config = getattr(net, "config", None)
+        return dict(config()) if callable(config) else dict(params)
+
+    # -- checkpoints -----------------------------------------------------------------------------
+
+    def load(self, path: str | Path, **overrides: Any) -> torch.nn.Module:
+        """The network of a checkpoint (eval mode), rebuilt from its stored config with ``overrides``
+        (entries that do not change the weights' shapes); DataError naming the file otherwise."""
+        from lfbench.training import checkpoint as ckpt
+
+        payload = ckpt.load(path)
+        state, config = payload.get("state_dict"), payload.get("config")
+        if not isinstance(state, dict) or not isinstance(config, dict):
+            raise DataError("not an lfbench weights file (expected 'state_dict' and 'config')", path)
+        return network_from_state(self.build, state, {**config, **overrides}, path)
+
+    @property
+    def method_name(self) -> str:
+        return self.method or self.name
+
+    def runner(self, weights: str | Path, *, device: str = "cpu", **options: Any) -> Method:
+        """The registered method running ``weights`` on ``device``; ``options`` (threads, tile, precision,
+        max_memory_gb, ...) are passed when the method has such a parameter and left out otherwise."""
+        from lfbench.method.registry import create, method_info
+
+        accepted = method_info(self.method_name).params
+        method = create(self.method_name, weights=Path(weights),
+                        **{k: v for k, v in options.items() if k in accepted})
+        return method.to(device)
+
+    # -- timing ----------------------------------------------------------------------------------
+
+    def infer(self, net: torch.nn.Module, views: torch.Tensor, *, precision: str = "fp32", max_memory_gb: float = 4.0,
+              tile: int = 0, timings: dict | None = None) -> tuple[torch.Tensor, torch.Tensor | None]:
+        """One inference pass as ``lfbench bench inference`` times it: views (B, N, H, W) ->
+        (disparity (B, H, W), probability or None). Default: ``net(views)`` in inference mode, under
+        bf16 autocast for precision ``bf16`` (tile and max_memory_gb are the plugin's to use)."""
+        import torch
+
+        autocast = (torch.autocast("cpu" if views.device.type == "cpu" else views.device.type, dtype=torch.bfloat16)
+                    if precision == "bf16" else contextlib.nullcontext())
+        with torch.inference_mode(), autocast:
+            return net.eval()(views)
+
+    def flops(self, net: torch.nn.Module, height: int, width: int) -> dict[str, float] | None:
+        """Floating-point operations of one eval forward on an H x W light field (``{"total": ...}`` and
+        any parts), or None when unknown (then bench records carry no GFLOP/s)."""
+        return None
+
+
+def network_from_state(build: Callable[..., torch.nn.Module], state: dict, config: dict, path: str | Path
+                       ) -> torch.nn.Module:
+    """``build(**config)`` with ``state`` loaded, in eval mode; DataError naming ``path`` (the checkpoint)
+    when the config does not build or the weights do not fit it."""
+    try:
+        net = build(**config)
+    except (TypeError, ValueError) as exc:
+        raise DataError(f"checkpoint config {config} is not valid: {exc}", path) from None
+    try:
+        net.load_state_dict(state)
+    except RuntimeError as exc:
+        raise DataError(f"weights do not fit the stored config: {str(exc).splitlines()[0]}", path) from None
+    return net.eval()
+
+
+class TrainableRegistry(PluginRegistry):
+    """Maps names to :class:`Trainable` instances; ``TRAINABLES`` is the process-wide default."""
+
+    kind = "trainable network"
+    names_attr = "__lfbench_trainable_names__"
+
+    def _make(self, name: str, obj: Any) -> Trainable:
+        if not (inspect.isclass(obj) and issubclass(obj, Trainable)):
+            raise TypeError(f"{obj!r} registered as trainable network {name!r} is not a Trainable subclass")
+        instance = obj()
+        instance.name = name
+        return instance
+
+    def _factory(self, entry: Trainable) -> Any:
+        return type(entry)
+
+    def _accepts(self, obj: Any) -> bool:
+        return inspect.isclass(obj) and issubclass(obj, Trainable)
+
+    def get(self, name: str) -> Trainable:
+        return self._get(name)
+
+
+TRAINABLES = TrainableRegistry(ENTRY_POINT_GROUP)
+
+
+def register_trainable(name: str, registry: TrainableRegistry | None = None) -> Callable:
+    """Class decorator: make a :class:`Trainable` subclass available as ``name``."""
+    return _decorator(name, registry or TRAINABLES)
+
+
+def get_trainable(name: str) -> Trainable:
+    """The registered trainable network ``name`` (SpecError listing the available ones otherwise)."""
+    return TRAINABLES.get(name)
+
+
+def list_trainables() -> list[str]:
+    return TRAINABLES.names()
+
+
+__all__ = ["Trainable", "TrainableRegistry", "network_from_state", "TRAINABLES", "DEFAULT_TRAINABLE",
+           "register_trainable", "get_trainable", "list_trainables"]

@@ -1,0 +1,77 @@
+"""SubFocal and LFattNet as trainable networks (the lfbench.method.trainable seam): what ``lfbench train``
+builds from ``[model]``, what ``lfbench ablate`` varies, what ``lfbench bench`` times."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import torch
+from lfbench_methods.subfocal.bench import bench_peak, bench_volume
+from lfbench_methods.subfocal.network import SubFocalNet
+
+from lfbench.method.trainable import Trainable, register_trainable
+
+
+@register_trainable("subfocal")
+class SubFocalTrainable(Trainable):
+    """SubFocal (Chao et al., TCI 2023): forward -> (disparity, softmax probability over the disparity grid).
+
+    d_min: smallest candidate disparity in px
+    d_max: largest candidate disparity in px
+    interval: disparity step of the cost volume in px (paper 0.5)
+    interpolation: sub-pixel shift of the features: nearest, bilinear (paper) or phase (Fourier)
+    width: channels of the 3D aggregation (paper 150)
+    attention: channel attention over the views on/off
+    angular: views per angular row (9 for the HCI scenes)
+    """
+
+    network = SubFocalNet
+    distribution = True
+    axes = ("interval", "interpolation", "width", "attention", "d_min", "d_max")
+    benches = {"peak": bench_peak, "volume": bench_volume}
+
+    def check(self, params: dict[str, Any]) -> None:
+        """The grid and the interpolation, without building the (paper-size) network."""
+        from lfbench.data.shift import INTERPOLATIONS, disparity_grid
+
+        merged = {**self.defaults, **params}
+        if "interpolation" in merged and merged["interpolation"] not in INTERPOLATIONS:
+            raise ValueError(f"interpolation must be one of {', '.join(INTERPOLATIONS)}, "
+                             f"got {merged['interpolation']!r}")
+        disparity_grid(float(merged.get("d_min", -4.0)), float(merged.get("d_max", 4.0)),
+                       float(merged.get("interval", 0.5)))
+
+    def load(self, path: str | Path, **overrides: Any) -> SubFocalNet:
+        from lfbench_methods.subfocal.keras_import import build_from_checkpoint
+
+        return build_from_checkpoint(path, **overrides)
+
+    def infer(self, net: SubFocalNet, views: torch.Tensor, *, precision: str = "fp32", max_memory_gb: float = 4.0,
+              tile: int = 0, timings: dict | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+        """Whole-image or exactly tiled inference (tiles from ``max_memory_gb`` when tile = 0); ``timings``
+        receives the phases, the tile size and the number of tiles."""
+        from lfbench_methods.subfocal.inference import infer, plan_tiles
+
+        out = infer(net, views, tile=tile, max_memory_gb=max_memory_gb, precision=precision, timings=timings)
+        if timings is not None and "tile" not in timings:
+            h, w = views.shape[-2:]
+            timings["tile"] = plan_tiles(net, h, w, max_memory_gb=max_memory_gb, precision=precision) \
+                if tile == 0 else (tile, tile)
+        return out.disparity, out.probability
+
+    def flops(self, net: SubFocalNet, height: int, width: int) -> dict[str, float]:
+        return net.flops(height, width)
+
+
+@register_trainable("lfattnet")
+class LFAttNetTrainable(SubFocalTrainable):
+    """LFattNet (Tsai et al., AAAI 2020), SubFocal's baseline: the same network at integer disparities.
+
+    interval: disparity step of the cost volume in px (LFattNet 1)
+    """
+
+    defaults = {"interval": 1.0}
+
+
+__all__ = ["SubFocalTrainable", "LFAttNetTrainable"]
