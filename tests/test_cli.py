@@ -406,3 +406,61 @@ def test_evaluate_rates_uncertainty_maps(data, capsys):
         assert float(r["ause"]) >= 0 and int(r["n_pixels"]) == (SIZE - 30) ** 2
     assert "note: gt predicts no uncertainty map" in err and "AUSE" in out  # notes are log messages (stderr)
     assert (data["out"] / "figures" / "sparsification_abs.png").is_file()
+
+
+# --------------------------------------------------------------------------- plugin subcommands
+
+COMMAND_MODULE = '''\
+"""Echo the argument (a plugin command used by the tests)."""
+HELP = "echo WORD times N"
+
+
+def add_arguments(p):
+    p.add_argument("word")
+    p.add_argument("--times", type=int, default=1)
+
+
+def run(args):
+    print(" ".join([args.word] * args.times))
+    return 3
+'''
+
+
+def test_plugin_commands_come_from_entry_points(tmp_path, monkeypatch, capsys):
+    import uuid
+
+    tag = uuid.uuid4().hex[:8]
+    site = tmp_path / "site"
+    site.mkdir()
+    (site / f"lfbench_cmd_{tag}.py").write_text(COMMAND_MODULE, encoding="utf-8")
+    (site / f"lfbench_cmd_{tag}_empty.py").write_text("HELP = 'no run'\n", encoding="utf-8")
+    dist = site / f"lfbench_cmd_{tag}-1.0.dist-info"
+    dist.mkdir()
+    (dist / "METADATA").write_text(f"Metadata-Version: 2.1\nName: lfbench-cmd-{tag}\nVersion: 1.0\n", encoding="utf-8")
+    (dist / "entry_points.txt").write_text(
+        "[lfbench.commands]\n"
+        f"echo-{tag} = lfbench_cmd_{tag}\n"
+        f"evaluate = lfbench_cmd_{tag}\n"  # may not replace a built-in command
+        f"empty-{tag} = lfbench_cmd_{tag}_empty\n"  # no add_arguments / run
+        f"broken-{tag} = lfbench_cmd_{tag}_missing\n", encoding="utf-8")
+    monkeypatch.syspath_prepend(str(site))
+    try:
+        assert main([f"echo-{tag}", "hi", "--times", "2"]) == 3
+        out, err = capsys.readouterr()
+        assert out == "hi hi\n"
+        assert "plugin command 'evaluate'" in err and "would replace a built-in command" in err
+        assert f"plugin command 'empty-{tag}' failed to load (TypeError" in err and "add_arguments, run" in err
+        assert f"plugin command 'broken-{tag}' failed to load (ModuleNotFoundError" in err
+        assert "lfbench.cli.evaluate" in main.__globals__["COMMANDS"].values()  # the built-in stays
+    finally:
+        import sys
+
+        sys.modules.pop(f"lfbench_cmd_{tag}", None)
+
+
+def test_convert_keras_is_the_subfocal_plugin_command():
+    from importlib import metadata
+
+    eps = {ep.name: ep.value for ep in metadata.entry_points(group="lfbench.commands")}
+    assert eps.get("convert-keras") == "lfbench_methods.subfocal.cli"
+    assert "convert-keras" not in main.__globals__["COMMANDS"]

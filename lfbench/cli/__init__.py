@@ -1,6 +1,11 @@
 """The ``lfbench`` command line. Each subcommand lives in lfbench/cli/<name>.py with
 ``HELP``, ``add_arguments(parser)`` and ``run(args) -> int``; heavy imports happen inside run().
 
+Plugins add subcommands the same way: a module with ``HELP``, ``add_arguments`` and ``run`` (light at
+import: every ``lfbench`` call imports it to build the parser), named by an entry point of the group
+``lfbench.commands`` (``convert-keras = "lfbench_methods.subfocal.cli"``). A plugin command cannot
+replace a built-in one; one that fails to load is left out with a warning on stderr.
+
 Errors caused by input (files, specs, options) print one line on stderr and exit with code 2.
 Library messages go through ``logging`` and are shown on stderr (``-v``: also debug, ``-q``: only warnings).
 """
@@ -11,10 +16,12 @@ import argparse
 import importlib
 import sys
 from collections.abc import Sequence
+from types import ModuleType
 
 from lfbench.utils.errors import LFBenchError
 from lfbench.utils.log import configure_cli_logging
 
+COMMAND_GROUP = "lfbench.commands"
 COMMANDS = {
     "evaluate": "lfbench.cli.evaluate",
     "predict": "lfbench.cli.predict",
@@ -23,7 +30,6 @@ COMMANDS = {
     "demo": "lfbench.cli.demo",
     "report": "lfbench.cli.report",
     "synth": "lfbench.cli.synth",
-    "convert-keras": "lfbench.cli.convert_keras",
     "train": "lfbench.cli.train",
     "ablate": "lfbench.cli.ablate",
     "regress": "lfbench.cli.regress",
@@ -48,12 +54,35 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("-q", "--quiet", dest="log_quiet", action="store_true",
                         help="only warnings and errors on stderr")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
-    for name, module_name in COMMANDS.items():
-        module = importlib.import_module(module_name)
+    for name, module in [*((n, importlib.import_module(m)) for n, m in COMMANDS.items()), *plugin_commands()]:
         p = sub.add_parser(name, help=module.HELP, description=module.__doc__)
         module.add_arguments(p)
         p.set_defaults(_run=module.run)
     return parser
+
+
+def plugin_commands() -> list[tuple[str, ModuleType]]:
+    """(name, module) of the ``lfbench.commands`` entry points, sorted by name; a broken one, or one that
+    would replace a built-in command, is left out with a one-line warning on stderr."""
+    from importlib import metadata
+
+    out = []
+    for ep in sorted(metadata.entry_points(group=COMMAND_GROUP), key=lambda e: e.name):
+        if ep.name in COMMANDS:
+            print(f"lfbench: warning: plugin command {ep.name!r} ({ep.value}) would replace a built-in command; "
+                  "left out", file=sys.stderr)
+            continue
+        try:
+            module = ep.load()
+            missing = [a for a in ("HELP", "add_arguments", "run") if not hasattr(module, a)]
+            if missing:
+                raise TypeError(f"{ep.value} has no {', '.join(missing)}")
+        except Exception as exc:  # a broken plugin must not break the command line
+            print(f"lfbench: warning: plugin command {ep.name!r} failed to load ({type(exc).__name__}: {exc})",
+                  file=sys.stderr)
+            continue
+        out.append((ep.name, module))
+    return out
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -1,6 +1,9 @@
 """Convert a Keras checkpoint of the SubFocal/LFattNet authors' code (HDF5 written by ``model.save``,
 with model_weights/) into a PyTorch checkpoint for the ``subfocal`` method.
 
+A plugin command: ``lfbench convert-keras`` comes from the ``lfbench.commands`` entry point of this
+package (pyproject.toml), the way any plugin adds a subcommand (see lfbench/cli/__init__.py).
+
 The disparity grid is not stored in the Keras weights: give --interval 1 for LFattNet checkpoints
 (the default 0.5 is SubFocal's). Example:
 
