@@ -1,6 +1,7 @@
 """Shared fixtures. Real-data tests read LFBENCH_HCI_ROOT (the HCI data root, e.g. ../shared/data/hci)
 and skip cleanly when it is unset; the folder beside it (its parent) holds published/, reference/
-and paper/ when present."""
+and paper/ when present. Every test that uses the ``hci_root`` fixture (directly or through another
+fixture) carries the ``realdata`` marker, so ``-m "not realdata"`` runs without the data."""
 
 from __future__ import annotations
 
@@ -13,6 +14,12 @@ import pytest
 def _hci_root() -> Path | None:
     value = os.environ.get("LFBENCH_HCI_ROOT")
     return Path(value) if value and Path(value).is_dir() else None
+
+
+def pytest_collection_modifyitems(config, items) -> None:
+    for item in items:
+        if "hci_root" in getattr(item, "fixturenames", ()):
+            item.add_marker(pytest.mark.realdata)
 
 
 @pytest.fixture(scope="session")

@@ -1,4 +1,5 @@
-"""Tables and the BadPix-series figure from existing results (nothing is re-run).
+"""Tables and the BadPix-series figure from existing results (nothing is re-run; the work is
+lfbench.reports.from_results.report_from_results).
 
 Writes OUT/table_per_scene.* and OUT/table_average.* (the same tables `lfbench evaluate` writes) and,
 with --paper, OUT/table_per_scene_paper.* and OUT/table_average_paper.* with the paper's numbers in
@@ -76,77 +77,24 @@ def parse_figure_formats(text: str) -> list[str]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from lfbench.reports import figures as fig
-    from lfbench.reports.tables import average_table, per_scene_table, render, write_table
-    from lfbench.runs.results import Results
-    from lfbench.utils.errors import DataError
+    from lfbench.reports.from_results import report_from_results
+    from lfbench.reports.tables import render
 
     formats = parse_formats(args.format)
     figure_formats = parse_figure_formats(args.figure_format)
-    results = Results.read(args.results)
-    if not results.records:
-        raise DataError("the results hold no records", args.results)
-    results_dir = args.results if args.results.is_dir() else args.results.parent
-    paper = paper_methods = None
+    paper, paper_methods = None, ["SubFocal"]
     if args.paper is not None:
         from lfbench.reports.paper import find_paper_dir, load_paper
 
         paper = load_paper(find_paper_dir(args.paper or None))
         paper_methods = [m.strip() for m in args.paper_methods.split(",") if m.strip()]
-        for m in paper_methods:
-            paper.resolve_method(m)  # unknown names fail before anything is written
-    curves_path = args.curves or results_dir / "figures" / "badpix_series.csv"
-    if args.curves is not None and not curves_path.is_file():
-        raise DataError("curve file not found", curves_path)
-
-    per_scene, average = per_scene_table(results), average_table(results)
-    tables = {"per_scene": per_scene, "average": average}
-    if paper is not None:
-        from lfbench.reports.paper import average_with_paper, per_scene_with_paper
-
-        tables["per_scene_paper"] = per_scene_with_paper(per_scene, paper, paper_methods)
-        tables["average_paper"] = average_with_paper(average, paper, results.scenes, paper_methods)
-    written = [path for name, table in tables.items() for path in write_table(table, args.out, f"table_{name}",
-                                                                              formats=formats)]
-
-    fig_dir = args.out / "figures"
-    if args.maps is not None:
-        from lfbench.data.scene import Benchmark
-
-        root = args.data or (Path(results.meta["data_root"]) if results.meta.get("data_root") else None)
-        if root is None:
-            raise DataError("--maps needs --data ROOT (the results do not record their data root)", args.results)
-        bench = Benchmark.discover(root)
-        scenes = [s for s in bench if s.name in set(results.scenes) and s.has_gt()]
-        from lfbench.reports.maps import map_folders
-        from lfbench.reports.toolkit_figures import write_toolkit_figures
-
-        folders = map_folders(args.maps, results.methods)
-        writer = fig.figures_from_maps(scenes, folders, fig_dir)
-        written += sorted(writer.written)
-        written += write_toolkit_figures(results, scenes, folders, fig_dir / "toolkit", formats=figure_formats,
-                                         border_px=int((results.meta.get("scoring") or {}).get("border_px", 15)))
-        source = f"saved maps in {args.maps}"
-    elif curves_path.is_file():
-        written += fig.draw_badpix_curves(fig.read_curves_csv(curves_path), fig_dir)
-        source = str(curves_path)
-    else:
-        series = fig.curves_from_records(results)
-        written.append(fig.plot_badpix_series(series, fig_dir / "badpix_series.png",
-                                              "BadPix at the thresholds in the results, mean over scenes",
-                                              markers=True))
-        source = "the BadPix thresholds in the results (no curves saved: run evaluate --figures for full curves)"
-
-    if args.html:
-        from lfbench.reports.html import SITE_DIR, build_site, site_inputs_from_dir
-
-        inputs = site_inputs_from_dir(args.results, data_root=args.data, maps=args.maps, paper=paper,
-                                      paper_methods=paper_methods or ("SubFocal",))
-        index = build_site(inputs, args.out / SITE_DIR)
-        written.append(index)
-        print(f"HTML report: {index}")
-    print(render(tables.get("average_paper", average), "markdown"), end="")
-    print(f"\nBadPix series from {source}")
-    print(f"wrote {len(written)} files into {args.out}: tables table_*.{{{','.join(e for _, e in formats)}}}, "
-          f"figures in {fig_dir}")
+    outcome = report_from_results(args.results, args.out, formats=formats, paper=paper, paper_methods=paper_methods,
+                                  curves=args.curves, maps=args.maps, data=args.data, figure_formats=figure_formats,
+                                  html=args.html)
+    if outcome.html_index is not None:
+        print(f"HTML report: {outcome.html_index}")
+    print(render(outcome.tables.get("average_paper", outcome.tables["average"]), "markdown"), end="")
+    print(f"\nBadPix series from {outcome.curves_source}")
+    print(f"wrote {len(outcome.written)} files into {args.out}: tables table_*.{{{','.join(e for _, e in formats)}}}, "
+          f"figures in {outcome.figures}")
     return 0
