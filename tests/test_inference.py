@@ -9,7 +9,7 @@ import pytest
 import torch
 from lfbench_methods.subfocal.inference import estimate_tile_bytes, infer, plan_tile, region_volume, tile_count
 from lfbench_methods.subfocal.keras_import import save_checkpoint
-from lfbench_methods.subfocal.method import LFAttNet, SubFocal
+from lfbench_methods.subfocal.method import SubFocal
 from lfbench_methods.subfocal.network import SubFocalNet
 
 from lfbench.cli import main
@@ -140,8 +140,7 @@ def test_bf16_autocast_is_close_to_fp32():
 
 @pytest.fixture()
 def no_default_weights(monkeypatch, tmp_path: Path):
-    monkeypatch.setattr(SubFocal, "DEFAULT_WEIGHTS", tmp_path / "absent" / "subfocal_small.pt")
-    monkeypatch.setattr(LFAttNet, "DEFAULT_WEIGHTS", tmp_path / "absent" / "lfattnet_small.pt")
+    monkeypatch.setattr(SubFocal, "WEIGHTS_DIR", tmp_path / "absent")  # no <variant>_small.pt of any variant
 
 
 def test_subfocal_method_predicts_with_a_checkpoint(tmp_path: Path):
@@ -204,9 +203,10 @@ def test_info_prints_trainable_parameters_of_the_configured_variant(no_default_w
 def test_shipped_weights_serve_only_their_own_architecture(monkeypatch, tmp_path: Path, capsys):
     shipped = tmp_path / "subfocal_small.pt"
     save_checkpoint(_net(width=3), shipped, source="shipped test model")
-    monkeypatch.setattr(SubFocal, "DEFAULT_WEIGHTS", shipped)
+    monkeypatch.setattr(SubFocal, "WEIGHTS_DIR", tmp_path)
     lf = ArrayLightField(views=_views(12, 12, seed=5)[0].reshape(9, 9, 12, 12).numpy(), name="toy")
-    assert SubFocal.offline_variants() == [{"width": 3}]
+    assert create("subfocal").offline_variants() == [{"width": 3}]
+    assert create("lfattnet").offline_variants() == []  # no lfattnet_small.pt
     small = create_from_spec("subfocal:width=3,threads=1")
     assert small.weights_path == shipped and small.available_for(lf) is None
     assert small.run(lf).disparity.shape == (12, 12)

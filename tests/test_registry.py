@@ -250,3 +250,79 @@ def test_the_global_helpers_see_plugins(plugin):
     assert plugin["centre"] in [i.name for i in registry.list_methods()]
     assert registry.method_info(plugin["offset"]).params["offset"].default == 0.0
     assert registry.create(plugin["centre"]).gain == 1.0
+
+
+# --------------------------------------------------------------------------- the Method contract
+
+
+def test_every_hook_is_declared_on_the_base_class_with_a_default():
+    from lfbench.method.base import HOOKS, overrides
+
+    lf = ArrayLightField(np.zeros((9, 9, 4, 4), np.float32))
+    m = Method()
+    assert HOOKS == ("predict", "available_for", "describe_variant", "offline_variants", "to")
+    assert all(getattr(Method, h).__doc__ for h in HOOKS)
+    assert m.available_for(lf) is None and m.describe_variant() == {} and m.offline_variants() == []
+    assert m.to("cuda") is m
+    with pytest.raises(NotImplementedError, match="Method does not implement predict"):
+        m.predict(lf)
+    assert overrides(Toy, "predict") and not overrides(Toy, "describe_variant")
+
+
+def test_create_refuses_what_is_not_a_method(reg):
+    def returns_a_dict(scale: float = 1.0):
+        """Not a method."""
+        return {"scale": scale}
+
+    register_method("dict", registry=reg)(returns_a_dict)
+    with pytest.raises(SpecError, match="method 'dict': .*returns_a_dict returned a dict, which is not a Method"):
+        reg.create("dict")
+
+    class NotAMethod:
+        """A plain class."""
+
+    with pytest.raises(TypeError, match="NotAMethod registered as method 'plain' is not a Method"):
+        register_method("plain", registry=reg)(NotAMethod)
+
+
+def test_name_and_params_are_set_once_by_the_registry(reg):
+    m = reg.create("toy", steps=4)
+    assert (m.name, m.params) == ("toy", {"steps": 4})
+    m.params["steps"] = 9  # a copy: the method keeps its own
+    assert m.params == {"steps": 4} and m.label == "toy:steps=4"
+    with pytest.raises(AttributeError):
+        m.name = "other"
+    with pytest.raises(RuntimeError, match="set once"):
+        m._bind("other", {})
+    assert Toy().name == "" and Toy().params == {}  # made without the registry
+
+
+def test_a_variant_is_the_factory_registered_with_its_defaults(reg):
+    register_method("toy-fast", registry=reg, defaults={"steps": 1, "mode": "b"},
+                    doc="The toy in one step.\n\nsteps: one step only")(Toy)
+    info = reg.info("toy-fast")
+    assert info.factory is Toy and info.summary == "The toy in one step."
+    assert (info.params["steps"].default, info.params["mode"].default, info.params["scale"].default) == (1, "b", 1.0)
+    assert info.params["steps"].help == "one step only" and info.params["scale"].help == "multiplies the ground truth"
+    m = reg.create("toy-fast", scale=2.0)
+    assert (m.steps, m.mode, m.scale) == (1, "b", 2.0)
+    assert m.label == "toy-fast:scale=2.0"  # the variant's defaults are not spelled out
+    assert reg.create("toy-fast", steps=5).steps == 5
+    text = info.describe()
+    assert "steps (int, default 1): one step only" in text and "mode (Literal['a', 'b'], default 'b')" in text
+    assert reg.info("toy").params["steps"].default == 3  # the base name keeps its own defaults
+    with pytest.raises(TypeError, match="variant 'bad' gives defaults for speed"):
+        register_method("bad", registry=reg, defaults={"speed": 2})(Toy)
+
+
+def test_lfattnet_is_a_registered_variant_of_subfocal():
+    sub, lfa = registry.method_info("subfocal"), registry.method_info("lfattnet")
+    assert lfa.factory is sub.factory and lfa.defaults == {"interval": 1.0} and sub.defaults == {}
+    assert lfa.params["interval"].default == 1.0 and sub.params["interval"].default == 0.5
+    assert list(lfa.params) == list(sub.params)
+    assert lfa.summary.startswith("LFattNet (Tsai et al., AAAI 2020)")
+    assert lfa.params["interval"].help == "disparity step of the cost volume in px (LFattNet 1)"
+    assert lfa.params["tile"].help == sub.params["tile"].help != ""
+    m = registry.create("lfattnet")
+    assert m.values["interval"] == 1.0 and m.label == "lfattnet" and m.variant == "lfattnet"
+    assert m.shipped_weights.name == "lfattnet_small.pt"

@@ -10,12 +10,12 @@ import torch
 
 from lfbench.data.scene import Benchmark
 from lfbench.data.synth import write_benchmark
-from lfbench.method.registry import create
+from lfbench.method.registry import create, offline_variants
 from lfbench.scoring.rules import score_scene
 from lfbench.scoring.uncertainty import scene_sparsification
 
 SubFocal = pytest.importorskip("lfbench_methods.subfocal.method").SubFocal
-SHIPPED = SubFocal.DEFAULT_WEIGHTS
+SHIPPED = SubFocal.WEIGHTS_DIR / "subfocal_small.pt"
 
 
 def test_shipped_checkpoint_is_small_and_loads_without_pickle():
@@ -27,7 +27,8 @@ def test_shipped_checkpoint_is_small_and_loads_without_pickle():
 
 
 def test_registry_and_demo_variant():
-    assert SubFocal.offline_variants() == [{"width": 16}]
+    assert create("subfocal").offline_variants() == [{"width": 16}]
+    assert offline_variants("subfocal") == [{"width": 16}] and offline_variants("gt") == [{}]
     assert create("subfocal", width=16).weights_path == SHIPPED
     assert create("subfocal").weights_path is None  # the paper width has no shipped weights: never random ones
     assert "shipped" in create("subfocal", width=16).describe_variant()["weights"]

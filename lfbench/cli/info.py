@@ -13,6 +13,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    import inspect
+
+    from lfbench.method.base import overrides
     from lfbench.method.registry import REGISTRY, create_from_spec, parse_spec
 
     name, raw = parse_spec(args.spec)
@@ -20,8 +23,7 @@ def run(args: argparse.Namespace) -> int:
     print(info.describe())
     if info.doc and "\n" in info.doc:
         print("\n" + info.doc.split("\n", 1)[1].strip())
-    describe = getattr(info.factory, "describe_variant", None)
-    if describe is not None:
+    if inspect.isclass(info.factory) and overrides(info.factory, "describe_variant"):
         method = create_from_spec(args.spec) if raw else REGISTRY.create(name)
         for key, value in method.describe_variant().items():
             print(f"{key}: {value}")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -27,16 +28,43 @@ class Prediction:
 
 
 class Method:
-    """Base class of registered methods. Subclasses implement :meth:`predict`.
+    """Base class of registered methods: the contract every method follows.
 
-    The registry sets ``name`` and ``params`` (the parameters it was created with).
+    A method turns a light field into a :class:`Prediction`. Subclasses implement :meth:`predict`
+    and may override the other hooks below; each has a default that fits a method without it.
+    Parameters are keyword arguments of ``__init__`` (types from its annotations, help from
+    ``name: text`` lines of the class docstring; see ``lfbench methods``).
+
+    The registry creates methods (``create``, ``create_from_spec``) and sets :attr:`name` and
+    :attr:`params` once, after ``__init__``; they are read-only afterwards.
     """
 
-    name: str = ""
-    params: dict
+    _name: str = ""
+    _params: dict[str, Any] = {}  # replaced, never mutated
+    _bound: bool = False
 
-    def __init__(self, **params) -> None:
-        self.params = dict(params)
+    def __init__(self, **params: Any) -> None:
+        """``params``: the parameters this instance was configured with, used as :attr:`params` of a
+        method made without the registry (the registry replaces them with the ones it was given)."""
+        self._params = dict(params)
+
+    # -- identity (set by the registry) ----------------------------------------------------------
+
+    @property
+    def name(self) -> str:
+        """The registered name ("" for a method made without the registry)."""
+        return self._name
+
+    @property
+    def params(self) -> dict[str, Any]:
+        """The parameters it was created with (a copy), as given: defaults are not listed."""
+        return dict(self._params)
+
+    def _bind(self, name: str, params: dict[str, Any]) -> None:
+        """Record how the registry made this method; a second call is an error (set once)."""
+        if self._bound:
+            raise RuntimeError(f"method {self.label!r} is already registered; name and params are set once")
+        self._name, self._params, self._bound = name, dict(params), True
 
     @property
     def label(self) -> str:
@@ -45,20 +73,40 @@ class Method:
 
         return format_spec(self.name, self.params)
 
-    def available_for(self, lf: LightField) -> str | None:
-        """None if the method can run on ``lf``, else a one-line reason (e.g. no stored map)."""
-        return None
+    # -- hooks -----------------------------------------------------------------------------------
 
     def predict(self, lf: LightField) -> Prediction:
-        raise NotImplementedError
+        """The prediction for ``lf`` (required): disparity (H, W) in px per view step, optionally a
+        distribution and an uncertainty map. Raise DataError for a light field it cannot handle."""
+        raise NotImplementedError(f"{type(self).__name__} does not implement predict()")
+
+    def available_for(self, lf: LightField) -> str | None:
+        """None if the method can run on ``lf``, else a one-line reason (e.g. no stored map, no weights):
+        runs skip the method on that scene and say why. Default: always available."""
+        return None
+
+    def describe_variant(self) -> dict[str, Any]:
+        """Facts about this configured variant beyond its parameters (e.g. trainable parameters, the
+        weights it loads), printed by ``lfbench info``. Default: none."""
+        return {}
+
+    def offline_variants(self) -> list[dict[str, Any]]:
+        """Parameter sets (beyond the defaults this instance has) under which the method runs with what
+        is installed, no download: e.g. ``[{"width": 16}]``, the architecture of shipped weights. The demo
+        and golden.py run these. Called on an instance made with the defaults. Default: ``[]`` (the
+        defaults themselves run)."""
+        return []
 
     def to(self, device: str) -> Method:
         """Run on ``device`` (``cpu``, ``cuda``, ``cuda:1``): a method with a network moves it there.
-        The default (a method without one) runs where it is and returns itself."""
+        Default (a method without one): runs where it is and returns itself."""
         return self
 
+    # -- running ---------------------------------------------------------------------------------
+
     def run(self, lf: LightField) -> Prediction:
-        """predict() with the wall time recorded (unless the prediction carries its own runtime)."""
+        """predict() with the wall time recorded (unless the prediction carries its own runtime) and the
+        disparity as float32. Not a hook: runners call this."""
         start = time.perf_counter()
         pred = self.predict(lf)
         elapsed = time.perf_counter() - start
@@ -66,3 +114,14 @@ class Method:
             pred.runtime_s = elapsed
         pred.disparity = np.asarray(pred.disparity, dtype=np.float32)
         return pred
+
+
+HOOKS = ("predict", "available_for", "describe_variant", "offline_variants", "to")
+
+
+def overrides(cls: type, hook: str) -> bool:
+    """Whether a Method subclass implements ``hook`` itself (rather than inheriting the default)."""
+    return getattr(cls, hook, None) is not getattr(Method, hook)
+
+
+__all__ = ["Method", "Prediction", "HOOKS", "overrides"]

@@ -14,7 +14,7 @@ import inspect
 import types
 import typing
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from importlib import metadata
 from pathlib import Path
 from typing import Any
@@ -43,12 +43,17 @@ class Param:
 
 @dataclass(frozen=True)
 class MethodInfo:
+    """A registered method: its factory (a Method subclass or a function returning a Method), its
+    parameters (with this name's defaults), summary and docstring, the module it comes from, and the
+    ``defaults`` a variant gives the factory (``lfattnet`` = SubFocal with interval 1)."""
+
     name: str
     factory: Callable[..., Any]
     params: dict[str, Param]
     summary: str
     doc: str
     source: str
+    defaults: dict[str, Any] = field(default_factory=dict)
 
     def describe(self) -> str:
         lines = [f"{self.name}: {self.summary}", f"  source: {self.source}"]
@@ -91,11 +96,47 @@ def signature_params(target: Callable[..., Any], doc: str) -> dict[str, Param]:
     return params
 
 
-def _introspect(name: str, factory: Callable[..., Any]) -> MethodInfo:
-    doc = inspect.getdoc(factory) or ""
+def _introspect(name: str, factory: Callable[..., Any], defaults: dict[str, Any] | None = None,
+                doc: str | None = None) -> MethodInfo:
+    """The MethodInfo of ``factory`` registered as ``name``; a variant passes its ``defaults`` (they
+    replace the signature's) and its own ``doc`` (summary line, and ``name: help`` lines that replace
+    the factory's)."""
+    from lfbench.method.base import Method
+
+    if inspect.isclass(factory) and not issubclass(factory, Method):
+        raise TypeError(f"{factory.__module__}.{factory.__qualname__} registered as method {name!r} is not a "
+                        "Method (subclass lfbench.Method)")
+    if not callable(factory):
+        raise TypeError(f"{factory!r} registered as method {name!r} is not a Method class or factory")
+    own = inspect.getdoc(factory) or ""
+    doc = _variant_doc(inspect.cleandoc(doc), own) if doc else own
+    params = signature_params(factory, doc)
+    defaults = dict(defaults or {})
+    unknown = sorted(set(defaults) - set(params))
+    if unknown:
+        raise TypeError(f"variant {name!r} gives defaults for {', '.join(unknown)}, which "
+                        f"{getattr(factory, '__qualname__', factory)} does not take")
+    params = {k: replace(p, default=defaults[k]) if k in defaults else p for k, p in params.items()}
     summary = doc.splitlines()[0] if doc else ""
     module = getattr(factory, "__module__", "?")
-    return MethodInfo(name, factory, signature_params(factory, doc), summary, doc, module)
+    return MethodInfo(name, factory, params, summary, doc, module, defaults)
+
+
+def _variant_doc(variant: str, base: str) -> str:
+    """A variant's docstring followed by the base's body lines that it does not replace (``name:`` lines
+    it gives again, and the base's summary line, are left out)."""
+    given = set(_param_help(variant))
+    body = base.split("\n", 1)[1] if "\n" in base else ""
+    lines, skipping = [], False
+    for line in body.splitlines():
+        key = line.strip().split(":", 1)[0].split("(")[0].strip() if ":" in line else ""
+        if key.isidentifier() and not line.startswith((" ", "\t")):
+            skipping = key in given
+        elif not line.startswith((" ", "\t")):
+            skipping = False
+        if not skipping:
+            lines.append(line)
+    return variant.rstrip() + "\n" + "\n".join(lines)
 
 
 class PluginRegistry:
@@ -111,7 +152,7 @@ class PluginRegistry:
         self._loaded = group is None
         self.load_errors: dict[str, str] = {}
 
-    def _make(self, name: str, obj: Any) -> Any:
+    def _make(self, name: str, obj: Any, **options: Any) -> Any:
         """The stored entry for ``obj`` registered as ``name`` (TypeError if it is of the wrong kind)."""
         return obj
 
@@ -121,10 +162,11 @@ class PluginRegistry:
     def _source(self, entry: Any) -> str:
         return getattr(self._factory(entry), "__module__", "?")
 
-    def register(self, name: str, obj: Any) -> None:
+    def register(self, name: str, obj: Any, **options: Any) -> None:
+        """Register ``obj`` as ``name`` (``options``: what the registry takes, e.g. a variant's defaults)."""
         if name in self._items and self._factory(self._items[name]) is not obj:
             raise ValueError(f"{self.kind} {name!r} is already registered by {self._source(self._items[name])}")
-        self._items[name] = self._make(name, obj)
+        self._items[name] = self._make(name, obj, **options)
 
     def _accepts(self, obj: Any) -> bool:
         """Whether an entry point's object (not a module) is registered under the entry point's name."""
@@ -169,9 +211,10 @@ class PluginRegistry:
             if id(obj) in seen:
                 continue
             seen.add(id(obj))
+            options = _decorated_options(obj, self.names_attr)
             for name in decorated_names(obj, self.names_attr):
                 try:
-                    self.register(name, obj)
+                    self.register(name, obj, **options.get(name, {}))
                 except (TypeError, ValueError) as exc:
                     self.load_errors[name] = str(exc)
 
@@ -194,8 +237,9 @@ class MethodRegistry(PluginRegistry):
     kind = "method"
     names_attr = "__lfbench_method_names__"
 
-    def _make(self, name: str, obj: Any) -> MethodInfo:
-        return _introspect(name, obj)
+    def _make(self, name: str, obj: Any, defaults: dict[str, Any] | None = None, doc: str | None = None
+              ) -> MethodInfo:
+        return _introspect(name, obj, defaults, doc)
 
     def _factory(self, entry: MethodInfo) -> Any:
         return entry.factory
@@ -217,14 +261,15 @@ class MethodRegistry(PluginRegistry):
         if missing:
             raise SpecError(f"method {name!r} needs parameter {', '.join(missing)} (e.g. {name}:{missing[0]}=...)")
         try:
-            method = info.factory(**params)
+            method = info.factory(**{**info.defaults, **params})
         except (ValueError, TypeError) as exc:
             raise SpecError(f"method {name!r}: {exc}") from None
-        try:  # record how it was made: results name a method by its canonical spec
-            method.name = name
-            method.params = dict(params)
-        except AttributeError:  # a plain function or a frozen object: leave it as it is
-            pass
+        from lfbench.method.base import Method
+
+        if not isinstance(method, Method):
+            raise SpecError(f"method {name!r}: {info.source}.{getattr(info.factory, '__qualname__', info.factory)} "
+                            f"returned a {type(method).__name__}, which is not a Method")
+        method._bind(name, params)  # how it was made: results name a method by its canonical spec
         return method
 
     def create_from_spec(self, spec: str) -> Any:
@@ -247,21 +292,35 @@ def coerce_params(raw: dict[str, str], params: dict[str, Param], owner: str, kin
 REGISTRY = MethodRegistry()
 
 
-def register_method(name: str, registry: MethodRegistry | None = None) -> Callable:
-    """Class or function decorator: make a method factory available as ``name``."""
-    return _decorator(name, registry or REGISTRY)
+def register_method(name: str, registry: MethodRegistry | None = None, *, defaults: dict[str, Any] | None = None,
+                    doc: str | None = None) -> Callable:
+    """Class or function decorator: make a method factory (a Method subclass, or a function returning a
+    Method) available as ``name``. A variant registers the same factory under another name with its own
+    ``defaults`` (replacing the signature's) and ``doc`` (summary line; ``name: help`` lines replace the
+    factory's), the way timm registers resnet18 = ``_create_resnet("resnet18", **dict(defaults, **kwargs))``."""
+    options = {k: v for k, v in (("defaults", defaults), ("doc", doc)) if v is not None}
+    return _decorator(name, registry or REGISTRY, **options)
 
 
-def _decorator(name: str, registry: PluginRegistry) -> Callable:
+def _decorator(name: str, registry: PluginRegistry, **options: Any) -> Callable:
     def deco(obj: Any) -> Any:
-        registry.register(name, obj)
-        try:  # remember the name so that any registry loading the module finds the object
+        registry.register(name, obj, **options)
+        try:  # remember the name (and options) so that any registry loading the module finds the object
             setattr(obj, registry.names_attr, (*decorated_names(obj, registry.names_attr), name))
+            setattr(obj, registry.names_attr + "options",
+                    {**_decorated_options(obj, registry.names_attr), name: options})
         except (AttributeError, TypeError):
             pass
         return obj
 
     return deco
+
+
+def _decorated_options(obj: Any, attr: str) -> dict[str, dict[str, Any]]:
+    try:
+        return dict(vars(obj).get(attr + "options", {}))
+    except TypeError:  # no __dict__
+        return {}
 
 
 def decorated_names(obj: Any, attr: str = MethodRegistry.names_attr) -> tuple[str, ...]:
@@ -291,11 +350,17 @@ def method_info(name: str) -> MethodInfo:
 
 
 def offline_variants(name: str) -> list[dict[str, Any]]:
-    """Parameter sets under which ``name`` runs with what is installed: the method's own
-    ``offline_variants()`` (e.g. ``[{"width": 16}]``, the architecture of its shipped weights) when it
-    offers a non-empty list, else ``[{}]`` (its defaults)."""
-    variants = getattr(REGISTRY.info(name).factory, "offline_variants", None)
-    return (variants() if variants else None) or [{}]
+    """Parameter sets under which ``name`` runs with what is installed: the ``Method.offline_variants()``
+    of the method made with its defaults (e.g. ``[{"width": 16}]``, the architecture of its shipped weights)
+    when it implements the hook and offers a non-empty list, else ``[{}]`` (its defaults). A method that
+    needs a parameter (no defaults) and does not implement the hook is not made."""
+    from lfbench.method.base import overrides
+
+    info = REGISTRY.info(name)
+    cls = info.factory if inspect.isclass(info.factory) else None
+    if cls is not None and not overrides(cls, "offline_variants"):
+        return [{}]
+    return REGISTRY.create(name).offline_variants() or [{}]
 
 
 def parse_spec(spec: str) -> tuple[str, dict[str, str]]:

@@ -180,9 +180,11 @@ class TrainableRegistry(PluginRegistry):
     kind = "trainable network"
     names_attr = "__lfbench_trainable_names__"
 
-    def _make(self, name: str, obj: Any) -> Trainable:
+    def _make(self, name: str, obj: Any, **options: Any) -> Trainable:
         if not (inspect.isclass(obj) and issubclass(obj, Trainable)):
             raise TypeError(f"{obj!r} registered as trainable network {name!r} is not a Trainable subclass")
+        if options:
+            raise TypeError(f"trainable network {name!r}: unexpected options {', '.join(options)}")
         instance = obj()
         instance.name = name
         return instance

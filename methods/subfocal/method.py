@@ -1,17 +1,17 @@
-"""Registered methods ``subfocal`` (Chao et al., TCI 2023) and ``lfattnet`` (its baseline, interval 1).
+"""Registered methods ``subfocal`` (Chao et al., TCI 2023) and its variant ``lfattnet`` (the baseline:
+the same class registered with interval 1 as its default).
 
 Weights come from a checkpoint (``{"state_dict", "config", ...}``, e.g. from ``lfbench train`` or
 ``lfbench convert-keras``); its stored config decides the architecture, and an explicitly given
 parameter that contradicts it is a SpecError. Without ``weights``, the variant's parameters decide
 the architecture (default: the paper's, 5,055,329 trainable parameters) and the shipped checkpoint
-(methods/weights/<name>_small.pt, trained on CPU by lfbench itself) is used when it has exactly that
+(methods/weights/<variant>_small.pt, trained on CPU by lfbench itself) is used when it has exactly that
 architecture, e.g. ``subfocal:width=16``; otherwise the method is unavailable (never random weights).
 """
 
 from __future__ import annotations
 
-import os
-from contextlib import contextmanager
+import inspect
 from pathlib import Path
 from typing import Literal
 
@@ -22,50 +22,76 @@ from lfbench_methods.subfocal.trainable import LFAttNetTrainable, SubFocalTraina
 from lfbench.data.scene import LightField
 from lfbench.data.shift import INTERPOLATIONS, disparity_grid
 from lfbench.method.base import Method, Prediction
-from lfbench.method.registry import register_method
+from lfbench.method.registry import method_info, register_method
 from lfbench.utils.errors import DataError, SpecError
+from lfbench.utils.threads import torch_threads
 
 WEIGHTS_DIR = Path(__file__).resolve().parent.parent / "weights"
 PAPER_WIDTH = 150
 _ARCH_KEYS = ("d_min", "d_max", "interval", "interpolation", "width", "attention")
 
+LFATTNET_DOC = """LFattNet (Tsai et al., AAAI 2020), SubFocal's baseline: the same network at integer disparities.
 
-@contextmanager
-def _threads(n: int):
-    """Run torch with ``n`` intra-op threads (0 = all cores), restoring the previous setting."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(n if n > 0 else (os.cpu_count() or 1))
-    try:
-        yield
-    finally:
-        torch.set_num_threads(before)
+weights: checkpoint .pt (lfbench train / convert-keras --interval 1); default: a shipped checkpoint
+    of the configured architecture, if any
+interval: disparity step of the cost volume in px (LFattNet 1)
+"""
 
 
-class _SubFocalBase(Method):
-    """Shared implementation of ``subfocal`` and ``lfattnet`` (see their docstrings)."""
+@register_method("lfattnet", defaults={"interval": 1.0}, doc=LFATTNET_DOC)
+@register_method("subfocal")
+class SubFocal(Method):
+    """SubFocal (Chao et al., TCI 2023): sub-pixel cost volume, channel attention, 3D aggregation.
 
-    DEFAULT_WEIGHTS: Path = WEIGHTS_DIR / "subfocal_small.pt"
-    DEFAULT_INTERVAL = 0.5
+    The uncertainty output is the standard deviation (px) of the predicted disparity distribution.
+    weights: checkpoint .pt (lfbench train / convert-keras); default: the shipped CPU-trained checkpoint
+        when the configured architecture is its own (see `lfbench info subfocal`)
+    interval: disparity step of the cost volume in px (paper 0.5; 1, 0.25, 0.1 or any)
+    interpolation: sub-pixel shift of the features: nearest, bilinear (paper) or phase (Fourier)
+    d_min: smallest candidate disparity in px
+    d_max: largest candidate disparity in px
+    width: channels of the 3D aggregation (paper 150; with weights=..., the checkpoint's)
+    attention: channel attention over the views on/off
+    tile: inference tile size in px (0 = from max_memory_gb; exact, with a 9 px halo)
+    precision: fp32, or bf16 autocast for the 3D aggregation
+    threads: torch CPU threads (0 = all cores)
+    max_memory_gb: memory budget of inference in GB (decides the tile size when tile=0)
+    """
 
-    def _setup(self, **values) -> None:
-        defaults = {"weights": None, "interval": self.DEFAULT_INTERVAL, "interpolation": "bilinear", "d_min": -4.0,
-                    "d_max": 4.0, "width": None, "attention": True, "tile": 0, "precision": "fp32", "threads": 0,
-                    "max_memory_gb": 4.0}
-        Method.__init__(self, **{k: v for k, v in values.items() if v != defaults[k]})
-        if values["interpolation"] not in INTERPOLATIONS:
-            raise ValueError(f"interpolation must be one of {', '.join(INTERPOLATIONS)}, "
-                             f"got {values['interpolation']!r}")
-        if values["precision"] not in ("fp32", "bf16"):
-            raise ValueError(f"precision must be fp32 or bf16, got {values['precision']!r}")
-        if values["width"] is not None and values["width"] < 1:
-            raise ValueError(f"width must be >= 1, got {values['width']}")
-        if values["tile"] < 0 or values["threads"] < 0 or values["max_memory_gb"] <= 0:
+    WEIGHTS_DIR: Path = WEIGHTS_DIR  # the shipped checkpoints: <variant>_small.pt
+
+    def __init__(self, weights: Path | None = None, interval: float = 0.5,
+                 interpolation: Literal["nearest", "bilinear", "phase"] = "bilinear", d_min: float = -4.0,
+                 d_max: float = 4.0, width: int | None = None, attention: bool = True, tile: int = 0,
+                 precision: Literal["fp32", "bf16"] = "fp32", threads: int = 0, max_memory_gb: float = 4.0) -> None:
+        values = {"weights": weights, "interval": interval, "interpolation": interpolation, "d_min": d_min,
+                  "d_max": d_max, "width": width, "attention": attention, "tile": tile, "precision": precision,
+                  "threads": threads, "max_memory_gb": max_memory_gb}
+        defaults = _signature_defaults()
+        super().__init__(**{k: v for k, v in values.items() if v != defaults[k]})
+        if interpolation not in INTERPOLATIONS:
+            raise ValueError(f"interpolation must be one of {', '.join(INTERPOLATIONS)}, got {interpolation!r}")
+        if precision not in ("fp32", "bf16"):
+            raise ValueError(f"precision must be fp32 or bf16, got {precision!r}")
+        if width is not None and width < 1:
+            raise ValueError(f"width must be >= 1, got {width}")
+        if tile < 0 or threads < 0 or max_memory_gb <= 0:
             raise ValueError("tile and threads must be >= 0 and max_memory_gb > 0")
-        disparity_grid(values["d_min"], values["d_max"], values["interval"])  # ValueError if not a grid
+        disparity_grid(d_min, d_max, interval)  # ValueError if not a grid
         self.values = values
         self._net = None
 
     # -- configuration ----------------------------------------------------------------------
+
+    @property
+    def variant(self) -> str:
+        """The registered variant (``subfocal`` or ``lfattnet``; ``subfocal`` when made without the registry)."""
+        return self.name or "subfocal"
+
+    @property
+    def shipped_weights(self) -> Path:
+        """The checkpoint shipped for this variant (it may not exist)."""
+        return self.WEIGHTS_DIR / f"{self.variant}_small.pt"
 
     @property
     def weights_path(self) -> Path | None:
@@ -74,7 +100,7 @@ class _SubFocalBase(Method):
         w = self.values["weights"]
         if w is not None:
             return Path(w).expanduser()
-        shipped = self.DEFAULT_WEIGHTS
+        shipped = self.shipped_weights
         if shipped.is_file() and not self._differences(self._configured(), _stored_config(shipped)):
             return shipped
         return None
@@ -83,9 +109,9 @@ class _SubFocalBase(Method):
         """Parameters the user gave (the registry records them in ``params``)."""
         return {k: self.values[k] for k in self.params if k in _ARCH_KEYS}
 
-    def _configured(self) -> dict:
+    def _configured(self, values: dict | None = None) -> dict:
         """The architecture from the parameters alone (width: the paper's 150 unless given)."""
-        v = self.values
+        v = self.values if values is None else values
         return {"d_min": float(v["d_min"]), "d_max": float(v["d_max"]), "interval": float(v["interval"]),
                 "interpolation": v["interpolation"], "width": int(v["width"] or PAPER_WIDTH),
                 "attention": bool(v["attention"]), "angular": 9}
@@ -108,20 +134,26 @@ class _SubFocalBase(Method):
         """The checkpoint's config, after checking explicit parameters against it (SpecError)."""
         conflicts = self._differences(self._explicit(), config)
         if conflicts:
-            raise SpecError(f"{self.name or 'subfocal'}: {', '.join(conflicts)} conflicts with the checkpoint "
+            raise SpecError(f"{self.variant}: {', '.join(conflicts)} conflicts with the checkpoint "
                             f"{self.weights_path}; leave it out to use the checkpoint's")
         return config
 
-    @classmethod
-    def offline_variants(cls) -> list[dict]:
+    def offline_variants(self) -> list[dict]:
         """Parameter sets that run with no download: the shipped checkpoint's architecture, as the
-        parameters that differ from the defaults (e.g. ``{"width": 16}``). Empty if none is shipped."""
-        if not cls.DEFAULT_WEIGHTS.is_file():
+        parameters that differ from the variant's defaults (e.g. ``{"width": 16}``). Empty if none is shipped."""
+        shipped = self.shipped_weights
+        if not shipped.is_file():
             return []
-        stored = _stored_config(cls.DEFAULT_WEIGHTS)
-        defaults = {"d_min": -4.0, "d_max": 4.0, "interval": cls.DEFAULT_INTERVAL, "interpolation": "bilinear",
-                    "width": PAPER_WIDTH, "attention": True}
+        stored = _stored_config(shipped)
+        defaults = self._configured(self._variant_defaults())
         return [{k: stored[k] for k in _ARCH_KEYS if k in stored and stored[k] != defaults[k]}]
+
+    def _variant_defaults(self) -> dict:
+        """The parameter defaults of this variant (the registry's, else the signature's)."""
+        try:
+            return {k: p.default for k, p in method_info(self.variant).params.items()}
+        except SpecError:
+            return _signature_defaults()
 
     def _missing_reason(self) -> str | None:
         p = self.weights_path
@@ -130,7 +162,7 @@ class _SubFocalBase(Method):
             variants = self.offline_variants()
             if variants:
                 spec = ",".join(f"{k}={v}" for k, v in variants[0].items())
-                hint = f", or run the shipped CPU-trained model: {self.name or 'subfocal'}:{spec}"
+                hint = f", or run the shipped CPU-trained model: {self.variant}:{spec}"
             return ("no weights for this configuration: give weights=CHECKPOINT.pt (lfbench train or "
                     f"lfbench convert-keras){hint}")
         return None if p.is_file() else f"weights file {p} not found"
@@ -148,7 +180,7 @@ class _SubFocalBase(Method):
             self._net = net
         return self._net
 
-    def to(self, device: str) -> _SubFocalBase:
+    def to(self, device: str) -> SubFocal:
         """Load the network (once) and move it to ``device``."""
         self.load_network().to(device)
         return self
@@ -196,11 +228,15 @@ class _SubFocalBase(Method):
         net = self.load_network()
         views = lf.gray_views()
         x = torch.from_numpy(np.ascontiguousarray(views.reshape(v * u, *views.shape[2:]), dtype=np.float32))
-        with _threads(self.values["threads"]):
+        with torch_threads(self.values["threads"]):
             out = infer(net, x, tile=self.values["tile"], max_memory_gb=self.values["max_memory_gb"],
                         precision=self.values["precision"])
         return Prediction(disparity=out.disparity[0].numpy(), distribution=out.probability[0].numpy(),
                           disparity_values=out.disparities.numpy(), uncertainty=out.uncertainty[0].numpy())
+
+
+def _signature_defaults() -> dict:
+    return {k: p.default for k, p in inspect.signature(SubFocal.__init__).parameters.items() if k != "self"}
 
 
 def _stored_config(path: Path) -> dict:
@@ -209,63 +245,4 @@ def _stored_config(path: Path) -> dict:
     return load_checkpoint(path)[1]
 
 
-@register_method("subfocal")
-class SubFocal(_SubFocalBase):
-    """SubFocal (Chao et al., TCI 2023): sub-pixel cost volume, channel attention, 3D aggregation.
-
-    The uncertainty output is the standard deviation (px) of the predicted disparity distribution.
-    weights: checkpoint .pt (lfbench train / convert-keras); default: the shipped CPU-trained checkpoint
-        when the configured architecture is its own (see `lfbench info subfocal`)
-    interval: disparity step of the cost volume in px (paper 0.5; 1, 0.25, 0.1 or any)
-    interpolation: sub-pixel shift of the features: nearest, bilinear (paper) or phase (Fourier)
-    d_min: smallest candidate disparity in px
-    d_max: largest candidate disparity in px
-    width: channels of the 3D aggregation (paper 150; with weights=..., the checkpoint's)
-    attention: channel attention over the views on/off
-    tile: inference tile size in px (0 = from max_memory_gb; exact, with a 9 px halo)
-    precision: fp32, or bf16 autocast for the 3D aggregation
-    threads: torch CPU threads (0 = all cores)
-    max_memory_gb: memory budget of inference in GB (decides the tile size when tile=0)
-    """
-
-    DEFAULT_WEIGHTS = WEIGHTS_DIR / "subfocal_small.pt"
-    DEFAULT_INTERVAL = 0.5
-
-    def __init__(self, weights: Path | None = None, interval: float = 0.5,
-                 interpolation: Literal["nearest", "bilinear", "phase"] = "bilinear", d_min: float = -4.0,
-                 d_max: float = 4.0, width: int | None = None, attention: bool = True, tile: int = 0,
-                 precision: Literal["fp32", "bf16"] = "fp32", threads: int = 0, max_memory_gb: float = 4.0) -> None:
-        self._setup(weights=weights, interval=interval, interpolation=interpolation, d_min=d_min, d_max=d_max,
-                    width=width, attention=attention, tile=tile, precision=precision, threads=threads,
-                    max_memory_gb=max_memory_gb)
-
-
-@register_method("lfattnet")
-class LFAttNet(_SubFocalBase):
-    """LFattNet (Tsai et al., AAAI 2020), SubFocal's baseline: the same network at integer disparities.
-
-    The uncertainty output is the standard deviation (px) of the predicted disparity distribution.
-    weights: checkpoint .pt (lfbench train / convert-keras --interval 1); default: a shipped checkpoint
-        of the configured architecture, if any
-    interval: disparity step of the cost volume in px (LFattNet 1)
-    interpolation: sub-pixel shift of the features: nearest, bilinear or phase (Fourier)
-    d_min: smallest candidate disparity in px
-    d_max: largest candidate disparity in px
-    width: channels of the 3D aggregation (paper 150; with weights=..., the checkpoint's)
-    attention: channel attention over the views on/off
-    tile: inference tile size in px (0 = from max_memory_gb; exact, with a 9 px halo)
-    precision: fp32, or bf16 autocast for the 3D aggregation
-    threads: torch CPU threads (0 = all cores)
-    max_memory_gb: memory budget of inference in GB (decides the tile size when tile=0)
-    """
-
-    DEFAULT_WEIGHTS = WEIGHTS_DIR / "lfattnet_small.pt"
-    DEFAULT_INTERVAL = 1.0
-
-    def __init__(self, weights: Path | None = None, interval: float = 1.0,
-                 interpolation: Literal["nearest", "bilinear", "phase"] = "bilinear", d_min: float = -4.0,
-                 d_max: float = 4.0, width: int | None = None, attention: bool = True, tile: int = 0,
-                 precision: Literal["fp32", "bf16"] = "fp32", threads: int = 0, max_memory_gb: float = 4.0) -> None:
-        self._setup(weights=weights, interval=interval, interpolation=interpolation, d_min=d_min, d_max=d_max,
-                    width=width, attention=attention, tile=tile, precision=precision, threads=threads,
-                    max_memory_gb=max_memory_gb)
+__all__ = ["SubFocal", "SubFocalTrainable", "LFAttNetTrainable", "WEIGHTS_DIR", "PAPER_WIDTH"]
