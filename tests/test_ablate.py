@@ -4,6 +4,7 @@ and one-line spec errors. Training runs are tiny (width 2, patch 16, batch 1, 1 
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import os
 from pathlib import Path
@@ -316,6 +317,23 @@ def test_table5_has_the_paper_value_beside_ours(shared_run):
         assert all((out / f"{stem}.{ext}").is_file() for ext in ("md", "tex", "csv"))
     overview = out / "figures" / "error_maps" / "overview_synth_5_0.png"
     assert overview.is_file() and overview.stat().st_size > 1000
+
+
+def test_cells_leave_training_curves_and_report_only_writes_the_html_report(shared_run, capsys):
+    from lfbench.cli import main
+
+    spec_path, out, paper, _ = shared_run
+    for cid in ("loss=l1", "loss=uafl"):
+        cell = out / "cells" / cid
+        assert (cell / "learning_curve.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+        if importlib.util.find_spec("tensorboard") is not None:
+            assert list(cell.glob("events.out.tfevents.*")), "no TensorBoard event file beside metrics.jsonl"
+    assert main(["ablate", str(spec_path), "--out", str(out), "--report-only", "--html", "--paper", str(paper)]) == 0
+    index = (out / "html" / "index.html").read_text(encoding="utf-8")
+    assert "tiny table V" in index and "method-loss=l1.html" in index
+    scene = next((out / "html").glob("scene-*.html")).read_text(encoding="utf-8")
+    assert "loss_l1.badpix.png" not in scene and "loss=l1.badpix.png" in scene  # each cell's maps
+    assert "HTML report:" in capsys.readouterr().out
 
 
 def test_finished_cells_are_not_run_again(shared_run, monkeypatch):

@@ -3,6 +3,7 @@ resume after a kill, and 2-process data-parallel training on CPU (gloo)."""
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import os
 import signal
@@ -364,6 +365,45 @@ def test_training_outputs(reference_run, data_root):
     assert (out / "best.pt").is_file() and (out / "command.txt").read_text().strip().endswith("test")
 
 
+def _scalars(out: Path) -> dict[str, list[tuple[int, float]]]:
+    """Every scalar of the TensorBoard event files in ``out``, read back with tensorboard itself."""
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    acc = EventAccumulator(str(out))
+    acc.Reload()
+    return {tag: [(e.step, e.value) for e in acc.Scalars(tag)] for tag in acc.Tags()["scalars"]}
+
+
+def test_training_writes_tensorboard_events_and_a_learning_curve(reference_run):
+    pytest.importorskip("tensorboard", reason="tensorboard is not installed (pip install -e .[test])")
+    _, out, _ = reference_run
+    entries = [json.loads(x) for x in (out / "metrics.jsonl").read_text().splitlines()]
+    train_entries = [e for e in entries if e["event"] == "train"]
+    vals = [e for e in entries if e["event"] == "validation"]
+    scalars = _scalars(out)
+    # the same numbers as the JSON log, at the same global steps (float32 in the event files)
+    for key, tag in (("loss", "train/loss"), ("lr", "train/learning_rate"), ("steps_per_s", "train/steps_per_s")):
+        assert [s for s, _ in scalars[tag]] == [e["global_step"] for e in train_entries]
+        np.testing.assert_allclose([v for _, v in scalars[tag]], [e[key] for e in train_entries], rtol=1e-6)
+    for key in ("badpix", "mse_x100"):
+        for tag, want in ((f"validation/{key}", [e[key] for e in vals]),
+                          (f"validation/val/{key}", [e["scenes"]["val"][key] for e in vals])):
+            assert [s for s, _ in scalars[tag]] == [e["global_step"] for e in vals]
+            np.testing.assert_allclose([v for _, v in scalars[tag]], want, rtol=1e-6)
+    assert (out / "learning_curve.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_without_tensorboard_the_run_says_so_in_one_line(monkeypatch, caplog):
+    from lfbench.training import curves
+
+    monkeypatch.setattr(curves, "tensorboard_available", lambda: False)
+    with caplog.at_level("INFO", logger="lfbench.training.curves"):
+        loggers = curves.default_loggers(Path("unused"))
+    assert [type(lg).__name__ for lg in loggers] == ["LearningCurveLogger"]
+    (line,) = [r.getMessage() for r in caplog.records]
+    assert "tensorboard is not installed" in line and "lfbench[tensorboard]" in line and "\n" not in line
+
+
 def run_cli(args: list[str], **kw) -> subprocess.Popen:
     env = {**os.environ, "OMP_NUM_THREADS": "1", "PYTHONUNBUFFERED": "1"}
     return subprocess.Popen([sys.executable, "-m", "lfbench", *args], env=env, stdout=subprocess.PIPE,
@@ -396,6 +436,8 @@ def test_resume_after_kill_matches_an_uninterrupted_run(reference_run, tmp_path)
         assert torch.equal(final["state_dict"][k], v), k  # bit for bit: same batches, same arithmetic
     steps = [json.loads(x)["global_step"] for x in (out / "metrics.jsonl").read_text().splitlines()]
     assert steps == [2, 4, 4, 6, 6]  # train/validation entries, none repeated across the kill
+    if importlib.util.find_spec("tensorboard") is not None:  # nor in the TensorBoard events (purged on resume)
+        assert [s for s, _ in _scalars(out)["train/loss"]] == [2, 4, 6]
     assert (out / "command.txt").read_text().count("lfbench train") == 2
     # a different config in the same folder is refused
     changed = tmp_path / "changed.toml"

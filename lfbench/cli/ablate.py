@@ -33,6 +33,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--list", action="store_true", help="print the cells and their training configs, run nothing")
     p.add_argument("--report-only", action="store_true",
                    help="rewrite the tables and figures from the finished cells in OUT (train nothing)")
+    p.add_argument("--html", action="store_true",
+                   help="also write the HTML report OUT/html/index.html (leaderboard of the cells, their maps)")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 
@@ -68,8 +70,12 @@ def run(args: argparse.Namespace) -> int:
         from lfbench.ablation.runner import report_only
 
         report_only(spec, out, paper=args.paper)
-        return 0
-    from lfbench.ablation.runner import run_ablation
+    else:
+        from lfbench.ablation.runner import run_ablation
 
-    run_ablation(spec, out, jobs=args.jobs, progress=progress, paper=args.paper)
+        run_ablation(spec, out, jobs=args.jobs, progress=progress, paper=args.paper)
+    if args.html:
+        from lfbench.ablation.html import write_site
+
+        print(f"HTML report: {write_site(spec, out)}")
     return 0

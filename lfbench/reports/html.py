@@ -28,6 +28,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+from urllib.parse import quote
 
 import numpy as np
 import pandas as pd
@@ -280,9 +281,11 @@ def _scene_images(sm: SceneMaps, images: _Images, threshold: float, pair_thresho
 def _environment():
     import jinja2
 
-    return jinja2.Environment(loader=jinja2.PackageLoader("lfbench.reports", "site_assets"),
-                              autoescape=jinja2.select_autoescape(["html"]), undefined=jinja2.StrictUndefined,
-                              trim_blocks=True, lstrip_blocks=True)
+    env = jinja2.Environment(loader=jinja2.PackageLoader("lfbench.reports", "site_assets"),
+                             autoescape=jinja2.select_autoescape(["html"]), undefined=jinja2.StrictUndefined,
+                             trim_blocks=True, lstrip_blocks=True)
+    env.filters["href"] = lambda path: quote(str(path), safe="/=")  # a relative link to a file of the site
+    return env
 
 
 def _meta_lines(results: Results) -> list[str]:

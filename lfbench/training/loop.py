@@ -10,6 +10,8 @@ Files under OUT:
   ``best.pt``: the weights with the lowest pooled validation BadPix so far.
 - ``metrics.jsonl``: one JSON object per log line (``"event": "train"``) and per validation
   (``"event": "validation"``); entries past the checkpoint are dropped on resume.
+- TensorBoard event files (``tensorboard --logdir OUT``) and ``learning_curve.png``, from the
+  loggers of lfbench.training.curves that see every metrics.jsonl entry;
 - ``command.txt``: every command that ran on this folder; ``config.toml``: the config text;
   ``summary.json``: the final numbers; ``data/<category>``: generated synthetic scenes.
 
@@ -29,7 +31,7 @@ import signal
 import sys
 import tempfile
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
@@ -42,6 +44,7 @@ from lfbench.data.scene import Benchmark, Scene
 from lfbench.method.trainable import get_trainable
 from lfbench.training import checkpoint as ckpt
 from lfbench.training.config import TrainConfig, expand_path
+from lfbench.training.curves import RunLogger, default_loggers
 from lfbench.training.data import PatchSampler, ValidationScene, load_scene_data, load_validation_scene
 from lfbench.training.distributed import DistContext, setup
 from lfbench.training.losses import make_loss
@@ -255,8 +258,9 @@ def network_config(cfg: TrainConfig, model: torch.nn.Module) -> dict[str, Any]:
 
 class Trainer:
     def __init__(self, cfg: TrainConfig, out: Path, ctx: DistContext, command: str | None = None,
-                 progress: bool | None = None) -> None:
+                 progress: bool | None = None, loggers: Sequence[RunLogger] = ()) -> None:
         self.cfg, self.ctx, self.paths = cfg, ctx, RunPaths(Path(out))
+        self.loggers = list(loggers) if ctx.is_main else []  # see every metrics.jsonl entry
         self.command = command
         self.progress = progress
         self.stop = StopFlag()
@@ -279,6 +283,8 @@ class Trainer:
         if self.ctx.is_main:
             with open(self.paths.metrics, "a", encoding="utf-8") as f:
                 f.write(json.dumps(entry, sort_keys=True) + "\n")
+            for logger in self.loggers:
+                logger.record(entry)
 
     def elapsed(self) -> float:
         return self.elapsed_before + time.perf_counter() - self.t0
@@ -537,15 +543,23 @@ class Trainer:
 
 
 def train(cfg: TrainConfig, out: str | Path, *, require_checkpoint: bool = False, command: str | None = None,
-          progress: bool | None = None) -> dict:
+          progress: bool | None = None, loggers: Sequence[RunLogger] | None = None) -> dict:
     """Train per ``cfg`` into ``out`` (resuming from out/checkpoint.pt when present); returns a summary.
+    ``loggers`` see every metrics.jsonl entry and are closed when the run stops (default:
+    TensorBoard event files and the PNG learning curve, lfbench.training.curves.default_loggers).
 
     Run under torchrun for data-parallel training; every process calls this function.
     """
     threads = torch.get_num_threads()
     ctx = setup(cfg.training.device)
     try:
-        return Trainer(cfg, Path(out), ctx, command, progress).run(require_checkpoint)
+        if loggers is None:
+            loggers = default_loggers(Path(out)) if ctx.is_main else []
+        try:
+            return Trainer(cfg, Path(out), ctx, command, progress, loggers).run(require_checkpoint)
+        finally:
+            for logger in loggers:
+                logger.close()
     finally:
         ctx.close()
         torch.set_num_threads(threads)
