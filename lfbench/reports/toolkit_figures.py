@@ -317,7 +317,8 @@ def plot_radar(scores: pd.DataFrame, path: str | Path, *, title: str = "", highl
     vmax = (scores.max(axis=1) * 1.2).where(scores.max(axis=1) > 0, 1.0)
     for angle, top in zip(angles, vmax, strict=True):
         for k in (1, 2, 3, 4):
-            ax.text(angle, 0.2 * (k + 1), f"{top * k / 4:.3g}", fontsize=6, color="0.45", ha="center", va="center")
+            ax.text(angle + 0.09, 0.2 * (k + 1), f"{top * k / 4:.3g}", fontsize=6, color="0.45", ha="center",
+                    va="center")  # ring values beside the axis, off the method lines' corners
     closed = np.r_[angles, angles[:1]]
     for method in scores.columns:
         r = radii[method].to_numpy(dtype=float)
