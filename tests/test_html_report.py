@@ -136,10 +136,23 @@ def test_report_rebuilds_the_site_with_the_papers_labelled_columns(site, tmp_pat
     assert ">8.500<" in section and ">0.750<" in section  # Table I of the tiny paper: boxes, dots
     assert 'class="res">highres</span>' in section  # the paper scored dots at high resolution
     assert "SubFocal (paper, Table II, 4 scenes)" in page
+    assert "&lt;NA&gt;" not in page and ">nan" not in page  # numbers the paper does not give read '–'
     assert (out / "figures" / "toolkit" / "radar.svg").is_file()
     assert (out / "figures" / "toolkit" / "error_heatmaps.png").is_file()
     assert (out / "figures" / "toolkit" / f"pairwise_gt_vs_{safe_name('published:good')}.png").is_file()
     assert "HTML report:" in stdout
+
+
+def test_a_file_where_the_report_goes_is_refused_before_any_work(site, tmp_path, capsys):
+    out = tmp_path / "run"
+    (out / "html").parent.mkdir()
+    (out / "html").write_text("not a folder")
+    rc = main(["evaluate", "--data", str(site.parent / "data"), "--method", "gt", "--out", str(out), "--html",
+               "--no-progress"])
+    assert rc == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "exists and is not a folder (the HTML report goes there)" in err[0]
+    assert not (out / "results.json").exists()
 
 
 def test_report_refuses_unknown_figure_formats_before_writing(site, tmp_path, capsys):

@@ -51,6 +51,10 @@ def run(args: argparse.Namespace) -> int:
     from lfbench.utils.errors import DataError
 
     methods = [create_from_spec(spec) for spec in args.method]  # spec errors before any work
+    if args.html:
+        from lfbench.reports.html import SITE_DIR, check_site_dir
+
+        check_site_dir(args.out / SITE_DIR)
     scenes = Benchmark.discover(args.data).select([s for s in args.scenes.split(",") if s.strip()])
     scenes = [s for s in scenes if s.has_gt()]
     if not scenes:

@@ -82,6 +82,10 @@ def run(args: argparse.Namespace) -> int:
 
     formats = parse_formats(args.format)
     figure_formats = parse_figure_formats(args.figure_format)
+    if args.html:
+        from lfbench.reports.html import SITE_DIR, check_site_dir
+
+        check_site_dir(args.out / SITE_DIR)
     paper, paper_methods = None, ["SubFocal"]
     if args.paper is not None:
         from lfbench.reports.paper import find_paper_dir, load_paper

@@ -42,7 +42,7 @@ from lfbench.scoring.rules import ScoringRules
 from lfbench.utils.atomic import write_text
 from lfbench.utils.errors import DataError
 
-__all__ = ["SITE_DIR", "SiteInputs", "build_site", "build_site_from_dir", "site_inputs_from_dir"]
+__all__ = ["SITE_DIR", "SiteInputs", "build_site", "build_site_from_dir", "check_site_dir", "site_inputs_from_dir"]
 
 log = logging.getLogger(__name__)
 
@@ -71,7 +71,7 @@ class SiteInputs:
 # --------------------------------------------------------------------------- helpers
 
 def _fmt(v: Any, floatfmt: str = FLOATFMT) -> str:
-    if v is None or (isinstance(v, float) and math.isnan(v)):
+    if v is None or v is pd.NA or (isinstance(v, (float, np.floating)) and math.isnan(v)):
         return "–"
     if isinstance(v, (float, np.floating)):
         return "∞" if math.isinf(v) else format(float(v), floatfmt)
@@ -80,6 +80,8 @@ def _fmt(v: Any, floatfmt: str = FLOATFMT) -> str:
 
 def _sort_value(v: Any) -> str:
     """The data-v attribute the sorting script reads: a number, or '' (sorted last)."""
+    if v is pd.NA:
+        return ""
     try:
         f = float(v)
     except (TypeError, ValueError):
@@ -303,6 +305,15 @@ def _meta_lines(results: Results) -> list[str]:
     return lines
 
 
+def check_site_dir(out: str | Path) -> Path:
+    """``out`` as the site's folder, refused (DataError) when it exists and is not a folder: check it
+    before the work whose report goes there."""
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise DataError("exists and is not a folder (the HTML report goes there)", out)
+    return out
+
+
 def build_site(inputs: SiteInputs, out: str | Path, *, threshold: float = fig.BADPIX_THRESHOLD,
                pairwise_threshold: float = tk.PAIRWISE_THRESHOLD, border_px: int | None = None) -> Path:
     """Write the site into folder ``out`` (replacing an earlier site there as a whole); returns the
@@ -310,9 +321,7 @@ def build_site(inputs: SiteInputs, out: str | Path, *, threshold: float = fig.BA
     results = inputs.results
     if not results.records:
         raise DataError("the results hold no records; nothing to report")
-    out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise DataError("exists and is not a folder", out)
+    out = check_site_dir(out)
     border = border_px if border_px is not None else int((results.meta.get("scoring") or {}).get("border_px", 15))
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent))
