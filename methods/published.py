@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from lfbench.data.scene import LightField
-from lfbench.data.submission import disp_map_path, read_submission_map
+from lfbench.data.submission import check_inside, disp_map_path, read_submission_map
 from lfbench.method.base import Method, Prediction
 from lfbench.method.registry import register_method
 from lfbench.utils.errors import DataError
@@ -30,10 +30,15 @@ class PublishedResults(Method):
 
     def available_for(self, lf: LightField) -> str | None:
         p = disp_map_path(self.path, lf.name)
-        return None if p.is_file() else f"no {p}"
+        if not (p.exists() or p.is_symlink()):
+            return f"no {p}"
+        check_inside(self.path, p)
+        return None
 
     def predict(self, lf: LightField) -> Prediction:
-        if not disp_map_path(self.path, lf.name).is_file():
-            raise DataError(f"no disparity map for scene {lf.name!r}", disp_map_path(self.path, lf.name))
+        path = disp_map_path(self.path, lf.name)
+        if not (path.exists() or path.is_symlink()):
+            raise DataError(f"no disparity map for scene {lf.name!r}", path)
+        check_inside(self.path, path)
         disparity, runtime = read_submission_map(self.path, lf.name)
         return Prediction(disparity=disparity, runtime_s=float("nan") if runtime is None else runtime)

@@ -184,3 +184,26 @@ def forget_module(name: str) -> None:
     import sys
 
     sys.modules.pop(name, None)
+
+
+def run_cli(capsys, *args) -> tuple[int, str, str]:
+    """(exit code, stdout, stderr) of ``lfbench ARGS`` run in-process (argparse exits become codes)."""
+    from lfbench.cli import main
+
+    try:
+        rc = main([str(a) for a in args])
+    except SystemExit as exc:
+        rc = exc.code
+    out, err = capsys.readouterr()
+    return rc, out, err
+
+
+def assert_one_error_line(rc: int, err: str, *fragments: str) -> str:
+    """The CLI's promise for bad input: exit 2, exactly one stderr line holding every fragment, no traceback."""
+    assert rc == 2, err
+    assert "Traceback" not in err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    for fragment in fragments:
+        assert fragment in lines[0], (fragment, lines[0])
+    return lines[0]

@@ -12,32 +12,21 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import forget_module, install_fake_plugin, pfm_bytes, write_scene, write_submission, zip_folder
+from helpers import (
+    assert_one_error_line,
+    forget_module,
+    install_fake_plugin,
+    pfm_bytes,
+    run_cli,
+    write_scene,
+    write_submission,
+    zip_folder,
+)
 
-from lfbench.cli import main
 from lfbench.data.pfm import read_pfm, write_pfm
 
 GENERAL_IDS = {"badpix_0.01", "badpix_0.03", "badpix_0.07", "mse_x100", "q25_x100"}
 SIZE = 40
-
-
-def run_cli(capsys, *args: str) -> tuple[int, str, str]:
-    try:
-        rc = main([str(a) for a in args])
-    except SystemExit as exc:  # argparse usage errors
-        rc = exc.code
-    out, err = capsys.readouterr()
-    return rc, out, err
-
-
-def assert_one_error_line(rc: int, err: str, *fragments: str) -> str:
-    assert rc == 2, err
-    assert "Traceback" not in err
-    lines = err.splitlines()
-    assert len(lines) == 1, err
-    for fragment in fragments:
-        assert fragment in lines[0], (fragment, lines[0])
-    return lines[0]
 
 
 def assert_nothing_written(out: Path) -> None:

@@ -11,9 +11,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import run_cli
 from scipy import ndimage
 
-from lfbench.cli import main
 from lfbench.data import synth
 from lfbench.data.params import read_parameters
 from lfbench.data.pfm import read_pfm
@@ -313,15 +313,6 @@ def test_per_scene_categories_and_force(tmp_path):
 
 
 # --------------------------------------------------------------------------- CLI
-
-
-def run_cli(capsys, *args) -> tuple[int, str, str]:
-    try:
-        rc = main([str(a) for a in args])
-    except SystemExit as exc:
-        rc = exc.code
-    out, err = capsys.readouterr()
-    return rc, out, err
 
 
 def test_cli_writes_refuses_to_overwrite_and_forces(tmp_path, capsys):

@@ -23,6 +23,30 @@ REQUIRED_KEYS: tuple[tuple[str, str, type], ...] = (
 )
 
 
+# Bounds checked before anything is allocated from these numbers (a 1 kB file must not ask for 100 GB).
+MAX_CAMS = 33  # per side; HCI has 9x9
+MAX_RESOLUTION_PX = 16384  # per side
+MAX_VIEW_PIXELS = 2**29  # num_cams_x * num_cams_y * width * height (81 views of 2574x2574 px)
+MAX_DEPTH_MAP_SCALE = 16  # side ratio of the high-resolution ground truth (HCI: 10)
+_POSITIVE = {"focal_length_mm", "sensor_size_mm", "focus_distance_m"}
+
+
+def _checked(section: str, key: str, number: float, kind: type, path: Path) -> int | float:
+    """One required value, range-checked: counts are whole numbers within their bound, lengths finite
+    (and > 0 where 0 would divide)."""
+    where = f"[{section}] {key} = {number:g}"
+    if not np.isfinite(number):
+        raise DataError(f"{where} must be a finite number", path)
+    if kind is float:
+        if key in _POSITIVE and number <= 0:
+            raise DataError(f"{where} must be > 0", path)
+        return number
+    limit = MAX_CAMS if key.startswith("num_cams") else MAX_RESOLUTION_PX
+    if number != round(number) or not 1 <= number <= limit:
+        raise DataError(f"{where} must be a whole number from 1 to {limit}", path)
+    return int(number)
+
+
 @dataclass(frozen=True)
 class SceneParameters:
     """Camera and meta data of one scene (units in the names: mm, m, px)."""
@@ -41,6 +65,11 @@ class SceneParameters:
     name: str | None = None
     category: str | None = None
     extra: dict[str, dict[str, str]] = field(default_factory=dict, compare=False, repr=False)
+
+    @property
+    def highres_scale(self) -> int:
+        """Side ratio of the high-resolution ground truth to the views (depth_map_scale, 10 in HCI)."""
+        return int(round(self.depth_map_scale))
 
     @property
     def angular_size(self) -> tuple[int, int]:
@@ -103,26 +132,38 @@ def read_parameters(path: str | Path) -> SceneParameters:
             raise DataError(f"missing required key [{section}] {key}", path)
         raw = parser.get(section, key)
         try:
-            values[key] = kind(float(raw)) if kind is int else kind(raw)
+            number = float(raw)
         except ValueError:
-            raise DataError(f"[{section}] {key} = {raw!r} is not a number", path) from None
-    if values["num_cams_x"] < 1 or values["num_cams_y"] < 1:  # type: ignore[operator]
-        raise DataError("num_cams_x and num_cams_y must be positive", path)
+            raise DataError(f"[{section}] {key} = {raw[:40]!r} is not a number", path) from None
+        values[key] = _checked(section, key, number, kind, path)
+    views = values["num_cams_x"] * values["num_cams_y"] * values["image_resolution_x_px"] \
+        * values["image_resolution_y_px"]  # type: ignore[operator]
+    if views > MAX_VIEW_PIXELS:
+        raise DataError(f"{values['num_cams_x']}x{values['num_cams_y']} views of {values['image_resolution_x_px']}x"
+                        f"{values['image_resolution_y_px']} px is {views:.3g} pixels, more than lfbench reads "
+                        f"({MAX_VIEW_PIXELS:.3g})", path)
 
     def meta(key: str, default=None):
         if not parser.has_option("meta", key):
             return default
         try:
-            return float(parser.get("meta", key))
+            value = float(parser.get("meta", key))
         except ValueError:
             raise DataError(f"[meta] {key} is not a number", path) from None
+        if not np.isfinite(value):
+            raise DataError(f"[meta] {key} = {value} must be a finite number", path)
+        return value
 
+    scale = meta("depth_map_scale", 10.0)
+    if scale != round(scale) or not 1 <= scale <= MAX_DEPTH_MAP_SCALE:
+        raise DataError(f"[meta] depth_map_scale = {scale:g} must be a whole number from 1 to {MAX_DEPTH_MAP_SCALE}",
+                        path)
     extra = {s: dict(parser.items(s)) for s in parser.sections()}
     return SceneParameters(
         **values,  # type: ignore[arg-type]
         disp_min=meta("disp_min"),
         disp_max=meta("disp_max"),
-        depth_map_scale=meta("depth_map_scale", 10.0),
+        depth_map_scale=scale,
         name=parser.get("meta", "scene", fallback=None),
         category=parser.get("meta", "category", fallback=None),
         extra=extra,

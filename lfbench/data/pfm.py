@@ -57,7 +57,7 @@ def parse_pfm(data: bytes, source: str | Path = "<bytes>") -> np.ndarray:
 def _read_pfm_stream(f: BinaryIO, path: Path) -> np.ndarray:
     ident = _header_line(f, path)
     if ident not in ("Pf", "PF"):
-        raise DataError(f"not a PFM file: identifier {ident[:20]!r}, expected 'Pf' or 'PF'", path)
+        raise DataError("not a PFM file: the first line is not 'Pf' or 'PF'", path)  # never echo content
     channels = 1 if ident == "Pf" else 3
     dims = _header_line(f, path).split()
     try:
@@ -65,7 +65,7 @@ def _read_pfm_stream(f: BinaryIO, path: Path) -> np.ndarray:
         if width <= 0 or height <= 0:
             raise ValueError
     except ValueError:
-        raise DataError(f"bad PFM dimensions {' '.join(dims)[:40]!r}", path) from None
+        raise DataError("bad PFM dimensions: expected two positive integers 'width height'", path) from None
     try:
         scale = float(_header_line(f, path))
         if scale == 0 or not np.isfinite(scale):

@@ -8,8 +8,10 @@ positive = closer than the focus plane (HCI convention).
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import re
+import warnings
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -34,28 +36,80 @@ def rgb_to_gray(rgb: np.ndarray) -> np.ndarray:
     return np.clip(out, 0.0, 1.0).astype(np.float32)
 
 
-def read_png(path: Path, what: str = "image", mode: str | None = None) -> np.ndarray:
-    """A PNG's pixels as stored (uint8/uint16, (H, W) or (H, W, C)), converted to PIL ``mode`` if given.
+MAX_PNG_PIXELS = 2**27  # any PNG lfbench reads (HCI high-res masks: 5120x5120 = 2**24.6)
+_SIXTEEN_BIT = {"I;16", "I;16B", "I;16L", "I;16N", "I"}  # 16-bit gray PNG (Pillow's modes for it)
 
-    DataError naming the file ("missing <what>" / "cannot read <what>: ...") if it cannot be read.
-    """
+
+@contextlib.contextmanager
+def _open_png(path: Path, what: str, size: tuple[int, int] | None) -> Iterator[Image.Image]:
+    """The PNG opened lazily, its dimensions checked from the header before any pixel is decoded
+    (against ``size`` (H, W) when given, else against MAX_PNG_PIXELS). Errors name the file."""
     try:
-        with Image.open(path) as img:
-            return np.asarray(img.convert(mode) if mode else img)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", Image.DecompressionBombWarning)  # our own limits apply
+            with Image.open(path) as img:
+                w, h = img.size
+                if size is not None and (h, w) != tuple(size):
+                    noun = "view" if what == "view image" else what
+                    said = "parameters.cfg says" if what == "view image" else "expected"
+                    raise DataError(f"{noun} is {w}x{h}, {said} {size[1]}x{size[0]}", path)
+                if w * h > MAX_PNG_PIXELS:
+                    raise DataError(f"{what} is {w}x{h} px, more than lfbench reads ({MAX_PNG_PIXELS} px)", path)
+                yield img
     except FileNotFoundError:
         raise DataError(f"missing {what}", path) from None
-    except (OSError, ValueError) as exc:
-        raise DataError(f"cannot read {what}: {exc}", path) from None
+    except IsADirectoryError:
+        raise DataError(f"{what} is a folder, expected a PNG file", path) from None
+    except Image.DecompressionBombError:
+        raise DataError(f"{what} is larger than lfbench reads ({MAX_PNG_PIXELS} px)", path) from None
+    except (OSError, ValueError, SyntaxError) as exc:
+        raise DataError(f"cannot read {what}: {' '.join(str(exc).split())[:120]}", path) from None
 
 
-def read_rgb(path: Path) -> np.ndarray:
-    """A PNG as float32 (H, W, 3) in [0, 1]; DataError naming the file if unreadable."""
-    return read_png(path, "view image", "RGB").astype(np.float32) / np.float32(255.0)
+def _sixteen_bit(img: Image.Image, path: Path, what: str) -> np.ndarray:
+    """A 16-bit gray PNG's pixels as uint16 (H, W)."""
+    arr = np.asarray(img)
+    if arr.dtype != np.uint16:
+        if arr.size and (arr.min() < 0 or arr.max() > 65535):
+            raise DataError(f"{what}: {img.mode} pixel values outside 0..65535 (not a 16-bit PNG)", path)
+        arr = arr.astype(np.uint16)
+    return arr
 
 
-def read_mask(path: Path) -> np.ndarray:
-    """A mask PNG as bool (H, W): True where any colour channel is non-zero (alpha ignored)."""
-    arr = read_png(path, "mask")
+def read_png(path: Path, what: str = "image", mode: str | None = None,
+             size: tuple[int, int] | None = None) -> np.ndarray:
+    """A PNG's pixels as stored (uint8/uint16, (H, W) or (H, W, C)), converted to PIL ``mode`` if given.
+
+    A 16-bit gray PNG converted to "L" or "RGB" is scaled by its bit depth (65535 -> 255), not
+    clipped as Pillow does. ``size`` (H, W): the expected dimensions, checked before decoding.
+    DataError naming the file ("missing <what>" / "cannot read <what>: ...") if it cannot be read.
+    """
+    with _open_png(path, what, size) as img:
+        if img.mode in _SIXTEEN_BIT:
+            arr = _sixteen_bit(img, path, what)
+            if mode is None:
+                return arr
+            if mode not in ("L", "RGB"):
+                raise DataError(f"cannot read {what}: a 16-bit gray PNG cannot be converted to {mode}", path)
+            eight = ((arr.astype(np.uint32) * 255 + 32767) // 65535).astype(np.uint8)
+            return eight if mode == "L" else np.repeat(eight[..., None], 3, axis=-1)
+        return np.asarray(img.convert(mode) if mode else img)
+
+
+def read_rgb(path: Path, size: tuple[int, int] | None = None) -> np.ndarray:
+    """A PNG as float32 (H, W, 3) in [0, 1] (8-bit / 255, 16-bit gray / 65535); DataError naming the
+    file if unreadable or not ``size`` (H, W)."""
+    with _open_png(path, "view image", size) as img:
+        if img.mode in _SIXTEEN_BIT:
+            gray = _sixteen_bit(img, path, "view image").astype(np.float32) / np.float32(65535.0)
+            return np.repeat(gray[..., None], 3, axis=-1)
+        return np.asarray(img.convert("RGB")).astype(np.float32) / np.float32(255.0)
+
+
+def read_mask(path: Path, size: tuple[int, int] | None = None) -> np.ndarray:
+    """A mask PNG as bool (H, W): True where any colour channel is non-zero (alpha ignored);
+    ``size`` (H, W): the expected dimensions, checked before decoding."""
+    arr = read_png(path, "mask", size=size)
     if arr.ndim == 3:
         arr = arr[..., :3].any(axis=-1) if arr.shape[2] >= 3 else arr[..., 0]
     return arr.astype(bool)
@@ -161,11 +215,7 @@ class Scene(LightField):
         h, w = self.spatial_size
         views = np.empty((v, u, h, w, 3), dtype=np.float32)
         for k in range(v * u):
-            img = read_rgb(self.view_path(k))
-            if img.shape[:2] != (h, w):
-                raise DataError(f"view is {img.shape[1]}x{img.shape[0]}, parameters.cfg says {w}x{h}",
-                                self.view_path(k))
-            views[k // u, k % u] = img
+            views[k // u, k % u] = read_rgb(self.view_path(k), size=(h, w))
         return views
 
     def rgb_views(self) -> np.ndarray:
@@ -184,7 +234,7 @@ class Scene(LightField):
         k = (v // 2) * u + u // 2
         if "_rgb" in self.__dict__:
             return self._rgb[v // 2, u // 2]
-        return read_rgb(self.view_path(k))
+        return read_rgb(self.view_path(k), size=self.spatial_size)
 
     def has_gt(self, resolution: str = LOWRES) -> bool:
         return (self.path / f"gt_disp_{resolution}.pfm").is_file()
@@ -195,11 +245,17 @@ class Scene(LightField):
         if not path.is_file():
             return None
         gt = read_pfm(path)
+        if gt.ndim != 2:
+            raise DataError("ground truth is a 3-channel PF map, expected a gray Pf map", path)
         h, w = self.spatial_size
-        scale = 1 if resolution == LOWRES else int(round(self.params.depth_map_scale))
+        scale = 1 if resolution == LOWRES else self.params.highres_scale
         if gt.shape != (h * scale, w * scale):
             raise DataError(f"ground truth is {gt.shape[1]}x{gt.shape[0]}, expected {w * scale}x{h * scale}",
                             path)
+        bad = int(np.count_nonzero(~np.isfinite(gt)))
+        if bad:
+            raise DataError(f"ground truth has {bad} non-finite values of {gt.size} (NaN or inf): it cannot be "
+                            "scored against", path)
         return gt
 
     def mask_names(self, resolution: str = LOWRES) -> list[str]:
@@ -216,7 +272,9 @@ class Scene(LightField):
         path = self.path / f"{name}_{resolution}.png"
         if not path.is_file():
             raise DataError(f"no mask {name!r} at {resolution}", path)
-        return read_mask(path)
+        h, w = self.spatial_size
+        scale = 1 if resolution == LOWRES else self.params.highres_scale
+        return read_mask(path, size=(h * scale, w * scale))
 
     def valid_mask(self) -> np.ndarray | None:
         """valid_mask.png as bool (H, W) (True = pixel may be scored), or None if absent."""

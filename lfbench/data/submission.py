@@ -25,6 +25,23 @@ def runtime_path(root: str | Path, scene: str) -> Path:
     return Path(root) / RUNTIME_DIR / f"{scene}.txt"
 
 
+def check_inside(root: str | Path, path: str | Path) -> None:
+    """DataError unless ``path`` is a regular file whose real location is inside the folder ``root``
+    (validate-submission's rule: no symbolic link may lead out of a submission)."""
+    root, path = Path(root), Path(path)
+    try:
+        real = path.resolve(strict=True)
+        inside = real.is_relative_to(root.resolve(strict=True))
+    except (OSError, RuntimeError):  # a dangling link or a loop
+        raise DataError("broken symbolic link or unreadable path", path) from None
+    if not inside:
+        raise DataError("symbolic link leading out of the submission folder (not allowed)", path)
+    if real.is_dir():
+        raise DataError("is a folder, expected a file", path)
+    if not real.is_file():
+        raise DataError("not a regular file", path)
+
+
 def read_runtime(path: str | Path) -> float:
     """The runtime in s from a runtimes/<scene>.txt (first line, one float)."""
     path = Path(path)
@@ -32,10 +49,12 @@ def read_runtime(path: str | Path) -> float:
         first = path.read_text(encoding="utf-8", errors="replace").strip().splitlines()
     except FileNotFoundError:
         raise DataError("missing runtime file", path) from None
+    except OSError as exc:
+        raise DataError(f"cannot read runtime file: {exc.strerror or exc}", path) from None
     try:
         value = float(first[0]) if first else float("nan")
-    except ValueError:
-        raise DataError(f"runtime {first[0][:30]!r} is not a number", path) from None
+    except ValueError:  # the file's text is not shown: never echo file content
+        raise DataError("runtime is not a number (expected one number of seconds)", path) from None
     return value
 
 
@@ -55,9 +74,13 @@ def submission_scenes(root: str | Path) -> list[str]:
 
 def read_submission_map(root: str | Path, scene: str) -> tuple[np.ndarray, float | None]:
     """(disparity (H, W) float32, runtime in s or None if its file is absent) of one scene."""
+    check_inside(root, disp_map_path(root, scene))
     disp = read_pfm(disp_map_path(root, scene))
     rt = runtime_path(root, scene)
-    return disp, (read_runtime(rt) if rt.is_file() else None)
+    if not (rt.exists() or rt.is_symlink()):
+        return disp, None
+    check_inside(root, rt)
+    return disp, read_runtime(rt)
 
 
 def write_submission_map(root: str | Path, scene: str, disparity: np.ndarray, runtime_s: float) -> None:

@@ -15,6 +15,7 @@ from lfbench.method.base import Method, Prediction
 from lfbench.runs.results import Record, Results, RunInfo
 from lfbench.scoring.metrics import GENERAL_METRICS, Metric
 from lfbench.scoring.rules import ScoringRules, score_scene
+from lfbench.utils.errors import DataError
 
 log = logging.getLogger(__name__)
 
@@ -33,8 +34,10 @@ def evaluate(methods: Sequence[Method], scenes: Sequence[Scene], *,
     ``lfbench.scoring.region_metrics.applicable_metrics``).
 
     A (method, scene) pair the method cannot serve (e.g. no stored map) is skipped with a warning
-    (logger ``lfbench.runs.runner``). ``on_prediction`` sees each prediction (to save maps or draw figures).
+    (logger ``lfbench.runs.runner``); a method that can serve none of the scenes is an error
+    (DataError, raised before any work). ``on_prediction`` sees each prediction (to save maps or draw figures).
     """
+    check_runnable(methods, scenes)
     results = Results(meta={"scoring": {"border_px": rules.border_px, "toolkit_nonfinite": rules.toolkit,
                                         "highres_scenes": sorted(rules.highres_scenes)}})
     pairs = [(m, s) for m in methods for s in scenes]
@@ -60,6 +63,15 @@ def evaluate(methods: Sequence[Method], scenes: Sequence[Scene], *,
             log.warning("lfbench: %s on %s: %d non-finite pixels inside the evaluation mask (%s)", method.label,
                         scene.name, score.nonfinite_pixels, _NONFINITE_RULE[rules.toolkit])
     return results
+
+
+def check_runnable(methods: Sequence[Method], scenes: Sequence[Scene]) -> None:
+    """DataError when a method can run on none of ``scenes`` (its results would silently be empty)."""
+    for method in methods:
+        reasons = [method.available_for(scene) for scene in scenes]
+        if scenes and all(r is not None for r in reasons):
+            names = ", ".join(s.name for s in scenes[:3]) + (" ..." if len(scenes) > 3 else "")
+            raise DataError(f"{method.label} cannot run on any selected scene ({names}): {reasons[0]}")
 
 
 def save_prediction(out_dir: Path) -> PredictionHook:

@@ -58,10 +58,7 @@ def read_views_uint8(scene: Scene) -> np.ndarray:
     out = np.empty((h, w, v * u, 3), dtype=np.uint8)
     for k in range(v * u):  # one file per view: reading is per file by nature
         path = scene.view_path(k)
-        arr = read_png(path, "view image", "RGB")
-        if arr.shape[:2] != (h, w):
-            raise DataError(f"view is {arr.shape[1]}x{arr.shape[0]}, parameters.cfg says {w}x{h}", path)
-        out[:, :, k] = arr
+        out[:, :, k] = read_png(path, "view image", "RGB", size=(h, w))
     return out
 
 
