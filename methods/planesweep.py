@@ -50,6 +50,9 @@ SUBPIXEL_FITS = ("equiangular", "parabola", "none")
 _CHUNK_ELEMENTS = 8 * 1024 * 1024  # floats per shifted-view chunk (32 MB)
 
 
+MAX_RADIUS_PX = 256  # norm_radius and arm_length: windows wider than this only cost time and memory
+
+
 @register_method("planesweep")
 class PlaneSweep(Method):
     """Training-free plane sweep with occlusion-aware view subsets, edge-aware aggregation and sub-pixel fit.
@@ -79,10 +82,11 @@ class PlaneSweep(Method):
                                      ("occlusion", occlusion, OCCLUSION_MODES), ("subpixel", subpixel, SUBPIXEL_FITS)):
             if value not in allowed:
                 raise ValueError(f"{name} must be one of {', '.join(allowed)}, got {value!r}")
-        if norm_radius < 0 or arm_length < 0:
-            raise ValueError(f"norm_radius and arm_length must be >= 0, got {norm_radius}, {arm_length}")
-        if arm_tau <= 0 or temperature <= 0:
-            raise ValueError(f"arm_tau and temperature must be > 0, got {arm_tau}, {temperature}")
+        if not (0 <= norm_radius <= MAX_RADIUS_PX and 0 <= arm_length <= MAX_RADIUS_PX):
+            raise ValueError(f"norm_radius and arm_length must be from 0 to {MAX_RADIUS_PX} px, "
+                             f"got {norm_radius}, {arm_length}")
+        if not (0 < arm_tau < math.inf and 0 < temperature < math.inf):
+            raise ValueError(f"arm_tau and temperature must be finite numbers > 0, got {arm_tau}, {temperature}")
         self.interval = float(interval)
         self.interpolation = interpolation
         self.views = views

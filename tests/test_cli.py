@@ -23,6 +23,7 @@ from helpers import (
     zip_folder,
 )
 
+from lfbench.cli import main
 from lfbench.data.pfm import read_pfm, write_pfm
 
 GENERAL_IDS = {"badpix_0.01", "badpix_0.03", "badpix_0.07", "mse_x100", "q25_x100"}

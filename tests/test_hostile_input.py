@@ -191,3 +191,101 @@ def test_results_json_nested_too_deeply_is_one_line(tmp_path, capsys):
     path.write_text(json.dumps({"records": [], "runs": [{"method": 1}]}))
     rc, _, err = run_cli(capsys, "report", path, "--out", tmp_path / "rep")
     one_line(rc, err, "results.json", "run 0 is malformed")
+
+
+@pytest.mark.parametrize(("spec", "problem"), [
+    ("planesweep:interval=0.00001", "gives 8e+05 disparities, more than 1024"),
+    ("planesweep:d_min=-1e9", "disparities beyond +-64"),
+    ("planesweep:d_max=inf", "must be finite"),
+    ("planesweep:interval=inf", "must be finite"),
+    ("planesweep:interval=nan", "must be finite"),
+    ("planesweep:norm_radius=100000000", "norm_radius and arm_length must be from 0 to 256"),
+    ("planesweep:arm_length=1000000000", "norm_radius and arm_length must be from 0 to 256"),
+    ("planesweep:arm_tau=inf", "must be finite numbers > 0"),
+    ("subfocal:width=10000000", "width must be from 1 to 1024"),
+    ("subfocal:interval=1e-7", "more than 1024"),
+    ("subfocal:max_memory_gb=inf", "max_memory_gb a finite number > 0"),
+])
+def test_spec_sizes_are_bounded_before_any_work(tmp_path, capsys, scene, spec, problem):
+    rc, _, err = run_cli(capsys, "predict", "--method", spec, "--input", scene, "--out", tmp_path / "p.pfm")
+    one_line(rc, err, spec.split(":")[0], problem)
+    assert not (tmp_path / "p.pfm").exists()
+
+
+def _npy_header_only(path: Path, shape: tuple[int, ...], descr: str = "<f4", payload: bytes = b"") -> None:
+    with open(path, "wb") as f:
+        np.lib.format.write_array_header_1_0(f, {"descr": descr, "fortran_order": False, "shape": shape})
+        f.write(payload)
+
+
+@pytest.mark.parametrize(("shape", "payload", "problem"), [
+    ((100000, 100000, 81), b"\0" * 64, "views of 100000x100000 px"),
+    ((0, 4, 81), b"", "views of 4x0 px: each side must be from 1"),
+    ((4, 4, 81), b"\0" * 100, "truncated .npy"),
+    ((2, 2, 80), b"\0" * 1280, "expected (H, W, 81) views, got shape (2, 2, 80)"),
+])
+def test_npy_header_is_checked_before_loading(tmp_path, capsys, shape, payload, problem):
+    path = tmp_path / "views.npy"
+    _npy_header_only(path, shape, payload=payload)
+    rc, _, err = run_cli(capsys, "predict", "--method", "gt", "--input", path, "--out", tmp_path / "o.pfm")
+    one_line(rc, err, "views.npy", problem)
+
+
+def test_size_flags_are_bounded(tmp_path, capsys):
+    rc, _, err = run_cli(capsys, "validate-submission", tmp_path, "--size", "60000")
+    one_line(rc, err, "--size '60000'", "at most 16384 px")
+    rc, _, err = run_cli(capsys, "synth", "--out", tmp_path / "s", "--size", "200000")
+    one_line(rc, err, "size must be an integer from 16 to 4096 px")
+    rc, _, err = run_cli(capsys, "synth", "--out", tmp_path / "s", "--angular", "99")
+    one_line(rc, err, "angular must be an odd integer from 3")
+    assert not (tmp_path / "s").exists()
+
+
+# --------------------------------------------------------------------------- 12.3 / 12.7 tampered checkpoints
+
+@pytest.fixture(scope="module")
+def small_checkpoint(tmp_path_factory) -> Path:
+    import torch
+    from lfbench_methods.subfocal.keras_import import save_checkpoint
+    from lfbench_methods.subfocal.network import SubFocalNet
+
+    torch.manual_seed(0)
+    path = tmp_path_factory.mktemp("ckpt") / "small.pt"
+    save_checkpoint(SubFocalNet(width=2, interval=1.0), path, "test")
+    return path
+
+
+def _tampered(small_checkpoint: Path, tmp_path: Path, change) -> Path:
+    import torch
+
+    ckpt = torch.load(small_checkpoint, weights_only=True)
+    change(ckpt)
+    out = tmp_path / "tampered.pt"
+    torch.save(ckpt, out)
+    return out
+
+
+@pytest.mark.parametrize(("change", "problem"), [
+    (lambda c: c["config"].update(width=10**7), "width must be a whole number from 1 to 1024"),
+    (lambda c: c["config"].update(width=2.5), "width must be a whole number"),
+    (lambda c: c["config"].update(angular=100001), "angular must be a whole number from 1 to 15"),
+    (lambda c: c["config"].update(interval=1e-7), "more than 1024"),
+    (lambda c: c["config"].update(d_max=float("inf")), "must be finite"),
+    (lambda c: c["state_dict"].pop(next(iter(c["state_dict"]))), "missing 1 tensors (e.g. 'extractor."),
+    (lambda c: c["state_dict"].update(bogus=np.zeros(1)), "1 unexpected entries (e.g. 'bogus')"),
+    (lambda c: c["state_dict"].update({k: v[:1] for k, v in list(c["state_dict"].items())[:1]}), "has shape (1,"),
+])
+def test_tampered_checkpoint_is_one_line_naming_the_file(tmp_path, capsys, scene, small_checkpoint, change, problem):
+    import torch
+
+    def apply(c):
+        change(c)
+        for k, v in list(c["state_dict"].items()):
+            if isinstance(v, np.ndarray):
+                c["state_dict"][k] = torch.from_numpy(v)
+
+    path = _tampered(small_checkpoint, tmp_path, apply)
+    rc, _, err = run_cli(capsys, "predict", "--method", f"subfocal:weights={path}", "--input", scene,
+                         "--out", tmp_path / "p.pfm")
+    one_line(rc, err, "tampered.pt", problem)
+    assert not (tmp_path / "p.pfm").exists()

@@ -22,8 +22,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def load_input(path: Path):
     """A LightField from a scene folder or a VIEWS.npy; DataError naming the file otherwise."""
+    import math
+
     import numpy as np
 
+    from lfbench.data.npyfile import read_npy
+    from lfbench.data.params import MAX_RESOLUTION_PX, MAX_VIEW_PIXELS
     from lfbench.data.scene import ArrayLightField, Scene
     from lfbench.utils.errors import DataError
 
@@ -31,15 +35,19 @@ def load_input(path: Path):
         return Scene(path)
     if path.suffix != ".npy":
         raise DataError("input must be a scene folder or a .npy file", path)
-    try:
-        arr = np.load(path, allow_pickle=False)
-    except FileNotFoundError:
-        raise DataError("input not found", path) from None
-    except (ValueError, OSError, EOFError) as exc:
-        raise DataError(f"cannot read .npy: {str(exc).splitlines()[0]}", path) from None
-    if arr.ndim != 3 or arr.shape[2] != 81:
-        raise DataError(f"expected (H, W, 81) views, got shape {arr.shape}", path)
-    if not np.issubdtype(arr.dtype, np.floating) or not np.isfinite(arr).all():
+
+    def check(shape: tuple[int, ...], dtype: np.dtype) -> str | None:
+        if len(shape) != 3 or shape[2] != 81:
+            return f"expected (H, W, 81) views, got shape {shape}"
+        if not 1 <= min(shape[:2]) or max(shape[:2]) > MAX_RESOLUTION_PX or math.prod(shape) > MAX_VIEW_PIXELS:
+            return (f"views of {shape[1]}x{shape[0]} px: each side must be from 1 to {MAX_RESOLUTION_PX} "
+                    f"and all 81 views at most {MAX_VIEW_PIXELS} px")
+        if not np.issubdtype(dtype, np.floating):
+            return f"views must be floating-point values in [0, 1], got {dtype}"
+        return None
+
+    arr = read_npy(path, check)
+    if not np.isfinite(arr).all():
         raise DataError("views must be finite floating-point values in [0, 1]", path)
     return ArrayLightField.from_channels(arr.astype(np.float32), name=path.stem)
 

@@ -22,15 +22,32 @@ Interpolation = Literal["nearest", "bilinear", "phase"]
 INTERPOLATIONS: tuple[str, ...] = ("nearest", "bilinear", "phase")
 
 
+MAX_ABS_DISPARITY = 64.0  # px per view step (HCI scenes: within +-4)
+MAX_DISPARITIES = 1024  # candidate disparities of one grid (the paper's finest: 81)
+
+
 def disparity_grid(d_min: float = -4.0, d_max: float = 4.0, interval: float = 0.5) -> torch.Tensor:
     """Candidate disparities d_min, d_min + interval, ..., d_max as float32 (D,).
 
     (-4, 4, 0.5) gives 17 values, 0.25 gives 33, 0.1 gives 81, 1 gives 9. The range must be a
-    whole number of intervals.
+    whole number of intervals, within +-MAX_ABS_DISPARITY px and at most MAX_DISPARITIES values
+    (checked before anything is allocated).
     """
+    try:
+        d_min, d_max, interval = float(d_min), float(d_max), float(interval)
+    except (TypeError, ValueError):
+        raise ValueError(f"d_min, d_max and interval must be numbers, got {d_min!r}, {d_max!r}, {interval!r}") from None
+    if not all(math.isfinite(v) for v in (d_min, d_max, interval)):
+        raise ValueError(f"d_min, d_max and interval must be finite, got [{d_min}, {d_max}] step {interval}")
     if interval <= 0 or d_max <= d_min:
         raise ValueError(f"need interval > 0 and d_max > d_min, got [{d_min}, {d_max}] step {interval}")
+    if max(abs(d_min), abs(d_max)) > MAX_ABS_DISPARITY:
+        raise ValueError(f"disparities beyond +-{MAX_ABS_DISPARITY} px per view step are not supported, "
+                         f"got [{d_min}, {d_max}]")
     steps = (d_max - d_min) / interval
+    if steps + 1 > MAX_DISPARITIES:
+        raise ValueError(f"[{d_min}, {d_max}] step {interval} gives {steps + 1:.3g} disparities, more than "
+                         f"{MAX_DISPARITIES}: use a larger interval")
     n = int(round(steps))
     if abs(steps - n) > 1e-6 * max(1.0, steps):
         raise ValueError(f"[{d_min}, {d_max}] is not a whole number of {interval} px intervals")

@@ -259,11 +259,15 @@ def _entries_by_rel(entries: list[_Entry]) -> dict[str, _Entry]:
 
 def parse_size(text: str) -> tuple[int, int]:
     """'512' -> (512, 512); 'WxH' -> (H, W). DataError on anything else."""
-    m = re.fullmatch(r"\s*(\d+)\s*(?:[xX]\s*(\d+)\s*)?", text)
+    from lfbench.data.params import MAX_RESOLUTION_PX
+
+    m = re.fullmatch(r"\s*(\d{1,9})\s*(?:[xX]\s*(\d{1,9})\s*)?", text)
     if not m or int(m[1]) <= 0 or (m[2] is not None and int(m[2]) <= 0):
-        raise DataError(f"bad --size {text!r}: expected N or WxH, e.g. 512 or 512x512")
+        raise DataError(f"bad --size {text[:40]!r}: expected N or WxH, e.g. 512 or 512x512")
     w = int(m[1])
     h = int(m[2]) if m[2] is not None else w
+    if max(h, w) > MAX_RESOLUTION_PX:
+        raise DataError(f"bad --size {text[:40]!r}: each side must be at most {MAX_RESOLUTION_PX} px")
     return h, w
 
 

@@ -698,11 +698,20 @@ class SyntheticScene:
         return ArrayLightField(views=self.gray_views(), name=self.name, gt=self.disparity)
 
 
+MAX_SYNTH_SIZE = 4096  # px per side of a generated view
+
+
 def _check_args(size: int, angular: int) -> None:
-    if int(size) != size or size < 16:
-        raise SpecError(f"size must be an integer >= 16 px, got {size}")
-    if int(angular) != angular or angular < 3 or angular % 2 == 0:
-        raise SpecError(f"angular must be an odd integer >= 3 (a centre view), got {angular}")
+    """SpecError for sizes outside the bounds, before anything is allocated."""
+    from lfbench.data.params import MAX_CAMS, MAX_VIEW_PIXELS
+
+    if int(size) != size or not 16 <= size <= MAX_SYNTH_SIZE:
+        raise SpecError(f"size must be an integer from 16 to {MAX_SYNTH_SIZE} px, got {size}")
+    if int(angular) != angular or not 3 <= angular <= MAX_CAMS or angular % 2 == 0:
+        raise SpecError(f"angular must be an odd integer from 3 (a centre view) to {MAX_CAMS}, got {angular}")
+    if size * size * angular * angular > MAX_VIEW_PIXELS:
+        raise SpecError(f"{angular}x{angular} views of {size}x{size} px is more than lfbench reads "
+                        f"({MAX_VIEW_PIXELS} px): use a smaller size or angular resolution")
 
 
 def _visibility(layers: Sequence[Layer], x: np.ndarray, y: np.ndarray, lid: np.ndarray, disp: np.ndarray,

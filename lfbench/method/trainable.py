@@ -164,14 +164,34 @@ def network_from_state(build: Callable[..., torch.nn.Module], state: dict, confi
     """``build(**config)`` with ``state`` loaded, in eval mode; DataError naming ``path`` (the checkpoint)
     when the config does not build or the weights do not fit it."""
     try:
-        net = build(**config)
+        net = build(**config)  # the network checks every size against its bound before allocating
     except (TypeError, ValueError) as exc:
-        raise DataError(f"checkpoint config {config} is not valid: {exc}", path) from None
+        raise DataError(f"checkpoint config is not valid: {' '.join(str(exc).split())[:200]}", path) from None
+    check_state_dict(state, net.state_dict(), path)
     try:
         net.load_state_dict(state)
-    except RuntimeError as exc:
-        raise DataError(f"weights do not fit the stored config: {str(exc).splitlines()[0]}", path) from None
+    except (RuntimeError, TypeError, ValueError) as exc:
+        raise DataError(f"weights do not fit the stored config: {' '.join(str(exc).split())[:200]}", path) from None
     return net.eval()
+
+
+def check_state_dict(state: dict, expected: dict, path: str | Path, what: str = "state_dict") -> None:
+    """DataError naming ``path`` and the first offending entry when ``state`` lacks a key of
+    ``expected``, has one more, or holds a non-tensor or a tensor of another shape."""
+    missing = [k for k in expected if k not in state]
+    extra = [k for k in state if k not in expected]
+    if missing or extra:
+        parts = ([f"missing {len(missing)} tensors (e.g. {missing[0]!r})"] if missing else []) + \
+                ([f"{len(extra)} unexpected entries (e.g. {str(extra[0])[:60]!r})"] if extra else [])
+        raise DataError(f"{what}: weights do not fit the network: {', '.join(parts)}", path)
+    for key, ref in expected.items():
+        value = state[key]
+        if not isinstance(value, torch.Tensor):
+            raise DataError(f"{what}: weights do not fit the network: {key!r} is a {type(value).__name__}, "
+                            "not a tensor", path)
+        if tuple(value.shape) != tuple(ref.shape):
+            raise DataError(f"{what}: weights do not fit the network: {key!r} has shape "
+                            f"{tuple(value.shape)}, it needs {tuple(ref.shape)}", path)
 
 
 class TrainableRegistry(PluginRegistry):

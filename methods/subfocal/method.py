@@ -17,6 +17,7 @@ from typing import Literal
 
 import numpy as np
 import torch
+from lfbench_methods.subfocal.network import MAX_WIDTH
 from lfbench_methods.subfocal.trainable import LFAttNetTrainable, SubFocalTrainable  # noqa: F401 (registers them)
 
 from lfbench.data.scene import LightField
@@ -73,10 +74,10 @@ class SubFocal(Method):
             raise ValueError(f"interpolation must be one of {', '.join(INTERPOLATIONS)}, got {interpolation!r}")
         if precision not in ("fp32", "bf16"):
             raise ValueError(f"precision must be fp32 or bf16, got {precision!r}")
-        if width is not None and width < 1:
-            raise ValueError(f"width must be >= 1, got {width}")
-        if tile < 0 or threads < 0 or max_memory_gb <= 0:
-            raise ValueError("tile and threads must be >= 0 and max_memory_gb > 0")
+        if width is not None and not 1 <= width <= MAX_WIDTH:
+            raise ValueError(f"width must be from 1 to {MAX_WIDTH}, got {width}")
+        if tile < 0 or threads < 0 or not 0 < max_memory_gb < float("inf"):
+            raise ValueError("tile and threads must be >= 0 and max_memory_gb a finite number > 0")
         disparity_grid(d_min, d_max, interval)  # ValueError if not a grid
         self.values = values
         self._net = None

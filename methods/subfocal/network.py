@@ -21,6 +21,7 @@ statistics once per view, view 0 first.
 from __future__ import annotations
 
 import math
+import numbers
 
 import torch
 import torch.nn.functional as F
@@ -31,6 +32,8 @@ from lfbench.data.shift import INTERPOLATIONS, angular_offsets, disparity_grid, 
 BN_EPS = 1e-3
 BN_MOMENTUM = 0.01  # Keras momentum 0.99
 FEATURES = 4  # channels per view after the extractor
+MAX_WIDTH = 1024  # channels of the 3D aggregation (the paper: 150); bounds a stored config before allocation
+MAX_ANGULAR = 15  # views per angular row (HCI: 9)
 SPP_POOLS = (2, 4, 8, 16)
 
 
@@ -241,9 +244,16 @@ class SubFocalNet(nn.Module):
                  interpolation: str = "bilinear", width: int = 150, attention: bool = True, angular: int = 9) -> None:
         super().__init__()
         if interpolation not in INTERPOLATIONS:
-            raise ValueError(f"interpolation must be one of {', '.join(INTERPOLATIONS)}, got {interpolation!r}")
-        if width < 1 or angular < 1 or angular % 2 == 0:
-            raise ValueError(f"need width >= 1 and an odd angular size, got width={width}, angular={angular}")
+            raise ValueError(f"interpolation must be one of {', '.join(INTERPOLATIONS)}, "
+                             f"got {str(interpolation)[:40]!r}")
+        for name, value, top in (("width", width, MAX_WIDTH), ("angular", angular, MAX_ANGULAR)):
+            if isinstance(value, bool) or not isinstance(value, numbers.Integral) or not 1 <= value <= top:
+                raise ValueError(f"{name} must be a whole number from 1 to {top}, got {str(value)[:40]}")
+        if angular % 2 == 0:
+            raise ValueError(f"angular must be odd, got {angular}")
+        if not isinstance(attention, bool):
+            raise ValueError(f"attention must be true or false, got {str(attention)[:40]}")
+        disparity_grid(d_min, d_max, interval)  # ValueError for a bad or oversized grid, before any allocation
         self._config = {"d_min": float(d_min), "d_max": float(d_max), "interval": float(interval),
                         "interpolation": interpolation, "width": int(width), "attention": bool(attention),
                         "angular": int(angular)}
