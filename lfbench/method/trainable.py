@@ -178,6 +178,8 @@ def network_from_state(build: Callable[..., torch.nn.Module], state: dict, confi
 def check_state_dict(state: dict, expected: dict, path: str | Path, what: str = "state_dict") -> None:
     """DataError naming ``path`` and the first offending entry when ``state`` lacks a key of
     ``expected``, has one more, or holds a non-tensor or a tensor of another shape."""
+    import torch
+
     missing = [k for k in expected if k not in state]
     extra = [k for k in state if k not in expected]
     if missing or extra:
