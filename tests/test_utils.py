@@ -13,7 +13,7 @@ import pytest
 from lfbench.utils.atomic import FILE_MODE, atomic_open, write_text
 from lfbench.utils.envvars import expand_vars
 from lfbench.utils.errors import SpecError
-from lfbench.utils.log import configure_cli_logging
+from lfbench.utils.log import configure_cli_logging, log_to_file
 from lfbench.utils.threads import torch_threads
 
 
@@ -92,4 +92,18 @@ def test_cli_logging_shows_library_messages_once_at_the_chosen_level():
     configure_cli_logging(1, verbose)
     logger.debug("debug line")
     assert verbose.getvalue() == "debug line\n"
+    configure_cli_logging(0)
+
+
+def test_log_to_file_takes_the_training_log_off_the_console(tmp_path):
+    console = io.StringIO()
+    configure_cli_logging(0, console)
+    train_log = logging.getLogger("lfbench.training.loop")
+    with log_to_file(tmp_path / "cell" / "log.txt", "# header"):
+        train_log.info("step 1")
+        logging.getLogger("lfbench.runs.runner").info("not training")
+    train_log.info("after")
+    assert (tmp_path / "cell" / "log.txt").read_text() == "# header\nstep 1\n"
+    assert console.getvalue() == "not training\nafter\n"
+    assert logging.getLogger("lfbench.training").propagate
     configure_cli_logging(0)

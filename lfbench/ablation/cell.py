@@ -22,7 +22,7 @@ import contextlib
 import json
 import shlex
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -33,6 +33,9 @@ from lfbench.ablation.toml_text import dumps
 from lfbench.method.trainable import DEFAULT_TRAINABLE
 from lfbench.utils.atomic import write_bytes, write_text
 from lfbench.utils.errors import DataError, SpecError
+from lfbench.utils.jsonfile import read_json
+from lfbench.utils.log import log_to_file
+from lfbench.utils.threads import torch_threads
 
 MARKER, TRAIN_CONFIG, LOG, MAPS, TIMING = "cell.json", "train.toml", "log.txt", "maps", "timing.json"
 UNCERTAINTY_DIR = "uncertainty"
@@ -68,9 +71,10 @@ class CellTask:
 def read_marker(cell_dir: str | Path) -> dict[str, Any] | None:
     """The cell's marker (None when absent or unreadable: a cell without one is not finished)."""
     try:
-        return json.loads((Path(cell_dir) / MARKER).read_text(encoding="utf-8"))
-    except (FileNotFoundError, json.JSONDecodeError, UnicodeDecodeError):
+        marker = read_json(Path(cell_dir) / MARKER, "cell marker")
+    except DataError:
         return None
+    return marker if isinstance(marker, dict) else None
 
 
 def is_done(task: CellTask) -> bool:
@@ -212,19 +216,16 @@ def load_scenes(pairs: tuple[tuple[str, str], ...]):
     return [Scene(path, category=category) for path, category in pairs]
 
 
-def evaluate_weights(label: str, weights: Path, ev: Evaluation, scenes, threads: int, maps_dir: Path | None,
-                     network: str = DEFAULT_TRAINABLE):
-    """Score the weights (of the trainable ``network``) on the scenes; the records are named ``label``."""
-    from lfbench.runs.runner import evaluate
+def evaluate_weights(label: str, weights: Path, ev: Evaluation, scenes, threads: int, out: Path,
+                     maps_dir: Path | None, network: str = DEFAULT_TRAINABLE):
+    """Score the weights (of the trainable ``network``) on the scenes into ``out`` (results.json/csv);
+    the records are named ``label``."""
+    from lfbench.runs.folder import evaluate_to_folder
     from lfbench.scoring.rules import ScoringRules
 
-    method = make_method(weights, ev, threads, network)
-    rules = ScoringRules(allow_highres=not ev.lowres_only)
-    results = evaluate([method], scenes, rules=rules, on_prediction=save_maps(maps_dir) if maps_dir else None,
-                       progress=False)
-    results.records = [replace(r, method=label) for r in results.records]
-    results.runs = [replace(r, method=label) for r in results.runs]
-    return results
+    return evaluate_to_folder([make_method(weights, ev, threads, network)], scenes, out, label=label, tables=False,
+                              rules=ScoringRules(allow_highres=not ev.lowres_only), progress=False,
+                              on_prediction=save_maps(maps_dir) if maps_dir else None)
 
 
 def timing_key(ev: Evaluation, threads: int) -> dict[str, Any]:
@@ -237,20 +238,15 @@ def time_cell(cell_dir: str | Path, ev: Evaluation, threads: int, network: str =
     """Test time of a finished cell (CELL/timing.json, reused when the timing settings are the same):
     the median of ``time_repeats`` whole-scene predictions. Run one cell at a time, with nothing else
     of the ablation running, so that the cells' times compare."""
-    import torch
-
     path = Path(cell_dir) / TIMING
     key = timing_key(ev, threads)
-    with contextlib.suppress(FileNotFoundError, json.JSONDecodeError, UnicodeDecodeError):
-        old = json.loads(path.read_text(encoding="utf-8"))
-        if old.get("key") == key:
+    with contextlib.suppress(DataError):
+        old = read_json(path, "cell timing")
+        if isinstance(old, dict) and old.get("key") == key:
             return old
-    before = torch.get_num_threads()
-    try:
+    with torch_threads(None):  # the method sets its own count; restore ours afterwards
         method = make_method(Path(cell_dir) / "final.pt", ev, threads, network)
         times = time_whole_scene(method, ev.time_size, ev.time_repeats, ev.time_warmup)
-    finally:
-        torch.set_num_threads(before)
     out = {"key": key, "test_s": float(np.median(times)), "test_s_all": times, "time_size": ev.time_size,
            "threads": threads, "device": key["device"]}
     write_text(path, json.dumps(out, indent=2, sort_keys=True) + "\n")
@@ -261,16 +257,10 @@ def time_cell(cell_dir: str | Path, ev: Evaluation, threads: int, network: str =
 
 def run_cell(task: CellTask) -> dict[str, Any]:
     """Train, evaluate and mark one cell (skipped when it is finished); returns its marker."""
-    import torch
-
     if is_done(task):
         return read_marker(task.cell_dir) or {}
-    before = torch.get_num_threads()
-    torch.set_num_threads(task.threads)
-    try:
+    with torch_threads(task.threads):
         return _run(task)
-    finally:
-        torch.set_num_threads(before)
 
 
 def _run(task: CellTask) -> dict[str, Any]:
@@ -285,14 +275,14 @@ def _run(task: CellTask) -> dict[str, Any]:
         stage1_s = seed_from_stage1(task)
     cfg = TrainConfig.from_toml(config_path)
     command = shlex.join(["lfbench", "train", str(config_path), "--out", str(task.path)])
-    with open(task.path / LOG, "a", encoding="utf-8") as log, contextlib.redirect_stdout(log):
-        print(f"# {time.strftime('%Y-%m-%d %H:%M:%S')} cell {task.cell_id} ({task.threads} threads)")
+    with log_to_file(task.path / LOG, f"# {time.strftime('%Y-%m-%d %H:%M:%S')} cell {task.cell_id} "
+                                      f"({task.threads} threads)"):
         loop.train(cfg, task.path, command=command, progress=task.progress)
-    summary = json.loads((task.path / "summary.json").read_text(encoding="utf-8"))
+    summary = read_json(task.path / "summary.json", "training summary")
     train_s = float(summary["elapsed_s"])
 
     results = evaluate_weights(task.cell_id, task.path / "final.pt", task.evaluation, load_scenes(task.scenes),
-                               task.evaluation.threads or task.threads, task.path / MAPS, task.network)
+                               task.evaluation.threads or task.threads, task.path, task.path / MAPS, task.network)
     marker: dict[str, Any] = {
         "id": task.cell_id, "values": task.values, "fingerprint": task.fingerprint,
         "eval_fingerprint": task.eval_fingerprint, "steps": int(summary["steps"]),

@@ -22,6 +22,7 @@ paper columns, and one line says so.
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -30,8 +31,8 @@ import numpy as np
 import pandas as pd
 
 from lfbench.ablation.spec import AblationSpec
+from lfbench.reports.tables import write_table
 from lfbench.runs.results import Results
-from lfbench.utils.atomic import write_text
 from lfbench.utils.errors import DataError
 
 PAPER_LABEL = "paper (RTX 3090, full training)"
@@ -41,8 +42,8 @@ PAPER_UAFL_BETA = 0.1
 METRICS = ("badpix_0.07", "badpix_0.03", "badpix_0.01", "mse_x100")
 METRIC_NAMES = {"badpix_0.07": "BadPix 0.07 (%)", "badpix_0.03": "BadPix 0.03 (%)", "badpix_0.01": "BadPix 0.01 (%)",
                 "mse_x100": "MSE x100"}
-FORMATS = (("markdown", "md"), ("latex", "tex"), ("csv", "csv"))
 Log = Callable[[str], None]
+_log = logging.getLogger(__name__)
 
 
 # --------------------------------------------------------------------------- facts per cell
@@ -234,26 +235,6 @@ def caption_lines(spec: AblationSpec, paper, what: str | None = None, note: str 
             note if paper is not None else "paper: not shown (the paper's tables were not found)"]
 
 
-def render_with_caption(table: pd.DataFrame, fmt: str, caption: Sequence[str]) -> str:
-    from lfbench.reports.tables import render
-
-    body = render(table, fmt)
-    if fmt == "markdown":
-        return "".join(f"{line}  \n" for line in caption) + "\n" + body
-    if fmt == "latex":
-        return "".join(f"% {line}\n" for line in caption) + body
-    return body
-
-
-def write_table(table: pd.DataFrame, out: Path, stem: str, caption: Sequence[str]) -> list[Path]:
-    written = []
-    for fmt, ext in FORMATS:
-        path = out / f"{stem}.{ext}"
-        write_text(path, render_with_caption(table, fmt, caption))
-        written.append(path)
-    return written
-
-
 def load_paper_tables(paper: str | Path | None, log: Log):
     """The paper's tables, or None (with one line saying so) when no folder is given or found."""
     from lfbench.reports.paper import find_paper_dir, load_paper
@@ -267,7 +248,7 @@ def load_paper_tables(paper: str | Path | None, log: Log):
 
 
 def write_report(spec: AblationSpec, out: str | Path, results: Results, markers: Sequence[dict[str, Any]], *,
-                 paper: str | Path | None = None, log: Log = print) -> list[Path]:
+                 paper: str | Path | None = None, log: Log = _log.info) -> list[Path]:
     """Every table and figure of the run into ``out``; returns the files written."""
     from lfbench.reports.paper import average_with_paper, per_scene_with_paper
     from lfbench.reports.tables import average_table, per_scene_table

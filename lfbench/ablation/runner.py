@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import logging
 import os
 import shlex
 import shutil
@@ -36,8 +37,12 @@ from lfbench.ablation.spec import AblationSpec, Cell, SyntheticEval, _sha
 from lfbench.runs.results import Results
 from lfbench.utils.atomic import write_text
 from lfbench.utils.errors import DataError, SpecError
+from lfbench.utils.jsonfile import read_json
+from lfbench.utils.log import log_to_file
+from lfbench.utils.threads import torch_threads
 
 Log = Callable[[str], None]
+_log = logging.getLogger(__name__)
 
 
 def available_cores() -> int:
@@ -137,15 +142,9 @@ def run_shared_stage1(spec: AblationSpec, out: Path, links: dict[str, str], thre
         return folder
     log(f"stage 1 (shared by {len(spec.cells)} cells) in {folder}")
     command = shlex.join(["lfbench", "train", str(path), "--out", str(folder)])
-    import torch
-
-    before = torch.get_num_threads()
-    try:
-        with open(folder / LOG, "a", encoding="utf-8") as f, contextlib.redirect_stdout(f):
-            train(TrainConfig.from_toml(path), folder, command=command, progress=progress)
-    finally:
-        torch.set_num_threads(before)
-    summary = json.loads((folder / "summary.json").read_text(encoding="utf-8"))
+    with torch_threads(None), log_to_file(folder / LOG):  # the trainer sets its own thread count
+        train(TrainConfig.from_toml(path), folder, command=command, progress=progress)
+    summary = read_json(folder / "summary.json", "training summary")
     write_text(marker, json.dumps({"steps": summary["steps"], "elapsed_s": summary["elapsed_s"]}, indent=2) + "\n")
     return folder
 
@@ -246,7 +245,7 @@ def run_methods(spec: AblationSpec, out: Path, scenes: tuple[tuple[str, str], ..
     """Score the spec's [[methods]] (cached in OUT/methods/<label>/ with a marker, like cells)."""
     from lfbench.ablation.cell import load_scenes, save_maps
     from lfbench.method.registry import create_from_spec
-    from lfbench.runs.runner import evaluate
+    from lfbench.runs.folder import evaluate_to_folder
     from lfbench.scoring.rules import ScoringRules
 
     ev = spec.evaluation
@@ -257,16 +256,14 @@ def run_methods(spec: AblationSpec, out: Path, scenes: tuple[tuple[str, str], ..
         folder = out / "methods" / _safe(m.label)
         key = _sha([m.spec, ev.fingerprint(), [s for s, _ in scenes]])
         marker = folder / "method.json"
-        if marker.is_file() and json.loads(marker.read_text(encoding="utf-8")).get("key") == key:
+        done = read_json(marker, "method marker") if marker.is_file() else None
+        if isinstance(done, dict) and done.get("key") == key:
             out_list.append(Results.read(folder))
             log(f"method {m.label}: finished earlier, skipped")
             continue
-        method = create_from_spec(m.spec)
-        res = evaluate([method], loaded, rules=rules, on_prediction=save_maps(folder / "maps"), progress=False)
-        res.records = [replace(r, method=m.label) for r in res.records]
-        res.runs = [replace(r, method=m.label) for r in res.runs]
-        res.meta["method"] = {"label": m.label, "spec": m.spec}
-        res.write(folder)
+        res = evaluate_to_folder([create_from_spec(m.spec)], loaded, folder, rules=rules, label=m.label, tables=False,
+                                 on_prediction=save_maps(folder / "maps"), progress=False,
+                                 meta={"method": {"label": m.label, "spec": m.spec}})
         if res.records:  # a method that served no scene (e.g. weights not there yet) is tried again next time
             write_text(marker, json.dumps({"label": m.label, "spec": m.spec, "key": key}, indent=2) + "\n")
         log(f"method {m.label}: scored on {len(res.scenes)} scene(s)")
@@ -285,7 +282,7 @@ class AblationRun:
 
 
 def run_ablation(spec: AblationSpec, out: str | Path, *, jobs: int = 1, progress: bool | None = None,
-                 paper: str | Path | None = None, log: Log = print) -> AblationRun:
+                 paper: str | Path | None = None, log: Log = _log.info) -> AblationRun:
     """Run (or resume) every cell and extra method of ``spec`` into ``out``; write the combined results,
     tables and figures. ``paper``: the paper's tables folder (None: lfbench.reports.paper.find_paper_dir)."""
     from lfbench.ablation.report import write_report
@@ -323,7 +320,7 @@ def run_ablation(spec: AblationSpec, out: str | Path, *, jobs: int = 1, progress
 
 
 def report_only(spec: AblationSpec, out: str | Path, *, paper: str | Path | None = None,
-                log: Log = print) -> list[Path]:
+                log: Log = _log.info) -> list[Path]:
     """Rewrite the tables and figures from OUT/results.json and the cells' markers (nothing is run)."""
     from lfbench.ablation.report import write_report
 
@@ -336,7 +333,7 @@ def report_only(spec: AblationSpec, out: str | Path, *, paper: str | Path | None
         marker = read_marker(out / "cells" / c.id) or {}
         timing = out / "cells" / c.id / TIMING
         if marker and timing.is_file():
-            marker.update({k: v for k, v in json.loads(timing.read_text(encoding="utf-8")).items() if k != "key"})
+            marker.update({k: v for k, v in read_json(timing, "cell timing").items() if k != "key"})
         markers.append(marker)
     missing = [c.id for c, m in zip(spec.cells, markers, strict=True) if "test_s" not in m]
     if missing:

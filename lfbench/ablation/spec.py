@@ -67,7 +67,6 @@ import copy
 import hashlib
 import itertools
 import json
-import os
 import re
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -75,12 +74,12 @@ from pathlib import Path
 from typing import Any
 
 from lfbench.training.config import STAGE_KEYS, TrainConfig, _Table
+from lfbench.utils.envvars import expand_vars
 from lfbench.utils.errors import SpecError
 
 TABLES = ("table4", "table5", "beta", "tables12", "none")
 SPECIAL_AXES = ("loss", "beta", "lr", "seed")
 DEVICES = ("cpu", "cuda", "auto")
-_VAR_RE = re.compile(r"\$\{(\w+)\}|\$(\w+)")
 _ID_SAFE = re.compile(r"[^A-Za-z0-9._=+-]")
 
 
@@ -207,17 +206,6 @@ def network_default(config: dict[str, Any], key: str) -> Any:
 
 def _sha(obj: Any) -> str:
     return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()
-
-
-def expand_vars(value: str, source: Path, key: str) -> str:
-    """``~`` and ``$VAR`` / ``${VAR}`` expanded; SpecError naming the key if a variable is unset."""
-    def sub(m: re.Match) -> str:
-        name = m.group(1) or m.group(2)
-        if name not in os.environ:
-            raise SpecError(f"{key}: {value!r} uses environment variable {name}, which is not set", source)
-        return os.environ[name]
-
-    return os.path.expanduser(_VAR_RE.sub(sub, value))
 
 
 def _resolve(value: str, source: Path, key: str) -> Path:

@@ -46,17 +46,15 @@ Paths expand ``~`` and ``$VARS``; relative paths are taken from the current dire
 from __future__ import annotations
 
 import math
-import os
-import re
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
 from lfbench.method.trainable import DEFAULT_TRAINABLE
+from lfbench.utils.envvars import expand_vars
 from lfbench.utils.errors import SpecError
 
 STAGE_KEYS = {"name", "loss", "lr", "steps", "eps", "betas"}
-_VAR_RE = re.compile(r"\$\{(\w+)\}|\$(\w+)")
 
 
 @dataclass(frozen=True)
@@ -177,14 +175,8 @@ def _plain(x: Any) -> Any:
 
 
 def expand_path(value: str, source: str | None = None) -> Path:
-    """``~`` and ``$VAR`` / ``${VAR}`` expanded; SpecError if a variable is unset."""
-    def sub(m: re.Match) -> str:
-        name = m.group(1) or m.group(2)
-        if name not in os.environ:
-            raise SpecError(f"path {value!r} uses environment variable {name}, which is not set", source)
-        return os.environ[name]
-
-    return Path(_VAR_RE.sub(sub, value)).expanduser()
+    """``~`` and ``$VAR`` / ``${VAR}`` expanded (lfbench.utils.envvars); SpecError if a variable is unset."""
+    return Path(expand_vars(value, source))
 
 
 class _Table:

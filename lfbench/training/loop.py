@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import logging
 import os
 import shutil
 import signal
@@ -117,7 +118,7 @@ def comparable(config: dict[str, Any]) -> dict[str, Any]:
 
 # --------------------------------------------------------------------------- data preparation
 
-def prepare_synthetic(cfg: TrainConfig, data_dir: Path, log=print) -> None:
+def prepare_synthetic(cfg: TrainConfig, data_dir: Path, log=logging.getLogger(__name__).info) -> None:
     """Generate each [[data.synthetic]] set into data_dir/<category> unless it is already there
     (generated in a temporary folder and renamed, so a killed run never leaves half a set)."""
     for spec in cfg.data.synthetic:
@@ -256,6 +257,9 @@ def network_config(cfg: TrainConfig, model: torch.nn.Module) -> dict[str, Any]:
 
 # --------------------------------------------------------------------------- the trainer
 
+_log = logging.getLogger(__name__)
+
+
 class Trainer:
     def __init__(self, cfg: TrainConfig, out: Path, ctx: DistContext, command: str | None = None,
                  progress: bool | None = None, loggers: Sequence[RunLogger] = ()) -> None:
@@ -273,11 +277,10 @@ class Trainer:
     # -- output ------------------------------------------------------------------------------
 
     def log(self, msg: str) -> None:
+        """A line of the training log (logger ``lfbench.training.loop``; the CLI shows it on stderr, an
+        ablation cell writes it to its log.txt)."""
         if self.ctx.is_main:
-            from tqdm import tqdm
-
-            tqdm.write(msg, file=sys.stdout)
-            sys.stdout.flush()
+            _log.info(msg)
 
     def record(self, entry: dict) -> None:
         if self.ctx.is_main:

@@ -4,11 +4,14 @@ are to stderr, through tqdm so that progress bars stay intact."""
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import sys
+from collections.abc import Iterator
+from pathlib import Path
 from typing import IO
 
-__all__ = ["LOGGERS", "configure_cli_logging"]
+__all__ = ["LOGGERS", "configure_cli_logging", "log_to_file"]
 
 #: The loggers the CLI shows: the library and the bundled methods.
 LOGGERS = ("lfbench", "lfbench_methods")
@@ -47,3 +50,29 @@ def configure_cli_logging(verbosity: int = 0, stream: IO[str] | None = None) -> 
         logger.addHandler(handler)
         logger.setLevel(level)
     return handler
+
+
+@contextlib.contextmanager
+def log_to_file(path: str | Path, header: str | None = None, logger: str = "lfbench.training") -> Iterator[None]:
+    """For the block, append the messages of ``logger`` and its children (INFO and above) to ``path``,
+    one line each, and only there: they do not reach the console meanwhile (e.g. an ablation cell's
+    training log). ``header``: a first line written before the block."""
+    log = logging.getLogger(logger)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "a", encoding="utf-8") as stream:
+        if header is not None:
+            stream.write(header + "\n")
+            stream.flush()
+        handler = logging.StreamHandler(stream)
+        handler.setFormatter(logging.Formatter("%(message)s"))
+        level, propagate = log.level, log.propagate
+        log.addHandler(handler)
+        log.setLevel(logging.INFO)
+        log.propagate = False
+        try:
+            yield
+        finally:
+            log.removeHandler(handler)
+            log.setLevel(level)
+            log.propagate = propagate
