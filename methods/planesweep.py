@@ -1,6 +1,7 @@
 """``planesweep``: a training-free disparity estimator (plane sweep over SubFocal's disparity grid).
 
-Pipeline, all batched torch on the CPU (or any device the views live on):
+Pipeline, all batched torch on the chosen device (``device``: auto, cpu, cuda or cuda:K; every tensor lives
+there, the outputs come back to the CPU):
 
 1. Matching features: each gray view is contrast-normalised in a small window,
    ``(I - mean) / (std + eps)``, so faint texture (shadows, dark walls) counts as much as strong texture.
@@ -43,6 +44,7 @@ from lfbench.data.shift import INTERPOLATIONS, angular_offsets, disparity_grid
 from lfbench.method.base import Method, Prediction
 from lfbench.method.registry import register_method
 from lfbench.utils.errors import DataError
+from lfbench.utils.hardware import resolve_device
 
 VIEW_SETS = ("star", "all")
 OCCLUSION_MODES = ("subsets", "none")
@@ -68,15 +70,16 @@ class PlaneSweep(Method):
     arm_tau: gray-level tolerance (0..1) under which the aggregation arms keep growing
     subpixel: fit through the cost minimum: equiangular (suits the L1 cost), parabola or none
     temperature: softmax temperature of the returned distribution, in units of each pixel's mean cost
+    device: where the sweep runs: auto (CUDA when available, else CPU), cpu, cuda or cuda:K
     """
 
     def __init__(self, d_min: float = -4.0, d_max: float = 4.0, interval: float = 0.25,
                  interpolation: str = "bilinear", views: str = "star", occlusion: str = "subsets",
                  norm_radius: int = 2, arm_length: int = 16, arm_tau: float = 0.02,
-                 subpixel: str = "equiangular", temperature: float = 0.05) -> None:
+                 subpixel: str = "equiangular", temperature: float = 0.05, device: str = "auto") -> None:
         super().__init__(d_min=d_min, d_max=d_max, interval=interval, interpolation=interpolation, views=views,
                          occlusion=occlusion, norm_radius=norm_radius, arm_length=arm_length, arm_tau=arm_tau,
-                         subpixel=subpixel, temperature=temperature)
+                         subpixel=subpixel, temperature=temperature, device=device)
         self.disparities = disparity_grid(d_min, d_max, interval)  # ValueError on a bad grid
         for name, value, allowed in (("interpolation", interpolation, INTERPOLATIONS), ("views", views, VIEW_SETS),
                                      ("occlusion", occlusion, OCCLUSION_MODES), ("subpixel", subpixel, SUBPIXEL_FITS)):
@@ -90,6 +93,7 @@ class PlaneSweep(Method):
         self.interval = float(interval)
         self.interpolation = interpolation
         self.views = views
+        self.device = resolve_device(device)  # SpecError before any work for a device this machine lacks
         self.occlusion = occlusion
         self.norm_radius = int(norm_radius)
         self.arm_length = int(arm_length)
@@ -107,14 +111,14 @@ class PlaneSweep(Method):
         if not np.isfinite(gray).all():
             raise DataError(f"planesweep: {lf.name!r} views contain NaN or infinite values")
         with torch.inference_mode():
-            views = torch.from_numpy(gray).reshape(rows * cols, *gray.shape[2:])
+            views = torch.from_numpy(gray).reshape(rows * cols, *gray.shape[2:]).to(self.device)
             _, disp, dist, unc = estimate(views, angular_offsets(rows, cols), self.disparities, self.interval,
                                           interpolation=self.interpolation, view_set=self.views,
                                           occlusion=self.occlusion, norm_radius=self.norm_radius,
                                           arm_length=self.arm_length, arm_tau=self.arm_tau,
                                           subpixel=self.subpixel, temperature=self.temperature)
-        return Prediction(disparity=disp.numpy().astype(np.float32), distribution=dist.numpy(),
-                          disparity_values=self.disparities.numpy(), uncertainty=unc.numpy())
+        return Prediction(disparity=disp.cpu().numpy().astype(np.float32), distribution=dist.cpu().numpy(),
+                          disparity_values=self.disparities.numpy(), uncertainty=unc.cpu().numpy())
 
 
 # --------------------------------------------------------------------------- the estimator
@@ -130,8 +134,9 @@ def estimate(views: torch.Tensor, offsets: torch.Tensor, disparities: torch.Tens
     views: (N, H, W) float32 gray in [0, 1], view k at angular offset ``offsets[k]`` = (u - uc, v - vc);
     disparities: (D,) ascending candidates, ``interval`` apart (px per view step).
     Returns (cost (D, H, W) aggregated matching cost, disparity (H, W) px, distribution (D, H, W),
-    uncertainty (H, W) px).
+    uncertainty (H, W) px), all on the views' device.
     """
+    offsets, disparities = offsets.to(views.device), disparities.to(views.device)
     keep = select_views(offsets, view_set)
     gray, off = views[keep], offsets[keep]
     centre_index = int(torch.nonzero((off == 0).all(dim=1))[0, 0])
@@ -237,15 +242,16 @@ class _Shifter:
         p, n = self.pad, self.off.shape[0]
         if self.mode == "phase":
             return self._phase(sx, sy)[:, :, p + y0:p + y0 + rows, p:p + self.w]
-        idx_n = torch.arange(n)[None, :, None]
+        dev = self.padded.device
+        idx_n = torch.arange(n, device=dev)[None, :, None]
         if self.mode == "nearest":
             ix, iy = torch.round(sx).long(), torch.round(sy).long()
-            row = (y0 + p - iy)[:, :, None] + torch.arange(rows)
+            row = (y0 + p - iy)[:, :, None] + torch.arange(rows, device=dev)
             return self.windows[idx_n, row, (p - ix)[:, :, None], :]
         fx, fy = torch.floor(sx), torch.floor(sy)
         wx, wy = (sx - fx)[:, :, None, None], (sy - fy)[:, :, None, None]
         ix, iy = fx.long(), fy.long()
-        row = (y0 + p - iy - 1)[:, :, None] + torch.arange(rows + 1)  # one extra row above for the y blend
+        row = (y0 + p - iy - 1)[:, :, None] + torch.arange(rows + 1, device=dev)  # one extra row above for the y blend
         col = (p - ix - 1)[:, :, None]
         pairs = self.wide_windows[idx_n, row, col, :]  # (K, N, rows+1, W+1): reads x - ix - 1 .. x - ix + W - 1
         across = torch.lerp(pairs[..., 1:], pairs[..., :-1], wx)  # between x - ix and x - ix - 1
@@ -253,9 +259,11 @@ class _Shifter:
 
     def _phase(self, sx: torch.Tensor, sy: torch.Tensor) -> torch.Tensor:
         hp, wp = self.padded.shape[-2:]
-        ky = torch.fft.fftfreq(hp)[:, None]
-        kx = torch.fft.rfftfreq(wp)[None, :]
-        ramp = torch.polar(torch.ones(()), -2 * math.pi * (ky * sy[:, :, None, None] + kx * sx[:, :, None, None]))
+        dev = self.padded.device
+        ky = torch.fft.fftfreq(hp, device=dev)[:, None]
+        kx = torch.fft.rfftfreq(wp, device=dev)[None, :]
+        phase = -2 * math.pi * (ky * sy[:, :, None, None] + kx * sx[:, :, None, None])
+        ramp = torch.polar(torch.ones((), device=dev), phase)
         return torch.fft.irfft2(self.spectrum[None] * ramp, s=(hp, wp))
 
 
@@ -274,7 +282,7 @@ def sweep_costs(feats: torch.Tensor, offsets: torch.Tensor, disparities: torch.T
     else:
         band = min(h, max(8, _CHUNK_ELEMENTS // (n * w)))
         chunk = max(1, _CHUNK_ELEMENTS // (n * band * w))
-    cost = torch.empty(d_count, s_count, h, w, dtype=torch.float32)
+    cost = torch.empty(d_count, s_count, h, w, dtype=torch.float32, device=feats.device)
     for k in range(0, d_count, chunk):  # chunks of disparities and bands of rows, for memory
         d = disparities[k:k + chunk]
         for y0 in range(0, h, band):
@@ -288,7 +296,7 @@ def sweep_costs(feats: torch.Tensor, offsets: torch.Tensor, disparities: torch.T
 def best_subset(cost: torch.Tensor, radius: int = 1) -> torch.Tensor:
     """(D, S, H, W) -> (D, H, W): per disparity the smallest 3x3-averaged subset cost (chunked for memory)."""
     d_count, s_count, h, w = cost.shape
-    out = torch.empty(d_count, h, w, dtype=cost.dtype)
+    out = torch.empty(d_count, h, w, dtype=cost.dtype, device=cost.device)
     chunk = max(1, _CHUNK_ELEMENTS // (s_count * h * w))
     for k in range(0, d_count, chunk):
         out[k:k + chunk] = box_mean(cost[k:k + chunk], radius).amin(dim=1)
@@ -305,13 +313,14 @@ def cross_arms(guide: torch.Tensor, length: int, tau: float) -> torch.Tensor:
     up to ``length`` px and never past the image border.
     """
     h, w = guide.shape
-    steps = torch.arange(1, length + 1)
+    dev = guide.device
+    steps = torch.arange(1, length + 1, device=dev)
     big = torch.finfo(guide.dtype).max
     padded = F.pad(guide[None, None], (length, length, length, length), value=big)[0, 0]  # border stops arms
     arms = []
     for dy, dx in ((0, -1), (0, 1), (-1, 0), (1, 0)):  # 4 directions, each vectorised over the arm length
-        ys = length + dy * steps[:, None, None] + torch.arange(h)[None, :, None]
-        xs = length + dx * steps[:, None, None] + torch.arange(w)[None, None, :]
+        ys = length + dy * steps[:, None, None] + torch.arange(h, device=dev)[None, :, None]
+        xs = length + dx * steps[:, None, None] + torch.arange(w, device=dev)[None, None, :]
         ok = (padded[ys, xs] - guide[None]).abs() < tau  # (length, H, W)
         arms.append(ok.to(torch.int64).cumprod(dim=0).sum(dim=0))
     return torch.stack(arms)
@@ -321,7 +330,7 @@ def cross_aggregate(cost: torch.Tensor, arms: torch.Tensor) -> torch.Tensor:
     """Mean of (D, H, W) cost over each pixel's cross-based support: horizontal arm sums, then vertical."""
     d_count, h, w = cost.shape
     left, right, up, down = arms
-    xs, ys = torch.arange(w), torch.arange(h)[:, None]
+    xs, ys = torch.arange(w, device=cost.device), torch.arange(h, device=cost.device)[:, None]
 
     def horizontal(x: torch.Tensor) -> torch.Tensor:
         c = F.pad(x.cumsum(-1), (1, 0))  # c[..., j] = sum of x[..., :j]
@@ -333,7 +342,7 @@ def cross_aggregate(cost: torch.Tensor, arms: torch.Tensor) -> torch.Tensor:
         hi, lo = (ys + down + 1).expand(x.shape), (ys - up).expand(x.shape)
         return c.gather(-2, hi) - c.gather(-2, lo)
 
-    count = vertical(horizontal(torch.ones(1, h, w, dtype=cost.dtype)))
+    count = vertical(horizontal(torch.ones(1, h, w, dtype=cost.dtype, device=cost.device)))
     out = torch.empty_like(cost)
     chunk = max(1, _CHUNK_ELEMENTS // (h * w))
     for k in range(0, d_count, chunk):  # chunks of disparities, for memory

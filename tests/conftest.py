@@ -50,3 +50,13 @@ def one_torch_thread():
 
     with torch_threads(1):
         yield
+
+
+@pytest.fixture()
+def cpu_bf16():
+    """Skip the test, with the reason, on a CPU that cannot run bf16 convolutions (e.g. AVX2 only)."""
+    from lfbench.utils.hardware import cpu_bf16_missing
+
+    missing = cpu_bf16_missing()
+    if missing is not None:
+        pytest.skip(f"this CPU cannot run bf16 convolutions: it lacks {missing}")

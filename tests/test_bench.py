@@ -9,6 +9,7 @@ import pytest
 
 from lfbench.cli import main
 from lfbench.runs import bench
+from lfbench.utils.hardware import FORCE_NO_BF16_ENV, cpu_bf16_missing
 
 CONTRACT = {"size", "interval", "precision", "seconds", "peak_memory_gb", "gflops_per_s"}
 
@@ -16,15 +17,19 @@ CONTRACT = {"size", "interval", "precision", "seconds", "peak_memory_gb", "gflop
 def test_inference_command_writes_the_contract_records(tmp_path: Path, capsys):
     out = tmp_path / "OUT.json"
     # A tiny network on a tiny scene, in its own process, after the conv peak (in another process).
-    code = main(["bench", "inference", "--size", "12", "--interval", "1", "--precision", "bf16",
-                 "--width", "3", "--threads", "1", "--json", str(out)])
-    assert code == 0
+    code = main(["bench", "inference", "--size", "12", "--interval", "1", "--precision", "fp32", "bf16",
+                 "--width", "3", "--threads", "1", "--device", "cpu", "--json", str(out)])
+    assert code == 0  # a bf16 case this CPU cannot run is skipped, not an error
     records = json.loads(out.read_text())
-    assert [r["precision"] for r in records] == ["bf16"]  # only inference records in this file
-    for r in records:
+    assert [r["precision"] for r in records] == ["fp32", "bf16"]  # only inference records in this file
+    missing = cpu_bf16_missing()
+    ran = records if missing is None else records[:1]
+    if missing is not None:
+        assert "avx512" in records[1]["skipped"] and "seconds" not in records[1]
+    for r in ran:
         assert CONTRACT <= set(r)
         assert r["size"] == 12 and r["interval"] == 1.0 and r["width"] == 3 and r["disparities"] == 9
-        assert r["seconds"] > 0 and r["gflops_per_s"] > 0
+        assert r["seconds"] > 0 and r["gflops_per_s"] > 0 and r["device"] == "cpu" and r["memory"] == "rss"
         assert r["peak_memory_gb"] >= r["baseline_memory_gb"] > 0.05  # a fresh process with torch loaded
         assert r["tiles"] == 1 and r["tile"] == [12, 12] and r["weights"] == "random"
         assert set(r["phases_s"]) == {"features_s", "attention_s", "aggregation_s"}
@@ -37,6 +42,29 @@ def test_inference_command_writes_the_contract_records(tmp_path: Path, capsys):
         assert r["floor_s"] == pytest.approx(r["tflop"] * 1e3 / r["peak_gflops_per_s"])
     text = capsys.readouterr().out
     assert "## inference" in text and "## peak" in text and "machine:" in text
+
+
+def test_bf16_on_a_cpu_without_it_is_skipped_with_its_reason(tmp_path: Path, capsys, monkeypatch):
+    monkeypatch.setenv(FORCE_NO_BF16_ENV, "1")  # as on an AVX2-only CPU
+    out = tmp_path / "OUT.json"
+    code = main(["bench", "inference", "--size", "12", "--interval", "1", "--precision", "bf16", "fp32",
+                 "--width", "3", "--threads", "1", "--no-peak", "--json", str(out)])
+    assert code == 0
+    bf16, fp32 = json.loads(out.read_text())
+    assert bf16["precision"] == "bf16" and "seconds" not in bf16
+    assert bf16["skipped"].startswith("bf16 convolutions: this CPU lacks avx512bw, avx512vl, avx512dq")
+    assert fp32["precision"] == "fp32" and fp32["seconds"] > 0 and "skipped" not in fp32
+    text = capsys.readouterr().out
+    assert "[inference] bf16 skipped: bf16 convolutions" in text and "skipped: bf16" in text.split("## inference")[1]
+    assert bench.skip_reason("peak", {"precision": "bf16"})
+    assert bench.skip_reason("volume", {"precision": "bf16"}) is None  # a gather, no convolution
+
+
+@pytest.mark.skipif(__import__("torch").cuda.is_available(), reason="this machine has CUDA")
+def test_a_cuda_device_without_cuda_is_one_line_and_exit_2(capsys):
+    assert main(["bench", "peak", "--device", "cuda", "--precision", "fp32"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "device=cuda" in err[0] and "sees no CUDA GPU" in err[0]
 
 
 def test_network_flops_are_the_analytic_count():

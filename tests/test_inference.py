@@ -124,7 +124,7 @@ def test_outputs_distribution_and_uncertainty():
     assert disp[0, 0, 1].item() == pytest.approx(1.125) and spread[0, 0, 1].item() == pytest.approx(0.125)
 
 
-def test_bf16_autocast_is_close_to_fp32():
+def test_bf16_autocast_is_close_to_fp32(cpu_bf16):
     net = _net(width=8)
     views = _views(24, 24)
     fp32 = infer(net, views)

@@ -15,6 +15,12 @@ Examples:
   lfbench bench volume --size 512 --method gather grid_sample
   lfbench bench train --width 150 16 --batch 2
   lfbench bench suite --quick --json quick.json
+  lfbench bench inference --device cuda --interval 0.5 0.1 --precision fp32 bf16
+
+--device (auto, cpu, cuda, cuda:K; default auto) places the peak, inference and training cases: on CUDA
+the clocks are read after torch.cuda.synchronize, peak_memory_gb is torch.cuda.max_memory_allocated and
+fp32 is IEEE fp32 (TF32 off). A bf16 case on a CPU without bf16 instructions is recorded as skipped
+(with the reason) and does not change the exit code.
 """
 
 from __future__ import annotations
@@ -34,6 +40,12 @@ def _common(p: argparse.ArgumentParser) -> None:
                    help="trainable network to time, with parameters (default subfocal; see lfbench.method.trainable)")
 
 
+def _device_option(p: argparse.ArgumentParser) -> None:
+    from lfbench.utils.hardware import DEVICE_HELP
+
+    p.add_argument("--device", default="auto", help=f"where peak, inference and training cases run: {DEVICE_HELP}")
+
+
 def _inference_options(p: argparse.ArgumentParser, size: int, intervals: list[float] | None) -> None:
     p.add_argument("--size", type=int, default=size, help="image size in px (a size x size scene, 81 views)")
     p.add_argument("--interval", type=float, nargs="+", default=intervals,
@@ -41,10 +53,12 @@ def _inference_options(p: argparse.ArgumentParser, size: int, intervals: list[fl
     p.add_argument("--precision", nargs="+", default=["fp32", "bf16"], choices=["fp32", "bf16"])
     p.add_argument("--width", type=int, default=None, help="aggregation width (default: the network's, SubFocal 150)")
     p.add_argument("--weights", help="checkpoint .pt (default: random weights)")
-    p.add_argument("--max-memory", type=float, default=4.0, metavar="GB", help="memory budget of inference")
+    p.add_argument("--max-memory", type=float, default=None, metavar="GB",
+                   help="memory budget of inference (default: 4 on the CPU, the GPU's free memory on CUDA)")
     p.add_argument("--tile", type=int, default=0, help="core tile size in px (0 = from --max-memory)")
     p.add_argument("--repeat", type=int, default=1, help="runs per case (the best is kept)")
     p.add_argument("--no-peak", action="store_true", help="do not measure the conv3d peak around each case")
+    _device_option(p)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -74,6 +88,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     t.add_argument("--steps", type=int, default=2)
     t.add_argument("--interval", type=float, default=None)
     t.add_argument("--no-channels-last", action="store_true")
+    _device_option(t)
     _common(t)
     m = sub.add_parser("metrics", help="the metric engine over synthetic scenes x methods")
     m.add_argument("--scenes", type=int, default=12)
@@ -84,6 +99,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     k = sub.add_parser("peak", help="the conv3d peak (GFLOP/s) of the paper's 3D convolution")
     k.add_argument("--precision", nargs="+", default=["fp32", "bf16"], choices=["fp32", "bf16"])
     k.add_argument("--repeat", type=int, default=3)
+    _device_option(k)
     _common(k)
 
 
@@ -117,6 +133,9 @@ def _cases(args: argparse.Namespace) -> list[tuple[str, dict]]:
     """(bench, params) in the order they run."""
     which = args.which
     th = {"threads": args.threads}
+    cpu = dict(th)  # the volume bench runs on the CPU
+    if getattr(args, "device", None) is not None:  # cases that run on a device (resolved by run())
+        th["device"] = args.device
     model, model_params, trainable = _model(args)
     net = {"model": model, **model_params}
     has = trainable.benches  # the network's own benches (SubFocal: peak, volume)
@@ -143,9 +162,9 @@ def _cases(args: argparse.Namespace) -> list[tuple[str, dict]]:
             quick = args.quick
             if "volume" not in skip and "volume" in has:
                 cases += [("volume", {"model": model, "size": size, "interval": 0.5, "precision": p,
-                                      "method": "gather", **th}) for p in args.precision]
+                                      "method": "gather", **cpu}) for p in args.precision]
                 cases.append(("volume", {"model": model, "size": size, "interval": 0.5, "precision": "fp32",
-                                         "method": "grid_sample", **th}))
+                                         "method": "grid_sample", **cpu}))
             if "train" not in skip:
                 widths = [150, args.small_width] if "width" in trainable.parameters() else [None]
                 for w in widths:
@@ -180,6 +199,8 @@ def _line(record: dict) -> str:
 
     if "error" in record:
         return f"[{record.get('bench')}] error: {record['error']}"
+    if "skipped" in record:
+        return f"[{record.get('bench')}] {record.get('precision', '')} skipped: {record['skipped']}"
     keys = [k for k in ("size", "interval", "precision", "method", "width", "batch", "seconds", "peak_memory_gb",
                         "gflops_per_s", "gb_per_s", "steps_per_s", "scores_per_s") if k in record]
     load = (record.get("machine") or {}).get("load_average")
@@ -199,6 +220,10 @@ def run(args: argparse.Namespace) -> int:
         parser = argparse.ArgumentParser()
         add_arguments(parser)
         args = parser.parse_args(["suite"])
+    if getattr(args, "device", None) is not None:
+        from lfbench.utils.hardware import resolve_device
+
+        args.device = str(resolve_device(args.device))  # SpecError (exit 2) before any case
     records: list[dict] = []
     cases = _cases(args)
     print(f"lfbench bench {args.which}: {len(cases)} cases, each in a fresh process", flush=True)

@@ -39,6 +39,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="also rate each method's uncertainty map (SubFocal: std of its distribution): "
                         "sparsification curves and AUSE/AURG in OUT/uncertainty.csv, OUT/table_uncertainty.md "
                         "and OUT/figures/sparsification_*.png")
+    p.add_argument("--device", metavar="DEVICE",
+                   help="where methods that have a device parameter run (a spec's own device=... wins): "
+                        "auto, cpu, cuda or cuda:K (default: the method's, auto)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
@@ -50,7 +53,7 @@ def run(args: argparse.Namespace) -> int:
     from lfbench.scoring.rules import ScoringRules
     from lfbench.utils.errors import DataError
 
-    methods = [create_from_spec(spec) for spec in args.method]  # spec errors before any work
+    methods = [create_from_spec(spec, {"device": args.device}) for spec in args.method]  # errors before any work
     if args.html:
         from lfbench.reports.html import SITE_DIR, check_site_dir
 

@@ -16,6 +16,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--method", required=True, metavar="SPEC", help="method spec name[:key=value,...]")
     p.add_argument("--input", required=True, type=Path, help="scene folder (HCI layout) or VIEWS.npy (H, W, 81)")
     p.add_argument("--out", required=True, type=Path, help="OUT.pfm or OUT.npy")
+    p.add_argument("--device", metavar="DEVICE",
+                   help="where methods that have a device parameter run (a spec's own device=... wins): "
+                        "auto, cpu, cuda or cuda:K (default: the method's, auto)")
     p.add_argument("--extras", action="store_true",
                    help="also save OUT.distribution.npy (D, H, W), OUT.disparities.npy (D,) and OUT.uncertainty.npy")
 
@@ -62,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
 
     if args.out.suffix not in (".pfm", ".npy"):
         raise DataError("output must end in .pfm or .npy", args.out)
-    method = create_from_spec(args.method)
+    method = create_from_spec(args.method, {"device": args.device})
     lf = load_input(args.input)
     reason = method.available_for(lf)
     if reason:

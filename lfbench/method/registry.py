@@ -13,7 +13,7 @@ from __future__ import annotations
 import inspect
 import types
 import typing
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from importlib import metadata
 from pathlib import Path
@@ -251,6 +251,11 @@ class MethodRegistry(PluginRegistry):
         return self._get(name)
 
     def create(self, name: str, **params: Any) -> Any:
+        return self._create(name, params, {})
+
+    def _create(self, name: str, params: dict[str, Any], runtime: Mapping[str, Any]) -> Any:
+        """The method made with ``params`` (recorded: they name it) plus the ``runtime`` options it accepts
+        and ``params`` does not set (not recorded: where it runs does not change what it is)."""
         info = self.info(name)
         unknown = sorted(set(params) - set(info.params))
         if unknown:
@@ -260,8 +265,9 @@ class MethodRegistry(PluginRegistry):
                    if p.default is inspect.Parameter.empty and p.name not in params]
         if missing:
             raise SpecError(f"method {name!r} needs parameter {', '.join(missing)} (e.g. {name}:{missing[0]}=...)")
+        extra = {k: v for k, v in runtime.items() if v is not None and k in info.params and k not in params}
         try:
-            method = info.factory(**{**info.defaults, **params})
+            method = info.factory(**{**info.defaults, **extra, **params})
         except (ValueError, TypeError) as exc:
             raise SpecError(f"method {name!r}: {exc}") from None
         from lfbench.method.base import Method
@@ -272,10 +278,12 @@ class MethodRegistry(PluginRegistry):
         method._bind(name, params)  # how it was made: results name a method by its canonical spec
         return method
 
-    def create_from_spec(self, spec: str) -> Any:
+    def create_from_spec(self, spec: str, runtime: Mapping[str, Any] | None = None) -> Any:
+        """The method of ``name:key=value,...``; ``runtime`` (e.g. ``{"device": "cuda"}`` from ``--device``)
+        fills the parameters the method has and the spec leaves out, without entering its label."""
         name, raw = parse_spec(spec)
         info = self.info(name)
-        return self.create(name, **coerce_params(raw, info.params, name))
+        return self._create(name, coerce_params(raw, info.params, name), runtime or {})
 
 
 def coerce_params(raw: dict[str, str], params: dict[str, Param], owner: str, kind: str = "method") -> dict[str, Any]:
@@ -336,9 +344,9 @@ def create(name: str, **params: Any) -> Any:
     return REGISTRY.create(name, **params)
 
 
-def create_from_spec(spec: str) -> Any:
-    """Create a method from ``name:key=value,key=value``."""
-    return REGISTRY.create_from_spec(spec)
+def create_from_spec(spec: str, runtime: Mapping[str, Any] | None = None) -> Any:
+    """Create a method from ``name:key=value,key=value`` (``runtime``: see MethodRegistry.create_from_spec)."""
+    return REGISTRY.create_from_spec(spec, runtime)
 
 
 def list_methods() -> list[MethodInfo]:

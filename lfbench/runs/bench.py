@@ -4,7 +4,11 @@ Every case runs in a fresh Python subprocess (``python -m lfbench.runs.bench CAS
 memory is the peak resident set size (``ru_maxrss``) of a process that did only that case; the record
 also gives the RSS just before the measured work (interpreter, torch, weights), so the growth is the
 difference. Each record carries the machine it ran on (CPU model, cores, torch threads, torch version,
-load average before and after).
+load average before and after). On a CUDA ``device`` the clocks are read after ``torch.cuda.synchronize``
+and ``peak_memory_gb`` is the GPU's ``torch.cuda.max_memory_allocated`` over the case (``memory`` says
+which: ``rss`` or ``cuda_max_allocated``; ``peak_rss_gb`` keeps the process's RSS), with IEEE fp32 (TF32
+off). A case its device cannot run (bf16 on a CPU without bf16 instructions) is a record with ``skipped``
+(the reason) instead of numbers, and no process is started for it.
 
 Benches (each returns one record, a dict). lfbench's own time the network of any registered trainable
 (``model``, default ``subfocal``; lfbench.method.trainable) through its seam:
@@ -120,16 +124,74 @@ def cpu_seconds() -> float:
     return r.ru_utime + r.ru_stime
 
 
-def timed(fn: Callable[[], object], repeat: int) -> tuple[float, float]:
-    """(best wall time, mean CPU time) of ``repeat`` calls, s. CPU time counts the work itself and is
-    much less inflated than wall time when other processes compete for the cores."""
+def sync(device) -> None:
+    """Wait for the device's queued work (CUDA kernels run asynchronously); nothing on the CPU."""
+    import torch
+
+    if device is not None and torch.device(device).type == "cuda":
+        torch.cuda.synchronize(device)
+
+
+def timed(fn: Callable[[], object], repeat: int, device=None) -> tuple[float, float]:
+    """(best wall time, mean CPU time) of ``repeat`` calls, s; on CUDA each call is timed from a synchronized
+    start to its synchronized end. CPU time counts the work itself and is much less inflated than wall time
+    when other processes compete for the cores."""
     best = math.inf
     cpu0 = cpu_seconds()
     for _ in range(max(1, repeat)):
+        sync(device)
         t = time.perf_counter()
         fn()
+        sync(device)
         best = min(best, time.perf_counter() - t)
     return best, (cpu_seconds() - cpu0) / max(1, repeat)
+
+
+def case_device(device: str = "cpu"):
+    """The torch.device of a case (``auto`` resolved); on CUDA: made current, IEEE fp32 numerics, peak
+    memory statistics reset."""
+    import torch
+
+    from lfbench.utils.hardware import resolve_device, set_fp32_numerics
+
+    dev = resolve_device(device)
+    if dev.type == "cuda":
+        set_fp32_numerics(tf32=False)
+        torch.cuda.set_device(dev)
+        torch.cuda.reset_peak_memory_stats(dev)
+    return dev
+
+
+def memory_now_gb(device) -> float:
+    """Memory in use now, GB: the process's RSS on the CPU, torch's allocated memory on CUDA."""
+    import torch
+
+    return torch.cuda.memory_allocated(device) / 1e9 if device.type == "cuda" else current_rss_gb()
+
+
+def memory_fields(device, baseline_gb: float) -> dict:
+    """A record's memory: peak_memory_gb (peak RSS on the CPU; torch.cuda.max_memory_allocated on CUDA since
+    :func:`case_device`), baseline_memory_gb (before the measured work), memory (which), peak_rss_gb."""
+    import torch
+
+    if device.type == "cuda":
+        return {"peak_memory_gb": torch.cuda.max_memory_allocated(device) / 1e9, "baseline_memory_gb": baseline_gb,
+                "memory": "cuda_max_allocated", "peak_rss_gb": peak_rss_gb(), "device": str(device)}
+    return {"peak_memory_gb": peak_rss_gb(), "baseline_memory_gb": baseline_gb, "memory": "rss",
+            "peak_rss_gb": peak_rss_gb(), "device": str(device)}
+
+
+def skip_reason(bench: str, params: dict) -> str | None:
+    """Why a case cannot run on this machine (bf16 convolutions its device lacks), else None."""
+    from lfbench.utils.hardware import bf16_missing, resolve_device
+
+    if bench in ("peak", "inference", "train") and params.get("precision") == "bf16":
+        device = resolve_device(params.get("device", "cpu"))
+        missing = bf16_missing(device)
+        if missing is not None:
+            where = "this CPU" if device.type == "cpu" else str(device)
+            return f"bf16 convolutions: {where} lacks {missing}; fp32 runs"
+    return None
 
 
 def torch_dtype(precision: str):
@@ -173,24 +235,27 @@ def _described(record: dict, net, params: dict[str, Any]) -> dict:
 
 
 def bench_inference(size: int = 512, precision: str = "fp32", *, model: str = DEFAULT_MODEL, weights: str | None = None,
-                    max_memory_gb: float = 4.0, tile: int = 0, threads: int = 0, repeat: int = 1, seed: int = 0,
-                    **params: Any) -> dict:
-    """One size x size light field (random views) through the network's ``Trainable.infer``; best of
-    ``repeat`` runs. ``params``: the network's parameters (e.g. SubFocal's interval, width; default: its
-    defaults, random weights unless ``weights`` names a checkpoint)."""
+                    max_memory_gb: float | None = 4.0, tile: int = 0, threads: int = 0, repeat: int = 1, seed: int = 0,
+                    device: str = "cpu", **params: Any) -> dict:
+    """One size x size light field (random views, made on the CPU: the copy to ``device`` is timed) through the
+    network's ``Trainable.infer`` on ``device``; best of ``repeat`` runs. ``params``: the network's parameters
+    (e.g. SubFocal's interval, width; default: its defaults, random weights unless ``weights`` names a
+    checkpoint). max_memory_gb None: the device's budget (4 GB on the CPU, the free memory of a GPU)."""
     import torch
 
     set_threads(threads)
     torch_dtype(precision)
+    dev = case_device(device)
     trainable, net = _network(model, params, weights, seed)
+    net = net.to(dev)
     angular = int(getattr(net, "angular", 9))
     views = torch.rand((1, angular * angular, size, size), generator=torch.Generator().manual_seed(seed))
-    baseline = current_rss_gb()
+    baseline = memory_now_gb(dev)
     phases: dict = {}
     seconds, cpu = timed(lambda: trainable.infer(net, views, precision=precision, max_memory_gb=max_memory_gb,
-                                                 tile=tile, timings=phases), repeat)
+                                                 tile=tile, timings=phases), repeat, dev)
     record = {"bench": "inference", "model": model, "size": size, **params, "precision": precision,
-              "seconds": seconds, "peak_memory_gb": peak_rss_gb(), "baseline_memory_gb": baseline,
+              "seconds": seconds, **memory_fields(dev, baseline),
               "cpu_seconds": cpu, "weights": weights or "random", "max_memory_gb": max_memory_gb}
     flops = trainable.flops(net, size, size)
     if flops:
@@ -206,7 +271,7 @@ def bench_inference(size: int = 512, precision: str = "fp32", *, model: str = DE
 
 
 def bench_train(batch: int = 2, patch: int = 32, steps: int = 2, channels_last: bool = True, threads: int = 0,
-                seed: int = 0, *, model: str = DEFAULT_MODEL, **params: Any) -> dict:
+                seed: int = 0, *, model: str = DEFAULT_MODEL, device: str = "cpu", **params: Any) -> dict:
     """Training steps per second: the network (``params`` over its defaults) in training mode, Adam (lr 1e-3,
     eps 1e-7) on an L1 loss of its disparity for random (batch, N, patch, patch) views against random
     disparities in [-4, 4); one warm-up step, then ``steps``."""
@@ -215,15 +280,16 @@ def bench_train(batch: int = 2, patch: int = 32, steps: int = 2, channels_last: 
     from lfbench.training.loop import to_channels_last
 
     set_threads(threads)
+    dev = case_device(device)
     trainable, net = _network(model, params, None, seed)
-    net.train()
+    net = net.to(dev).train()
     if channels_last:
         to_channels_last(net)
     opt = torch.optim.Adam(net.parameters(), lr=1e-3, eps=1e-7)
     g = torch.Generator().manual_seed(seed)
     angular = int(getattr(net, "angular", 9))
-    views = torch.rand((batch, angular * angular, patch, patch), generator=g)
-    target = torch.rand((batch, patch, patch), generator=g) * 8 - 4
+    views = torch.rand((batch, angular * angular, patch, patch), generator=g).to(dev)
+    target = (torch.rand((batch, patch, patch), generator=g) * 8 - 4).to(dev)
 
     def step() -> None:
         opt.zero_grad(set_to_none=True)
@@ -231,17 +297,19 @@ def bench_train(batch: int = 2, patch: int = 32, steps: int = 2, channels_last: 
         torch.nn.functional.l1_loss(disp, target).backward()
         opt.step()
 
-    baseline = current_rss_gb()
+    baseline = memory_now_gb(dev)
     step()
+    sync(dev)
     t, cpu0 = time.perf_counter(), cpu_seconds()
     for _ in range(max(1, steps)):
         step()
+    sync(dev)
     seconds = (time.perf_counter() - t) / max(1, steps)
     cpu = (cpu_seconds() - cpu0) / max(1, steps)
     record = {"bench": "train", "model": model, **params, "batch": batch, "patch": patch,
               "channels_last": channels_last, "steps": max(1, steps), "seconds": seconds, "seconds_per_step": seconds,
-              "steps_per_s": 1.0 / seconds, "cpu_seconds": cpu, "peak_memory_gb": peak_rss_gb(),
-              "baseline_memory_gb": baseline, "precision": "fp32"}
+              "steps_per_s": 1.0 / seconds, "cpu_seconds": cpu, **memory_fields(dev, baseline),
+              "precision": "fp32"}
     flops = trainable.flops(net, patch, patch)
     if flops:
         forward = flops["total"] * batch
@@ -341,7 +409,11 @@ def run_case(bench: str, params: dict) -> dict:
 
 
 def run_isolated(bench: str, params: dict, timeout_s: float | None = None) -> dict:
-    """Run one case in a fresh Python process (its own peak RSS); a failed case gives a record with ``error``."""
+    """Run one case in a fresh Python process (its own peak RSS); a failed case gives a record with ``error``,
+    one its device cannot run a record with ``skipped`` (decided here, no process started)."""
+    reason = skip_reason(bench, params)
+    if reason is not None:
+        return {"bench": bench, **params, "skipped": reason}
     cmd = [sys.executable, "-m", "lfbench.runs.bench", json.dumps({"bench": bench, "params": params})]
     try:
         proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout_s, check=False)
@@ -361,9 +433,9 @@ def attach_peaks(records: Sequence[dict]) -> list[dict]:
     less sensitive to other processes on the cores); for inference also floor_s (network FLOPs / peak) and
     ratio_to_floor (seconds / floor_s)."""
     out = [dict(r) for r in records]
-    ok = [i for i, r in enumerate(out) if r.get("bench") == "peak" and "error" not in r]
+    ok = [i for i, r in enumerate(out) if r.get("bench") == "peak" and "error" not in r and "skipped" not in r]
     for i, r in enumerate(out):
-        if r.get("bench") not in ("inference", "train") or "error" in r:
+        if r.get("bench") not in ("inference", "train") or "error" in r or "skipped" in r:
             continue
         same = [j for j in ok if out[j]["precision"] == r.get("precision")]
         if not same:
@@ -415,7 +487,8 @@ def table(records: Sequence[dict]) -> str:
             continue
         cols = _COLUMNS[bench]
         body = [[_fmt(r.get(c)) for c in cols] + [_fmt((r.get("machine") or {}).get("load_average")),
-                                                  r.get("error", "")] for r in rows]
+                                                  r.get("error", "") or (f"skipped: {r['skipped']}" if "skipped" in r
+                                                                         else "")] for r in rows]
         parts.append(f"## {bench}\n\n" + tabulate(body, headers=[*cols, "load", "error"], tablefmt="github",
                                                   disable_numparse=True))
     machines = {json.dumps({k: v for k, v in (r.get("machine") or {}).items() if "load" not in k}, sort_keys=True)

@@ -4,14 +4,14 @@ the network itself through the trainable seam."""
 
 from __future__ import annotations
 
-from lfbench.runs.bench import current_rss_gb, peak_rss_gb, set_threads, timed, torch_dtype
+from lfbench.runs.bench import case_device, current_rss_gb, peak_rss_gb, set_threads, timed, torch_dtype
 from lfbench.utils.errors import SpecError
 
 PAPER_WIDTH = 150
 
 
 def bench_peak(precision: str = "fp32", depth: int = 17, size: int = 64, width: int = PAPER_WIDTH,
-               repeat: int = 3, threads: int = 0) -> dict:
+               repeat: int = 3, threads: int = 0, device: str = "cpu") -> dict:
     """GFLOP/s of a width -> width 3x3x3 conv3d (+ bias, ReLU) on (1, width, depth, size, size) channels-last,
     through the fused op of SubFocal's fast path; best of ``repeat`` after one warm-up."""
     import torch
@@ -19,17 +19,19 @@ def bench_peak(precision: str = "fp32", depth: int = 17, size: int = 64, width: 
 
     set_threads(threads)
     dtype = torch_dtype(precision)
+    dev = case_device(device)
     g = torch.Generator().manual_seed(0)
-    x = torch.rand((1, width, depth, size, size), generator=g).to(dtype).contiguous(
+    x = torch.rand((1, width, depth, size, size), generator=g).to(dev, dtype).contiguous(
         memory_format=torch.channels_last_3d)
-    w = (torch.randn((width, width, 3, 3, 3), generator=g) * 0.01).to(dtype).contiguous(
+    w = (torch.randn((width, width, 3, 3, 3), generator=g) * 0.01).to(dev, dtype).contiguous(
         memory_format=torch.channels_last_3d)
-    b = torch.zeros(width)
+    b = torch.zeros(width, device=dev)
     flops = 2.0 * 27 * width * width * depth * size * size
     with torch.inference_mode():
         conv(x, w, b, (1, 1, 1), relu=True)
-        seconds, cpu = timed(lambda: conv(x, w, b, (1, 1, 1), relu=True), repeat)
-    return {"bench": "peak", "precision": precision, "shape": [width, depth, size, size], "seconds": seconds,
+        seconds, cpu = timed(lambda: conv(x, w, b, (1, 1, 1), relu=True), repeat, dev)
+    return {"bench": "peak", "precision": precision, "device": str(dev), "shape": [width, depth, size, size],
+            "seconds": seconds,
             "cpu_seconds": cpu, "gflops_per_s": flops / seconds / 1e9, "gflops_per_cpu_s": flops / cpu / 1e9}
 
 

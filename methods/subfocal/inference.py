@@ -31,12 +31,15 @@ from lfbench_methods.subfocal.network import FEATURES, Aggregation, SubFocalNet
 from tqdm import tqdm
 
 from lfbench.data.shift import shift_views
+from lfbench.utils.hardware import require_bf16
 
 EXACT_HALO = Aggregation.RECEPTIVE_RADIUS  # px: eight 3x3x3 convolutions in a row
 PRECISIONS = ("fp32", "bf16")
 DTYPES = {"fp32": torch.float32, "bf16": torch.bfloat16}
 _FEATURE_BYTES_PER_PX_VIEW = 4 * 150  # fast extractor working set per view pixel (fp32; measured 480-580 B)
 _RUNTIME_BYTES = 0.35e9  # the interpreter, torch, oneDNN and the weights (measured ~0.26 GB)
+_CUDA_RUNTIME_BYTES = 0.5e9  # on a GPU: cuDNN workspaces and the caching allocator's slack beside planned tensors
+CPU_BUDGET_GB = 4.0  # the default budget on the CPU (on CUDA: the GPU's available memory)
 _SLAB = 2  # disparities per slab of the first 3D convolution
 
 
@@ -57,12 +60,13 @@ def distribution_std(probability: torch.Tensor, disparities: torch.Tensor, mean:
     return (probability * dev * dev).sum(dim=1).clamp_min(0).sqrt()
 
 
-def estimate_tile_bytes(net: SubFocalNet, rows: int, cols: int, precision: str = "fp32") -> int:
+def estimate_tile_bytes(net: SubFocalNet, rows: int, cols: int, precision: str = "fp32", device=None) -> int:
     """Peak working set of one tile's 3D aggregation that scales with its voxels (rows x cols incl. halo,
     times D disparities), bytes: the larger of (a) the first convolution's phase: its output, a slab of
     the volume (``_SLAB`` + 2 planes of 4N channels), the slab's output and gather indices, and (b) two live
     ``width``-channel activations (three without oneDNN's in-place add), or the last activation and its
-    27 float32 taps. The interpolated maps the volume is gathered from are :func:`gather_bytes`."""
+    27 float32 taps. The interpolated maps the volume is gathered from are :func:`gather_bytes`. ``device``
+    (default: the CPU) decides whether oneDNN's in-place add runs."""
     from lfbench_methods.subfocal.fast import _fused_ops_work
 
     d = net.disparities.numel()
@@ -72,7 +76,7 @@ def estimate_tile_bytes(net: SubFocalNet, rows: int, cols: int, precision: str =
     plane = rows * cols
     act = width * item
     first = d * plane * act + (_SLAB + 2) * plane * channels * item + _SLAB * plane * act + (_SLAB + 1) * plane * n * 4
-    live = 2 if _fused_ops_work() else 3
+    live = 2 if _is_cpu(device) and _fused_ops_work() else 3
     rest = d * plane * max(live * act, act + 27 * 4) + 65536 * width * 4
     return int(1.1 * max(first, rest))
 
@@ -95,12 +99,36 @@ def _map_area(plan, rows: int, cols: int) -> int:
     return (rows + int(plan.oy.max() - plan.oy.min()) + 1) * (cols + int(plan.ox.max() - plan.ox.min()) + 1)
 
 
-def _tile_need(net: SubFocalNet, rows: int, cols: int, precision: str, plan=None) -> int:
+def _is_cpu(device) -> bool:
+    return device is None or torch.device(device).type == "cpu"
+
+
+def _runtime_bytes(device) -> float:
+    """Bytes of the budget the planned tensors cannot use: on the CPU the process itself (interpreter, torch,
+    weights); on CUDA cuDNN workspaces and allocator slack (the weights are already allocated there)."""
+    return _RUNTIME_BYTES if _is_cpu(device) else _CUDA_RUNTIME_BYTES
+
+
+def memory_budget_gb(device, max_memory_gb: float | None = None) -> float:
+    """The inference budget in GB. CPU: ``max_memory_gb`` (default 4). CUDA: what this process can still
+    allocate on the device (``torch.cuda.mem_get_info`` free memory plus torch's cached, unused blocks),
+    capped by ``max_memory_gb`` when given. Call it with the views and weights already on the device: those
+    live tensors are then not counted again."""
+    if _is_cpu(device):
+        return CPU_BUDGET_GB if max_memory_gb is None else float(max_memory_gb)
+    device = torch.device(device)
+    free, _ = torch.cuda.mem_get_info(device)
+    cached = torch.cuda.memory_reserved(device) - torch.cuda.memory_allocated(device)
+    available = (free + max(cached, 0)) / 1e9
+    return available if max_memory_gb is None else min(float(max_memory_gb), available)
+
+
+def _tile_need(net: SubFocalNet, rows: int, cols: int, precision: str, plan=None, device=None) -> int:
     """Peak bytes of one tile: the aggregation beside what its volume source holds, or the source while it
     builds its maps (two float32 map-sized temporaries)."""
     held = gather_bytes(net, rows, cols, precision, plan)
     build = 2 * _map_area(plan, rows, cols) * net.angular ** 2 * FEATURES * 4 if plan is not None else 0
-    return max(estimate_tile_bytes(net, rows, cols, precision) + held, held + build)
+    return max(estimate_tile_bytes(net, rows, cols, precision, device) + held, held + build)
 
 
 def _plan(net: SubFocalNet):
@@ -117,8 +145,8 @@ def _fixed_bytes(net: SubFocalNet, height: int, width: int) -> int:
     return feats + 4 * height * width * (5 * d + 4)
 
 
-def _budget(net: SubFocalNet, height: int, width: int, max_memory_gb: float) -> float:
-    return max_memory_gb * 1e9 - _fixed_bytes(net, height, width) - _RUNTIME_BYTES
+def _budget(net: SubFocalNet, height: int, width: int, max_memory_gb: float, device=None) -> float:
+    return max_memory_gb * 1e9 - _fixed_bytes(net, height, width) - _runtime_bytes(device)
 
 
 def _spans(size: int, tile: int, halo: int) -> list[tuple[int, int, int, int]]:
@@ -126,8 +154,9 @@ def _spans(size: int, tile: int, halo: int) -> list[tuple[int, int, int, int]]:
     return [(a, min(a + tile, size), max(a - halo, 0), min(a + tile + halo, size)) for a in range(0, size, tile)]
 
 
-def _tile_fits(net: SubFocalNet, rows: int, cols: int, budget: float, precision: str, plan=None) -> bool:
-    return _tile_need(net, rows, cols, precision, plan) <= budget
+def _tile_fits(net: SubFocalNet, rows: int, cols: int, budget: float, precision: str, plan=None,
+               device=None) -> bool:
+    return _tile_need(net, rows, cols, precision, plan, device) <= budget
 
 
 def plan_tile(net: SubFocalNet, height: int, width: int, halo: int = EXACT_HALO, max_memory_gb: float = 4.0,
@@ -145,11 +174,12 @@ def plan_tile(net: SubFocalNet, height: int, width: int, halo: int = EXACT_HALO,
 
 
 def plan_tiles(net: SubFocalNet, height: int, width: int, halo: int = EXACT_HALO, max_memory_gb: float = 4.0,
-               precision: str = "fp32") -> tuple[int, int]:
+               precision: str = "fp32", device=None) -> tuple[int, int]:
     """Core tile (rows, cols) for ``max_memory_gb`` that computes the fewest voxels (tiles plus halos): the
     whole image when it fits, else e.g. full-width strips or a grid; ties go to fewer tiles. Tiles of
-    at least 8 px are used even when the budget is smaller than that."""
-    budget = _budget(net, height, width, max_memory_gb)
+    at least 8 px are used even when the budget is smaller than that. ``device`` (default CPU): where it runs
+    (see :func:`memory_budget_gb` for the budget of a GPU)."""
+    budget = _budget(net, height, width, max_memory_gb, device)
     plan = _plan(net) if net.interpolation == "bilinear" else None
     best = None
     for ky in range(1, math.ceil(height / 8) + 1):
@@ -160,7 +190,7 @@ def plan_tiles(net: SubFocalNet, height: int, width: int, halo: int = EXACT_HALO
             tw = math.ceil(width / kx)
             xs = _spans(width, tw, halo)
             cols = max(c1 - c0 for _, _, c0, c1 in xs)
-            if not _tile_fits(net, rows, cols, budget, precision, plan):
+            if not _tile_fits(net, rows, cols, budget, precision, plan, device):
                 continue
             work = sum(r1 - r0 for *_, r0, r1 in ys) * sum(c1 - c0 for *_, c0, c1 in xs)
             key = (work, len(ys) * len(xs))
@@ -172,10 +202,10 @@ def plan_tiles(net: SubFocalNet, height: int, width: int, halo: int = EXACT_HALO
     return best[1]
 
 
-def view_chunk(height: int, width: int, batch: int, max_memory_gb: float, fixed: float = 0.0) -> int:
+def view_chunk(height: int, width: int, batch: int, max_memory_gb: float, fixed: float = 0.0, device=None) -> int:
     """Views the feature extractor takes at once within the budget (at least 1)."""
     per_view = height * width * batch * _FEATURE_BYTES_PER_PX_VIEW
-    return max(1, int((max_memory_gb * 1e9 - fixed - _RUNTIME_BYTES) // per_view))
+    return max(1, int((max_memory_gb * 1e9 - fixed - _runtime_bytes(device)) // per_view))
 
 
 def _tiles(height: int, width: int, tile_h: int, tile_w: int | None = None) -> Iterator[tuple[int, int, int, int]]:
@@ -311,7 +341,7 @@ def eval_cost(net: SubFocalNet, views: torch.Tensor, tile_h: int, tile_w: int, *
     bilinear = net.interpolation == "bilinear"
     plan = _plan(net) if bilinear else None
     pad = plan.pad if bilinear else 0
-    chunk = view_chunk(h, w, b, max_memory_gb, fixed=_fixed_bytes(net, h, w))
+    chunk = view_chunk(h, w, b, max_memory_gb, fixed=_fixed_bytes(net, h, w), device=device)
     padded = padded_features(net, views, pad, chunk)
     feats = padded[:, pad:pad + h, pad:pad + w].permute(0, 3, 4, 1, 2)  # (B, N, 4, H, W) view
     release_memory()
@@ -351,9 +381,13 @@ def eval_cost(net: SubFocalNet, views: torch.Tensor, tile_h: int, tile_w: int, *
 
 
 def infer(net: SubFocalNet, views: torch.Tensor, *, tile: int = 0, halo: int = EXACT_HALO,
-          max_memory_gb: float = 4.0, precision: str = "fp32", progress: bool = False,
+          max_memory_gb: float | None = CPU_BUDGET_GB, precision: str = "fp32", progress: bool = False,
           timings: dict | None = None) -> InferenceOutput:
-    """Run ``net`` (switched to eval mode) on views (B, N, H, W) or (N, H, W) float32 in [0, 1].
+    """Run ``net`` (switched to eval mode) on views (B, N, H, W) or (N, H, W) float32 in [0, 1], on the
+    device of the network's weights (the views are moved there; the outputs come back to the CPU).
+
+    max_memory_gb: the memory budget (None: 4 GB on the CPU, the GPU's available memory on CUDA, see
+    :func:`memory_budget_gb`; on CUDA a given budget is capped by what is available).
 
     tile: core tile size in px (0 = the tiling that computes least within ``max_memory_gb``; >= the image
     size = one piece); halo: px of context around each tile (>= 8 is exact); precision: fp32, or bf16
@@ -368,9 +402,12 @@ def infer(net: SubFocalNet, views: torch.Tensor, *, tile: int = 0, halo: int = E
         views = views.unsqueeze(0)
     net.eval()
     device = net.disparities.device
+    if precision == "bf16":
+        require_bf16(device)  # one line instead of oneDNN's error on a CPU without bf16 instructions
     views = views.to(device, torch.float32)
     b, n, h, w = views.shape
-    tile_h, tile_w = plan_tiles(net, h, w, halo, max_memory_gb, precision) if tile == 0 else (tile, tile)
+    max_memory_gb = memory_budget_gb(device, max_memory_gb)  # after the views are on the device
+    tile_h, tile_w = plan_tiles(net, h, w, halo, max_memory_gb, precision, device) if tile == 0 else (tile, tile)
     with torch.inference_mode():
         cost = eval_cost(net, views, tile_h, tile_w, halo=halo, precision=precision, max_memory_gb=max_memory_gb,
                          progress=progress, timings=timings)
@@ -385,6 +422,7 @@ def tile_count(height: int, width: int, tile: int) -> int:
     return math.ceil(height / tile) * math.ceil(width / tile)
 
 
-__all__ = ["infer", "InferenceOutput", "plan_tile", "plan_tiles", "estimate_tile_bytes", "gather_bytes",
+__all__ = ["infer", "InferenceOutput", "plan_tile", "plan_tiles", "memory_budget_gb", "CPU_BUDGET_GB",
+           "estimate_tile_bytes", "gather_bytes",
            "region_volume", "distribution_std", "eval_cost", "padded_features", "tile_count", "EXACT_HALO",
            "PRECISIONS"]

@@ -25,6 +25,7 @@ from lfbench.data.shift import INTERPOLATIONS, disparity_grid
 from lfbench.method.base import Method, Prediction
 from lfbench.method.registry import method_info, register_method
 from lfbench.utils.errors import DataError, SpecError
+from lfbench.utils.hardware import require_bf16, resolve_device, set_fp32_numerics
 from lfbench.utils.threads import torch_threads
 
 WEIGHTS_DIR = Path(__file__).resolve().parent.parent / "weights"
@@ -56,7 +57,10 @@ class SubFocal(Method):
     tile: inference tile size in px (0 = from max_memory_gb; exact, with a 9 px halo)
     precision: fp32, or bf16 autocast for the 3D aggregation
     threads: torch CPU threads (0 = all cores)
-    max_memory_gb: memory budget of inference in GB (decides the tile size when tile=0)
+    max_memory_gb: memory budget of inference in GB (decides the tile size when tile=0); on CUDA at most the
+        GPU's free memory, which is the budget when this is not given
+    device: auto (CUDA when available, else CPU), cpu, cuda or cuda:K
+    tf32: allow TF32 in CUDA fp32 convolutions and matmuls (default off: IEEE fp32)
     """
 
     WEIGHTS_DIR: Path = WEIGHTS_DIR  # the shipped checkpoints: <variant>_small.pt
@@ -64,10 +68,11 @@ class SubFocal(Method):
     def __init__(self, weights: Path | None = None, interval: float = 0.5,
                  interpolation: Literal["nearest", "bilinear", "phase"] = "bilinear", d_min: float = -4.0,
                  d_max: float = 4.0, width: int | None = None, attention: bool = True, tile: int = 0,
-                 precision: Literal["fp32", "bf16"] = "fp32", threads: int = 0, max_memory_gb: float = 4.0) -> None:
+                 precision: Literal["fp32", "bf16"] = "fp32", threads: int = 0, max_memory_gb: float = 4.0,
+                 device: str = "auto", tf32: bool = False) -> None:
         values = {"weights": weights, "interval": interval, "interpolation": interpolation, "d_min": d_min,
                   "d_max": d_max, "width": width, "attention": attention, "tile": tile, "precision": precision,
-                  "threads": threads, "max_memory_gb": max_memory_gb}
+                  "threads": threads, "max_memory_gb": max_memory_gb, "device": device, "tf32": tf32}
         defaults = _signature_defaults()
         super().__init__(**{k: v for k, v in values.items() if v != defaults[k]})
         if interpolation not in INTERPOLATIONS:
@@ -79,6 +84,9 @@ class SubFocal(Method):
         if tile < 0 or threads < 0 or not 0 < max_memory_gb < float("inf"):
             raise ValueError("tile and threads must be >= 0 and max_memory_gb a finite number > 0")
         disparity_grid(d_min, d_max, interval)  # ValueError if not a grid
+        self.device = resolve_device(device)  # SpecError for a device this machine lacks
+        if precision == "bf16":
+            require_bf16(self.device)  # one line, before any work (an AVX2-only CPU cannot run it)
         self.values = values
         self._net = None
 
@@ -178,12 +186,13 @@ class SubFocal(Method):
                 raise DataError(reason)
             net = build_from_checkpoint(self.weights_path)
             self._checkpoint_config(net.config())
-            self._net = net
+            self._net = net.to(self.device)
         return self._net
 
     def to(self, device: str) -> SubFocal:
-        """Load the network (once) and move it to ``device``."""
-        self.load_network().to(device)
+        """Load the network (once) and move it to ``device`` (where predict then runs)."""
+        self.device = resolve_device(device)
+        self.load_network().to(self.device)
         return self
 
     def describe_variant(self) -> dict:
@@ -229,9 +238,11 @@ class SubFocal(Method):
         net = self.load_network()
         views = lf.gray_views()
         x = torch.from_numpy(np.ascontiguousarray(views.reshape(v * u, *views.shape[2:]), dtype=np.float32))
+        if self.device.type == "cuda":
+            set_fp32_numerics(tf32=self.values["tf32"])  # IEEE fp32 unless tf32=true
+        budget = self.values["max_memory_gb"] if "max_memory_gb" in self.params else None  # None: the device's
         with torch_threads(self.values["threads"]):
-            out = infer(net, x, tile=self.values["tile"], max_memory_gb=self.values["max_memory_gb"],
-                        precision=self.values["precision"])
+            out = infer(net, x, tile=self.values["tile"], max_memory_gb=budget, precision=self.values["precision"])
         return Prediction(disparity=out.disparity[0].numpy(), distribution=out.probability[0].numpy(),
                           disparity_values=out.disparities.numpy(), uncertainty=out.uncertainty[0].numpy())
 

@@ -47,17 +47,20 @@ class SubFocalTrainable(Trainable):
 
         return build_from_checkpoint(path, **overrides)
 
-    def infer(self, net: SubFocalNet, views: torch.Tensor, *, precision: str = "fp32", max_memory_gb: float = 4.0,
-              tile: int = 0, timings: dict | None = None) -> tuple[torch.Tensor, torch.Tensor]:
-        """Whole-image or exactly tiled inference (tiles from ``max_memory_gb`` when tile = 0); ``timings``
-        receives the phases, the tile size and the number of tiles."""
-        from lfbench_methods.subfocal.inference import infer, plan_tiles
+    def infer(self, net: SubFocalNet, views: torch.Tensor, *, precision: str = "fp32",
+              max_memory_gb: float | None = 4.0, tile: int = 0,
+              timings: dict | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+        """Whole-image or exactly tiled inference on the network's device (tiles from ``max_memory_gb`` when
+        tile = 0; None: the device's budget, see inference.memory_budget_gb); ``timings`` receives the phases,
+        the tile size and the number of tiles."""
+        from lfbench_methods.subfocal.inference import infer, memory_budget_gb, plan_tiles
 
         out = infer(net, views, tile=tile, max_memory_gb=max_memory_gb, precision=precision, timings=timings)
         if timings is not None and "tile" not in timings:
             h, w = views.shape[-2:]
-            timings["tile"] = plan_tiles(net, h, w, max_memory_gb=max_memory_gb, precision=precision) \
-                if tile == 0 else (tile, tile)
+            device = net.disparities.device
+            timings["tile"] = plan_tiles(net, h, w, max_memory_gb=memory_budget_gb(device, max_memory_gb),
+                                         precision=precision, device=device) if tile == 0 else (tile, tile)
         return out.disparity, out.probability
 
     def flops(self, net: SubFocalNet, height: int, width: int) -> dict[str, float]:
