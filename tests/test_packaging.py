@@ -23,3 +23,45 @@ def test_every_package_folder_is_listed_in_pyproject():
 def test_shipped_weights_are_package_data():
     config = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
     assert "weights/*.pt" in config["package-data"]["lfbench_methods"]
+
+
+def _torch_requirement():
+    from packaging.requirements import Requirement
+
+    deps = [Requirement(d) for d in tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["dependencies"]]
+    found = [r for r in deps if r.name == "torch"]
+    assert len(found) == 1
+    return found[0]
+
+
+def test_torch_is_a_lower_bound_so_an_installed_build_is_kept():
+    """pip keeps an installed torch that satisfies the requirement: any 2.x build from 2.4 on, CUDA or CPU."""
+    spec = _torch_requirement().specifier
+    assert spec and all(s.operator == ">=" for s in spec)  # no ==, ~=, <, != pin of one build
+    for version in ("2.4.0", "2.5.1+cu121", "2.7.1+cu128", "2.13.0", "2.13.0+cpu", "2.15.0+cu130"):
+        assert spec.contains(version), version
+    assert not spec.contains("2.3.1")
+
+
+def test_quick_start_and_ci_pin_the_cpu_build_through_the_constraints_file():
+    from packaging.requirements import Requirement
+
+    lines = [ln.strip() for ln in (ROOT / "constraints" / "cpu.txt").read_text().splitlines()]
+    pins = [Requirement(ln) for ln in lines if ln and not ln.startswith("#")]
+    assert [str(p) for p in pins] == ["torch==2.13.0"]
+    assert _torch_requirement().specifier.contains("2.13.0")  # the pin satisfies the package's bound
+    install = 'pip install -c constraints/cpu.txt -e ".[test]"'
+    readme = (ROOT / "README.md").read_text()
+    quick = readme.split("## Quick start", 1)[1].split("```bash", 1)[1].split("```", 1)[0]
+    assert install in quick  # still the README's one install command
+    assert f"python -m {install.replace('pip install', 'pip install -q')}" in (ROOT / ".ci" / "run").read_text()
+
+
+def test_the_code_calls_newer_torch_apis_only_behind_a_check():
+    """torch >= 2.9's per-backend fp32_precision flags are the one newer API lfbench uses; every use sits in
+    lfbench/utils/hardware.py behind _new_precision_api() (older torch takes the allow_tf32 branch)."""
+    users = [p for top in ("lfbench", "methods") for p in (ROOT / top).rglob("*.py")
+             if "fp32_precision" in p.read_text(encoding="utf-8")]
+    assert [p.relative_to(ROOT).as_posix() for p in users] == ["lfbench/utils/hardware.py"]
+    text = (ROOT / "lfbench" / "utils" / "hardware.py").read_text(encoding="utf-8")
+    assert text.count("if _new_precision_api():") == 2
