@@ -263,6 +263,7 @@ def shared_run(tmp_path_factory):
     return spec_path, root / "out", paper, run
 
 
+@pytest.mark.slow
 def test_shared_stage1_is_trained_once_and_bit_identical(shared_run, tmp_path):
     from lfbench.training.config import TrainConfig
     from lfbench.training.loop import train
@@ -293,6 +294,7 @@ def test_shared_stage1_is_trained_once_and_bit_identical(shared_run, tmp_path):
     assert all(torch.equal(plain[k], v) for k, v in finals[1].items())
 
 
+@pytest.mark.slow
 def test_table5_has_the_paper_value_beside_ours(shared_run):
     _, out, _, run = shared_run
     t5 = pd.read_csv(out / "table5.csv").set_index("cell")
@@ -320,6 +322,7 @@ def test_table5_has_the_paper_value_beside_ours(shared_run):
     assert overview.is_file() and overview.stat().st_size > 1000
 
 
+@pytest.mark.slow
 def test_cells_leave_training_curves_and_report_only_writes_the_html_report(shared_run, capsys):
     from lfbench.cli import main
 
@@ -337,6 +340,7 @@ def test_cells_leave_training_curves_and_report_only_writes_the_html_report(shar
     assert "HTML report:" in capsys.readouterr().out
 
 
+@pytest.mark.slow
 def test_finished_cells_are_not_run_again(shared_run, monkeypatch):
     from lfbench.training import loop
 
@@ -357,6 +361,7 @@ def test_finished_cells_are_not_run_again(shared_run, monkeypatch):
 
 # --------------------------------------------------------------------------- an interrupted cell
 
+@pytest.mark.slow
 def test_an_interrupted_cell_resumes_from_its_checkpoint(tmp_path, monkeypatch):
     from lfbench.training import loop
 

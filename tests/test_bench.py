@@ -14,6 +14,7 @@ from lfbench.utils.hardware import FORCE_NO_BF16_ENV, cpu_bf16_missing
 CONTRACT = {"size", "interval", "precision", "seconds", "peak_memory_gb", "gflops_per_s"}
 
 
+@pytest.mark.slow
 def test_inference_command_writes_the_contract_records(tmp_path: Path, capsys):
     out = tmp_path / "OUT.json"
     # A tiny network on a tiny scene, in its own process, after the conv peak (in another process).
@@ -122,6 +123,7 @@ def test_volume_bench_measures_both_paths_in_process():
         assert r["gb_per_s"] == pytest.approx(r["volume_gb"] / r["seconds"])
 
 
+@pytest.mark.slow
 def test_a_failing_case_is_a_record_with_an_error_and_exit_code_1(tmp_path: Path, capsys):
     r = bench.run_isolated("peak", {"precision": "fp16"})
     assert "error" in r and "fp16" in r["error"]

@@ -124,6 +124,7 @@ def test_scene_page_shows_every_methods_maps_at_one_scale(site):
     assert "pairwise_0.png" in page and "heatmap_median.png" in page
 
 
+@pytest.mark.slow
 def test_report_rebuilds_the_site_with_the_papers_labelled_columns(site, tmp_path):
     paper = write_paper(tmp_path / "paper")
     out = tmp_path / "rep"

@@ -48,6 +48,7 @@ def test_region_volume_is_the_crop_of_the_whole_cost_volume(mode):
     assert (part - whole[..., 3:17, 5:21]).abs().max().item() <= (1e-6 if mode == "phase" else 0.0)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("mode,grid", [("bilinear", (-4, 4, 0.5)), ("nearest", (-4, 4, 0.5)), ("phase", (-2, 2, 1))])
 def test_tiled_inference_equals_whole_image_inference(mode, grid):
     net = _net(interpolation=mode, d_min=grid[0], d_max=grid[1], interval=grid[2])
@@ -82,6 +83,7 @@ def test_a_short_halo_or_a_per_tile_attention_would_change_the_result():
         assert (net.attention_weights(whole_mean) - net.attention_weights(tile_mean)).abs().max() > 1e-3
 
 
+@pytest.mark.slow
 def test_memory_budget_picks_tiles_and_stays_exact():
     net = _net(width=8)
     whole_bytes = estimate_tile_bytes(net, 48, 48)

@@ -29,6 +29,7 @@ def reference(shared_data: Path) -> Path:
     return require(shared_data / "reference" / "subfocal_keras_64")
 
 
+@pytest.mark.slow
 def test_reproduces_the_keras_reference_disparity(reference: Path, tmp_path: Path):
     out = tmp_path / "paper.pt"
     assert main(["convert-keras", str(reference / "model.hdf5"), str(out)]) == 0

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import csv
 import io
+import logging
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -35,6 +36,8 @@ from lfbench.method.base import Prediction
 from lfbench.scoring.metrics import bad_pix_curve, find_metric
 from lfbench.scoring.rules import ScoringRules, align_prediction, border_mask, upsample_nearest
 from lfbench.utils.atomic import write_bytes, write_text
+
+_log = logging.getLogger(__name__)
 
 BADPIX_THRESHOLD = 0.07  # px
 ERROR_LIMIT = 0.2  # px, range of the signed error maps
@@ -598,5 +601,5 @@ def figures_from_maps(scenes: Sequence[LightField], maps: Mapping[str, str | Pat
             disp, runtime = read_submission_map(folder, scene.name)
             writer.add(label, scene, Prediction(disparity=disp, runtime_s=runtime))
             if progress:
-                print(f"drew {label} on {scene.name}")
+                _log.info("drew %s on %s", label, scene.name)
     return writer

@@ -52,6 +52,7 @@ from lfbench.training.losses import make_loss
 from lfbench.training.validate import validate
 from lfbench.utils.atomic import write_text
 from lfbench.utils.errors import DataError, LFBenchError, SpecError
+from lfbench.utils.threads import torch_threads
 
 # Settings that may change between a run and its resumption (they do not change the result).
 RESUME_FREE_KEYS = (("out",), ("training", "threads"), ("training", "prefetch"), ("training", "log_every"),
@@ -553,16 +554,15 @@ def train(cfg: TrainConfig, out: str | Path, *, require_checkpoint: bool = False
 
     Run under torchrun for data-parallel training; every process calls this function.
     """
-    threads = torch.get_num_threads()
-    ctx = setup(cfg.training.device)
-    try:
-        if loggers is None:
-            loggers = default_loggers(Path(out)) if ctx.is_main else []
+    with torch_threads(None):  # the run sets its own thread count; the caller's comes back afterwards
+        ctx = setup(cfg.training.device)
         try:
-            return Trainer(cfg, Path(out), ctx, command, progress, loggers).run(require_checkpoint)
+            if loggers is None:
+                loggers = default_loggers(Path(out)) if ctx.is_main else []
+            try:
+                return Trainer(cfg, Path(out), ctx, command, progress, loggers).run(require_checkpoint)
+            finally:
+                for logger in loggers:
+                    logger.close()
         finally:
-            for logger in loggers:
-                logger.close()
-    finally:
-        ctx.close()
-        torch.set_num_threads(threads)
+            ctx.close()
