@@ -403,3 +403,96 @@ def test_an_interrupted_cell_resumes_from_its_checkpoint(tmp_path, monkeypatch):
     (tmp_path / "changed.toml").write_text(changed)
     with pytest.raises(SpecError, match="seed=3"):
         run_ablation(load_spec(tmp_path / "changed.toml"), out, progress=False, log=quiet)
+
+
+# --------------------------------------------------------------------------- many GPUs, clusters, concurrent runs
+
+TWO_CELLS = """
+title = "two cells"
+table = "table4"
+[[grid]]
+interval = [1.0, 2.0]
+"""
+
+
+def _records(path: Path) -> dict:
+    data = json.loads(path.read_text())
+    return {(r["method"], r["scene"], r["metric"]): r["value"] for r in data["records"]}
+
+
+@pytest.mark.slow
+def test_submitit_local_executor_and_merged_cells_runs_give_the_jobs_1_results(tmp_path):
+    """The cluster path (submitit's local executor: one job per cell, in subprocesses) and two `--cells` runs
+    merged into one results.json give exactly what one `--jobs 1` run in this process gives."""
+    import dataclasses
+
+    from lfbench.ablation.executor import ClusterOptions
+
+    spec = load_spec(write_spec(tmp_path, TWO_CELLS))
+    assert len(spec.cells) == 2
+    one = run_ablation(spec, tmp_path / "jobs1", jobs=1, progress=False, log=quiet)
+    cluster = run_ablation(spec, tmp_path / "local", jobs=1, progress=False, log=quiet,
+                           cluster=ClusterOptions("local", timeout_min=10))
+    assert (tmp_path / "local" / "submitit").is_dir()  # the jobs' pickles and logs
+    for a, b in zip(one.markers, cluster.markers, strict=True):
+        assert a["id"] == b["id"] and a["final_sha256"] == b["final_sha256"]  # bit-identical training
+    assert _records(tmp_path / "local" / "results.json") == _records(tmp_path / "jobs1" / "results.json")
+    # --cells: one cell per run (as two processes or machines would), merged into one results file
+    for cell in spec.cells:
+        run_ablation(dataclasses.replace(spec, cells=(cell,)), tmp_path / "split", progress=False, log=quiet)
+    merged = json.loads((tmp_path / "split" / "results.json").read_text())
+    assert _records(tmp_path / "split" / "results.json") == _records(tmp_path / "jobs1" / "results.json")
+    assert sorted(m["id"] for m in merged["meta"]["ablation"]["cells"]) == sorted(c.id for c in spec.cells)
+    # a second run of a finished cell replaces its records instead of adding them twice
+    run_ablation(dataclasses.replace(spec, cells=spec.cells[:1]), tmp_path / "split", progress=False, log=quiet)
+    assert _records(tmp_path / "split" / "results.json") == _records(tmp_path / "jobs1" / "results.json")
+
+
+def test_each_worker_gets_its_own_gpu_round_robin(monkeypatch):
+    import queue
+
+    from lfbench.ablation import executor
+
+    assert executor.worker_gpus(3, ["0", "1"]) == ["0", "1", "0"]
+    assert executor.worker_gpus(2, []) == [None, None]  # no CUDA: every worker on the CPU
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: True)
+    monkeypatch.setattr(torch.cuda, "device_count", lambda: 2)
+    monkeypatch.delenv("CUDA_VISIBLE_DEVICES", raising=False)
+    assert executor.visible_gpus() == ["0", "1"]
+    monkeypatch.setenv("CUDA_VISIBLE_DEVICES", "4,6")  # a job already restricted to two GPUs
+    assert executor.visible_gpus() == ["4", "6"]
+    gpus = queue.Queue()
+    for g in executor.worker_gpus(2, executor.visible_gpus()):
+        gpus.put(g)
+    threads = torch.get_num_threads()
+    try:
+        executor.init_worker(1, gpus)  # what each spawned worker runs first
+        assert os.environ["CUDA_VISIBLE_DEVICES"] == "4" and torch.get_num_threads() == 1
+        executor.init_worker(1, gpus)
+        assert os.environ["CUDA_VISIBLE_DEVICES"] == "6"
+    finally:
+        torch.set_num_threads(threads)
+    with pytest.raises(SpecError, match="Unknown executor 'pbs'. Available: local, slurm"):
+        executor.ClusterOptions("pbs")
+
+
+def test_the_shared_stage1_waits_for_another_process_holding_its_lock(tmp_path, monkeypatch):
+    import threading
+
+    from filelock import FileLock
+
+    from lfbench.ablation import runner
+
+    spec = load_spec(write_spec(tmp_path, TABLE5))
+    entered = threading.Event()
+    monkeypatch.setattr(runner, "_shared_stage1", lambda *a: entered.set() or a[1])
+    (tmp_path / "out" / "stage1").mkdir(parents=True)
+    other = FileLock(tmp_path / "out" / "stage1" / "stage1.lock")  # another ablate process training stage 1
+    other.acquire()
+    worker = threading.Thread(target=runner.run_shared_stage1,
+                              args=(spec, tmp_path / "out", {}, 1, False, quiet))
+    worker.start()
+    assert not entered.wait(0.5)  # blocked while the other process holds the lock
+    other.release()
+    worker.join(30)
+    assert entered.is_set()

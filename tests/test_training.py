@@ -510,3 +510,51 @@ def test_cli_errors(tmp_path, data_root):
         from lfbench.training.loop import discover, select_scenes
 
         select_scenes(discover(bad, tmp_path), bad)
+
+
+# --------------------------------------------------------------------------- many processes, many machines
+
+def test_slurm_tasks_are_ranks_only_inside_an_srun_step():
+    from lfbench.training.distributed import launch_env
+
+    assert launch_env({}) == (1, 0, 0, "none")
+    torchrun = {"WORLD_SIZE": "8", "RANK": "5", "LOCAL_RANK": "1", "SLURM_PROCID": "0", "SLURM_NTASKS": "2"}
+    assert launch_env(torchrun) == (8, 5, 1, "torchrun")  # torchrun's variables win
+    step = {"SLURM_STEP_ID": "0", "SLURM_STEP_NUM_TASKS": "8", "SLURM_NTASKS": "8", "SLURM_PROCID": "6",
+            "SLURM_LOCALID": "2"}
+    assert launch_env(step) == (8, 6, 2, "slurm")  # srun: 2 nodes x 4 GPUs, the 3rd task of the 2nd node
+    assert launch_env({"SLURM_NTASKS": "8", "SLURM_PROCID": "0"}) == (1, 0, 0, "none")  # the batch script itself
+
+
+def test_srun_without_a_master_address_is_one_line(monkeypatch):
+    from lfbench.training import distributed
+
+    for key in ("WORLD_SIZE", "RANK", "LOCAL_RANK", "MASTER_ADDR", "MASTER_PORT"):
+        monkeypatch.delenv(key, raising=False)
+    for key, value in {"SLURM_STEP_ID": "0", "SLURM_STEP_NUM_TASKS": "2", "SLURM_PROCID": "1",
+                       "SLURM_LOCALID": "1"}.items():
+        monkeypatch.setenv(key, value)
+    with pytest.raises(SpecError, match="MASTER_ADDR / MASTER_PORT are not set"):
+        distributed.setup("cpu")
+
+
+def test_ranks_resuming_from_different_steps_stop_with_one_error():
+    from lfbench.training.distributed import DistContext, agree_on_resume
+    from lfbench.utils.errors import DataError, LFBenchError
+
+    class TwoRanks(DistContext):
+        def __init__(self, other):
+            super().__init__(rank=0, world_size=2)
+            self.other = other
+
+        def gather(self, obj):
+            return [obj, self.other]
+
+    agree_on_resume(TwoRanks((0, 10, 10)), (0, 10, 10))  # the same position: go on
+    agree_on_resume(TwoRanks(None), None)
+    with pytest.raises(LFBenchError, match=r"rank 0: stage 2 step 10 \(global 10\), rank 1: fresh start"):
+        agree_on_resume(TwoRanks(None), (1, 10, 10))
+    with pytest.raises(LFBenchError, match="rank 1 could not resume: .*checkpoint.pt: unreadable"):
+        agree_on_resume(TwoRanks("/x/checkpoint.pt: unreadable"), (1, 10, 10))
+    with pytest.raises(DataError, match="unreadable"):  # one process: its own error, as before
+        agree_on_resume(DistContext(), DataError("unreadable", "/x/checkpoint.pt"))

@@ -256,11 +256,17 @@ def time_cell(cell_dir: str | Path, ev: Evaluation, threads: int, network: str =
 # --------------------------------------------------------------------------- the cell
 
 def run_cell(task: CellTask) -> dict[str, Any]:
-    """Train, evaluate and mark one cell (skipped when it is finished); returns its marker."""
-    if is_done(task):
-        return read_marker(task.cell_dir) or {}
-    with torch_threads(task.threads):
-        return _run(task)
+    """Train, evaluate and mark one cell (skipped when it is finished); returns its marker. Under a file lock
+    in the cell's folder: two ablate processes (or cluster jobs) never train the same cell at once; the
+    second finds it finished."""
+    from filelock import FileLock
+
+    task.path.mkdir(parents=True, exist_ok=True)
+    with FileLock(task.path / "cell.lock"):
+        if is_done(task):
+            return read_marker(task.cell_dir) or {}
+        with torch_threads(task.threads):
+            return _run(task)
 
 
 def _run(task: CellTask) -> dict[str, Any]:

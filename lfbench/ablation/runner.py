@@ -33,6 +33,7 @@ from pathlib import Path
 from typing import Any
 
 from lfbench.ablation.cell import CellTask, is_done, read_marker, run_cell
+from lfbench.ablation.executor import ClusterOptions
 from lfbench.ablation.spec import AblationSpec, Cell, SyntheticEval, _sha
 from lfbench.runs.results import Results
 from lfbench.utils.atomic import write_text
@@ -117,14 +118,23 @@ def prepare_evaluation(spec: AblationSpec, out: Path, log: Log) -> tuple[tuple[s
 
 def run_shared_stage1(spec: AblationSpec, out: Path, links: dict[str, str], threads: int,
                       progress: bool | None, log: Log) -> Path:
-    """Train the shared stages (all but the last) once into OUT/stage1 (resuming when interrupted)."""
+    """Train the shared stages (all but the last) once into OUT/stage1 (resuming when interrupted), under a
+    file lock: another ``lfbench ablate`` on the same OUT (e.g. other --cells) waits for it and reuses it."""
+    from filelock import FileLock
+
+    folder = out / "stage1"
+    folder.mkdir(parents=True, exist_ok=True)
+    with FileLock(folder / "stage1.lock"):
+        return _shared_stage1(spec, folder, links, threads, progress, log)
+
+
+def _shared_stage1(spec: AblationSpec, folder: Path, links: dict[str, str], threads: int, progress: bool | None,
+                   log: Log) -> Path:
     from lfbench.ablation.cell import LOG, TRAIN_CONFIG
     from lfbench.ablation.toml_text import dumps
     from lfbench.training.config import TrainConfig
     from lfbench.training.loop import comparable, train
 
-    folder = out / "stage1"
-    folder.mkdir(parents=True, exist_ok=True)
     cfg = spec.stage1_config()
     cfg["training"]["threads"] = threads
     path = folder / TRAIN_CONFIG
@@ -174,15 +184,14 @@ def _cost_estimate(task: CellTask) -> float:
     return d * steps * (1.6 if model.get("interpolation") == "phase" else 1.0)
 
 
-def _worker_init(threads: int) -> None:
-    import torch
-
-    torch.set_num_threads(threads)
-
-
-def run_cells(tasks: list[CellTask], jobs: int, progress: bool | None, log: Log) -> list[dict[str, Any]]:
-    """Run the unfinished cells, ``jobs`` at a time in separate processes (1: in this process)."""
+def run_cells(tasks: list[CellTask], jobs: int, progress: bool | None, log: Log,
+              cluster: ClusterOptions | None = None, out: Path | None = None) -> list[dict[str, Any]]:
+    """Run the unfinished cells: ``jobs`` at a time in separate processes (1: in this process), each process
+    with its own GPU (round-robin over the visible CUDA devices; the CPU when there are none); or, with
+    ``cluster``, one submitit job per cell (logs in OUT/submitit)."""
     from tqdm import tqdm
+
+    from lfbench.ablation.executor import init_worker, submit_cells, visible_gpus, worker_gpus
 
     pending = [t for t in tasks if not is_done(t)]
     for t in tasks:
@@ -191,7 +200,16 @@ def run_cells(tasks: list[CellTask], jobs: int, progress: bool | None, log: Log)
     bar = tqdm(total=len(tasks), initial=len(tasks) - len(pending), desc="cells", unit="cell",
                disable=None if progress is None else not progress, file=sys.stderr, dynamic_ncols=True)
     try:
-        if jobs <= 1 or len(pending) <= 1:
+        if cluster is not None and pending:
+            quiet = [replace(t, progress=False) for t in pending]
+            folder = (out or Path(quiet[0].cell_dir).parent.parent) / "submitit"
+
+            def done(marker: dict[str, Any]) -> None:
+                _report(marker, log)
+                bar.update(1)
+
+            submit_cells(run_cell, quiet, cluster, folder, quiet[0].threads, done)
+        elif jobs <= 1 or len(pending) <= 1:
             for t in pending:
                 bar.set_postfix_str(t.cell_id[-50:])
                 _report(run_cell(t), log)
@@ -201,8 +219,14 @@ def run_cells(tasks: list[CellTask], jobs: int, progress: bool | None, log: Log)
 
             quiet = sorted((replace(t, progress=False) for t in pending), key=_cost_estimate, reverse=True)
             ctx = multiprocessing.get_context("spawn")
-            pool = ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=_worker_init,
-                                       initargs=(quiet[0].threads,))
+            gpus = worker_gpus(jobs, visible_gpus())
+            queue = ctx.Queue()
+            for gpu in gpus:
+                queue.put(gpu)
+            if gpus[0] is not None:
+                log(f"{jobs} worker(s) on GPU(s) {', '.join(str(g) for g in gpus)} (round-robin)")
+            pool = ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=init_worker,
+                                       initargs=(quiet[0].threads, queue))
             try:
                 futures: dict[Future, CellTask] = {pool.submit(run_cell, t): t for t in quiet}
                 remaining = set(futures)
@@ -282,9 +306,12 @@ class AblationRun:
 
 
 def run_ablation(spec: AblationSpec, out: str | Path, *, jobs: int = 1, progress: bool | None = None,
-                 paper: str | Path | None = None, log: Log = _log.info) -> AblationRun:
+                 paper: str | Path | None = None, log: Log = _log.info,
+                 cluster: ClusterOptions | None = None) -> AblationRun:
     """Run (or resume) every cell and extra method of ``spec`` into ``out``; write the combined results,
-    tables and figures. ``paper``: the paper's tables folder (None: lfbench.reports.paper.find_paper_dir)."""
+    tables and figures. ``paper``: the paper's tables folder (None: lfbench.reports.paper.find_paper_dir).
+    ``cluster``: run the cells as submitit jobs (see lfbench.ablation.executor). OUT/results.json is merged
+    under a file lock: runs of different cells (``--cells``, several processes or machines) add up."""
     from lfbench.ablation.report import write_report
 
     if jobs < 1:
@@ -303,7 +330,7 @@ def run_ablation(spec: AblationSpec, out: str | Path, *, jobs: int = 1, progress
     if spec.shared_stage1 and spec.cells:
         stage1 = run_shared_stage1(spec, out, links[spec.cells[0].id], spec.budget.threads or cores, progress, log)
     tasks = make_tasks(spec, out, links, scenes, threads, stage1, progress)
-    markers = run_cells(tasks, jobs, progress, log)
+    markers = run_cells(tasks, jobs, progress, log, cluster, out)
     timings = time_cells(tasks, spec.evaluation.threads or cores, progress, log)
     markers = [{**m, **{k: v for k, v in t.items() if k != "key"}} for m, t in zip(markers, timings, strict=True)]
     combined = Results(meta={"ablation": {"title": spec.title, "spec": str(spec.source), "table": spec.table,
@@ -314,9 +341,38 @@ def run_ablation(spec: AblationSpec, out: str | Path, *, jobs: int = 1, progress
     for res in run_methods(spec, out, scenes, log):
         combined.extend(res)
     combined.meta["scenes"] = [s for s, _ in scenes]
-    combined.write(out)
+    merged = merge_results(out, combined)
     written = write_report(spec, out, combined, markers, paper=paper, log=log)
+    if len(merged.methods) > len(combined.methods):
+        log(f"{out / 'results.json'}: {len(combined.methods)} of {len(merged.methods)} cells/methods from this run "
+            "(the others from earlier runs); `lfbench ablate SPEC --report-only` tabulates them all")
     return AblationRun(out=out, results=combined, markers=markers, written=written)
+
+
+def merge_results(out: Path, new: Results) -> Results:
+    """OUT/results.json := its records of other cells/methods plus ``new`` (whose cells/methods replace
+    theirs), the ablation's cell markers merged by id; read-modify-write under OUT/results.json.lock so that
+    concurrent runs of different cells do not lose each other's results. Returns what was written."""
+    from filelock import FileLock
+
+    path = out / "results.json"
+    with FileLock(out / "results.json.lock"):
+        if not path.is_file():
+            new.write(out)
+            return new
+        old = Results.read(path)
+        replaced = set(new.methods)
+        merged = Results(records=[r for r in old.records if r.method not in replaced] + list(new.records),
+                         runs=[r for r in old.runs if r.method not in replaced] + list(new.runs),
+                         meta=dict(new.meta))
+        new_cells = new.meta.get("ablation", {}).get("cells", [])
+        ids = {m.get("id") for m in new_cells}
+        old_cells = [m for m in old.meta.get("ablation", {}).get("cells", []) if m.get("id") not in ids]
+        if "ablation" in merged.meta:
+            merged.meta["ablation"] = {**merged.meta["ablation"], "cells": old_cells + list(new_cells)}
+        merged.meta["scenes"] = sorted(set(old.meta.get("scenes", [])) | set(new.meta.get("scenes", [])))
+        merged.write(out)
+        return merged
 
 
 def report_only(spec: AblationSpec, out: str | Path, *, paper: str | Path | None = None,

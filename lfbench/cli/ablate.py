@@ -7,7 +7,12 @@ synthetic scenes), *_paper.toml (the paper's widths, steps and data, for a GPU) 
 (Tables I/II for any set of methods). Spec layout: lfbench/ablation/spec.py.
 
 Re-running the same command skips finished cells and resumes an interrupted one from its
-checkpoint. ``--jobs N`` trains N cells at a time in separate processes (cores / N threads each).
+checkpoint. ``--jobs N`` trains N cells at a time in separate processes (cores / N threads each), each
+with its own GPU (round-robin over the visible CUDA devices; the CPU when there are none). The shared
+stage 1 is trained once under a file lock, and OUT/results.json is merged under one, so several ablate
+processes on one OUT (e.g. different --cells) add up. ``--executor slurm`` submits one job per cell
+through submitit (``--gpus-per-job``, ``--partition``, ...; ``--executor local``: the same path as local
+processes); re-running the command resumes unfinished cells.
 The paper's tables come from --paper DIR, else $LFBENCH_PAPER_DIR, else $LFBENCH_HCI_ROOT/../paper;
 without them the tables have no paper columns.
 """
@@ -35,6 +40,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="rewrite the tables and figures from the finished cells in OUT (train nothing)")
     p.add_argument("--html", action="store_true",
                    help="also write the HTML report OUT/html/index.html (leaderboard of the cells, their maps)")
+    p.add_argument("--executor", choices=["local", "slurm"], default=None,
+                   help="run each cell as a submitit job: slurm (a cluster) or local (subprocesses here)")
+    p.add_argument("--gpus-per-job", type=int, default=0, metavar="N", help="GPUs of each cell's job (--executor)")
+    p.add_argument("--cpus-per-job", type=int, default=0, metavar="N",
+                   help="CPUs of each cell's job (--executor; default: the spec's threads per cell)")
+    p.add_argument("--timeout-min", type=int, default=24 * 60, metavar="MIN", help="time limit of each job")
+    p.add_argument("--partition", default=None, help="SLURM partition (--executor slurm)")
+    p.add_argument("--max-parallel", type=int, default=0, metavar="N",
+                   help="SLURM jobs running at once (0: no limit)")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 
@@ -73,7 +87,14 @@ def run(args: argparse.Namespace) -> int:
     else:
         from lfbench.ablation.runner import run_ablation
 
-        run_ablation(spec, out, jobs=args.jobs, progress=progress, paper=args.paper)
+        cluster = None
+        if args.executor is not None:
+            from lfbench.ablation.executor import ClusterOptions
+
+            cluster = ClusterOptions(args.executor, gpus_per_job=args.gpus_per_job, cpus_per_job=args.cpus_per_job,
+                                     timeout_min=args.timeout_min, partition=args.partition,
+                                     max_parallel=args.max_parallel)
+        run_ablation(spec, out, jobs=args.jobs, progress=progress, paper=args.paper, cluster=cluster)
     if args.html:
         from lfbench.ablation.html import write_site
 

@@ -1,8 +1,14 @@
-"""torch.distributed set-up for data-parallel training, read from torchrun's environment.
+"""torch.distributed set-up for data-parallel training, read from torchrun's or SLURM's environment.
 
 ``torchrun --nproc-per-node K -m lfbench train CONFIG.toml`` starts K processes with RANK,
 WORLD_SIZE, LOCAL_RANK, MASTER_ADDR and MASTER_PORT set; each joins a process group (NCCL on
-GPUs, gloo on CPU). Without those variables training runs in a single process.
+GPUs, gloo on CPU). Under ``srun`` (one task per GPU, no torchrun) the rank, world size and local rank
+come from SLURM_PROCID, SLURM_STEP_NUM_TASKS (or SLURM_NTASKS) and SLURM_LOCALID, with MASTER_ADDR and
+MASTER_PORT from the job script. Without any of these, training runs in a single process.
+
+Before training, every rank must resume from the same position (:func:`agree_on_resume`): a rank that
+sees another checkpoint (or none: a node without the shared file system) stops every rank with one
+error line instead of a silent hang in the first collective.
 """
 
 from __future__ import annotations
@@ -14,7 +20,7 @@ from datetime import timedelta
 import torch
 import torch.distributed as dist
 
-from lfbench.utils.errors import SpecError
+from lfbench.utils.errors import LFBenchError, SpecError
 
 
 @dataclass
@@ -91,11 +97,50 @@ def resolve_device(preference: str, local_rank: int = 0) -> torch.device:
     return torch.device(preference)
 
 
+def launch_env(environ=None) -> tuple[int, int, int, str]:
+    """(world size, rank, local rank, launcher): torchrun's WORLD_SIZE / RANK / LOCAL_RANK; else, inside an
+    ``srun`` step of several tasks (SLURM_STEP_ID set), SLURM_STEP_NUM_TASKS (or SLURM_NTASKS) /
+    SLURM_PROCID / SLURM_LOCALID; else a single process. (A batch script's own shell also has SLURM_NTASKS
+    but no SLURM_STEP_ID: it is one process, not a task of a step.)"""
+    env = os.environ if environ is None else environ
+    if "WORLD_SIZE" in env:
+        rank = int(env.get("RANK", "0"))
+        return int(env["WORLD_SIZE"]), rank, int(env.get("LOCAL_RANK", str(rank))), "torchrun"
+    tasks = env.get("SLURM_STEP_NUM_TASKS") or env.get("SLURM_NTASKS")
+    if tasks and int(tasks) > 1 and ("SLURM_STEP_ID" in env or "SLURM_STEPID" in env):
+        rank = int(env.get("SLURM_PROCID", "0"))
+        return int(tasks), rank, int(env.get("SLURM_LOCALID", "0")), "slurm"
+    return 1, 0, 0, "none"
+
+
+def agree_on_resume(ctx: DistContext, position) -> None:
+    """Stop every rank with one error unless all resume from the same ``position`` (e.g. (stage, step,
+    global step), or None for a fresh start). A position that is an LFBenchError (this rank could not read
+    its checkpoint) is raised on every rank."""
+    if not ctx.enabled:
+        if isinstance(position, LFBenchError):
+            raise position
+        return
+    seen = ctx.gather(str(position) if isinstance(position, LFBenchError) else position)
+    errors = [(r, p) for r, p in enumerate(seen) if isinstance(p, str)]
+    if errors:
+        rank, msg = errors[0]
+        raise LFBenchError(f"rank {rank} could not resume: {msg}")
+    if any(p != seen[0] for p in seen):
+        where = ", ".join(f"rank {r}: " + ("fresh start" if p is None else
+                                           f"stage {p[0] + 1} step {p[1]} (global {p[2]})") for r, p in enumerate(seen))
+        raise LFBenchError(f"the ranks would resume from different checkpoints ({where}); every node must see the "
+                           "same OUT/checkpoint.pt (a shared file system), or start a new --out folder")
+
+
 def setup(device: str = "auto", timeout_s: float = 1800.0) -> DistContext:
-    """Join the process group described by the environment (or none: a single process)."""
-    world = int(os.environ.get("WORLD_SIZE", "1"))
-    rank = int(os.environ.get("RANK", "0"))
-    local = int(os.environ.get("LOCAL_RANK", str(rank)))
+    """Join the process group described by the environment (torchrun's or an srun step's; or none: a single
+    process)."""
+    world, rank, local, launcher = launch_env()
+    if launcher == "slurm" and not (os.environ.get("MASTER_ADDR") and os.environ.get("MASTER_PORT")):
+        raise SpecError("srun started several tasks but MASTER_ADDR / MASTER_PORT are not set; in the job script: "
+                        "export MASTER_ADDR=$(scontrol show hostnames $SLURM_JOB_NODELIST | head -n 1) "
+                        "MASTER_PORT=29500 (or start the tasks with torchrun)")
     dev = resolve_device(device, local)
     if dev.type == "cuda":
         torch.cuda.set_device(dev)

@@ -47,7 +47,7 @@ from lfbench.training import checkpoint as ckpt
 from lfbench.training.config import TrainConfig, expand_path
 from lfbench.training.curves import RunLogger, default_loggers
 from lfbench.training.data import PatchSampler, ValidationScene, load_scene_data, load_validation_scene
-from lfbench.training.distributed import DistContext, setup
+from lfbench.training.distributed import DistContext, agree_on_resume, setup
 from lfbench.training.losses import make_loss
 from lfbench.training.validate import validate
 from lfbench.utils.atomic import write_text
@@ -379,7 +379,13 @@ class Trainer:
         if rem or local_batch % tc.accumulate:
             raise SpecError(f"training.batch_size {tc.batch_size} must split evenly over {ctx.world_size} "
                             f"process(es) x accumulate {tc.accumulate}", cfg.source)
-        state = self.load_checkpoint()
+        try:
+            state = self.load_checkpoint()
+            position = None if state is None else (int(state["stage"]), int(state["step"]),
+                                                   int(state["global_step"]))
+        except LFBenchError as exc:
+            state, position = None, exc
+        agree_on_resume(ctx, position)  # every rank from the same step, or one error everywhere (no hang)
         if state is None and require_checkpoint:
             raise DataError("--resume given but there is no checkpoint to resume from", paths.checkpoint)
         if state is not None and state["stage"] >= len(cfg.stages) and paths.final.is_file():
