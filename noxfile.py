@@ -26,10 +26,10 @@ def tests(session: nox.Session) -> None:
 
 @nox.session
 def lint(session: nox.Session) -> None:
-    """ruff over the package, the methods, tests and scripts."""
+    """ruff over the package, the methods, tests, scripts and the example plugin."""
     if not isinstance(session.virtualenv, nox.virtualenv.PassthroughEnv):
         session.install("ruff")
-    session.run("ruff", "check", "lfbench", "methods", "tests", "benchmarks", "results", "noxfile.py")
+    session.run("ruff", "check", "lfbench", "methods", "tests", "benchmarks", "results", "examples", "noxfile.py")
 
 
 @nox.session

@@ -3,7 +3,8 @@
 The public API, importable from ``lfbench`` itself:
 
 - methods: :class:`Method`, :class:`Prediction`, :func:`register_method`, :func:`create`,
-  :func:`create_from_spec`, :func:`list_methods`;
+  :func:`create_from_spec`, :func:`list_methods`; trainable networks (``lfbench train``, ``ablate``,
+  ``bench``): :class:`Trainable`, :func:`register_trainable`;
 - metrics (plain functions of ``(gt, pred, mask)`` arrays): :func:`bad_pix`, :func:`mse_x100`,
   :func:`q25_x100`, :func:`bad_pix_curve`; every metric's definition by id: :func:`get_metric`,
   :func:`list_metrics`;
@@ -22,12 +23,14 @@ from lfbench.data.pfm import read_pfm, write_pfm  # noqa: E402
 from lfbench.data.scene import ArrayLightField, Benchmark, Scene  # noqa: E402
 from lfbench.method.base import Method, Prediction  # noqa: E402
 from lfbench.method.registry import create, create_from_spec, list_methods, register_method  # noqa: E402
+from lfbench.method.trainable import Trainable, register_trainable  # noqa: E402
 from lfbench.scoring.metrics import bad_pix, bad_pix_curve, get_metric, list_metrics, mse_x100, q25_x100  # noqa: E402
 from lfbench.utils.errors import DataError, LFBenchError, SpecError  # noqa: E402
 
 __all__ = [
     "__version__",
     "Method", "Prediction", "create", "create_from_spec", "list_methods", "register_method",
+    "Trainable", "register_trainable",
     "bad_pix", "bad_pix_curve", "mse_x100", "q25_x100", "get_metric", "list_metrics",
     "Scene", "Benchmark", "ArrayLightField", "read_pfm", "write_pfm",
     "LFBenchError", "DataError", "SpecError",

@@ -1,7 +1,10 @@
-"""The methods API: what a method is (:class:`Method`, :class:`Prediction`) and the registry that
-names, documents and creates them (``@register_method``, ``create``, spec strings)."""
+"""The methods API: what a method is (:class:`Method`, :class:`Prediction`), the registry that names,
+documents and creates them (``@register_method``, ``create``, spec strings), and trainable networks
+(:class:`Trainable`, ``@register_trainable``: what ``lfbench train``, ``ablate`` and ``bench`` use)."""
 
 from lfbench.method.base import Method, Prediction
 from lfbench.method.registry import create, create_from_spec, list_methods, method_info, register_method
+from lfbench.method.trainable import Trainable, get_trainable, list_trainables, register_trainable
 
-__all__ = ["Method", "Prediction", "create", "create_from_spec", "list_methods", "method_info", "register_method"]
+__all__ = ["Method", "Prediction", "create", "create_from_spec", "list_methods", "method_info", "register_method",
+           "Trainable", "get_trainable", "list_trainables", "register_trainable"]

@@ -1,0 +1,1 @@
+"""An example lfbench plugin: the tiny CNN ``tinycnn`` (lfbench_tiny.plugin)."""

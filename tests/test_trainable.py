@@ -1,0 +1,107 @@
+"""The trainable-network seam (lfbench.method.trainable): registration, parameters and axes, config
+checks, checkpoints; SubFocal and LFattNet as its users. End to end with a plugin: test_example_plugin."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+from torch import nn
+
+import lfbench.method.trainable as trainable
+from lfbench.method.trainable import Trainable, TrainableRegistry, get_trainable, register_trainable
+from lfbench.training import checkpoint as ckpt
+from lfbench.training.config import TrainConfig
+from lfbench.utils.errors import DataError, SpecError
+
+
+class Line(nn.Module):
+    """disparity = a * centre view + b (no distribution)."""
+
+    def __init__(self, a: float = 1.0, bias: bool = True, angular: int = 3) -> None:
+        super().__init__()
+        self.angular = angular
+        self.a = nn.Parameter(torch.tensor(float(a)))
+        self.b = nn.Parameter(torch.zeros(())) if bias else None
+
+    def forward(self, views):
+        d = self.a * views[:, views.shape[1] // 2]
+        return (d + self.b if self.b is not None else d), None
+
+
+class LineTrainable(Trainable):
+    """A line.
+
+    a: initial slope
+    bias: with an offset
+    """
+
+    network = Line
+
+
+@pytest.fixture()
+def registry(monkeypatch) -> TrainableRegistry:
+    fresh = TrainableRegistry()  # the entry points too: subfocal, lfattnet
+    monkeypatch.setattr(trainable, "TRAINABLES", fresh)
+    register_trainable("line")(LineTrainable)
+    return fresh
+
+
+def _config(method: str, loss: str = "l1") -> dict:
+    return {"method": method, "data": {"synthetic": [{"size": 16, "scenes": 1}]},
+            "stages": [{"name": "s", "loss": loss, "lr": 1e-3, "steps": 1}]}
+
+
+def test_registration_parameters_and_axes(registry):
+    t = get_trainable("line")
+    assert t.name == "line" and t.method_name == "line" and not t.distribution
+    params = t.parameters()
+    assert list(params) == ["a", "bias", "angular"] and params["a"].help == "initial slope"
+    assert params["a"].default == 1.0 and t.ablation_axes() == ("a", "bias", "angular")
+    with pytest.raises(SpecError, match="unknown trainable network .nope.; available: lfattnet, line, subfocal"):
+        get_trainable("nope")
+    with pytest.raises(TypeError, match="is not a Trainable subclass"):
+        register_trainable("bad", registry)(Line)
+    with pytest.raises(ValueError, match="unknown \\[model\\] key\\(s\\) slope \\(accepted: a, angular, bias\\)"):
+        t.check_params({"slope": 2})
+
+
+def test_subfocal_and_lfattnet_are_registered_users_of_the_seam():
+    sub, lfa = get_trainable("subfocal"), get_trainable("lfattnet")
+    assert sub.distribution and sub.method_name == "subfocal" and lfa.method_name == "lfattnet"
+    assert sub.ablation_axes() == ("interval", "interpolation", "width", "attention", "d_min", "d_max")
+    assert sub.parameters()["interval"].default == 0.5 and lfa.parameters()["interval"].default == 1.0
+    net = lfa.build(width=2)
+    assert net.config()["interval"] == 1.0 and net.disparities.numel() == 9
+    with pytest.raises(ValueError, match="interpolation must be one of"):
+        sub.check_params({"interpolation": "cubic"})
+
+
+def test_configs_name_the_network_and_its_losses_must_fit(registry, tmp_path):
+    cfg = TrainConfig.from_dict(_config("line"))
+    assert cfg.method == "line" and cfg.to_dict()["method"] == "line"
+    assert "method" not in TrainConfig.from_dict(_config("subfocal")).to_dict()  # the default is left out
+    assert TrainConfig.from_dict({k: v for k, v in _config("x").items() if k != "method"}).method == "subfocal"
+    with pytest.raises(SpecError, match="method: unknown trainable network 'nope'"):
+        TrainConfig.from_dict(_config("nope"))
+    with pytest.raises(SpecError, match="stages\\[0\\].loss: 'uafl' needs a distribution over disparities, which "
+                                        "network 'line' does not return"):
+        TrainConfig.from_dict(_config("line", "uafl"))
+
+
+def test_checkpoints_load_back_and_bad_ones_are_refused(registry, tmp_path):
+    t = get_trainable("line")
+    net = t.build(a=2.0)
+    with torch.no_grad():
+        net.b.fill_(0.25)
+    path = tmp_path / "w.pt"
+    ckpt.export_weights(path, net, {}, method="line", config=t.config_of(net, {"a": 2.0}))
+    back = t.load(path)
+    assert not back.training and back.a.item() == 2.0 and back.b.item() == 0.25
+    assert t.load(path, bias=True).b is not None
+    with pytest.raises(DataError, match="w.pt: state_dict: weights do not fit the network: 1 unexpected entries"):
+        t.load(path, bias=False)
+    with pytest.raises(DataError, match="checkpoint config is not valid: .*colour"):
+        t.load(path, colour=1)
+    (tmp_path / "junk.pt").write_bytes(b"junk")
+    with pytest.raises(DataError, match="cannot load checkpoint"):
+        t.load(tmp_path / "junk.pt")
