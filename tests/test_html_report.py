@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import json
 import re
 import shutil
 from html.parser import HTMLParser
@@ -19,6 +20,7 @@ from test_report import write_paper
 
 from lfbench.cli import main
 from lfbench.reports.figures import safe_name
+from lfbench.scoring.rules import upsample_nearest
 
 SCENES = ("boxes", "dots")
 SIZE = 40
@@ -46,14 +48,16 @@ def _run(argv: list[str]) -> tuple[int, str, str]:
 
 @pytest.fixture(scope="module")
 def site(tmp_path_factory) -> Path:
-    """Two tiny scenes, the oracle and two submissions (one worse everywhere), evaluated with --html --ci."""
+    """Two tiny scenes (dots with high-resolution ground truth, scored at highres as on the benchmark),
+    the oracle and two submissions (one worse everywhere), evaluated with --html --ci."""
     base = tmp_path_factory.mktemp("site")
     root = base / "data"
     rng = np.random.default_rng(0)
     maps_good, maps_bad = {}, {}
     for i, name in enumerate(SCENES):
         gt = rng.uniform(-1, 1, size=(SIZE, SIZE)).astype(np.float32)
-        write_scene(root, name, "training", size=SIZE, seed=i, gt=gt)
+        highres = upsample_nearest(gt, 10) if name == "dots" else None  # the oracle stays exact at highres
+        write_scene(root, name, "training", size=SIZE, seed=i, gt=gt, gt_highres=highres)
         maps_good[name] = gt + rng.normal(scale=0.05, size=gt.shape).astype(np.float32)
         maps_bad[name] = gt + rng.normal(scale=0.3, size=gt.shape).astype(np.float32)
     good = write_submission(base / "good", maps_good)
@@ -105,9 +109,14 @@ def test_index_ranks_methods_and_states_resolutions_and_intervals(site):
     page = (site / "html" / "index.html").read_text(encoding="utf-8")
     # the oracle is best, the noisy submission worst, on average rank
     assert _table_rows(page, "table-overview") == ["gt", "published:good", "published:bad"]
+    overview = page.split('id="table-overview"', 1)[1].split("</table>", 1)[0]
+    gt_row = re.search(r'data-v="gt">.*?</tr>', overview, re.S).group(0)
+    assert re.findall(r'data-v="([-0-9.e]+)">', gt_row)[1:6] == ["0.0"] * 5  # the oracle's means, highres dots too
     section = page.split('id="table-badpix_0.07"', 1)[1].split("</table>", 1)[0]
     assert section.count("#1</span>") == len(SCENES)  # the oracle ranks first on each scene
-    assert 'class="res">lowres</span>' in section
+    assert '<span class="res">lowres</span>' in section.split("boxes", 1)[1].split("</th>", 1)[0]
+    assert '<span class="res">highres</span>' in section.split("dots", 1)[1].split("</th>", 1)[0]
+    assert "Mean<span class=\"res\">highres+lowres</span>" in section  # the mean says what it averages
     assert re.search(r'class="ci"[^>]*>\[\d+\.\d{3}, \d+\.\d{3}\]', section)  # bootstrap intervals
     # the mean column holds the mean of the per-scene values
     good = re.search(r'data-v="published:good">.*?</tr>', section, re.S).group(0)
@@ -154,6 +163,22 @@ def test_a_file_where_the_report_goes_is_refused_before_any_work(site, tmp_path,
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "exists and is not a folder (the HTML report goes there)" in err[0]
     assert not (out / "results.json").exists()
+
+
+def test_a_site_from_results_alone_shows_the_numbers_and_says_why_there_are_no_maps(site, tmp_path):
+    alone = tmp_path / "alone"
+    alone.mkdir()
+    data = json.loads((site / "results.json").read_text())
+    data["meta"]["data_root"] = str(tmp_path / "moved")  # the data root is not here any more
+    (alone / "results.json").write_text(json.dumps(data))
+    rc, stdout, err = _run(["report", str(alone), "--out", str(tmp_path / "rep"), "--html"])
+    assert rc == 0, err
+    html = tmp_path / "rep" / "html"
+    index = (html / "index.html").read_text(encoding="utf-8")
+    assert "is not here: no maps are shown" in index and "No saved maps" in index
+    scene = (html / "scene-boxes.html").read_text(encoding="utf-8")
+    assert "only the numbers are shown" in scene and "#1</span>" in scene
+    assert not list(html.glob("img/boxes/*"))
 
 
 def test_report_refuses_unknown_figure_formats_before_writing(site, tmp_path, capsys):
