@@ -19,7 +19,6 @@ temporary folder and renamed into place when complete.
 
 from __future__ import annotations
 
-import logging
 import math
 import os
 import shutil
@@ -43,8 +42,6 @@ from lfbench.utils.atomic import write_text
 from lfbench.utils.errors import DataError
 
 __all__ = ["SITE_DIR", "SiteInputs", "build_site", "build_site_from_dir", "check_site_dir", "site_inputs_from_dir"]
-
-log = logging.getLogger(__name__)
 
 SITE_DIR = "html"
 ASSETS = ("site.css", "site.js")
