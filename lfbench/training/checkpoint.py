@@ -17,7 +17,7 @@ import numpy as np
 import torch
 
 from lfbench.utils.atomic import atomic_open
-from lfbench.utils.errors import DataError
+from lfbench.utils.errors import DataError, LFBenchError
 
 CHECKPOINT_FORMAT = "lfbench.train.checkpoint"
 WEIGHTS_FORMAT = "lfbench.subfocal.weights"
@@ -50,9 +50,14 @@ def set_rng_state(state: dict[str, Any]) -> None:
 
 
 def save(path: str | Path, payload: dict[str, Any]) -> None:
-    """torch.save ``payload`` to ``path`` atomically (a reader sees the old file or the new one)."""
-    with atomic_open(path, "wb") as f:
-        torch.save(payload, f)
+    """torch.save ``payload`` to ``path`` atomically (a reader sees the old file or the new one); a write
+    error (disk full, read-only folder) is one LFBenchError naming the file, and the old file stays."""
+    try:
+        with atomic_open(path, "wb") as f:
+            torch.save(payload, f)
+    except (OSError, RuntimeError) as exc:  # torch reports a failed write of its zip stream as RuntimeError
+        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else " ".join(str(exc).split())[:120]
+        raise LFBenchError(f"cannot write checkpoint: {reason} (the previous one is kept)", path) from None
 
 
 def load(path: str | Path, expected_format: str | None = None) -> dict[str, Any]:

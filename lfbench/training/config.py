@@ -46,15 +46,24 @@ Paths expand ``~`` and ``$VARS``; relative paths are taken from the current dire
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+from lfbench.data.synth import MAX_SYNTH_SIZE
 from lfbench.method.trainable import DEFAULT_TRAINABLE
 from lfbench.utils.envvars import expand_vars
 from lfbench.utils.errors import SpecError
 
 STAGE_KEYS = {"name", "loss", "lr", "steps", "eps", "betas"}
+# Bounds of the sizes a config asks for, checked before anything is allocated.
+MAX_BATCH = 4096
+MAX_PATCH = 1024  # px
+MAX_STRIDE = 16
+MAX_STEPS = 10**9
+MAX_SCENES = 10000
+_SAFE_NAME = re.compile(r"[A-Za-z0-9._-]{1,100}")
 
 
 @dataclass(frozen=True)
@@ -208,6 +217,8 @@ class _Table:
     def number(self, key: str, default: float, low: float | None = None, high: float | None = None,
                integer: bool = False, low_open: bool = False) -> Any:
         value = self.get(key, int if integer else float, default)
+        if not math.isfinite(value):
+            self._fail(key, f"must be a finite number, got {value}")
         if low is not None and (value < low or (low_open and value == low)):
             self._fail(key, f"must be {'>' if low_open else '>='} {low}, got {value}")
         if high is not None and value > high:
@@ -289,9 +300,12 @@ def _parse_data(t: _Table, source: str | None) -> DataConfig:
         st = _Table(s, f"data.synthetic[{i}]", source)
         spec = SyntheticSpec(category=st.get("category", str, "synthetic"),
                              seed=st.number("seed", 0, low=0, integer=True),
-                             size=st.number("size", 128, low=16, integer=True),
-                             scenes=st.number("scenes", 8, low=1, integer=True))
+                             size=st.number("size", 128, low=16, high=MAX_SYNTH_SIZE, integer=True),
+                             scenes=st.number("scenes", 8, low=1, high=MAX_SCENES, integer=True))
         st.done()
+        if not _SAFE_NAME.fullmatch(spec.category) or spec.category in (".", ".."):
+            st._fail("category", f"must be a plain folder name (letters, digits, '.', '_', '-'), "
+                                 f"got {spec.category[:60]!r}")
         synthetic.append(spec)
     if len({s.category for s in synthetic}) != len(synthetic):
         raise SpecError("each [[data.synthetic]] entry needs its own category", source)
@@ -300,7 +314,10 @@ def _parse_data(t: _Table, source: str | None) -> DataConfig:
     for k in list(weights_t.raw):
         scene_weights[k] = weights_t.number(k, 1.0, low=0.0)
     weights_t.done()
-    strides = tuple(int(s) for s in t.floats("strides", (1, 2, 3)))
+    strides_f = t.floats("strides", (1, 2, 3))
+    if any(s != int(s) or not 1 <= s <= MAX_STRIDE for s in strides_f):
+        t._fail("strides", f"expected whole numbers from 1 to {MAX_STRIDE}, got {list(strides_f)}")
+    strides = tuple(int(s) for s in strides_f)
     stride_weights = t.floats("stride_weights", (8.0, 6.0, 3.0) if len(strides) == 3 else (1.0,) * len(strides),
                               length=len(strides))
     if not strides or min(strides) < 1 or min(stride_weights) < 0 or sum(stride_weights) <= 0:
@@ -311,7 +328,7 @@ def _parse_data(t: _Table, source: str | None) -> DataConfig:
         train=t.strings("train"),
         validation=t.strings("validation"),
         invalid_area=t.get("invalid_area", str, None),
-        patch=t.number("patch", 32, low=8, integer=True),
+        patch=t.number("patch", 32, low=8, high=MAX_PATCH, integer=True),
         strides=strides,
         stride_weights=stride_weights,
         texture=t.number("texture", 0.01, low=0.0),
@@ -342,13 +359,13 @@ def _parse_augment(t: _Table) -> AugmentConfig:
 
 def _parse_training(t: _Table) -> TrainingConfig:
     cfg = TrainingConfig(
-        batch_size=t.number("batch_size", 32, low=1, integer=True),
-        accumulate=t.number("accumulate", 1, low=1, integer=True),
-        threads=t.number("threads", 0, low=0, integer=True),
+        batch_size=t.number("batch_size", 32, low=1, high=MAX_BATCH, integer=True),
+        accumulate=t.number("accumulate", 1, low=1, high=MAX_BATCH, integer=True),
+        threads=t.number("threads", 0, low=0, high=1024, integer=True),
         device=t.get("device", str, "auto"),
         checkpoint_every=t.number("checkpoint_every", 500, low=1, integer=True),
         log_every=t.number("log_every", 50, low=1, integer=True),
-        prefetch=t.number("prefetch", 2, low=0, integer=True),
+        prefetch=t.number("prefetch", 2, low=0, high=64, integer=True),
         channels_last=t.get("channels_last", bool, True),
     )
     t.done()
@@ -380,11 +397,13 @@ def _parse_stage(t: _Table, index: int) -> StageConfig:
         raise SpecError(f"{t.where}: {exc}", t.source) from None
     t.get("steps", int, required=True)
     betas = t.floats("betas", (0.9, 0.999), length=2)
+    if not all(0.0 <= b < 1.0 for b in betas):
+        t._fail("betas", f"expected two numbers in [0, 1), got {list(betas)}")
     stage = StageConfig(
         name=t.get("name", str, f"stage{index + 1}"),
         loss=loss,
         lr=t.number("lr", 1e-3, low=0.0, low_open=True),
-        steps=t.number("steps", 1, low=1, integer=True),
+        steps=t.number("steps", 1, low=1, high=MAX_STEPS, integer=True),
         eps=t.number("eps", 1e-7, low=0.0),
         betas=betas,  # type: ignore[arg-type]
         loss_params=params,

@@ -42,7 +42,7 @@ import numpy as np
 import torch
 
 from lfbench.data.scene import Benchmark, Scene
-from lfbench.method.trainable import get_trainable
+from lfbench.method.trainable import check_state_dict, get_trainable
 from lfbench.training import checkpoint as ckpt
 from lfbench.training.config import TrainConfig, expand_path
 from lfbench.training.curves import RunLogger, default_loggers
@@ -104,6 +104,38 @@ class RunPaths:
 
     def stage_weights(self, index: int, name: str) -> Path:
         return self.out / f"stage{index + 1}_{name}.pt"
+
+
+def resume_view(config: dict[str, Any], stages: int) -> dict[str, Any]:
+    """:func:`comparable` with only the first ``stages`` stages: what a resumed run must keep."""
+    d = comparable(config)
+    d["stages"] = list(d.get("stages", []))[:stages]
+    return d
+
+
+_STATE_TYPES: dict[str, tuple[type, ...]] = {
+    "config": (dict,), "stage": (int,), "step": (int,), "global_step": (int,), "model": (dict,),
+    "optimizer": (dict, type(None)), "rng": (dict,), "elapsed_s": (int, float), "best_badpix": (int, float),
+    "last_validation": (dict, type(None)),
+}
+
+
+def check_resume_state(state: dict[str, Any], path: Path) -> None:
+    """DataError naming ``path`` when a training checkpoint lacks an entry or holds one of the wrong type
+    (a tampered or foreign file must fail in one line, not deep inside the loop)."""
+    for key, kinds in _STATE_TYPES.items():
+        if key not in state:
+            raise DataError(f"training checkpoint has no {key!r} entry", path)
+        value = state[key]
+        if isinstance(value, bool) or not isinstance(value, kinds):
+            raise DataError(f"training checkpoint entry {key!r} is a {type(value).__name__}", path)
+    if state["stage"] < 0 or state["step"] < 0 or state["global_step"] < 0:
+        raise DataError("training checkpoint has a negative stage or step", path)
+    if not isinstance(state["config"].get("stages"), list):
+        raise DataError("training checkpoint config has no list of stages", path)
+    if state["stage"] > len(state["config"]["stages"]):
+        raise DataError(f"training checkpoint is at stage {state['stage'] + 1}, beyond its config's "
+                        f"{len(state['config']['stages'])} stage(s)", path)
 
 
 def comparable(config: dict[str, Any]) -> dict[str, Any]:
@@ -331,12 +363,17 @@ class Trainer:
             ckpt.save(self.paths.checkpoint, self._checkpoint_payload(model, optimizer, stage, step))
 
     def load_checkpoint(self) -> dict | None:
+        """The checkpoint to resume from (type-checked), or None. Only what the finished stages and the
+        stage in progress used must be the same: a later stage may be fixed or added before it starts."""
         if not self.paths.checkpoint.is_file():
             return None
         state = ckpt.load(self.paths.checkpoint, ckpt.CHECKPOINT_FORMAT)
-        if comparable(state["config"]) != comparable(self.cfg.to_dict()):
-            raise SpecError(f"the config differs from the one {self.paths.checkpoint} was trained with; "
-                            "use another --out folder to start a new run", self.cfg.source)
+        check_resume_state(state, self.paths.checkpoint)
+        used = state["stage"] + (1 if state["step"] > 0 else 0)
+        if resume_view(state["config"], used) != resume_view(self.cfg.to_dict(), used):
+            raise SpecError(f"the config differs from the one {self.paths.checkpoint} was trained with (in a "
+                            f"setting or one of the {used} stage(s) already trained); use another --out folder "
+                            "to start a new run", self.cfg.source)
         return state
 
     def export(self, path: Path, model, info: dict | None = None) -> None:
@@ -428,13 +465,21 @@ class Trainer:
                             f"{angular}x{angular}", cfg.source)
         start_stage, start_step, opt_state = 0, 0, None
         if state is not None:
+            check_state_dict(state["model"], model.state_dict(), paths.checkpoint, "training checkpoint model")
             model.load_state_dict(state["model"])
             start_stage, start_step, opt_state = state["stage"], state["step"], state["optimizer"]
+            done = start_stage == len(cfg.stages) and start_step == 0  # finished, final weights not yet written
+            if not done and (start_stage >= len(cfg.stages) or start_step >= cfg.stages[start_stage].steps):
+                raise DataError(f"training checkpoint is at stage {start_stage + 1} step {start_step}, beyond the "
+                                "config's stages", paths.checkpoint)
             self.global_step = state["global_step"]
             self.elapsed_before = float(state["elapsed_s"])
             self.best_badpix = float(state["best_badpix"])
             self.last_validation = state["last_validation"]
-            ckpt.set_rng_state(state["rng"])
+            try:
+                ckpt.set_rng_state(state["rng"])
+            except (KeyError, TypeError, ValueError, AttributeError, RuntimeError, IndexError):
+                raise DataError("training checkpoint has an unusable RNG state", paths.checkpoint) from None
             self.log(f"resuming from {paths.checkpoint}: stage {start_stage + 1}, step {start_step} "
                      f"(global step {self.global_step})")
         model.to(ctx.device).train()
@@ -469,7 +514,16 @@ class Trainer:
         loss_fn = make_loss(st.loss, **st.loss_params)
         optimizer = torch.optim.Adam(model.parameters(), lr=st.lr, betas=st.betas, eps=st.eps)
         if opt_state is not None:
-            optimizer.load_state_dict(opt_state)
+            try:
+                optimizer.load_state_dict(opt_state)
+                for group in optimizer.param_groups:
+                    for p in group["params"]:
+                        for value in optimizer.state.get(p, {}).values():
+                            if isinstance(value, torch.Tensor) and value.ndim and value.shape != p.shape:
+                                raise ValueError("shape")
+            except (KeyError, TypeError, ValueError, AttributeError, RuntimeError, IndexError):
+                raise DataError("training checkpoint has an optimizer state that does not fit the model",
+                                self.paths.checkpoint) from None
         net = model
         if ctx.enabled:
             from torch.nn.parallel import DistributedDataParallel
@@ -563,12 +617,40 @@ def train(cfg: TrainConfig, out: str | Path, *, require_checkpoint: bool = False
     with torch_threads(None):  # the run sets its own thread count; the caller's comes back afterwards
         ctx = setup(cfg.training.device)
         try:
-            if loggers is None:
-                loggers = default_loggers(Path(out)) if ctx.is_main else []
-            try:
-                return Trainer(cfg, Path(out), ctx, command, progress, loggers).run(require_checkpoint)
-            finally:
-                for logger in loggers:
-                    logger.close()
+            with run_folder_lock(Path(out)) if ctx.is_main else contextlib.nullcontext():
+                if loggers is None:
+                    loggers = default_loggers(Path(out)) if ctx.is_main else []
+                try:
+                    return Trainer(cfg, Path(out), ctx, command, progress, loggers).run(require_checkpoint)
+                finally:
+                    for logger in loggers:
+                        logger.close()
         finally:
             ctx.close()
+
+
+LOCK_NAME = ".lfbench-train.lock"
+
+
+@contextlib.contextmanager
+def run_folder_lock(out: Path) -> Iterator[None]:
+    """Hold an exclusive lock on the run folder ``out`` (created if needed): a second ``lfbench train``
+    into the same folder is refused at once (DataError) instead of interleaving logs and checkpoints.
+    The lock is an OS file lock (filelock): it goes away with the process, even after kill -9."""
+    from filelock import FileLock, Timeout
+
+    if out.exists() and not out.is_dir():
+        raise DataError("output folder is a file", out)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        lock = FileLock(str(out / LOCK_NAME))
+        lock.acquire(timeout=0)
+    except Timeout:
+        raise DataError("another lfbench train is running into this folder (it holds "
+                        f"{LOCK_NAME}); wait for it or use another --out", out) from None
+    except OSError as exc:
+        raise DataError(f"cannot write into the output folder: {exc.strerror or exc}", out) from None
+    try:
+        yield
+    finally:
+        lock.release()

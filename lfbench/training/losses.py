@@ -22,6 +22,7 @@ and returns a scalar: the mean over all pixels. Definitions follow the SubFocal 
 from __future__ import annotations
 
 import inspect
+import math
 from collections.abc import Callable
 
 import torch
@@ -165,6 +166,9 @@ def make_loss(name: str, **params) -> LossFn:
     if unknown:
         allowed = ", ".join(sorted(accepted)) or "none"
         raise SpecError(f"loss {key!r} has no parameter {', '.join(sorted(unknown))} (parameters: {allowed})")
+    for k, v in params.items():  # every loss parameter (beta) is an exponent or weight: a finite number >= 0
+        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v) or v < 0:
+            raise SpecError(f"loss {key!r}: {k} must be a finite number >= 0, got {str(v)[:40]!r}")
     if not params:
         return fn
 
