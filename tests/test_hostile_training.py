@@ -58,7 +58,7 @@ def test_every_stage_is_validated_before_step_1(tmp_path, capsys, data_root, sta
     if "batch_size = 1000000000" in training:
         text = text.replace("batch_size = 1\n", training)
     config = write_config(tmp_path, text)
-    rc, _, err = run_cli(capsys, "train", config, "--out", tmp_path / "run", "--no-progress")
+    rc, _, err = run_cli(capsys, "-q", "train", config, "--out", tmp_path / "run", "--no-progress")
     assert_one_error_line(rc, err, "c.toml", problem)
     assert not (tmp_path / "run").exists()  # nothing trained, nothing written
 
@@ -68,7 +68,7 @@ def test_every_stage_is_validated_before_step_1(tmp_path, capsys, data_root, sta
 def test_synthetic_category_cannot_leave_the_run_folder(tmp_path, capsys, data_root, category, problem):
     data = f'[[data.synthetic]]\ncategory = "{category}"\nsize = 32\nscenes = 1\n'
     config = write_config(tmp_path, config_text(data_root, STAGE1, data=data))
-    rc, _, err = run_cli(capsys, "train", config, "--out", tmp_path / "run", "--no-progress")
+    rc, _, err = run_cli(capsys, "-q", "train", config, "--out", tmp_path / "run", "--no-progress")
     assert_one_error_line(rc, err, "c.toml", "data.synthetic[0].category", problem)
     assert not (tmp_path / "escape").exists()
 
@@ -78,7 +78,7 @@ def finished_stage1(tmp_path, capsys, data_root, one_torch_thread) -> Path:
     """A run folder whose only stage (l1, 2 steps) finished: checkpoint at (stage 1, step 0)."""
     out = tmp_path / "run"
     config = write_config(tmp_path, config_text(data_root, STAGE1), "one.toml")
-    rc, _, err = run_cli(capsys, "train", config, "--out", out, "--no-progress")
+    rc, _, err = run_cli(capsys, "-q", "train", config, "--out", out, "--no-progress")
     assert rc == 0, err
     return out
 
@@ -90,15 +90,16 @@ def test_fixing_a_stage_that_has_not_started_resumes_the_finished_ones(tmp_path,
     out = finished_stage1
     before = torch.load(out / "checkpoint.pt", weights_only=True)
     fixed = write_config(tmp_path, config_text(data_root, STAGE1 + STAGE2.format(beta="0.1")), "two.toml")
+    rc, stdout, err = run_cli(capsys, "-q", "train", fixed, "--out", out, "--no-progress")
+    assert rc == 0 and stdout + err == ""  # -q: no log lines
     rc, stdout, err = run_cli(capsys, "train", fixed, "--out", out, "--no-progress")
-    assert rc == 0, err
-    assert "resuming from" in stdout and "stage 2, step 0 (global step 2)" in stdout
+    assert rc == 0 and "training already complete (3 steps)" in stdout + err
     after = torch.load(out / "checkpoint.pt", weights_only=True)
     assert (before["stage"], before["global_step"]) == (1, 2) and (after["stage"], after["global_step"]) == (2, 3)
     # a change to a stage that already trained is still refused
     changed = write_config(tmp_path, config_text(data_root, STAGE1.replace("lr = 1e-3", "lr = 2e-3")
                                                  + STAGE2.format(beta="0.1")), "changed.toml")
-    rc, _, err = run_cli(capsys, "train", changed, "--out", out, "--no-progress")
+    rc, _, err = run_cli(capsys, "-q", "train", changed, "--out", out, "--no-progress")
     assert_one_error_line(rc, err, "changed.toml", "the config differs")
 
 
@@ -108,11 +109,11 @@ def test_a_second_train_into_the_same_folder_is_refused(tmp_path, capsys, data_r
     out = tmp_path / "run"
     config = write_config(tmp_path, config_text(data_root, STAGE1))
     with run_folder_lock(out):  # as a running `lfbench train` holds it
-        rc, _, err = run_cli(capsys, "train", config, "--out", out, "--no-progress")
+        rc, _, err = run_cli(capsys, "-q", "train", config, "--out", out, "--no-progress")
     assert_one_error_line(rc, err, str(out), "another lfbench train is running into this folder")
     assert not (out / "checkpoint.pt").exists() and not (out / "metrics.jsonl").exists()
     (tmp_path / "file").write_text("x")
-    rc, _, err = run_cli(capsys, "train", config, "--out", tmp_path / "file", "--no-progress")
+    rc, _, err = run_cli(capsys, "-q", "train", config, "--out", tmp_path / "file", "--no-progress")
     assert_one_error_line(rc, err, "file", "output folder is a file")
 
 
@@ -147,7 +148,7 @@ def test_tampered_training_checkpoint_is_one_line(tmp_path, capsys, data_root, f
     out = finished_stage1
     _tamper(out, change)
     two = write_config(tmp_path, config_text(data_root, STAGE1 + STAGE2.format(beta="0.1")), "two.toml")
-    rc, _, err = run_cli(capsys, "train", two, "--out", out, "--no-progress")
+    rc, _, err = run_cli(capsys, "-q", "train", two, "--out", out, "--no-progress")
     assert_one_error_line(rc, err, "checkpoint.pt", problem)
 
 
@@ -164,7 +165,7 @@ def test_disk_full_while_checkpointing_is_one_line_and_keeps_the_old_checkpoint(
         return real_save(obj, f, *a, **kw)
 
     monkeypatch.setattr(checkpoint.torch, "save", full)
-    rc, _, err = run_cli(capsys, "train", config, "--out", tmp_path / "run", "--no-progress")
+    rc, _, err = run_cli(capsys, "-q", "train", config, "--out", tmp_path / "run", "--no-progress")
     assert_one_error_line(rc, err, "checkpoint.pt", "cannot write checkpoint: No space left on device")
     kept = torch.load(tmp_path / "run" / "checkpoint.pt", weights_only=True)
     assert kept["global_step"] == 1  # the last good checkpoint, not half of a new one
