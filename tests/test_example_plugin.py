@@ -187,3 +187,24 @@ def test_bench_times_the_plugin_network(plugin, tmp_path):
     assert rec["model"] == "tinycnn" and rec["channels"] == 4 and rec["steps_per_s"] > 0
     proc = lfbench(env, "bench", "inference", "--model", "tinycnn", "--width", "3")
     assert proc.returncode == 2 and "network 'tinycnn' has no parameter 'width'" in proc.stderr
+
+
+def test_ddp_trains_the_plugin_network_in_two_processes(plugin, tmp_path):
+    """torchrun with 2 CPU processes (gloo): both ranks end with the same parameters, the exported ones."""
+    src, env, _ = plugin
+    text = (src / "train_tiny.toml").read_text().replace("batch_size = 4", "batch_size = 2")
+    text = text.replace("steps = 150", "steps = 3").replace("steps = 10", "steps = 2")
+    config = tmp_path / "ddp.toml"
+    config.write_text(text)
+    out = tmp_path / "ddp"
+    proc = subprocess.run([sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc-per-node", "2",
+                           "-m", "lfbench", "train", str(config), "--out", str(out), "--no-progress"],
+                          env=env, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    final = torch.load(out / "final.pt", map_location="cpu", weights_only=True)
+    from lfbench.training.checkpoint import state_sha256
+
+    names = [n for n, _ in _tiny_net(final["config"]).named_parameters()]
+    digests = final["training"]["rank_parameters_sha256"]
+    assert final["training"]["world_size"] == 2 and final["training"]["steps"] == 5
+    assert len(digests) == 2 and digests[0] == digests[1] == state_sha256({n: final["state_dict"][n] for n in names})

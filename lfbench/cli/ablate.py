@@ -1,4 +1,5 @@
-"""Run an ablation: a grid of SubFocal variants, each trained with the spec's budget (an in-process
+"""Run an ablation: a grid of variants of SubFocal or any registered trainable network (the base config's
+``method``; the grid's axes are its parameters), each trained with the spec's budget (an in-process
 ``lfbench train`` per cell), scored on the spec's scenes and timed on a whole scene; then the tables
 (markdown, LaTeX, CSV) with the paper's numbers in adjacent, labelled columns, and the figures.
 
@@ -22,7 +23,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-HELP = "train and score a grid of SubFocal variants (Tables IV, V, beta sweep, I/II) beside the paper's numbers"
+HELP = ("train and score a grid of network variants (SubFocal's Tables IV, V, beta sweep, I/II beside the paper's "
+        "numbers, or a plugin's network)")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

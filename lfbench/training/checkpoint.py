@@ -20,7 +20,7 @@ from lfbench.utils.atomic import atomic_open
 from lfbench.utils.errors import DataError, LFBenchError
 
 CHECKPOINT_FORMAT = "lfbench.train.checkpoint"
-WEIGHTS_FORMAT = "lfbench.subfocal.weights"
+WEIGHTS_FORMAT = "lfbench.subfocal.weights"  # the name weights files have carried since SubFocal was the only network
 VERSION = 1
 
 
