@@ -139,9 +139,11 @@ def test_mae_of_a_slanted_plane_against_a_fronto_parallel_one_is_its_tilt():
     k = 0.5 * 35.0 / (100.0 * 31)
     expected = math.degrees(math.atan(m / (k * (z0 + 2 * m * col))))
     assert expected == pytest.approx(18.4, abs=0.05)
-    assert median_angular_error(gt, pred, PARAMS, mask) == pytest.approx(expected, rel=1e-7)
+    # depth comes from float32 disparities in float32 (the toolkit's disp2depth): the tangents are
+    # differences of float32 depths, so the angle matches the exact one to ~1e-5 relative
+    assert median_angular_error(gt, pred, PARAMS, mask) == pytest.approx(expected, rel=1e-4)
     # the same angle whichever map is the ground truth
-    assert median_angular_error(pred, gt, PARAMS, mask) == pytest.approx(expected, rel=1e-7)
+    assert median_angular_error(pred, gt, PARAMS, mask) == pytest.approx(expected, rel=1e-4)
 
 
 def test_angular_error_of_perpendicular_normals_is_90_degrees():

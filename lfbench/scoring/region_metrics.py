@@ -84,20 +84,33 @@ def _percent_bad(bad: np.ndarray, reference: np.ndarray, pred: np.ndarray, mask:
     return _percentage(int(np.count_nonzero(scored)), int(np.count_nonzero(bad & scored)))
 
 
+_SCHARR_H = np.array([[3.0, 10.0, 3.0], [0.0, 0.0, 0.0], [-3.0, -10.0, -3.0]]) / 16.0  # scikit-image's HSCHARR
+
+
 def scharr_derivative(image: np.ndarray, axis: int, mode: str = "reflect", zero_border: bool = True) -> np.ndarray:
     """Scharr derivative of a (H, W) array along ``axis`` (0 = rows, 1 = columns), float64.
 
     Kernel: difference [-1, 0, 1] (f[i+1] - f[i-1], i.e. twice the central difference) along
     ``axis`` times the smoothing [3, 10, 3] / 16 across it: scikit-image's ``scharr_h`` (axis 0)
-    and ``scharr_v`` (axis 1). ``zero_border`` sets the outermost 1 px ring to 0, as the
+    and ``scharr_v`` (axis 1), computed as it did (``scipy.ndimage.convolve`` with the 3x3 kernel,
+    which skips the kernel's zero weights: an infinite value gives +-inf or NaN only where it has
+    a non-zero weight, never inf * 0). ``zero_border`` sets the outermost 1 px ring to 0, as the
     scikit-image of the toolkit's era did (only pixels within 2 px of the edge are affected).
     """
-    out = ndimage.correlate1d(np.asarray(image, dtype=np.float64), _DIFF, axis=axis, mode=mode)
-    out = ndimage.correlate1d(out, _SMOOTH, axis=1 - axis, mode=mode)
+    kernel = _SCHARR_H if axis == 0 else _SCHARR_H.T
+    out = ndimage.convolve(np.asarray(image, dtype=np.float64), kernel, mode=mode)
     if zero_border:
         out[0, :] = out[-1, :] = 0.0
         out[:, 0] = out[:, -1] = 0.0
     return out
+
+
+def _scharr_separable(image: np.ndarray, axis: int) -> np.ndarray:
+    """Scharr derivative with periodic borders as two 1-D passes (every weight multiplies, so a
+    non-finite value spreads NaN over its 3x3 neighbourhood, like the toolkit's
+    ``scipy.signal.convolve2d`` used for surface normals)."""
+    out = ndimage.correlate1d(np.asarray(image, dtype=np.float64), _DIFF, axis=axis, mode="wrap")
+    return ndimage.correlate1d(out, _SMOOTH, axis=1 - axis, mode="wrap")
 
 
 def _hessian_norm(diff: np.ndarray) -> np.ndarray:
@@ -164,11 +177,22 @@ def depth_normals(depth: np.ndarray, focal_length_mm: float, sensor_size_mm: flo
     x = k * (np.arange(w) / (w - 1.0))[None, :] * z
     y = k * (np.arange(h) / (h - 1.0))[:, None] * z
     points = (x, y, z)
-    d_row = np.stack([scharr_derivative(c, axis=0, mode="wrap", zero_border=False) for c in points], axis=-1)
-    d_col = np.stack([scharr_derivative(c, axis=1, mode="wrap", zero_border=False) for c in points], axis=-1)
+    d_row = np.stack([_scharr_separable(c, axis=0) for c in points], axis=-1)
+    d_col = np.stack([_scharr_separable(c, axis=1) for c in points], axis=-1)
     normal = np.cross(d_row, d_col)
     with np.errstate(invalid="ignore", divide="ignore"):
         return normal / np.linalg.norm(normal, axis=-1, keepdims=True)
+
+
+def toolkit_depth(disparity: np.ndarray, params: SceneParameters) -> np.ndarray:
+    """Depth (m) of a disparity map (px per view step) exactly as the toolkit's ``disp2depth``: float32
+    arithmetic in its order, 1 / ((1000 s) d / q + 1 / F) with q = b f max(W, H) (b, f, s in mm,
+    F in m); the same formula as :meth:`SceneParameters.disparity_to_depth`, which works in float64."""
+    q = np.float32(params.baseline_mm * params.focal_length_mm
+                   * max(params.image_resolution_x_px, params.image_resolution_y_px))
+    d = np.asarray(disparity, dtype=np.float32)
+    return np.float32(1.0) / (np.float32(1000.0 * params.sensor_size_mm) * d / q
+                              + np.float32(1.0 / params.focus_distance_m))
 
 
 def angular_error_deg(normals_a: np.ndarray, normals_b: np.ndarray) -> np.ndarray:
@@ -182,12 +206,12 @@ def median_angular_error(gt: np.ndarray, pred: np.ndarray, params: SceneParamete
                          *, toolkit: bool = False) -> float:
     """MAE: median angle (degrees) between the surface normals of gt and pred over the mask.
 
-    Disparities are converted to depth with the scene's parameters.cfg (``params``), normals
-    from :func:`depth_normals`; computed in float64."""
+    Disparities are converted to depth as the toolkit does (:func:`toolkit_depth`, float32), normals
+    from :func:`depth_normals` in float64."""
     gt, pred, mask = _prepare(gt, pred, mask)
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-        n_gt = depth_normals(params.disparity_to_depth(gt), params.focal_length_mm, params.sensor_size_mm)
-        n_pred = depth_normals(params.disparity_to_depth(pred), params.focal_length_mm, params.sensor_size_mm)
+        n_gt = depth_normals(toolkit_depth(gt, params), params.focal_length_mm, params.sensor_size_mm)
+        n_pred = depth_normals(toolkit_depth(pred, params), params.focal_length_mm, params.sensor_size_mm)
     angle = angular_error_deg(n_gt, n_pred)
     if toolkit:
         scored = mask & np.isfinite(pred) & np.isfinite(angle)
@@ -226,7 +250,7 @@ def backgammon_fattening(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | No
     the gt at column ``fg_column`` (the foreground extrapolated along each row): the prediction
     is nearer to the foreground than to the true (background) disparity."""
     gt, pred, mask = _prepare(gt, pred, mask)
-    half = 0.5 * (gt[:, fg_column:fg_column + 1] + gt)
+    half = 0.5 * (gt[:, fg_column:fg_column + 1].astype(np.float64) + gt)  # float64, as the toolkit's extrapolation
     with np.errstate(invalid="ignore"):
         bad = pred > half
     return _percent_bad(bad, half, pred, mask, toolkit)
@@ -238,7 +262,7 @@ def backgammon_thinning(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | Non
     the gt at column ``bg_column`` (the background extrapolated along each row): the prediction
     is nearer to the background than to the true (foreground) disparity."""
     gt, pred, mask = _prepare(gt, pred, mask)
-    half = 0.5 * (gt[:, bg_column:bg_column + 1] + gt)
+    half = 0.5 * (gt[:, bg_column:bg_column + 1].astype(np.float64) + gt)  # float64, as the toolkit's extrapolation
     with np.errstate(invalid="ignore"):
         bad = pred < half
     return _percent_bad(bad, half, pred, mask, toolkit)
@@ -253,10 +277,12 @@ def missed_dots(gt: np.ndarray, pred: np.ndarray, boxes: np.ndarray, dots_by_siz
 
     ``boxes`` (H, W) int labels the cells of the dots scene (0 = none); ``dots_by_size`` (H, W)
     int labels each dot by its size rank (0 = background). A dot is the set of pixels with one
-    label 1..max_label inside one box. As in the toolkit the border mask does not apply; every
-    pixel of a dot counts. Default: pixels with non-finite gt are left out, non-finite
-    predictions are bad, (box, label) pairs without pixels are not dots. ``toolkit=True``: NaN is
-    good and an empty pair counts as a missed dot (the toolkit's NaN < 50 is False).
+    label 1..n inside one box, n = the number of distinct labels of 1..max_label present (the
+    toolkit's rule: with a label missing, 1..n still includes it and leaves out the highest). As
+    in the toolkit the border mask does not apply; every pixel of a dot counts. Default: pixels
+    with non-finite gt are left out, non-finite predictions are bad, (box, label) pairs without
+    pixels are not dots. ``toolkit=True``: NaN is good and an empty pair counts as a missed dot
+    (the toolkit's NaN < 50 is False).
     """
     gt, pred, _ = _prepare(gt, pred, None)
     boxes = np.asarray(boxes)
@@ -266,7 +292,7 @@ def missed_dots(gt: np.ndarray, pred: np.ndarray, boxes: np.ndarray, dots_by_siz
     if boxes.size and (boxes.min() < 0 or dots_by_size.min() < 0):
         raise ValueError("box and dot labels must be non-negative integers")
     box_lut = _label_lut(boxes, 1, None)  # label value -> index of the box, -1 for none
-    dot_lut = _label_lut(dots_by_size, 1, max_label)
+    dot_lut = _first_labels(dots_by_size, max_label)
     n_boxes, n_labels = int(box_lut.max()) + 1, int(dot_lut.max()) + 1
     n_pairs = n_boxes * n_labels
     if n_pairs == 0:
@@ -290,6 +316,17 @@ def missed_dots(gt: np.ndarray, pred: np.ndarray, boxes: np.ndarray, dots_by_siz
     if toolkit:
         return _percentage(n_pairs, int(np.count_nonzero(missed | (n == 0))))
     return _percentage(int(np.count_nonzero(n > 0)), int(np.count_nonzero(missed)))
+
+
+def _first_labels(labels: np.ndarray, highest: int) -> np.ndarray:
+    """The toolkit's dot labels: with n = the number of distinct labels in 1..highest present, the
+    labels 1..n (even when one of them is absent and a higher one present). Lookup table: label
+    value -> its index 0..n-1, else -1."""
+    values = np.unique(labels)
+    n = int(np.count_nonzero((values > 0) & (values <= highest)))
+    lut = np.full(max(int(values.max()) + 1 if values.size else 1, n + 1), -1, dtype=np.intp)
+    lut[1:n + 1] = np.arange(n)
+    return lut
 
 
 def _label_lut(labels: np.ndarray, lowest: int, highest: int | None) -> np.ndarray:
