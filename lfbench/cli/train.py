@@ -46,6 +46,4 @@ def run(args: argparse.Namespace) -> int:
         nproc = os.environ.get("LOCAL_WORLD_SIZE", str(world))
         command = f"torchrun --nproc-per-node {nproc} -m {command}"
     train(cfg, out, require_checkpoint=args.resume, command=command, progress=False if args.no_progress else None)
-    if os.environ.get("RANK", "0") == "0":  # torchrun: only the main process writes files
-        print(f"curves: {out / 'learning_curve.png'}; live or afterwards: tensorboard --logdir {out}")
     return 0

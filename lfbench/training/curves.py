@@ -100,7 +100,8 @@ class LearningCurveLogger:
         if self._seen and metrics.is_file():
             entries = read_metrics(metrics)
             if any(e.get("event") == "train" for e in entries):
-                plot_learning_curve(entries, self.out / LEARNING_CURVE, title=self.out.name)
+                path = plot_learning_curve(entries, self.out / LEARNING_CURVE, title=self.out.name)
+                log.info("learning curve: %s (TensorBoard: tensorboard --logdir %s)", path, self.out)
 
 
 def default_loggers(out: str | Path) -> list[RunLogger]:
