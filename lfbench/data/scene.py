@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import os
 import re
 import warnings
 from collections.abc import Iterator
@@ -182,6 +183,11 @@ class Scene(LightField):
         self.path = Path(path)
         if not self.path.is_dir():
             raise DataError("scene folder not found", self.path)
+        try:  # a name that is not UTF-8 cannot be written to results.csv, tables or submissions
+            self.path.name.encode("utf-8")
+        except UnicodeEncodeError:
+            raise DataError("scene folder name is not valid UTF-8: rename the folder",
+                            os.fsencode(self.path).decode("utf-8", "backslashreplace")) from None
         self.params: SceneParameters = read_parameters(self.path / "parameters.cfg")
         self.name = self.path.name
         self.category = category or self.params.category or "other"

@@ -178,8 +178,7 @@ def run_demo(out: str | Path = "lfbench-demo", *, seed: int = DEFAULT_SEED, size
     Returns a :class:`DemoOutcome`."""
     from lfbench.data.scene import Benchmark
     from lfbench.method.registry import create_from_spec
-    from lfbench.runs.folder import evaluate_to_folder, replace_folder
-    from lfbench.runs.runner import save_prediction
+    from lfbench.runs.folder import evaluate_to_folder
 
     if int(scenes) != scenes or scenes < 1:
         raise SpecError(f"--scenes must be a positive integer, got {scenes}")
@@ -188,15 +187,9 @@ def run_demo(out: str | Path = "lfbench-demo", *, seed: int = DEFAULT_SEED, size
     root, reused = prepare_data(out, seed, size, scenes, log)
     scene_list = [s for s in Benchmark.discover(root) if s.has_gt()]
     chosen, skipped = select_methods(requested, scene_list, log)
-    tmp_maps = Path(tempfile.mkdtemp(prefix=f".{MAPS_DIR}.", suffix=".tmp", dir=out))
-    try:
-        results = evaluate_to_folder(chosen, scene_list, out, figures=figures, progress=progress,
-                                     on_prediction=save_prediction(tmp_maps), meta={
-                                         "data_root": str(root), "demo": data_settings(seed, size, scenes),
-                                         "skipped_methods": skipped})
-        replace_folder(tmp_maps, out / MAPS_DIR)
-    finally:
-        shutil.rmtree(tmp_maps, ignore_errors=True)
+    results = evaluate_to_folder(chosen, scene_list, out, figures=figures, progress=progress, save_maps=True,
+                                 meta={"data_root": str(root), "demo": data_settings(seed, size, scenes),
+                                       "skipped_methods": skipped})
     files: dict[str, Path] = {"results.json": out / "results.json", "results.csv": out / "results.csv",
                               "tables": out, "data": root, "maps": out / MAPS_DIR}
     if figures:

@@ -4,19 +4,19 @@ results/golden.py and the ablation cells.
 
 Files in OUT: results.json, results.csv (always); table_per_scene.{md,tex,csv} and
 table_average.{md,tex,csv} (``tables``); maps/<method>/ in the submission layout (``save_maps``);
-figures/ (``figures``: per-scene overviews and BadPix series, drawn into a temporary folder that
-replaces OUT/figures as a whole, so figures of two runs never mix); ci.csv and
+figures/ (``figures``: per-scene overviews and BadPix series); ci.csv and
 table_ci_per_scene.{md,tex,csv} (``ci``); uncertainty.csv, table_uncertainty.md and
 figures/sparsification_*.png (``uncertainty``, when a method predicts an uncertainty map).
+
+The files of a run appear together or not at all (lfbench.runs.outputs): they are written into a
+staging folder inside OUT and committed as one set, which replaces the previous run's set (files of
+an earlier run that this one does not write are dropped; other files in OUT are left alone).
 """
 
 from __future__ import annotations
 
 import functools
 import logging
-import os
-import shutil
-import tempfile
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -24,12 +24,13 @@ from typing import Any
 
 from lfbench.data.scene import Scene
 from lfbench.method.base import Method
+from lfbench.runs.outputs import staged_outputs
 from lfbench.runs.results import Results
 from lfbench.runs.runner import PredictionHook, evaluate, save_prediction
 from lfbench.scoring.metrics import GENERAL_METRICS, Metric
 from lfbench.scoring.rules import ScoringRules
 
-__all__ = ["CIOptions", "evaluate_to_folder", "replace_folder"]
+__all__ = ["CIOptions", "evaluate_to_folder"]
 
 log = logging.getLogger(__name__)
 
@@ -46,15 +47,6 @@ class CIOptions:
     resamples: int = 1000
     block: int | None = 16
     seed: int = 0
-
-
-def replace_folder(tmp: Path, final: Path) -> None:
-    """Move the finished folder ``tmp`` to ``final``, replacing an existing ``final`` as a whole."""
-    if final.exists():
-        old = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".old", dir=final.parent))
-        os.replace(final, old / final.name)
-        shutil.rmtree(old, ignore_errors=True)
-    os.replace(tmp, final)
 
 
 def evaluate_to_folder(methods: Sequence[Method], scenes: Sequence[Scene], out: str | Path, *,
@@ -78,16 +70,32 @@ def evaluate_to_folder(methods: Sequence[Method], scenes: Sequence[Scene], out: 
     out = Path(out)
     if label is not None and len(methods) != 1:
         raise ValueError("label= names the records of a single method")
+    with staged_outputs(out) as outputs:  # OUT checked and its staging folder made before any work
+        results, staged = _run_into(outputs.stage, methods, scenes, rules=rules, metrics=metrics,
+                                    all_metrics=all_metrics, more=more, label=label, on_prediction=on_prediction,
+                                    save_maps=save_maps, figures=figures, ci=ci, uncertainty=uncertainty,
+                                    tables=tables, meta=meta, progress=progress)
+        outputs.commit([p.relative_to(outputs.stage).parts[0] for p in staged])
+    results.files = [outputs.final(p) for p in staged]
+    return results
+
+
+def _run_into(stage: Path, methods: Sequence[Method], scenes: Sequence[Scene], *, rules: ScoringRules,
+              metrics: Sequence[Metric] | None, all_metrics: bool,
+              more: Sequence[tuple[Sequence[Method], Sequence[Scene]]], label: str | None,
+              on_prediction: PredictionHook | None, save_maps: bool, figures: bool, ci: CIOptions | None,
+              uncertainty: bool, tables: bool, meta: Mapping[str, Any] | None,
+              progress: bool) -> tuple[Results, list[Path]]:
+    """The work of :func:`evaluate_to_folder`, writing into the staging folder ``stage``; returns the
+    results and every file and folder written (paths in ``stage``)."""
     hooks: list[PredictionHook] = [] if on_prediction is None else [on_prediction]
     if save_maps:
-        hooks.append(save_prediction(out / "maps"))
-    tmp_fig = None
+        hooks.append(save_prediction(stage / "maps"))
     if figures:
         from lfbench.reports.figures import scene_figure_hook
 
-        out.mkdir(parents=True, exist_ok=True)
-        tmp_fig = Path(tempfile.mkdtemp(prefix=f".{FIGURES_DIR}.", suffix=".tmp", dir=out))
-        hooks.append(scene_figure_hook(tmp_fig, rules=rules))
+        (stage / FIGURES_DIR).mkdir()
+        hooks.append(scene_figure_hook(stage / FIGURES_DIR, rules=rules))
     collector = rater = None
     if ci is not None:
         from lfbench.scoring.stats import ErrorCollector
@@ -111,29 +119,22 @@ def evaluate_to_folder(methods: Sequence[Method], scenes: Sequence[Scene], out: 
         chosen = functools.partial(applicable_metrics, rules=rules)
     run = functools.partial(evaluate, metrics=chosen, rules=rules, on_prediction=each_prediction if hooks else None,
                             progress=progress)
-    try:
-        results = run(methods, scenes)
-        for group_methods, group_scenes in more:
-            results.extend(run(group_methods, group_scenes))
-        if tmp_fig is not None:
-            replace_folder(tmp_fig, out / FIGURES_DIR)
-            tmp_fig = None
-    finally:
-        if tmp_fig is not None:
-            shutil.rmtree(tmp_fig, ignore_errors=True)
+    results = run(methods, scenes)
+    for group_methods, group_scenes in more:
+        results.extend(run(group_methods, group_scenes))
     if label is not None:
         results.records = [replace(r, method=label) for r in results.records]
         results.runs = [replace(r, method=label) for r in results.runs]
     results.meta.update(meta or {})
-    files: list[Path] = list(results.write(out))
+    files: list[Path] = list(results.write(stage))
     if figures:
-        files.append(out / FIGURES_DIR)
-    if save_maps:
-        files.append(out / "maps")
+        files.append(stage / FIGURES_DIR)
+    if save_maps and (stage / "maps").exists():
+        files.append(stage / "maps")
     if tables:
         from lfbench.reports.tables import write_tables
 
-        files += write_tables(results, out)
+        files += write_tables(results, stage)
     if collector is not None:
         from lfbench.reports.tables import write_table
         from lfbench.scoring.stats import ci_records, format_ci_table
@@ -141,14 +142,13 @@ def evaluate_to_folder(methods: Sequence[Method], scenes: Sequence[Scene], out: 
 
         long = ci_records(results, collector.errors, n=ci.resamples, seed=ci.seed, block=ci.block,
                           progress=progress)
-        write_text(out / "ci.csv", long.to_csv(index=False))
-        files.append(out / "ci.csv")
-        files += write_table(format_ci_table(long), out, "table_ci_per_scene")
+        write_text(stage / "ci.csv", long.to_csv(index=False))
+        files.append(stage / "ci.csv")
+        files += write_table(format_ci_table(long), stage, "table_ci_per_scene")
     if rater is not None:
         from lfbench.scoring.uncertainty import write_uncertainty_report
 
-        files += write_uncertainty_report(rater, out)
+        files += write_uncertainty_report(rater, stage)
         for name in sorted(rater.without):
             log.info("note: %s predicts no uncertainty map; not rated", name)
-    results.files = files
-    return results
+    return results, files
