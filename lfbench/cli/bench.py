@@ -14,6 +14,7 @@ Examples:
   lfbench bench inference --interval 1 0.5 0.25 0.1 --precision fp32 bf16 --json grid.json
   lfbench bench volume --size 512 --method gather grid_sample
   lfbench bench train --width 150 16 --batch 2
+  lfbench bench train --width 16 --batch 4 --path reference fast --rounds 2   # the training speed-up
   lfbench bench suite --quick --json quick.json
   lfbench bench inference --device cuda --interval 0.5 0.1 --precision fp32 bf16
 
@@ -88,6 +89,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     t.add_argument("--steps", type=int, default=2)
     t.add_argument("--interval", type=float, default=None)
     t.add_argument("--no-channels-last", action="store_true")
+    t.add_argument("--path", nargs="+", default=["fast"], choices=["fast", "reference"],
+                   help="training path(s): fast (what lfbench train runs) and/or reference (the original ops)")
+    t.add_argument("--rounds", type=int, default=1,
+                   help="run the width x path cases this many times, interleaved (before/after under the same load)")
     _device_option(t)
     _common(t)
     m = sub.add_parser("metrics", help="the metric engine over synthetic scenes x methods")
@@ -184,8 +189,9 @@ def _cases(args: argparse.Namespace) -> list[tuple[str, dict]]:
                                                              else None)
         interval = _given(trainable, "interval", None if args.interval is None else [args.interval])[0]
         cases = [("train", {**_with(net, width=w, interval=interval), "batch": args.batch, "patch": args.patch,
-                            "steps": args.steps, "channels_last": not args.no_channels_last, **th})
-                 for w in _given(trainable, "width", widths)]
+                            "steps": args.steps, "channels_last": not args.no_channels_last, "path": path, **th})
+                 for _ in range(max(1, args.rounds)) for w in _given(trainable, "width", widths)
+                 for path in args.path]
     elif which == "metrics":
         cases = [("metrics", {"scenes": args.scenes, "methods": args.methods, "size": args.size,
                               "repeat": args.repeat})]
@@ -201,8 +207,9 @@ def _line(record: dict) -> str:
         return f"[{record.get('bench')}] error: {record['error']}"
     if "skipped" in record:
         return f"[{record.get('bench')}] {record.get('precision', '')} skipped: {record['skipped']}"
-    keys = [k for k in ("size", "interval", "precision", "method", "width", "batch", "seconds", "peak_memory_gb",
-                        "gflops_per_s", "gb_per_s", "steps_per_s", "scores_per_s") if k in record]
+    keys = [k for k in ("size", "interval", "precision", "method", "width", "batch", "path", "seconds",
+                        "peak_memory_gb", "gflops_per_s", "gb_per_s", "steps_per_s", "cpu_seconds", "scores_per_s")
+            if k in record]
     load = (record.get("machine") or {}).get("load_average")
     return f"[{record['bench']}] " + ", ".join(f"{k} {_fmt(record[k])}" for k in keys) + f" (load {load})"
 

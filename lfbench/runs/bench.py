@@ -16,7 +16,8 @@ Benches (each returns one record, a dict). lfbench's own time the network of any
 - ``inference``: one H x W scene through ``Trainable.infer`` (random weights unless a checkpoint is given;
   SubFocal: the paper network, width 150, tiles from ``max_memory_gb``): seconds, peak memory, achieved
   GFLOP/s when the trainable counts its FLOPs (halos not counted), the phases it reports;
-- ``train``: optimizer steps per second (Adam + L1 on random patches, training mode, channels-last);
+- ``train``: optimizer steps per second (Adam + L1 on random patches, training mode, channels-last), on the
+  fast training path or the ``reference`` one (the original ops: the before/after of the speed-up);
 - ``metrics``: the metric engine (``lfbench.scoring.rules.score_scene``, general metrics) over synthetic scenes
   x methods written in the HCI layout.
 
@@ -271,17 +272,27 @@ def bench_inference(size: int = 512, precision: str = "fp32", *, model: str = DE
 
 
 def bench_train(batch: int = 2, patch: int = 32, steps: int = 2, channels_last: bool = True, threads: int = 0,
-                seed: int = 0, *, model: str = DEFAULT_MODEL, device: str = "cpu", **params: Any) -> dict:
+                seed: int = 0, *, model: str = DEFAULT_MODEL, device: str = "cpu", path: str = "fast",
+                **params: Any) -> dict:
     """Training steps per second: the network (``params`` over its defaults) in training mode, Adam (lr 1e-3,
     eps 1e-7) on an L1 loss of its disparity for random (batch, N, patch, patch) views against random
-    disparities in [-4, 4); one warm-up step, then ``steps``."""
+    disparities in [-4, 4); one warm-up step, then ``steps``. ``path``: ``fast`` (what ``lfbench train``
+    runs) or ``reference`` (a network's original training ops, ``set_training_path("reference")``, with
+    glibc's default heap: the "before" of the training speed-up)."""
     import torch
 
     from lfbench.training.loop import to_channels_last
+    from lfbench.utils.malloc import retain_freed_memory
 
     set_threads(threads)
     dev = case_device(device)
     trainable, net = _network(model, params, None, seed)
+    if path != "fast" and not hasattr(net, "set_training_path"):
+        raise SpecError(f"{model} has no {path!r} training path; only SubFocal-style networks have one")
+    if hasattr(net, "set_training_path"):
+        net.set_training_path(path)
+    if path == "fast":
+        retain_freed_memory()  # as lfbench train does
     net = net.to(dev).train()
     if channels_last:
         to_channels_last(net)
@@ -306,7 +317,7 @@ def bench_train(batch: int = 2, patch: int = 32, steps: int = 2, channels_last: 
     sync(dev)
     seconds = (time.perf_counter() - t) / max(1, steps)
     cpu = (cpu_seconds() - cpu0) / max(1, steps)
-    record = {"bench": "train", "model": model, **params, "batch": batch, "patch": patch,
+    record = {"bench": "train", "model": model, **params, "batch": batch, "patch": patch, "path": path,
               "channels_last": channels_last, "steps": max(1, steps), "seconds": seconds, "seconds_per_step": seconds,
               "steps_per_s": 1.0 / seconds, "cpu_seconds": cpu, **memory_fields(dev, baseline),
               "precision": "fp32"}
@@ -460,8 +471,8 @@ _COLUMNS = {
     "inference": ["size", "interval", "precision", "seconds", "peak_memory_gb", "gflops_per_s", "fraction_of_peak",
                   "fraction_of_peak_cpu", "floor_s", "ratio_to_floor", "tile", "tiles", "phases_s"],
     "volume": ["size", "interval", "precision", "method", "seconds", "volume_gb", "gb_per_s", "peak_memory_gb"],
-    "train": ["width", "batch", "patch", "seconds_per_step", "steps_per_s", "gflops_per_s", "fraction_of_peak",
-              "fraction_of_peak_cpu", "peak_memory_gb"],
+    "train": ["width", "batch", "patch", "path", "seconds_per_step", "steps_per_s", "cpu_seconds", "gflops_per_s",
+              "fraction_of_peak", "fraction_of_peak_cpu", "peak_memory_gb"],
     "metrics": ["scenes", "methods", "size", "seconds", "scores_per_s", "mpixels_per_s", "peak_memory_gb"],
 }
 

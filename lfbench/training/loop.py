@@ -52,6 +52,7 @@ from lfbench.training.losses import make_loss
 from lfbench.training.validate import validate
 from lfbench.utils.atomic import write_text
 from lfbench.utils.errors import DataError, LFBenchError, SpecError
+from lfbench.utils.malloc import retain_freed_memory
 from lfbench.utils.threads import torch_threads
 
 # Settings that may change between a run and its resumption (they do not change the result).
@@ -614,6 +615,7 @@ def train(cfg: TrainConfig, out: str | Path, *, require_checkpoint: bool = False
 
     Run under torchrun for data-parallel training; every process calls this function.
     """
+    retain_freed_memory()  # fewer page faults per step (glibc); results unchanged
     with torch_threads(None):  # the run sets its own thread count; the caller's comes back afterwards
         ctx = setup(cfg.training.device)
         try:

@@ -7,8 +7,12 @@ disparity (B, H, W) in px per view step.
 
 Eval mode without autograd (``torch.no_grad`` / ``torch.inference_mode``) runs the fast path of
 methods/subfocal/fast.py (folded BatchNorm, channels-last, fused oneDNN ops; the bilinear cost
-volume gathered from interpolated maps): the same results up to float rounding. Training, and eval
-with autograd on, run the layer-by-layer modules below; ``net.fast_inference = False`` forces them.
+volume gathered from interpolated maps): the same results up to float rounding. Eval with autograd
+on runs the layer-by-layer modules below; ``net.fast_inference = False`` forces them. Training runs
+them with three faster equivalents (``set_training_path("reference")`` turns them off): per-view
+BatchNorm as one fused autograd function on the channels-last memory, the one-channel stem
+convolution as a grouped convolution, and the bilinear volume gathered with its attention applied
+to the interpolated maps (methods/subfocal/volume.py).
 
 Conventions taken from Keras: BatchNorm eps 1e-3 and momentum 0.99 (PyTorch momentum 0.01),
 glorot_uniform kernels, zero biases, 'same' average pooling that leaves padded cells out of the
@@ -37,6 +41,71 @@ MAX_ANGULAR = 15  # views per angular row (HCI: 9)
 SPP_POOLS = (2, 4, 8, 16)
 
 
+def _tile_rows(length: int, limit: int = 64) -> int:
+    """The largest power of two <= ``limit`` dividing ``length``: rows of (L, C) folded into one (L/K, K*C) row,
+    so that per-channel broadcasts run over long contiguous rows instead of C-element ones."""
+    k = limit
+    while k > 1 and length % k:
+        k //= 2
+    return k
+
+
+class _ViewBatchNormFn(torch.autograd.Function):
+    """Training-mode batch norm of G groups at once, with its closed-form backward.
+
+    x (G, L, C) float32 (L = samples x pixels of one group, C channels innermost: the memory of a
+    channels-last (G * B, C, H, W) activation), gamma, beta (C,). Returns y (G, L, C), and (not
+    differentiable) the per-group mean and biased variance (G, C). Statistics in two passes (mean, then
+    the mean square of x - mean) with the rows folded K at a time into (G, L/K, K*C), so every pass is a
+    plain reduction or a long contiguous broadcast; the backward is BatchNorm's
+    dx = gamma / sigma * (dy - mean(dy) - xhat * mean(dy * xhat)) as two fused multiply-adds.
+    """
+
+    @staticmethod
+    def forward(ctx, x: torch.Tensor, gamma: torch.Tensor, beta: torch.Tensor, eps: float):  # type: ignore[override]
+        ctx.dtype = x.dtype
+        if x.dtype in (torch.float16, torch.bfloat16):
+            x = x.float()  # statistics in float32 under autocast (the next convolution casts again)
+        g, length, c = x.shape
+        k = _tile_rows(length)
+        xr = x.reshape(g, length // k, k * c)
+
+        def channel_sum(t: torch.Tensor) -> torch.Tensor:  # (G, L/K, K*C) -> (G, 1, C)
+            return t.sum(1).reshape(g, k, c).sum(1, keepdim=True)
+
+        mean = channel_sum(xr) / length  # (G, 1, C)
+        centred = xr - mean.repeat(1, 1, k)
+        var = channel_sum(centred * centred) / length
+        invstd = torch.rsqrt(var + eps)
+        scale = (gamma.reshape(1, 1, c) * invstd).repeat(1, 1, k)
+        y = torch.addcmul(beta.repeat(k), centred, scale)
+        ctx.save_for_backward(centred, invstd, gamma)
+        ctx.k = k
+        mean_out, var_out = mean.reshape(g, c), var.reshape(g, c)
+        ctx.mark_non_differentiable(mean_out, var_out)
+        return y.reshape(g, length, c), mean_out, var_out
+
+    @staticmethod
+    def backward(ctx, dy: torch.Tensor, *_):  # type: ignore[override]
+        centred, invstd, gamma = ctx.saved_tensors
+        g, rows, kc = centred.shape
+        k = ctx.k
+        c, length = kc // k, rows * ctx.k
+        dyr = dy.to(centred.dtype).reshape(g, rows, kc)
+
+        def channel_sum(t: torch.Tensor) -> torch.Tensor:
+            return t.sum(1).reshape(g, k, c).sum(1, keepdim=True)
+
+        sum_dy = channel_sum(dyr)  # (G, 1, C)
+        sum_dy_centred = channel_sum(dyr * centred)
+        k1 = gamma.reshape(1, 1, c) * invstd  # dx = k1 dy + k2 centred + k3
+        k2 = -k1 * invstd * invstd * sum_dy_centred / length
+        k3 = -k1 * sum_dy / length
+        dx = torch.addcmul(k3.repeat(1, 1, k), dyr, k1.repeat(1, 1, k)).addcmul_(centred, k2.repeat(1, 1, k))
+        dgamma = (invstd * sum_dy_centred).sum((0, 1))
+        return dx.reshape(g, length, c).to(ctx.dtype), dgamma, sum_dy.sum((0, 1)), None
+
+
 class ViewBatchNorm2d(nn.BatchNorm2d):
     """BatchNorm2d whose training statistics are taken per view group.
 
@@ -44,7 +113,13 @@ class ViewBatchNorm2d(nn.BatchNorm2d):
     every group is normalised with its own mean and biased variance, and the running statistics
     receive G successive exponential updates (unbiased variance), group 0 first, in closed form.
     In eval mode (or with one group) this is a plain BatchNorm2d.
+
+    ``reference = True`` computes the training statistics with separate elementwise ops (the original
+    implementation, kept for the tests and the ``reference`` training bench); the default is
+    :class:`_ViewBatchNormFn` on the channels-last memory (the same numbers up to float rounding).
     """
+
+    reference = False
 
     def forward(self, x: torch.Tensor, groups: int = 1) -> torch.Tensor:  # type: ignore[override]
         if not self.training or groups <= 1:
@@ -52,21 +127,37 @@ class ViewBatchNorm2d(nn.BatchNorm2d):
         gb, c, h, w = x.shape
         if gb % groups:
             raise ValueError(f"batch {gb} is not a multiple of {groups} view groups")
+        if self.reference:
+            out, mean, var = self._reference_forward(x, groups)
+        else:
+            # (G * B, C, H, W) channels-last is (G, B * H * W, C) in memory: a view, not a copy.
+            y, mean, var = _ViewBatchNormFn.apply(x.permute(0, 2, 3, 1).reshape(groups, -1, c), self.weight,
+                                                  self.bias, self.eps)
+            out = y.reshape(gb, h, w, c).permute(0, 3, 1, 2)
+        self._update_running(mean, var, (gb // groups) * h * w, groups)
+        return out
+
+    def _reference_forward(self, x: torch.Tensor, groups: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        gb, c, h, w = x.shape
         xg = x.reshape(groups, gb // groups, c, h, w)
         var, mean = torch.var_mean(xg, dim=(1, 3, 4), unbiased=False)  # (G, C)
         out = (xg - mean[:, None, :, None, None]) * torch.rsqrt(var + self.eps)[:, None, :, None, None]
         out = out * self.weight[None, None, :, None, None] + self.bias[None, None, :, None, None]
-        if self.track_running_stats and self.running_mean is not None:
-            with torch.no_grad():
-                n = xg[0].numel() // c
-                unbiased = var * (n / max(n - 1, 1))
-                m = self.momentum if self.momentum is not None else 0.1
-                # m_G = (1-m)^G m_0 + sum_g m (1-m)^(G-1-g) s_g: the sequential updates, group 0 first.
-                decay = (1.0 - m) ** torch.arange(groups - 1, -1, -1, device=x.device, dtype=var.dtype)
-                self.running_mean.mul_((1.0 - m) ** groups).add_((m * decay[:, None] * mean).sum(0))
-                self.running_var.mul_((1.0 - m) ** groups).add_((m * decay[:, None] * unbiased).sum(0))
-                self.num_batches_tracked.add_(groups)
-        return out.reshape(gb, c, h, w)
+        return out.reshape(gb, c, h, w), mean, var
+
+    def _update_running(self, mean: torch.Tensor, var: torch.Tensor, n: int, groups: int) -> None:
+        """G successive running-statistics updates from per-group mean and biased variance (G, C) of n values."""
+        if not self.track_running_stats or self.running_mean is None:
+            return
+        with torch.no_grad():
+            mean, var = mean.detach(), var.detach()
+            unbiased = var * (n / max(n - 1, 1))
+            m = self.momentum if self.momentum is not None else 0.1
+            # m_G = (1-m)^G m_0 + sum_g m (1-m)^(G-1-g) s_g: the sequential updates, group 0 first.
+            decay = (1.0 - m) ** torch.arange(groups - 1, -1, -1, device=mean.device, dtype=var.dtype)
+            self.running_mean.mul_((1.0 - m) ** groups).add_((m * decay[:, None] * mean).sum(0))
+            self.running_var.mul_((1.0 - m) ** groups).add_((m * decay[:, None] * unbiased).sum(0))
+            self.num_batches_tracked.add_(groups)
 
 
 class ConvBN2d(nn.Module):
@@ -77,8 +168,20 @@ class ConvBN2d(nn.Module):
         self.conv = nn.Conv2d(cin, cout, kernel, padding=dilation * (kernel // 2), dilation=dilation, bias=False)
         self.bn = ViewBatchNorm2d(cout, eps=BN_EPS, momentum=BN_MOMENTUM)
 
+    reference = False  # see SubFocalNet.set_training_path
+
     def forward(self, x: torch.Tensor, groups: int = 1) -> torch.Tensor:
-        return self.bn(self.conv(x), groups)
+        if self.training and not self.reference and self.conv.in_channels == 1 and x.shape[0] > 1:
+            # One input channel: the M images as the channels of one image, one group each (the kernel
+            # repeated M times, so its gradient is the sum over them): oneDNN runs this 3-4x faster
+            # than a batch of M single-channel images.
+            m, _, h, w = x.shape
+            c = self.conv
+            y = F.conv2d(x.reshape(1, m, h, w), c.weight.repeat(m, 1, 1, 1), None, padding=c.padding,
+                         dilation=c.dilation, groups=m).reshape(m, -1, h, w)
+        else:
+            y = self.conv(x)
+        return self.bn(y, groups)
 
 
 class BasicBlock2d(nn.Module):
@@ -268,6 +371,7 @@ class SubFocalNet(nn.Module):
         self.reset_parameters()
 
     fast_inference = True  # eval mode without autograd takes methods/subfocal/fast.py
+    reference = False  # set_training_path("reference"): the original training ops
 
     def config(self) -> dict:
         """The constructor keyword arguments (stored in checkpoints)."""
@@ -291,6 +395,19 @@ class SubFocalNet(nn.Module):
         out = {"extractor": ext * n, "attention": att, "aggregation": agg}
         out["total"] = sum(out.values())
         return out
+
+    TRAINING_PATHS = ("fast", "reference")
+
+    def set_training_path(self, path: str) -> SubFocalNet:
+        """``fast`` (default): training runs the fused per-view BatchNorm, the grouped stem convolution and
+        the gathered cost volume; ``reference``: the original layer-by-layer ops (same results up to float
+        rounding; kept for the equivalence tests and as the "before" of ``lfbench bench train``)."""
+        if path not in self.TRAINING_PATHS:
+            raise ValueError(f"Unknown training path {path!r}. Available: {', '.join(self.TRAINING_PATHS)}")
+        for m in self.modules():
+            if hasattr(type(m), "reference"):
+                m.reference = path == "reference"
+        return self
 
     def uses_fast_path(self) -> bool:
         """True when a call now takes the fast path: eval mode, autograd off, ``fast_inference``."""
@@ -356,11 +473,29 @@ class SubFocalNet(nn.Module):
 
             h, w = views.shape[-2:]
             return self.regress(eval_cost(self, views.float(), h, w, halo=0, max_memory_gb=1e6))
-        vol = self.cost_volume(self.features(views))
+        features = self.features(views)
+        if self.training and self.interpolation == "bilinear" and not self.reference:
+            # Training: the volume gathered from interpolated maps, its channel means from the features,
+            # the attention applied to the maps (methods/subfocal/volume.py): the same numbers.
+            from lfbench_methods.subfocal.volume import GatheredVolume
+
+            gathered = GatheredVolume(self._shift_plan(), features)
+            vol = gathered.volume(self.attention_weights(gathered.channel_mean()))
+            return self.regress(self.aggregation(vol))
+        vol = self.cost_volume(features)
         weights = self.attention_weights(vol.mean(dim=(2, 3, 4)))
         if weights is not None:
             vol = vol * weights[:, :, None, None, None]
         return self.regress(self.aggregation(vol))
+
+    def _shift_plan(self):
+        """The bilinear :class:`~lfbench_methods.subfocal.fast.ShiftPlan` of this grid (cached; config-only)."""
+        plan = self.__dict__.get("_plan_cache")
+        if plan is None:
+            from lfbench_methods.subfocal.fast import net_shift_plan
+
+            plan = self.__dict__["_plan_cache"] = net_shift_plan(self)
+        return plan
 
 
 def count_trainable(module: nn.Module) -> int:
