@@ -6,6 +6,10 @@ Layout (every table optional except ``[[stages]]``; defaults are the authors' se
     seed = 42
     out = "runs/name"                       # default output folder (--out overrides)
     method = "subfocal"                     # the registered trainable network (lfbench.method.trainable)
+    init = "runs/small/final.pt"            # optional: start from these weights (exported format, e.g. a
+                                            # final.pt / best.pt / stage*.pt or methods/weights/*.pt) instead
+                                            # of a random initialisation; [model] may change what the weights'
+                                            # shapes do not fix (interval, interpolation); only a new run reads it
 
     [data]
     roots = ["${LFBENCH_HCI_ROOT}"]         # HCI-layout roots (ROOT/<category>/<scene>)
@@ -149,6 +153,7 @@ class TrainConfig:
     training: TrainingConfig = field(default_factory=TrainingConfig)
     validation: ValidationConfig = field(default_factory=ValidationConfig)
     method: str = DEFAULT_TRAINABLE
+    init: str | None = None  # weights the first stage starts from (None: a fresh initialisation)
     source: str | None = field(default=None, compare=False)
 
     def to_dict(self) -> dict[str, Any]:
@@ -159,6 +164,8 @@ class TrainConfig:
         d.pop("source", None)
         if d["method"] == DEFAULT_TRAINABLE:
             del d["method"]
+        if d["init"] is None:  # left out, so configs and fingerprints from before the key stay the same
+            del d["init"]
         for st in d["stages"]:  # the TOML layout: loss parameters beside the stage's keys
             st.update(st.pop("loss_params"))
         return d
@@ -257,6 +264,7 @@ def _parse(raw: dict[str, Any], source: str | None) -> TrainConfig:
     seed = top.number("seed", 42, low=0, integer=True)
     out = top.get("out", str, None)
     method = top.get("method", str, DEFAULT_TRAINABLE)
+    init = top.get("init", str, None)
     data = _parse_data(top.table("data"), source)
     augment = _parse_augment(top.table("augment"))
     model_t = top.table("model")
@@ -274,7 +282,7 @@ def _parse(raw: dict[str, Any], source: str | None) -> TrainConfig:
         raise SpecError(f"stage names must be unique, got {names}", source)
     _check_method(method, stages, source)
     return TrainConfig(stages=stages, seed=seed, out=out, data=data, augment=augment, model=model,
-                       training=training, validation=validation, method=method, source=source)
+                       training=training, validation=validation, method=method, init=init, source=source)
 
 
 def _check_method(method: str, stages: tuple[StageConfig, ...], source: str | None) -> None:

@@ -270,6 +270,20 @@ def to_channels_last(model: torch.nn.Module) -> torch.nn.Module:
     return model
 
 
+def load_init_weights(cfg: TrainConfig) -> tuple[Path, dict[str, torch.Tensor]]:
+    """(path, state_dict) of ``cfg.init``: exported weights (``{"state_dict", "config", ...}``, loaded with
+    weights_only=True); DataError naming the file when it is missing, unreadable or not in that format."""
+    path = expand_path(cfg.init, cfg.source) if cfg.init else None
+    if path is None:
+        raise SpecError("init: no weights file given", cfg.source)
+    payload = ckpt.load(path)
+    state = payload.get("state_dict")
+    if not isinstance(state, dict) or not all(isinstance(v, torch.Tensor) for v in state.values()):
+        raise DataError("init weights: not an exported weights file (no state_dict of tensors; use a final.pt, "
+                        "best.pt or stage*.pt of lfbench train)", path)
+    return path, state
+
+
 def build_model(cfg: TrainConfig) -> torch.nn.Module:
     """The config's trainable network built from [model]; SpecError naming the config for bad parameters."""
     from lfbench.method.trainable import get_trainable
@@ -307,6 +321,7 @@ class Trainer:
         self.elapsed_before = 0.0
         self.t0 = time.perf_counter()
         self.global_step = 0
+        self.init_info: dict | None = None  # {"path", "sha256"} of cfg.init once loaded (also kept on resume)
 
     # -- output ------------------------------------------------------------------------------
 
@@ -356,7 +371,7 @@ class Trainer:
             "model": {k: v.detach().cpu() for k, v in model.state_dict().items()},
             "optimizer": optimizer.state_dict() if optimizer is not None else None,
             "rng": ckpt.rng_state(), "elapsed_s": self.elapsed(), "world_size": self.ctx.world_size,
-            "best_badpix": self.best_badpix, "last_validation": self.last_validation,
+            "best_badpix": self.best_badpix, "last_validation": self.last_validation, "init": self.init_info,
         }
 
     def save_checkpoint(self, model, optimizer, stage: int, step: int) -> None:
@@ -383,9 +398,12 @@ class Trainer:
                             method=get_trainable(self.cfg.method).method_name, config=network_config(self.cfg, model))
 
     def training_info(self) -> dict:
-        return {"command": self.command, "config": self.cfg.to_dict(), "steps": self.global_step,
+        info = {"command": self.command, "config": self.cfg.to_dict(), "steps": self.global_step,
                 "elapsed_s": self.elapsed(), "world_size": self.ctx.world_size,
                 "validation": self.last_validation, "torch": str(torch.__version__)}
+        if self.init_info is not None:
+            info["init"] = self.init_info
+        return info
 
     # -- validation ----------------------------------------------------------------------------
 
@@ -426,6 +444,7 @@ class Trainer:
         agree_on_resume(ctx, position)  # every rank from the same step, or one error everywhere (no hang)
         if state is None and require_checkpoint:
             raise DataError("--resume given but there is no checkpoint to resume from", paths.checkpoint)
+        init = load_init_weights(cfg) if state is None and cfg.init else None  # checked before any work
         if state is not None and state["stage"] >= len(cfg.stages) and paths.final.is_file():
             self.log(f"{paths.out}: training already complete ({state['global_step']} steps); final weights in "
                      f"{paths.final}")
@@ -465,6 +484,12 @@ class Trainer:
             raise DataError(f"the scenes have {sampler.angular[0]}x{sampler.angular[1]} views, the model expects "
                             f"{angular}x{angular}", cfg.source)
         start_stage, start_step, opt_state = 0, 0, None
+        if init is not None:
+            path, weights = init
+            check_state_dict(weights, model.state_dict(), path, "init weights")
+            model.load_state_dict(weights)
+            self.init_info = {"path": str(path), "sha256": ckpt.state_sha256(weights)}
+            self.log(f"starting from the weights {path}")
         if state is not None:
             check_state_dict(state["model"], model.state_dict(), paths.checkpoint, "training checkpoint model")
             model.load_state_dict(state["model"])
@@ -477,6 +502,8 @@ class Trainer:
             self.elapsed_before = float(state["elapsed_s"])
             self.best_badpix = float(state["best_badpix"])
             self.last_validation = state["last_validation"]
+            init_info = state.get("init")
+            self.init_info = init_info if isinstance(init_info, dict) else None
             try:
                 ckpt.set_rng_state(state["rng"])
             except (KeyError, TypeError, ValueError, AttributeError, RuntimeError, IndexError):
