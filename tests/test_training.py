@@ -558,3 +558,77 @@ def test_ranks_resuming_from_different_steps_stop_with_one_error():
         agree_on_resume(TwoRanks("/x/checkpoint.pt: unreadable"), (1, 10, 10))
     with pytest.raises(DataError, match="unreadable"):  # one process: its own error, as before
         agree_on_resume(DistContext(), DataError("unreadable", "/x/checkpoint.pt"))
+
+
+# --------------------------------------------------------------------------- throughput options
+
+def test_dataloader_workers_give_the_same_batches_as_none(data_root, one_torch_thread):
+    """Each sample's generator is derived from (seed, stage, step, index): 0 and 2 workers, and a start in the
+    middle (a resume), give identical batches."""
+    from lfbench.training.loop import batch_source
+
+    cfg = tiny_config(data_root, batch_size=3)
+    sampler = PatchSampler([scene_data(data_root, "plane_a"), scene_data(data_root, "plane_b")], cfg.data,
+                           cfg.augment)
+
+    def batches(workers: int, start: int) -> list:
+        c = replace(cfg, training=replace(cfg.training, workers=workers))
+        src = batch_source(sampler, c, 0, start, 6, 0, 3)
+        try:
+            return [tuple(np.asarray(x) for x in src.get(step)) for step in range(start, 6)]
+        finally:
+            src.close()
+
+    plain, two = batches(0, 0), batches(2, 0)
+    assert len(plain) == len(two) == 6
+    for (v0, t0), (v2, t2) in zip(plain, two, strict=True):
+        np.testing.assert_array_equal(v0, v2)
+        np.testing.assert_array_equal(t0, t2)
+    for (v0, _), (v4, _) in zip(plain[4:], batches(2, 4), strict=True):  # resumed at step 4
+        np.testing.assert_array_equal(v0, v4)
+    assert not np.array_equal(plain[0][0], plain[1][0])  # the steps differ
+
+
+def test_throughput_options_parse_and_leave_old_fingerprints_alone(data_root):
+    cfg = tiny_config(data_root)
+    assert "workers" not in cfg.to_dict()["training"] and "precision" not in cfg.to_dict()["training"]
+    fast = tiny_config(data_root, workers=2, precision="bf16", tf32=True, cudnn_benchmark=True, pin_memory=False)
+    d = fast.to_dict()["training"]
+    assert (d["workers"], d["precision"], d["tf32"], d["cudnn_benchmark"], d["pin_memory"]) == (2, "bf16", True,
+                                                                                                   True, False)
+    assert TrainConfig.from_dict(fast.to_dict()) == fast
+    with pytest.raises(SpecError, match="precision"):
+        tiny_config(data_root, precision="fp16")
+
+
+def test_bf16_training_on_a_cpu_without_it_is_one_line(data_root, tmp_path, monkeypatch):
+    from lfbench.training.loop import train
+
+    monkeypatch.setenv("LFBENCH_FORCE_NO_BF16", "1")
+    with pytest.raises(SpecError, match="training.precision = 'bf16' needs bf16 convolutions.*lacks avx512bw"):
+        train(tiny_config(data_root, precision="bf16"), tmp_path / "bf16", progress=False)
+
+
+@pytest.mark.slow
+def test_bf16_autocast_and_workers_train(data_root, tmp_path, cpu_bf16):
+    """bf16 autocast trains (finite loss, weights that differ from fp32 only by bf16 rounding), and 2 DataLoader
+    workers give bit-identical weights to the prefetch thread."""
+    from lfbench.training.loop import train
+
+    base = {"validation": {"every": 0}, "stages": [{"name": "l1", "loss": "l1", "lr": 1e-3, "steps": 3}]}
+
+    def run(name: str, **training) -> dict:
+        cfg = tiny_config(data_root, **training)
+        cfg = TrainConfig.from_dict({**cfg.to_dict(), **base})
+        train(cfg, tmp_path / name, progress=False)
+        return load_state(tmp_path / name / "final.pt")
+
+    fp32, workers, bf16 = run("fp32"), run("workers", workers=2), run("bf16", precision="bf16")
+    for k in fp32["state_dict"]:
+        assert torch.equal(fp32["state_dict"][k], workers["state_dict"][k]), k
+    # Both start from the same weights and Adam moves a parameter by about lr per step: 3 steps of lr 1e-3 each
+    # keep every bf16 parameter within 2 x 3e-3 of the fp32 one; bf16 rounding makes them differ.
+    names = [n for n, _ in _net(fp32).named_parameters()]
+    diffs = [float((fp32["state_dict"][n] - bf16["state_dict"][n]).abs().max()) for n in names]
+    assert all(np.isfinite(diffs)) and 0 < max(diffs) <= 6.5e-3
+    assert all(torch.isfinite(v.float()).all() for v in bf16["state_dict"].values())

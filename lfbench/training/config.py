@@ -35,6 +35,8 @@ Layout (every table optional except ``[[stages]]``; defaults are the authors' se
     [training]
     batch_size = 32; accumulate = 1; threads = 0; device = "auto"
     checkpoint_every = 500; log_every = 50; prefetch = 2; channels_last = true
+    workers = 0; pin_memory = true          # DataLoader processes (batches identical for any number), pinned copies
+    precision = "fp32"; tf32 = false; cudnn_benchmark = false   # bf16 autocast, TF32, cuDNN autotuning
 
     [validation]
     every = 2000; max_size = 0; border = 15; threshold = 0.07
@@ -121,6 +123,17 @@ class TrainingConfig:
     log_every: int = 50
     prefetch: int = 2
     channels_last: bool = True  # conv weights/activations channels-last (2-3x faster convolutions on CPU)
+    workers: int = 0  # DataLoader processes making the batches (0: a prefetch thread); batches do not depend on it
+    pin_memory: bool = True  # page-locked batches and non-blocking copies to a CUDA device
+    precision: str = "fp32"  # or "bf16": autocast of the forward pass (CUDA, or a CPU with bf16 instructions)
+    tf32: bool = False  # allow TF32 in CUDA fp32 matmuls / convolutions (default: IEEE fp32)
+    cudnn_benchmark: bool = False  # let cuDNN time its algorithms per input shape (fixed patch size: faster)
+
+
+# Training keys added after configs and cell fingerprints were first written: left out of to_dict() at their
+# defaults, so that those stay the same (and old checkpoints resume).
+NEW_TRAINING_DEFAULTS = {"workers": 0, "pin_memory": True, "precision": "fp32", "tf32": False,
+                         "cudnn_benchmark": False}
 
 
 @dataclass(frozen=True)
@@ -166,6 +179,9 @@ class TrainConfig:
             del d["method"]
         if d["init"] is None:  # left out, so configs and fingerprints from before the key stay the same
             del d["init"]
+        for key, default in NEW_TRAINING_DEFAULTS.items():
+            if d["training"].get(key) == default:
+                del d["training"][key]
         for st in d["stages"]:  # the TOML layout: loss parameters beside the stage's keys
             st.update(st.pop("loss_params"))
         return d
@@ -375,8 +391,15 @@ def _parse_training(t: _Table) -> TrainingConfig:
         log_every=t.number("log_every", 50, low=1, integer=True),
         prefetch=t.number("prefetch", 2, low=0, high=64, integer=True),
         channels_last=t.get("channels_last", bool, True),
+        workers=t.number("workers", 0, low=0, high=256, integer=True),
+        pin_memory=t.get("pin_memory", bool, True),
+        precision=t.get("precision", str, "fp32"),
+        tf32=t.get("tf32", bool, False),
+        cudnn_benchmark=t.get("cudnn_benchmark", bool, False),
     )
     t.done()
+    if cfg.precision not in ("fp32", "bf16"):
+        t._fail("precision", f"expected 'fp32' or 'bf16', got {cfg.precision!r}")
     if cfg.device not in ("auto", "cpu") and not cfg.device.startswith("cuda"):
         t._fail("device", f"expected 'auto', 'cpu' or 'cuda', got {cfg.device!r}")
     return cfg

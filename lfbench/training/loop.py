@@ -24,6 +24,7 @@ gradients, and only rank 0 writes files.
 from __future__ import annotations
 
 import contextlib
+import functools
 import json
 import logging
 import os
@@ -52,13 +53,15 @@ from lfbench.training.losses import make_loss
 from lfbench.training.validate import validate
 from lfbench.utils.atomic import write_text
 from lfbench.utils.errors import DataError, LFBenchError, SpecError
+from lfbench.utils.hardware import require_bf16, set_fp32_numerics
 from lfbench.utils.malloc import retain_freed_memory
 from lfbench.utils.threads import torch_threads
 
 # Settings that may change between a run and its resumption (they do not change the result).
 RESUME_FREE_KEYS = (("out",), ("training", "threads"), ("training", "prefetch"), ("training", "log_every"),
                     ("training", "device"), ("training", "checkpoint_every"),
-                    ("training", "channels_last"))
+                    ("training", "channels_last"), ("training", "workers"), ("training", "pin_memory"),
+                    ("training", "cudnn_benchmark"))
 
 
 class TrainingInterrupted(LFBenchError):
@@ -230,6 +233,56 @@ class Prefetcher:
             for f in self.pending.values():
                 f.cancel()
             self.pool.shutdown(wait=True)
+
+
+class _StepBatches(torch.utils.data.Dataset):
+    """Item i: the batch of step start + i (samples first..first+count-1 of its global batch) as tensors."""
+
+    def __init__(self, sampler: PatchSampler, seed: int, stage: int, start: int, end: int, first: int,
+                 count: int) -> None:
+        self.args, self.start, self.end = (seed, stage, first, count), start, end
+        self.sampler = sampler
+
+    def __len__(self) -> int:
+        return max(0, self.end - self.start)
+
+    def __getitem__(self, i: int) -> tuple[torch.Tensor, torch.Tensor]:
+        seed, stage, first, count = self.args
+        views, target = self.sampler.sample(seed, stage, self.start + i, first, count)
+        return torch.from_numpy(views), torch.from_numpy(target)
+
+
+class LoaderBatches:
+    """Batches of steps start..end-1 made by ``workers`` DataLoader processes, in step order (the same interface
+    as :class:`Prefetcher`). Every sample's generator is derived from (seed, stage, step, index), so the
+    batches are the same for any number of workers, and a resumed run continues with the same batches."""
+
+    def __init__(self, sampler: PatchSampler, seed: int, stage: int, start: int, end: int, first_index: int,
+                 count: int, workers: int, pin_memory: bool = False, depth: int = 2) -> None:
+        data = _StepBatches(sampler, seed, stage, start, end, first_index, count)
+        self.loader = torch.utils.data.DataLoader(data, batch_size=None, shuffle=False, num_workers=workers,
+                                                  pin_memory=pin_memory, prefetch_factor=max(2, depth))
+        self.it = iter(self.loader)
+        self.next = start
+
+    def get(self, step: int) -> tuple[torch.Tensor, torch.Tensor]:
+        if step != self.next:
+            raise RuntimeError(f"batches are made in order: asked for step {step}, next is {self.next}")
+        self.next += 1
+        return next(self.it)
+
+    def close(self) -> None:
+        self.it = None  # the iterator's workers stop when it is released
+
+
+def batch_source(sampler: PatchSampler, cfg: TrainConfig, stage: int, start: int, end: int, first_index: int,
+                 count: int, pin_memory: bool = False):
+    """The batches of a stage: DataLoader workers when training.workers > 0, else the prefetch thread."""
+    tc = cfg.training
+    if tc.workers > 0:
+        return LoaderBatches(sampler, cfg.seed, stage, start, end, first_index, count, tc.workers, pin_memory,
+                             tc.prefetch)
+    return Prefetcher(sampler, cfg.seed, stage, start, end, first_index, count, tc.prefetch)
 
 
 class StopFlag:
@@ -513,6 +566,11 @@ class Trainer:
         model.to(ctx.device).train()
         if cfg.training.channels_last:
             to_channels_last(model)
+        if tc.precision == "bf16":
+            require_bf16(ctx.device, "training.precision = 'bf16'")  # one line on a CPU without bf16
+        if ctx.device.type == "cuda":
+            set_fp32_numerics(tf32=tc.tf32)  # IEEE fp32 unless training.tf32 = true
+            torch.backends.cudnn.benchmark = tc.cudnn_benchmark
 
         self.t0 = time.perf_counter()  # elapsed_s counts training (and validation), not data loading
         with self.stop.installed():
@@ -563,7 +621,10 @@ class Trainer:
         self.log(f"[{label}] loss {loss_fn.__name__}, Adam lr {st.lr:g} eps {st.eps:g}, {st.steps} steps of batch "
                  f"{tc.batch_size} ({ctx.world_size} process(es) x {tc.accumulate} micro-batch(es) of {micro}), "
                  f"patch {cfg.data.patch}, from step {step}")
-        batches = Prefetcher(sampler, cfg.seed, si, step, st.steps, ctx.rank * local_batch, local_batch, tc.prefetch)
+        pinned = tc.pin_memory and ctx.device.type == "cuda"
+        batches = batch_source(sampler, cfg, si, step, st.steps, ctx.rank * local_batch, local_batch, pinned)
+        autocast = (functools.partial(torch.autocast, ctx.device.type, dtype=torch.bfloat16)
+                    if tc.precision == "bf16" else contextlib.nullcontext)
         if not ctx.is_main:
             disable: bool | None = True
         else:
@@ -574,15 +635,20 @@ class Trainer:
         try:
             while step < st.steps:
                 views, target = batches.get(step)
-                v = torch.from_numpy(views).to(ctx.device)
-                t = torch.from_numpy(target).to(ctx.device)
+                v, t = torch.as_tensor(views), torch.as_tensor(target)
+                if pinned and not v.is_pinned():
+                    v, t = v.pin_memory(), t.pin_memory()
+                v = v.to(ctx.device, non_blocking=pinned)  # page-locked: the copy overlaps the GPU's work
+                t = t.to(ctx.device, non_blocking=pinned)
                 optimizer.zero_grad(set_to_none=True)
                 step_loss = 0.0
                 for m in range(tc.accumulate):
                     sl = slice(m * micro, (m + 1) * micro)
                     sync = contextlib.nullcontext() if (not ctx.enabled or m == tc.accumulate - 1) else net.no_sync()
                     with sync:
-                        disp, prob = net(v[sl])
+                        with autocast():  # bf16 forward when training.precision = 'bf16'; the loss in fp32
+                            disp, prob = net(v[sl])
+                        disp, prob = disp.float(), None if prob is None else prob.float()
                         loss = loss_fn(disp, prob, t[sl], disparities) / tc.accumulate
                         loss.backward()
                     step_loss += float(loss.detach())
