@@ -428,6 +428,7 @@ def test_submitit_local_executor_and_merged_cells_runs_give_the_jobs_1_results(t
 
     from lfbench.ablation.executor import ClusterOptions
 
+    pytest.importorskip("submitit", reason="the cluster path needs submitit (pip install -e '.[cluster]')")
     spec = load_spec(write_spec(tmp_path, TWO_CELLS))
     assert len(spec.cells) == 2
     one = run_ablation(spec, tmp_path / "jobs1", jobs=1, progress=False, log=quiet)
@@ -448,8 +449,9 @@ def test_submitit_local_executor_and_merged_cells_runs_give_the_jobs_1_results(t
     assert _records(tmp_path / "split" / "results.json") == _records(tmp_path / "jobs1" / "results.json")
 
 
-def test_each_worker_gets_its_own_gpu_round_robin(monkeypatch):
+def test_each_worker_gets_its_own_gpu_round_robin(monkeypatch, tmp_path):
     import queue
+    import sys
 
     from lfbench.ablation import executor
 
@@ -474,6 +476,9 @@ def test_each_worker_gets_its_own_gpu_round_robin(monkeypatch):
         torch.set_num_threads(threads)
     with pytest.raises(SpecError, match="Unknown executor 'pbs'. Available: local, slurm"):
         executor.ClusterOptions("pbs")
+    monkeypatch.setitem(sys.modules, "submitit", None)  # not installed
+    with pytest.raises(SpecError, match=r"--executor needs submitit: pip install -e \"\.\[cluster\]\""):
+        executor.make_executor(executor.ClusterOptions("local"), tmp_path, 1)
 
 
 def test_the_shared_stage1_waits_for_another_process_holding_its_lock(tmp_path, monkeypatch):

@@ -83,8 +83,8 @@ def make_executor(options: ClusterOptions, folder: Path, threads: int):
     """A submitit executor writing its logs and pickles under ``folder``."""
     try:
         import submitit
-    except ImportError:  # pragma: no cover - submitit is a dependency
-        raise SpecError("--executor needs submitit: pip install submitit") from None
+    except ImportError:
+        raise SpecError('--executor needs submitit: pip install -e ".[cluster]" (or pip install submitit)') from None
     if options.executor == "local":
         ex = submitit.LocalExecutor(folder=str(folder))
         ex.update_parameters(timeout_min=options.timeout_min, gpus_per_node=options.gpus_per_job,
