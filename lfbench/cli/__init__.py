@@ -14,7 +14,9 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import logging
 import sys
+import warnings
 from collections.abc import Sequence
 from types import ModuleType
 
@@ -92,16 +94,25 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.print_help()
         return 2
     configure_cli_logging(-1 if args.log_quiet else args.verbose)
-    try:
-        return int(args._run(args) or 0)
-    except LFBenchError as exc:
-        print(f"lfbench {args.command}: error: {exc}", file=sys.stderr)
-        return exc.exit_code
-    except KeyboardInterrupt:
-        print(f"lfbench {args.command}: interrupted", file=sys.stderr)
-        return 130
-    except BrokenPipeError:
-        return 0
+    with warnings.catch_warnings(record=True) as caught:  # library warnings (torch, Pillow): one line each,
+        warnings.simplefilter("default")                  # after the command; dropped when it fails
+        try:
+            rc = int(args._run(args) or 0)
+        except LFBenchError as exc:
+            print(f"lfbench {args.command}: error: {exc}", file=sys.stderr)
+            return exc.exit_code
+        except KeyboardInterrupt:
+            print(f"lfbench {args.command}: interrupted", file=sys.stderr)
+            return 130
+        except BrokenPipeError:
+            return 0
+        except OSError as exc:  # the system refused a read or write (disk full, permissions): one line too
+            where = f"{exc.filename}: " if exc.filename else ""
+            print(f"lfbench {args.command}: error: {where}{exc.strerror or exc}", file=sys.stderr)
+            return 2
+    for w in caught:
+        logging.getLogger("lfbench").warning("warning: %s", " ".join(str(w.message).split())[:300])
+    return rc
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -23,6 +23,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from lfbench.cli.argtypes import int_range
+
 HELP = ("train and score a grid of network variants (SubFocal's Tables IV, V, beta sweep, I/II beside the paper's "
         "numbers, or a plugin's network)")
 
@@ -31,7 +33,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("spec", type=Path, metavar="SPEC.toml", help="ablation spec (see ablations/*.toml)")
     p.add_argument("--out", type=Path, default=None,
                    help="output folder (default: the spec's 'out', else runs/ablate/<spec name>)")
-    p.add_argument("--jobs", type=int, default=1, metavar="N",
+    p.add_argument("--jobs", type=int_range(1, 1024), default=1, metavar="N",
                    help="cells trained at a time, each in its own process with cores / N torch threads")
     p.add_argument("--paper", default=None, metavar="DIR",
                    help="folder of the paper's tables (default: $LFBENCH_PAPER_DIR, else $LFBENCH_HCI_ROOT/../paper)")

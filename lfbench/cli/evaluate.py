@@ -9,6 +9,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from lfbench.cli.argtypes import int_range
+
 HELP = "score methods on HCI scenes (results.json, results.csv, tables)"
 
 
@@ -29,9 +31,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="also write each prediction as OUT/maps/<method>/ (submission layout)")
     p.add_argument("--ci", action="store_true",
                    help="also write 95%% bootstrap CIs: OUT/ci.csv and OUT/table_ci_per_scene.{md,tex,csv}")
-    p.add_argument("--ci-block", type=int, default=16, metavar="PX",
+    p.add_argument("--ci-block", type=int_range(1, 4096), default=16, metavar="PX",
                    help="tile size of the block bootstrap (1 = independent pixels; errors of neighbours correlate)")
-    p.add_argument("--ci-resamples", type=int, default=1000, metavar="N", help="bootstrap resamples")
+    p.add_argument("--ci-resamples", type=int_range(1, 10**6), default=1000, metavar="N", help="bootstrap resamples")
     p.add_argument("--figures", action="store_true", help="also draw per-scene figures into OUT/figures/")
     p.add_argument("--html", action="store_true",
                    help="also write a static HTML report OUT/html/index.html (implies --save-maps; opens offline)")

@@ -60,11 +60,13 @@ def run(args: argparse.Namespace) -> int:
 
     from lfbench.data.pfm import write_pfm
     from lfbench.method.registry import create_from_spec
+    from lfbench.runs.outputs import check_output_file
     from lfbench.utils.atomic import atomic_open
     from lfbench.utils.errors import DataError
 
     if args.out.suffix not in (".pfm", ".npy"):
         raise DataError("output must end in .pfm or .npy", args.out)
+    check_output_file(args.out)  # before the work
     method = create_from_spec(args.method, {"device": args.device})
     lf = load_input(args.input)
     reason = method.available_for(lf)

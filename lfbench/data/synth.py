@@ -699,9 +699,10 @@ class SyntheticScene:
 
 
 MAX_SYNTH_SIZE = 4096  # px per side of a generated view
+MAX_SYNTH_SCENES = 1000
 
 
-def _check_args(size: int, angular: int) -> None:
+def check_args(size: int, angular: int = 9) -> None:
     """SpecError for sizes outside the bounds, before anything is allocated."""
     from lfbench.data.params import MAX_CAMS, MAX_VIEW_PIXELS
 
@@ -737,7 +738,7 @@ def _visibility(layers: Sequence[Layer], x: np.ndarray, y: np.ndarray, lid: np.n
 def generate_scene(seed: int, size: int = 128, angular: int = 9, name: str | None = None,
                    category: str = "synthetic") -> SyntheticScene:
     """Generate one scene, deterministic in (seed, size, angular); ``size`` px square, A x A views."""
-    _check_args(size, angular)
+    check_args(size, angular)
     name = name or f"synth_{seed}"
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), int(size), int(angular)]))
     layers = layout_scene(rng, size, angular)
@@ -821,9 +822,9 @@ def write_benchmark(out: str | Path, seed: int = 0, size: int = 128, scenes: int
     leaves no half-written scene. An existing scene folder is an error unless ``force``; all
     destinations are checked before anything is generated.
     """
-    _check_args(size, angular)
-    if int(scenes) != scenes or scenes < 1:
-        raise SpecError(f"scenes must be a positive integer, got {scenes}")
+    check_args(size, angular)
+    if int(scenes) != scenes or not 1 <= scenes <= MAX_SYNTH_SCENES:
+        raise SpecError(f"scenes must be an integer from 1 to {MAX_SYNTH_SCENES}, got {scenes}")
     cats = [category] * scenes if isinstance(category, str) else list(category)
     if len(cats) != scenes:
         raise SpecError(f"{len(cats)} categories given for {scenes} scenes")

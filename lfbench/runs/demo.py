@@ -67,6 +67,9 @@ def prepare_data(out: Path, seed: int, size: int, scenes: int, log: Log = _log.i
     a demo folder. Data are generated into a temporary folder (manifest included) and renamed into
     place when complete, so an interrupted run leaves nothing that a later run would reuse.
     """
+    from lfbench.data.synth import check_args
+
+    check_args(size)  # before any message or folder
     out = Path(out)
     root = out / DATA_DIR
     wanted = data_settings(seed, size, scenes)

@@ -23,7 +23,8 @@ from pathlib import Path
 from lfbench.utils.atomic import write_text
 from lfbench.utils.errors import DataError, LFBenchError
 
-__all__ = ["JOURNAL", "MANIFEST", "OutputSet", "check_complete", "recover", "staged_outputs"]
+__all__ = ["JOURNAL", "MANIFEST", "OutputSet", "check_complete", "check_output_file", "prepare_output_folder",
+           "recover", "staged_outputs"]
 
 STAGE_PREFIX = ".lfbench-stage."
 JOURNAL = ".lfbench-commit.json"
@@ -38,6 +39,7 @@ class OutputSet:
 
     def __init__(self, out: str | Path) -> None:
         self.out = Path(out)
+        self.created = not self.out.exists()  # removed again by abort() when the run writes nothing
         prepare_output_folder(self.out)
         recover(self.out)
         try:
@@ -69,6 +71,9 @@ class OutputSet:
         the staging folder and journal stay for the next run to roll forward."""
         if not self.committed:
             shutil.rmtree(self.stage, ignore_errors=True)
+            if self.created:
+                with contextlib.suppress(OSError):
+                    self.out.rmdir()  # only if empty
 
 
 def prepare_output_folder(out: Path) -> None:
@@ -81,6 +86,15 @@ def prepare_output_folder(out: Path) -> None:
         raise DataError(f"cannot create the output folder: {exc.strerror or exc}", out) from None
     if not os.access(out, os.W_OK | os.X_OK):
         raise DataError("output folder is not writable", out)
+
+
+def check_output_file(path: str | Path) -> None:
+    """DataError unless ``path`` can be written as a file: not a folder, its folder creatable and
+    writable. Checked before the work, so that minutes of computing are not lost to a typo."""
+    path = Path(path)
+    if path.is_dir():
+        raise DataError("is a folder, expected a file path", path)
+    prepare_output_folder(path.parent)
 
 
 @contextlib.contextmanager

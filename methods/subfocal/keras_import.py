@@ -43,18 +43,46 @@ def _decode(v) -> str:
     return v.decode() if isinstance(v, bytes) else str(v)
 
 
-def _layer_arrays(group, path: Path) -> dict[str, np.ndarray]:
-    """{'kernel': ..., 'gamma': ...} of one layer group (weights sit in a sub-group of the same name)."""
+MAX_KERAS_BYTES = 2 * 1024**3  # all weight arrays of one checkpoint together (the paper model: ~20 MB)
+
+
+def _links(group, path: Path) -> list[tuple[str, object]]:
+    """(name, object) of a group's members, refusing links that are not hard links: an external link
+    would make h5py open another file (anything on disk), a soft link may dangle or loop."""
+    import h5py
+
+    out = []
+    for name in group.keys():
+        link = group.get(name, getlink=True)
+        if isinstance(link, h5py.ExternalLink):
+            raise DataError(f"HDF5 member {group.name}/{name} is an external link to another file (not allowed)", path)
+        if isinstance(link, h5py.SoftLink):
+            raise DataError(f"HDF5 member {group.name}/{name} is a soft link (not allowed in a checkpoint)", path)
+        out.append((name, group[name]))
+    return out
+
+
+def _layer_arrays(group, path: Path, budget: list[int]) -> dict[str, np.ndarray]:
+    """{'kernel': ..., 'gamma': ...} of one layer group (weights sit in a sub-group of the same name),
+    following hard links only; every array's size is checked against ``budget`` (bytes left) before
+    it is read."""
     import h5py
 
     out: dict[str, np.ndarray] = {}
-
-    def visit(name: str, obj) -> None:
-        if isinstance(obj, h5py.Dataset):
-            key = name.rsplit("/", 1)[-1].split(":")[0]
-            out[key] = np.asarray(obj[()], dtype=np.float32)
-
-    group.visititems(visit)
+    pending = [group]
+    while pending:
+        for name, obj in _links(pending.pop(), path):
+            if isinstance(obj, h5py.Group):
+                pending.append(obj)
+            elif isinstance(obj, h5py.Dataset):
+                if obj.dtype.kind not in "fiu":
+                    raise DataError(f"HDF5 dataset {obj.name} holds {obj.dtype}, not numbers", path)
+                nbytes = int(obj.size) * 4
+                budget[0] -= nbytes
+                if budget[0] < 0:
+                    raise DataError(f"the weight arrays are larger than a SubFocal checkpoint can be "
+                                    f"({MAX_KERAS_BYTES // 1024**2} MiB)", path)
+                out[name.split(":")[0]] = np.asarray(obj[()], dtype=np.float32)
     return out
 
 
@@ -69,26 +97,44 @@ def read_keras_layers(path: Path) -> tuple[list[tuple[str, dict]], list[tuple[st
         raise DataError("checkpoint not found", path) from None
     except OSError as exc:
         raise DataError(f"not an HDF5 file ({str(exc).splitlines()[0]})", path) from None
-    with f:
-        root = f["model_weights"] if "model_weights" in f else f
-        if "layer_names" not in root.attrs:
-            raise DataError("not a Keras checkpoint (no model_weights/ with a layer_names attribute)", path)
-        top: list[tuple[str, dict]] = []
-        nested: list[tuple[str, dict]] = []
-        for raw in root.attrs["layer_names"]:
-            name = _decode(raw)
-            if name not in root:  # a layer without weights may have no group
-                continue
-            g = root[name]
-            if any(k != name and isinstance(g[k], h5py.Group) for k in g.keys()):  # a nested model
-                if nested:
-                    raise DataError("Keras checkpoint has more than one nested model; not a SubFocal model", path)
-                nested = [(k, _layer_arrays(g[k], path)) for k in g.keys()]
-                continue
-            arrays = _layer_arrays(g, path)
-            if arrays:
-                top.append((name, arrays))
-        return top, nested
+    try:
+        with f:
+            return _read_layers(f, path)
+    except DataError:
+        raise
+    except (KeyError, TypeError, ValueError, AttributeError, OSError, RuntimeError) as exc:
+        reason = " ".join(str(exc).split())[:120] or type(exc).__name__
+        raise DataError(f"not a Keras checkpoint of the expected structure ({reason})", path) from None
+
+
+def _read_layers(f, path: Path) -> tuple[list[tuple[str, dict]], list[tuple[str, dict]]]:
+    import h5py
+
+    budget = [MAX_KERAS_BYTES]
+    members = dict(_links(f, path))
+    root = members["model_weights"] if "model_weights" in members else f
+    if not isinstance(root, h5py.Group) or "layer_names" not in root.attrs:
+        raise DataError("not a Keras checkpoint (no model_weights/ with a layer_names attribute)", path)
+    layers = dict(_links(root, path))
+    top: list[tuple[str, dict]] = []
+    nested: list[tuple[str, dict]] = []
+    for raw in np.atleast_1d(root.attrs["layer_names"]):
+        name = _decode(raw)
+        if name not in layers:  # a layer without weights may have no group
+            continue
+        g = layers[name]
+        if not isinstance(g, h5py.Group):
+            raise DataError(f"layer {name[:60]!r} is not an HDF5 group", path)
+        children = _links(g, path)
+        if any(k != name and isinstance(obj, h5py.Group) for k, obj in children):  # a nested model
+            if nested:
+                raise DataError("Keras checkpoint has more than one nested model; not a SubFocal model", path)
+            nested = [(k, _layer_arrays(obj, path, budget)) for k, obj in children if isinstance(obj, h5py.Group)]
+            continue
+        arrays = _layer_arrays(g, path, budget)
+        if arrays:
+            top.append((name, arrays))
+    return top, nested
 
 
 def _by_kind(layers: list[tuple[str, dict]], kind: str) -> list[tuple[str, dict]]:
@@ -181,8 +227,17 @@ def load_keras_checkpoint(path: str | Path, interval: float = 0.5, d_min: float 
     """
     path = Path(path)
     top, nested = read_keras_layers(path)
+    try:
+        return _build_keras(top, nested, path, interval, d_min, d_max)
+    except (KeyError, ValueError, IndexError, TypeError) as exc:  # a layer without a kernel, a 2-D Conv3D ...
+        reason = " ".join(str(exc).split())[:120] or type(exc).__name__
+        raise DataError(f"not a SubFocal/LFattNet Keras checkpoint ({reason})", path) from None
+
+
+def _build_keras(top: list[tuple[str, dict]], nested: list[tuple[str, dict]], path: Path, interval: float,
+                 d_min: float, d_max: float) -> SubFocalNet:
     config = infer_config(top, nested, path, interval, d_min, d_max)
-    net = SubFocalNet(**config)
+    net = SubFocalNet(**config)  # width and angular checked against their bounds before allocating
     convs, bns = _keras_extractor_order(net)
     _load_convs(convs, _by_kind(nested, "conv2d"), path, "feature extractor")
     _load_bns(bns, _by_kind(nested, "batch_normalization"), path, "feature extractor")

@@ -1,0 +1,204 @@
+"""Every command's promise for bad input (README): exit 2, exactly one line on stderr that names the
+file or option, no traceback, and no output left behind. Table-driven: add a row for a new command or
+flag; a hypothesis test feeds random bytes to the file readers behind the commands."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+from helpers import assert_one_error_line, run_cli, write_scene, write_submission
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from lfbench.cli import COMMANDS
+from lfbench.data.pfm import write_pfm
+
+SIZE = 24
+
+
+def _scene(tmp: Path) -> Path:
+    return write_scene(tmp / "data", "tiny", "training", size=SIZE)
+
+
+def _file(tmp: Path, name: str, content: bytes | str) -> Path:
+    path = tmp / name
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_bytes(content.encode() if isinstance(content, str) else content)
+    return path
+
+
+def _hdf5(tmp: Path, build: Callable) -> Path:
+    h5py = pytest.importorskip("h5py")
+    path = tmp / "model.hdf5"
+    with h5py.File(path, "w") as f:
+        build(f, h5py)
+    return path
+
+
+def _external_link(f, h5py) -> None:
+    g = f.create_group("model_weights")
+    g.attrs["layer_names"] = [b"conv3d"]
+    g["conv3d"] = h5py.ExternalLink("/etc/passwd", "/")
+
+
+def _soft_link(f, h5py) -> None:
+    g = f.create_group("model_weights")
+    g.attrs["layer_names"] = [b"conv3d"]
+    g["conv3d"] = h5py.SoftLink("/nowhere")
+
+
+def _dataset_as_layer(f, h5py) -> None:
+    g = f.create_group("model_weights")
+    g.attrs["layer_names"] = [b"conv3d"]
+    g["conv3d"] = np.zeros(3)
+
+
+def _text_weights(f, h5py) -> None:
+    g = f.create_group("model_weights")
+    g.attrs["layer_names"] = [b"conv3d"]
+    g.create_group("conv3d/conv3d")["kernel:0"] = np.array([b"TOPSECRET"])
+
+
+def _train_config(tmp: Path, extra: str) -> Path:
+    root = _scene(tmp).parent.parent
+    return _file(tmp, "c.toml", f'[data]\nroots = ["{root}"]\n[model]\nwidth = 2\n{extra}')
+
+
+# (id, argv builder given tmp_path, fragments of the one error line, paths that must not exist afterwards)
+CASES: list[tuple[str, Callable[[Path], list], tuple[str, ...], tuple[str, ...]]] = [
+    ("evaluate-no-data", lambda t: ["evaluate", "--data", t / "nope", "--method", "gt", "--out", t / "out"],
+     ("nope", "data root not found"), ("out",)),
+    ("evaluate-bad-spec", lambda t: ["evaluate", "--data", _scene(t), "--method", "planesweep:interval=x", "--out",
+                                     t / "out"], ("planesweep",), ("out",)),
+    ("evaluate-unknown-method", lambda t: ["evaluate", "--data", _scene(t), "--method", "nosuch", "--out", t / "out"],
+     ("nosuch",), ("out",)),
+    ("evaluate-ci-block-0", lambda t: ["evaluate", "--data", _scene(t), "--method", "gt", "--out", t / "out", "--ci",
+                                       "--ci-block", "0"], ("--ci-block", "must be from 1"), ("out",)),
+    ("evaluate-ci-resamples-neg", lambda t: ["evaluate", "--data", _scene(t), "--method", "gt", "--out", t / "out",
+                                             "--ci", "--ci-resamples", "-3"], ("--ci-resamples",), ("out",)),
+    ("evaluate-out-is-file", lambda t: ["evaluate", "--data", _scene(t), "--method", "gt", "--out",
+                                        _file(t, "out", "x")], ("out", "output folder is a file"), ()),
+    ("evaluate-scene-unknown", lambda t: ["evaluate", "--data", _scene(t), "--scenes", "nosuch", "--method", "gt",
+                                          "--out", t / "out"], ("no scene 'nosuch'",), ("out",)),
+    ("predict-out-is-folder", lambda t: ["predict", "--method", "gt", "--input", _scene(t), "--out",
+                                         _file(t, "o.pfm/x", "").parent], ("o.pfm", "is a folder"), ()),
+    ("predict-bad-suffix", lambda t: ["predict", "--method", "gt", "--input", _scene(t), "--out", t / "o.png"],
+     ("output must end in .pfm or .npy",), ("o.png",)),
+    ("predict-npy-object", lambda t: ["predict", "--method", "gt", "--input", _file(t, "v.npy", b"\x93NUMPY\x01\x00"
+                                      + b"v\x00{'descr': '|O', 'fortran_order': False, 'shape': (2,), }"
+                                      + b" " * 57 + b"\n"), "--out", t / "o.pfm"], ("v.npy",), ("o.pfm",)),
+    ("predict-garbage-params", lambda t: ["predict", "--method", "planesweep", "--input",
+                                          _file(t, "s/parameters.cfg", "\x00\x01garbage").parent, "--out",
+                                          t / "o.pfm"], ("parameters.cfg",), ("o.pfm",)),
+    ("info-unknown", lambda t: ["info", "nosuch"], ("nosuch",), ()),
+    ("regress-golden-nan", lambda t: ["regress", _file(t, "g.json", '[{"method": "m", "scene": "s", "metric": '
+                                      '"mse_x100", "value": NaN, "tolerance": 0, "resolution": "lowres"}]'),
+                                      _file(t, "r.json", "[]")], ("g.json", "NaN"), ()),
+    ("regress-update-negative", lambda t: ["regress", "--update", "--tolerance", "-5", t / "g.json",
+                                           _file(t, "r.json", "[]")], ("--tolerance",), ("g.json",)),
+    ("regress-new-not-utf8", lambda t: ["regress", t / "g.json", _file(t, "r.json", b"\xff\xfe[")],
+     ("r.json", "not UTF-8"), ()),
+    ("report-deep-json", lambda t: ["report", _file(t, "r.json", "[" * 50000 + "]" * 50000), "--out", t / "rep"],
+     ("r.json", "nested"), ("rep",)),
+    ("report-runs-malformed", lambda t: ["report", _file(t, "r.json", '{"records": [], "runs": [7]}'), "--out",
+                                         t / "rep"], ("r.json", "run 0 is malformed"), ("rep",)),
+    ("synth-size", lambda t: ["synth", "--out", t / "s", "--size", "200000"], ("size must be an integer",), ("s",)),
+    ("synth-scenes", lambda t: ["synth", "--out", t / "s", "--scenes", "100000000"], ("scenes must be",), ("s",)),
+    ("demo-size", lambda t: ["demo", "--out", t / "d", "--size", "8"], ("size must be an integer",), ()),
+    ("validate-size", lambda t: ["validate-submission", write_submission(t / "sub", {}), "--size", "60000"],
+     ("--size",), ()),
+    ("validate-missing", lambda t: ["validate-submission", t / "nope.zip"], ("nope.zip", "not found"), ()),
+    ("convert-keras-external-link", lambda t: ["convert-keras", _hdf5(t, _external_link), t / "o.pt"],
+     ("model.hdf5", "external link"), ("o.pt",)),
+    ("convert-keras-soft-link", lambda t: ["convert-keras", _hdf5(t, _soft_link), t / "o.pt"],
+     ("model.hdf5", "soft link"), ("o.pt",)),
+    ("convert-keras-dataset-layer", lambda t: ["convert-keras", _hdf5(t, _dataset_as_layer), t / "o.pt"],
+     ("model.hdf5", "not an HDF5 group"), ("o.pt",)),
+    ("convert-keras-text-weights", lambda t: ["convert-keras", _hdf5(t, _text_weights), t / "o.pt"],
+     ("model.hdf5", "not numbers"), ("o.pt",)),
+    ("convert-keras-not-hdf5", lambda t: ["convert-keras", _file(t, "x.hdf5", "TOPSECRET"), t / "o.pt"],
+     ("x.hdf5", "not an HDF5 file"), ("o.pt",)),
+    ("train-no-stages", lambda t: ["-q", "train", _train_config(t, ""), "--out", t / "run"], ("c.toml", "stages"),
+     ("run",)),
+    ("train-beta", lambda t: ["-q", "train", _train_config(t, '[[stages]]\nloss = "uafl"\nbeta = "x"\nlr = 1e-3\n'
+                                                              'steps = 1\n'), "--out", t / "run"],
+     ("c.toml", "beta"), ("run",)),
+    ("train-missing", lambda t: ["-q", "train", t / "nope.toml", "--out", t / "run"], ("nope.toml",), ("run",)),
+    ("ablate-missing", lambda t: ["ablate", t / "nope.toml", "--out", t / "ab"], ("nope.toml",), ("ab",)),
+    ("ablate-jobs-0", lambda t: ["ablate", t / "nope.toml", "--jobs", "0"], ("--jobs",), ()),
+    ("bench-bad-model", lambda t: ["bench", "--model", "nosuch", "--json", t / "b.json"], ("nosuch",), ("b.json",)),
+]
+
+
+def test_every_command_has_a_row():
+    """A new command must add its bad-input rows here (``methods`` takes no input)."""
+    covered = {case[0].split("-")[0] for case in CASES}
+    expected = {name.split("-")[0] for name in COMMANDS if name != "methods"}
+    assert expected <= covered, sorted(expected - covered)
+
+
+@pytest.mark.parametrize(("build", "fragments", "absent"), [c[1:] for c in CASES], ids=[c[0] for c in CASES])
+def test_bad_input_is_one_line_exit_2_nothing_written(tmp_path, capsys, build, fragments, absent):
+    argv = build(tmp_path)
+    rc, out, err = run_cli(capsys, *argv)
+    line = assert_one_error_line(rc, err, *fragments)
+    assert "TOPSECRET" not in err and "root:" not in err  # never echo file content
+    assert line.startswith("lfbench ")
+    for name in absent:
+        assert not (tmp_path / name).exists(), f"{name} was written"
+    assert not [p for p in tmp_path.rglob("*") if p.name.startswith(".lfbench-stage") or p.name.endswith(".tmp")]
+
+
+# --------------------------------------------------------------------------- random bytes into the readers
+
+@pytest.fixture(scope="module")
+def base(tmp_path_factory) -> Path:
+    tmp = tmp_path_factory.mktemp("fuzz")
+    folder = _scene(tmp)
+    write_pfm(tmp / "pred.pfm", np.zeros((SIZE, SIZE), np.float32))
+    return folder
+
+
+FILES = {  # which file of a scene / command the random bytes replace, and the command that reads it
+    "parameters.cfg": lambda t, s: ["predict", "--method", "gt", "--input", s, "--out", t / "o.pfm"],
+    "gt_disp_lowres.pfm": lambda t, s: ["predict", "--method", "gt", "--input", s, "--out", t / "o.pfm"],
+    "input_Cam040.png": lambda t, s: ["predict", "--method", "planesweep:interval=1", "--input", s, "--out",
+                                      t / "o.pfm"],
+}
+
+
+@settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(name=st.sampled_from(sorted(FILES)), data=st.binary(max_size=300))
+def test_random_bytes_never_give_a_traceback(tmp_path_factory, base, capsys, name, data):
+    import shutil
+
+    tmp = tmp_path_factory.mktemp("case")
+    scene = tmp / "tiny"
+    shutil.copytree(base, scene)
+    (scene / name).write_bytes(data)
+    rc, _, err = run_cli(capsys, *FILES[name](tmp, scene))
+    assert "Traceback" not in err
+    if rc != 0:
+        assert_one_error_line(rc, err, name)
+        assert not (tmp / "o.pfm").exists()
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.recursive(st.none() | st.booleans() | st.floats() | st.integers() | st.text(max_size=8),
+                    lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=8), inner,
+                                                                                  max_size=4), max_leaves=20))
+def test_random_json_golden_files_are_validated(tmp_path_factory, capsys, value):
+    tmp = tmp_path_factory.mktemp("golden")
+    golden = _file(tmp, "g.json", json.dumps(value))
+    new = _file(tmp, "r.json", "[]")
+    rc, out, err = run_cli(capsys, "regress", golden, new)
+    assert "Traceback" not in err
+    assert rc in (0, 2), (rc, out, err)
+    if rc == 0:  # only an empty golden file passes against empty results
+        assert "OK: 0 golden metrics" in out
+    else:
+        assert_one_error_line(rc, err, "g.json")
