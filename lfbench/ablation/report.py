@@ -208,6 +208,44 @@ def _num(row, key: str) -> float:
     return float(value)
 
 
+# --------------------------------------------------------------------------- seeds
+
+def seed_means(spec: AblationSpec, frame: pd.DataFrame) -> tuple[pd.DataFrame, dict[str, str]]:
+    """The cell frame averaged over seeds (one row per variant, indexed by its first seed's cell so the table
+    builders find its config) and the map from that cell id to the variant id; unchanged without seeds."""
+    if not spec.seeds or frame.empty:
+        return frame, {}
+    from lfbench.ablation.significance import cell_info
+
+    info = cell_info(spec).reindex(frame.index)
+    numeric = frame.select_dtypes(include="number").columns
+    rows, rename = [], {}
+    for variant, group in info.groupby("variant", sort=False):
+        first = group.index[0]
+        row = frame.loc[first].copy()
+        row[numeric] = frame.loc[group.index, numeric].mean()
+        rows.append(row.rename(first))
+        rename[first] = variant
+    return pd.DataFrame(rows), rename
+
+
+def write_seed_tables(spec: AblationSpec, results: Results, out: Path) -> list[Path]:
+    """table_seeds (mean and 95 % t-interval over seeds per variant) and table_significance (the paper's
+    orderings as paired t-tests over seeds); see lfbench.ablation.significance."""
+    from lfbench.ablation.significance import ALPHA, cell_info, seeds_table, significance_table
+
+    info, scores = cell_info(spec), results.to_frame()
+    caption = caption_lines(spec, None, f"mean over seeds {', '.join(str(x) for x in spec.seeds)} and 95 % "
+                                        "t-interval over seeds of the scene-mean score")
+    written = write_table(seeds_table(info, scores, METRICS), out, "table_seeds", caption)
+    sig = significance_table(spec.table, info, scores)
+    if not sig.empty:
+        caption = caption_lines(spec, None, "the paper's orderings, paired t-test over seeds (BadPix 0.07, lower "
+                                            f"is better; two-sided, alpha {ALPHA:g})")
+        written += write_table(sig.set_index("claim (paper)"), out, "table_significance", caption)
+    return written
+
+
 # --------------------------------------------------------------------------- writing
 
 PAPER_ABLATION_NOTE = ("paper: Chao et al., IEEE TCI 2023 (RTX 3090, full training: 50 + 10 epochs, batch 32, the 16 "
@@ -259,16 +297,21 @@ def write_report(spec: AblationSpec, out: str | Path, results: Results, markers:
     written: list[Path] = []
     if not frame.empty:
         written += write_table(cells_table(spec, frame), out, "table_cells", caption_lines(spec, None, "all cells"))
+        means, rename = seed_means(spec, frame)
+        seeds_note = ([f"ours: mean over seeds {', '.join(str(x) for x in spec.seeds)} (intervals and paired tests: "
+                       "table_seeds, table_significance)"] if spec.seeds else [])
         if spec.table == "table4":
-            written += write_table(table4(spec, frame, paper_tables, log), out, "table4",
-                                   caption_lines(spec, paper_tables))
+            written += write_table(table4(spec, means, paper_tables, log).rename(index=rename), out, "table4",
+                                   [*caption_lines(spec, paper_tables), *seeds_note])
         elif spec.table == "table5":
-            written += write_table(table5(spec, frame, paper_tables, log), out, "table5",
-                                   caption_lines(spec, paper_tables))
+            written += write_table(table5(spec, means, paper_tables, log).rename(index=rename), out, "table5",
+                                   [*caption_lines(spec, paper_tables), *seeds_note])
         elif spec.table == "beta":
-            caption = [*caption_lines(spec, None),
+            caption = [*caption_lines(spec, None), *seeds_note,
                        "paper: no values printed (its figure: BadPix 0.07 improves as beta goes from 1 down to 0.1)"]
-            written += write_table(table_beta(spec, frame), out, "table_beta", caption)
+            written += write_table(table_beta(spec, means).rename(index=rename), out, "table_beta", caption)
+        if spec.seeds:
+            written += write_seed_tables(spec, results, out)
     per_scene, average = per_scene_table(results), average_table(results)
     base_caption = caption_lines(spec, None, "Tables I/II")
     written += write_table(per_scene, out, "table_per_scene", base_caption)

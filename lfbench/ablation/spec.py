@@ -10,6 +10,9 @@ Layout (paths are relative to the spec file's folder; ``~`` and ``${VARS}`` are 
     base = "../configs/subfocal_cpu_small.toml"   # the training config every cell starts from,
                                 # or an inline [base] table in the training-config layout
     out = "runs/ablate/table4"  # default output folder (relative to the current directory)
+    seeds = [1, 2, 3]           # optional: every cell is trained once per seed (the config's seed; cell ids
+                                # end in _seed=K); tables report the mean over seeds with a 95 % t-interval
+                                # and a paired test between neighbouring cells (lfbench.ablation.significance)
 
     [budget]                    # every cell's training budget (written over the base config)
     steps = [48, 12]            # steps per stage, one number per [[stages]] of the base
@@ -180,6 +183,7 @@ class AblationSpec:
     paper_methods: tuple[str, ...] = ("SubFocal",)
     out: str | None = None
     text: str = field(default="", repr=False)
+    seeds: tuple[int, ...] = ()  # training seeds every cell runs (empty: the base config's seed, once)
 
     def budget_label(self) -> str:
         return self.budget.describe(self.cells[0].config) if self.cells else "no training"
@@ -232,6 +236,7 @@ def parse_spec(raw: dict[str, Any], source: Path, text: str = "") -> AblationSpe
     if table not in TABLES:
         top._fail("table", f"expected one of {', '.join(TABLES)}, got {table!r}")
     out = top.get("out", str, None)
+    seeds = _parse_seeds(top)
     base_cfg, base_source = _parse_base(top, source)
     budget = _parse_budget(top.table("budget"), base_cfg, source)
     set_t = top.table("set")
@@ -255,18 +260,52 @@ def parse_spec(raw: dict[str, Any], source: Path, text: str = "") -> AblationSpe
             _set_dotted(base, key, value, lambda msg, k=key: _fail(source, f"set.{k}", msg))
         _check_config(base, source, "set")
         cells = _expand_grid(grid_raw, base, source)
+        if seeds:
+            cells = _with_seeds(cells, seeds, source)
     elif grid_raw:
         raise SpecError("grid: cells need a base training config (base = \"CONFIG.toml\" or [base])", source)
     if not cells and not methods:
         raise SpecError("nothing to run: give a base config (with a [[grid]], or one cell from the base alone) "
                         "and/or [[methods]]", source)
     if shared:
+        if len(seeds) > 1:
+            raise SpecError("stage1.shared trains one stage 1 for all cells, so it cannot vary with seeds; start "
+                            "every cell from trained weights instead ([set] init = \"WEIGHTS.pt\", one stage)",
+                            source)
         _check_shared_stage1(cells, source)
     if evaluation.synthetic is None and evaluation.data is None:
         raise SpecError("evaluation: give synthetic = {seed, size, scenes} and/or data = ROOT with scenes", source)
     return AblationSpec(source=source, title=title, table=table, base_source=base_source, budget=budget,
                         cells=cells, shared_stage1=shared, evaluation=evaluation, methods=methods,
-                        paper_methods=paper_methods, out=out, text=text)
+                        paper_methods=paper_methods, out=out, text=text, seeds=seeds)
+
+
+def _parse_seeds(top: _Table) -> tuple[int, ...]:
+    raw = top.get("seeds", list, [])
+    if not all(isinstance(x, int) and not isinstance(x, bool) and 0 <= x < 2**63 for x in raw):
+        top._fail("seeds", f"expected a list of non-negative integers, got {raw!r}")
+    if len(set(raw)) != len(raw):
+        top._fail("seeds", f"each seed once, got {raw!r}")
+    return tuple(raw)
+
+
+def _with_seeds(cells: tuple[Cell, ...], seeds: tuple[int, ...], source: Path) -> tuple[Cell, ...]:
+    """Every cell once per seed: values gain seed = K (last), the config's seed is K, the id ends in _seed=K."""
+    out = []
+    for cell in cells:
+        if "seed" in cell.values:
+            raise SpecError(f"cell {cell.id}: seed is both a grid axis and given by seeds = [...]; use one", source)
+        for seed in seeds:
+            values = {**cell.values, "seed": seed}
+            config = copy.deepcopy(cell.config)
+            config["seed"] = seed
+            out.append(Cell(id=cell_id(values), values=values, config=config))
+    return tuple(out)
+
+
+def variant_values(cell: Cell) -> dict[str, Any]:
+    """The cell's grid values without the seed: what a row of a seed-averaged table stands for."""
+    return {k: v for k, v in cell.values.items() if k != "seed"}
 
 
 LEAF_TABLES = frozenset({"data.scene_weights"})  # config entries whose value is itself a table

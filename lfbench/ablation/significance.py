@@ -1,0 +1,193 @@
+"""Seeds and significance of an ablation run (``seeds = [...]`` in the spec).
+
+Each variant (a cell's grid values without the seed) is trained once per seed. For every variant and
+metric the tables report the mean over seeds of the scene-mean score and a 95 % t-interval over the
+seeds (mean +- t_{0.975, n-1} s / sqrt(n)): the seed is the unit of replication, the evaluation scenes
+are a fixed test set, so the interval says how much a re-training with another seed moves the number.
+
+Each of the paper's orderings becomes paired comparisons of neighbouring variants (Table IV: interval
+1 worse than 0.5 worse than 0.25 worse than 0.1 at the same interpolation; Table V: UAFL better than
+each other loss; beta sweep: beta 0.1 better than each other beta), in BadPix 0.07 (lower is better).
+The test is a paired t-test over seeds of d_s = score(worse, s) - score(better, s), each score the mean
+over the scenes both cells were scored on: pairing by seed removes what the seeds share (the sampled
+patches, the initialisation), and averaging over scenes first keeps one independent value per training
+run. Pairs over (scene, seed) would count each network once per scene as if the scenes were independent
+replicates, which they are not (one network scores all of them): the p-values would be too small. With
+n seeds the test has n - 1 degrees of freedom (with 3 seeds an effect must be about 4.3 standard errors
+to reach p < 0.05), so "not resolved" is a common, honest outcome at a small budget.
+
+Verdict per comparison at alpha = 0.05 (two-sided): ``reproduced`` (the paper's better variant is
+significantly better), ``reversed`` (significantly worse), ``not resolved`` (otherwise, or fewer than
+2 seeds in common).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+__all__ = ["ALPHA", "Comparison", "cell_info", "comparisons", "paired_t", "seeds_table", "significance_table",
+           "t_interval", "verdict"]
+
+ALPHA = 0.05
+LEVEL = 0.95
+ORDERING_METRIC = "badpix_0.07"
+PAPER_BETA = 0.1
+
+
+def t_interval(values: Sequence[float], level: float = LEVEL) -> tuple[float, float, float]:
+    """(mean, low, high): the t-interval of the mean of ``values`` (NaN bounds for fewer than 2 values)."""
+    from scipy import stats
+
+    x = np.asarray([v for v in values if np.isfinite(v)], dtype=np.float64)
+    if x.size == 0:
+        return math.nan, math.nan, math.nan
+    mean = float(x.mean())
+    if x.size < 2:
+        return mean, math.nan, math.nan
+    half = float(stats.t.ppf(0.5 + level / 2, x.size - 1) * x.std(ddof=1) / math.sqrt(x.size))
+    return mean, mean - half, mean + half
+
+
+def paired_t(better: Sequence[float], worse: Sequence[float], level: float = LEVEL) -> dict[str, float]:
+    """Paired t-test of d = worse - better (positive: ``better`` has the lower score). Returns n, mean_diff,
+    low, high (its t-interval), t and the two-sided p (NaN with fewer than 2 pairs; with all differences
+    equal, p is 0 for a non-zero difference and 1 for none)."""
+    from scipy import stats
+
+    d = np.asarray(worse, dtype=np.float64) - np.asarray(better, dtype=np.float64)
+    d = d[np.isfinite(d)]
+    n = int(d.size)
+    mean, low, high = t_interval(d, level)
+    if n < 2:
+        return {"n": n, "mean_diff": mean, "low": low, "high": high, "t": math.nan, "p": math.nan}
+    sd = float(d.std(ddof=1))
+    if sd == 0.0:
+        t = math.inf if mean > 0 else (-math.inf if mean < 0 else 0.0)
+        return {"n": n, "mean_diff": mean, "low": mean, "high": mean, "t": t, "p": 0.0 if mean != 0 else 1.0}
+    t = mean / (sd / math.sqrt(n))
+    p = float(2 * stats.t.sf(abs(t), n - 1))
+    return {"n": n, "mean_diff": mean, "low": low, "high": high, "t": float(t), "p": p}
+
+
+def verdict(test: dict[str, float], alpha: float = ALPHA) -> str:
+    """reproduced / reversed / not resolved for a :func:`paired_t` result (positive mean_diff: as the paper)."""
+    if test["n"] < 2 or not np.isfinite(test["p"]) or test["p"] >= alpha:
+        return "not resolved"
+    return "reproduced" if test["mean_diff"] > 0 else "reversed"
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """One paired comparison: the paper says ``better`` beats ``worse`` (variant ids)."""
+
+    claim: str
+    better: str
+    worse: str
+
+
+def cell_info(spec) -> pd.DataFrame:
+    """One row per cell (index: cell id): variant id, seed, interval, interpolation, loss, beta."""
+    from lfbench.ablation.report import _model_value, last_stage_loss, uafl_beta
+    from lfbench.ablation.spec import cell_id, variant_values
+
+    rows = []
+    for cell in spec.cells:
+        loss, params = last_stage_loss(cell.config)
+        rows.append({"cell": cell.id, "variant": cell_id(variant_values(cell)),
+                     "seed": cell.values.get("seed", cell.config.get("seed")),
+                     "interval": _model_value(cell.config, "interval", float, np.nan),
+                     "interpolation": _model_value(cell.config, "interpolation", str, ""),
+                     "loss": loss, "loss_params": bool(params), "beta": uafl_beta(cell.config)})
+    return pd.DataFrame(rows).set_index("cell") if rows else pd.DataFrame()
+
+
+def comparisons(table: str, info: pd.DataFrame) -> list[Comparison]:
+    """The paper's orderings of ``table`` (table4, table5, beta) as comparisons of the variants present."""
+    if info.empty:
+        return []
+    variants = info.drop_duplicates("variant").set_index("variant")
+    out: list[Comparison] = []
+    if table == "table4":
+        for interp, group in variants.groupby("interpolation", sort=False):
+            ordered = group.sort_values("interval", ascending=False)  # coarse -> fine
+            ids, steps = list(ordered.index), list(ordered["interval"])
+            for i in range(len(ids) - 1):
+                if steps[i] == steps[i + 1]:
+                    continue
+                out.append(Comparison(f"{interp}: interval {steps[i + 1]:g} better than {steps[i]:g}",
+                                      better=ids[i + 1], worse=ids[i]))
+    elif table == "table5":
+        uafl = variants[(variants["loss"] == "uafl")
+                        & np.isclose(variants["beta"].astype(float).fillna(-1.0), PAPER_BETA)]
+        for best in uafl.index:
+            for other in variants.index:
+                if other != best and variants.loc[other, "loss"] != "uafl":
+                    out.append(Comparison(f"UAFL better than {variants.loc[other, 'loss']}", better=best, worse=other))
+    elif table == "beta":
+        betas = variants[variants["beta"].notna()]
+        best = betas[np.isclose(betas["beta"].astype(float), PAPER_BETA)]
+        for b in best.index:
+            for other in betas.index:
+                if other != b:
+                    out.append(Comparison(f"beta {PAPER_BETA:g} better than beta {betas.loc[other, 'beta']:g}",
+                                          better=b, worse=other))
+    return out
+
+
+def _scores(scores: pd.DataFrame, metric: str) -> pd.DataFrame:
+    """(cell, scene) -> value of one metric (the mean over resolutions, as the cell tables average)."""
+    sel = scores[scores["metric"] == metric]
+    return sel.groupby(["method", "scene"])["value"].mean().rename("value").reset_index()
+
+
+def seeds_table(info: pd.DataFrame, scores: pd.DataFrame, metrics: Sequence[str]) -> pd.DataFrame:
+    """Per variant (index) and metric: the mean over seeds of the scene-mean score, its 95 % t-interval
+    and the number of seeds. ``scores``: long frame (method = cell id, scene, metric, value)."""
+    rows: dict[str, dict[str, Any]] = {}
+    for metric in metrics:
+        per_cell = _scores(scores, metric).groupby("method")["value"].mean()
+        for variant, group in info.groupby("variant", sort=False):
+            vals = [float(per_cell[c]) for c in group.index if c in per_cell.index]
+            mean, low, high = t_interval(vals)
+            row = rows.setdefault(variant, {"variant": variant, "seeds": len(vals)})
+            row[f"{metric} mean"] = mean
+            row[f"{metric} 95% low"] = low
+            row[f"{metric} 95% high"] = high
+    return pd.DataFrame(list(rows.values())).set_index("variant") if rows else pd.DataFrame()
+
+
+def significance_table(table: str, info: pd.DataFrame, scores: pd.DataFrame,
+                       metric: str = ORDERING_METRIC) -> pd.DataFrame:
+    """One row per comparison of :func:`comparisons`: both variants' means over the paired seeds, the mean
+    paired difference (worse - better) with its 95 % interval, t, p and the verdict."""
+    values = _scores(scores, metric)
+    cell_scores = {c: dict(zip(g["scene"], g["value"], strict=True)) for c, g in values.groupby("method")}
+    rows = []
+    for comp in comparisons(table, info):
+        better_cells = info[info["variant"] == comp.better]
+        worse_cells = info[info["variant"] == comp.worse]
+        worse_by_seed = {s: c for c, s in zip(worse_cells.index, worse_cells["seed"], strict=True)}
+        b_vals, w_vals, seeds = [], [], []
+        for cell, seed in zip(better_cells.index, better_cells["seed"], strict=True):
+            other = worse_by_seed.get(seed)
+            if other is None or cell not in cell_scores or other not in cell_scores:
+                continue
+            common = sorted(set(cell_scores[cell]) & set(cell_scores[other]))
+            if not common:
+                continue
+            b_vals.append(float(np.mean([cell_scores[cell][s] for s in common])))
+            w_vals.append(float(np.mean([cell_scores[other][s] for s in common])))
+            seeds.append(seed)
+        test = paired_t(b_vals, w_vals)
+        rows.append({"claim (paper)": comp.claim, "better": comp.better, "worse": comp.worse, "metric": metric,
+                     "seeds": test["n"], "better mean": float(np.mean(b_vals)) if b_vals else math.nan,
+                     "worse mean": float(np.mean(w_vals)) if w_vals else math.nan,
+                     "difference (worse - better)": test["mean_diff"], "95% low": test["low"],
+                     "95% high": test["high"], "t": test["t"], "p": test["p"], "verdict": verdict(test)})
+    return pd.DataFrame(rows)
