@@ -43,7 +43,7 @@ def test_label_more_groups_and_no_tables(scenes, tmp_path):
     out = tmp_path / "out"
     results = evaluate_to_folder([create("gt")], scenes[:1], out, more=[([create("published", path=sub)], scenes)],
                                  tables=False, progress=False)
-    assert sorted(p.name for p in out.iterdir()) == ["results.csv", "results.json"]
+    assert sorted(p.name for p in out.iterdir() if not p.name.startswith(".")) == ["results.csv", "results.json"]
     assert {(r.method, r.scene) for r in results.records} == {("gt", "alpha"), ("published:sub", "beta")}
     assert results.value("published:sub", "beta", "badpix_0.07") == 100.0  # |0.1| > 0.07 on every pixel
     named = evaluate_to_folder([create("gt")], scenes, tmp_path / "cell", label="cell-1", tables=False,
