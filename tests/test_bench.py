@@ -147,10 +147,12 @@ def test_train_bench_interleaves_the_reference_and_fast_paths():
 
     parser = argparse.ArgumentParser()
     add_arguments(parser)
-    args = parser.parse_args(["train", "--width", "16", "--batch", "4", "--path", "reference", "fast", "--rounds", "2"])
+    args = parser.parse_args(["train", "--width", "16", "--batch", "4", "--path", "reference", "fast", "--rounds", "2",
+                              "--precision", "fp32", "bf16"])
     cases = _cases(args)
-    assert [(c[0], c[1]["path"], c[1]["width"], c[1]["batch"]) for c in cases] == [
-        ("train", "reference", 16, 4), ("train", "fast", 16, 4)] * 2
+    assert [(c[0], c[1]["path"], c[1]["precision"], c[1]["width"], c[1]["batch"]) for c in cases] == [
+        ("train", "reference", "fp32", 16, 4), ("train", "reference", "bf16", 16, 4),
+        ("train", "fast", "fp32", 16, 4), ("train", "fast", "bf16", 16, 4)] * 2
     r = bench.bench_train(width=2, batch=1, patch=8, steps=1, threads=1, path="reference")
     assert r["path"] == "reference" and r["steps_per_s"] == pytest.approx(1 / r["seconds_per_step"])
     assert 0 < r["cpu_seconds"]

@@ -201,3 +201,22 @@ def test_retain_freed_memory_applies_on_glibc():
     assert retain_freed_memory() is applied  # idempotent (cached)
     if platform.system() == "Linux" and platform.libc_ver()[0] == "glibc":
         assert applied is True
+
+
+def test_the_fast_path_trains_under_bf16_autocast():
+    from lfbench.utils.hardware import bf16_missing
+
+    missing = bf16_missing(torch.device("cpu"))
+    if missing is not None:
+        pytest.skip(f"bf16 convolutions: this CPU lacks {missing}")
+    fast, _ = _pair()
+    views, target = _batches(1, torch.float32)[0]
+    ref = nn.functional.l1_loss(fast(views)[0], target)
+    with torch.autocast("cpu", dtype=torch.bfloat16):
+        disp, prob = fast(views)
+    assert disp.dtype == torch.float32 and prob.dtype == torch.float32  # the softmax regression stays fp32
+    loss = nn.functional.l1_loss(disp, target)
+    loss.backward()
+    assert float(loss.detach()) == pytest.approx(float(ref.detach()), rel=0.05)  # bf16: ~3 significant digits
+    assert all(p.grad is not None and torch.isfinite(p.grad).all() for p in fast.parameters())
+    assert all(p.grad.dtype == torch.float32 for p in fast.parameters())

@@ -91,6 +91,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     t.add_argument("--no-channels-last", action="store_true")
     t.add_argument("--path", nargs="+", default=["fast"], choices=["fast", "reference"],
                    help="training path(s): fast (what lfbench train runs) and/or reference (the original ops)")
+    t.add_argument("--precision", nargs="+", default=["fp32"], choices=["fp32", "bf16"],
+                   help="fp32 and/or bf16 (autocast of the forward pass, as [training] precision = 'bf16')")
     t.add_argument("--rounds", type=int, default=1,
                    help="run the width x path cases this many times, interleaved (before/after under the same load)")
     _device_option(t)
@@ -189,9 +191,10 @@ def _cases(args: argparse.Namespace) -> list[tuple[str, dict]]:
                                                              else None)
         interval = _given(trainable, "interval", None if args.interval is None else [args.interval])[0]
         cases = [("train", {**_with(net, width=w, interval=interval), "batch": args.batch, "patch": args.patch,
-                            "steps": args.steps, "channels_last": not args.no_channels_last, "path": path, **th})
+                            "steps": args.steps, "channels_last": not args.no_channels_last, "path": path,
+                            "precision": precision, **th})
                  for _ in range(max(1, args.rounds)) for w in _given(trainable, "width", widths)
-                 for path in args.path]
+                 for path in args.path for precision in args.precision]
     elif which == "metrics":
         cases = [("metrics", {"scenes": args.scenes, "methods": args.methods, "size": args.size,
                               "repeat": args.repeat})]

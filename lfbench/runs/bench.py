@@ -35,6 +35,7 @@ the wall-time numbers swing with the other processes' load; the CPU-time fractio
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
@@ -273,12 +274,13 @@ def bench_inference(size: int = 512, precision: str = "fp32", *, model: str = DE
 
 def bench_train(batch: int = 2, patch: int = 32, steps: int = 2, channels_last: bool = True, threads: int = 0,
                 seed: int = 0, *, model: str = DEFAULT_MODEL, device: str = "cpu", path: str = "fast",
-                **params: Any) -> dict:
+                precision: str = "fp32", **params: Any) -> dict:
     """Training steps per second: the network (``params`` over its defaults) in training mode, Adam (lr 1e-3,
     eps 1e-7) on an L1 loss of its disparity for random (batch, N, patch, patch) views against random
     disparities in [-4, 4); one warm-up step, then ``steps``. ``path``: ``fast`` (what ``lfbench train``
     runs) or ``reference`` (a network's original training ops, ``set_training_path("reference")``, with
-    glibc's default heap: the "before" of the training speed-up)."""
+    glibc's default heap: the "before" of the training speed-up). ``precision`` bf16: the forward pass under
+    bf16 autocast, as ``[training] precision = "bf16"`` trains."""
     import torch
 
     from lfbench.training.loop import to_channels_last
@@ -302,9 +304,13 @@ def bench_train(batch: int = 2, patch: int = 32, steps: int = 2, channels_last: 
     views = torch.rand((batch, angular * angular, patch, patch), generator=g).to(dev)
     target = (torch.rand((batch, patch, patch), generator=g) * 8 - 4).to(dev)
 
+    dtype = torch_dtype(precision)
+    autocast = (lambda: torch.autocast(dev.type, dtype=dtype)) if dtype != torch.float32 else contextlib.nullcontext
+
     def step() -> None:
         opt.zero_grad(set_to_none=True)
-        disp, _ = net(views)
+        with autocast():
+            disp, _ = net(views)
         torch.nn.functional.l1_loss(disp, target).backward()
         opt.step()
 
@@ -320,7 +326,7 @@ def bench_train(batch: int = 2, patch: int = 32, steps: int = 2, channels_last: 
     record = {"bench": "train", "model": model, **params, "batch": batch, "patch": patch, "path": path,
               "channels_last": channels_last, "steps": max(1, steps), "seconds": seconds, "seconds_per_step": seconds,
               "steps_per_s": 1.0 / seconds, "cpu_seconds": cpu, **memory_fields(dev, baseline),
-              "precision": "fp32"}
+              "precision": precision}
     flops = trainable.flops(net, patch, patch)
     if flops:
         forward = flops["total"] * batch
@@ -471,8 +477,8 @@ _COLUMNS = {
     "inference": ["size", "interval", "precision", "seconds", "peak_memory_gb", "gflops_per_s", "fraction_of_peak",
                   "fraction_of_peak_cpu", "floor_s", "ratio_to_floor", "tile", "tiles", "phases_s"],
     "volume": ["size", "interval", "precision", "method", "seconds", "volume_gb", "gb_per_s", "peak_memory_gb"],
-    "train": ["width", "batch", "patch", "path", "seconds_per_step", "steps_per_s", "cpu_seconds", "gflops_per_s",
-              "fraction_of_peak", "fraction_of_peak_cpu", "peak_memory_gb"],
+    "train": ["width", "batch", "patch", "path", "precision", "seconds_per_step", "steps_per_s", "cpu_seconds",
+              "gflops_per_s", "fraction_of_peak", "fraction_of_peak_cpu", "peak_memory_gb"],
     "metrics": ["scenes", "methods", "size", "seconds", "scores_per_s", "mpixels_per_s", "peak_memory_gb"],
 }
 
