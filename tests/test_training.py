@@ -632,3 +632,18 @@ def test_bf16_autocast_and_workers_train(data_root, tmp_path, cpu_bf16):
     diffs = [float((fp32["state_dict"][n] - bf16["state_dict"][n]).abs().max()) for n in names]
     assert all(np.isfinite(diffs)) and 0 < max(diffs) <= 6.5e-3
     assert all(torch.isfinite(v.float()).all() for v in bf16["state_dict"].values())
+
+
+def test_training_devices_go_through_the_one_device_parser(data_root, monkeypatch):
+    from lfbench.training.distributed import resolve_device
+
+    with pytest.raises(SpecError, match=r"expected 'auto', 'cpu', 'cuda' or 'cuda:K', got 'cuda:x'"):
+        tiny_config(data_root, device="cuda:x")
+    assert resolve_device("auto", 3) == torch.device("cpu") or torch.cuda.is_available()
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: True)
+    monkeypatch.setattr(torch.cuda, "device_count", lambda: 2)
+    monkeypatch.setattr(torch.cuda, "current_device", lambda: 0)
+    assert resolve_device("auto", 3) == torch.device("cuda", 1)  # local rank 3 of 2 GPUs per node
+    assert resolve_device("cuda", 2) == torch.device("cuda", 0) and resolve_device("cuda:1", 0).index == 1
+    with pytest.raises(SpecError, match="only 2 CUDA GPUs are visible"):
+        resolve_device("cuda:5")

@@ -153,13 +153,12 @@ def stage1_digest(stage1_dir: str | Path) -> str:
 # --------------------------------------------------------------------------- evaluation
 
 def resolve_device(name: str) -> str:
-    import torch
+    """The evaluation device as the tables name it: ``cpu``, ``cuda`` (for auto / cuda) or ``cuda:K``;
+    SpecError (lfbench.utils.hardware.resolve_device) for one this machine lacks."""
+    from lfbench.utils.hardware import resolve_device as hardware_device
 
-    if name == "auto":
-        return "cuda" if torch.cuda.is_available() else "cpu"
-    if name == "cuda" and not torch.cuda.is_available():
-        raise SpecError("evaluation.device = 'cuda' but no CUDA device is available")
-    return name
+    dev = hardware_device(name)
+    return dev.type if name in ("auto", "cuda") else str(dev)
 
 
 def make_method(weights: Path, ev: Evaluation, threads: int, network: str = DEFAULT_TRAINABLE):

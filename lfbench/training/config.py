@@ -61,6 +61,7 @@ from lfbench.data.synth import MAX_SYNTH_SIZE
 from lfbench.method.trainable import DEFAULT_TRAINABLE
 from lfbench.utils.envvars import expand_vars
 from lfbench.utils.errors import SpecError
+from lfbench.utils.hardware import parse_device
 
 STAGE_KEYS = {"name", "loss", "lr", "steps", "eps", "betas"}
 # Bounds of the sizes a config asks for, checked before anything is allocated.
@@ -400,8 +401,10 @@ def _parse_training(t: _Table) -> TrainingConfig:
     t.done()
     if cfg.precision not in ("fp32", "bf16"):
         t._fail("precision", f"expected 'fp32' or 'bf16', got {cfg.precision!r}")
-    if cfg.device not in ("auto", "cpu") and not cfg.device.startswith("cuda"):
-        t._fail("device", f"expected 'auto', 'cpu' or 'cuda', got {cfg.device!r}")
+    try:
+        parse_device(cfg.device)
+    except SpecError:
+        t._fail("device", f"expected 'auto', 'cpu', 'cuda' or 'cuda:K', got {cfg.device!r}")
     return cfg
 
 

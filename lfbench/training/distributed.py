@@ -87,14 +87,15 @@ class DistContext:
 
 
 def resolve_device(preference: str, local_rank: int = 0) -> torch.device:
-    """'auto' -> the local GPU when CUDA is available, else CPU; 'cpu'; 'cuda' or 'cuda:K'."""
-    if preference == "cpu" or (preference == "auto" and not torch.cuda.is_available()):
-        return torch.device("cpu")
-    if not torch.cuda.is_available():
-        raise SpecError(f"training.device = {preference!r} but CUDA is not available")
-    if preference in ("auto", "cuda"):
+    """'auto' / 'cuda' -> this process's GPU (local rank modulo the visible GPUs) when CUDA is available,
+    else (auto) the CPU; 'cpu'; 'cuda:K'. SpecError (lfbench.utils.hardware) for a device this machine lacks."""
+    from lfbench.utils.hardware import parse_device
+    from lfbench.utils.hardware import resolve_device as hardware_device
+
+    kind, index = parse_device(preference)
+    if kind in ("auto", "cuda") and index is None and torch.cuda.is_available():
         return torch.device("cuda", local_rank % torch.cuda.device_count())
-    return torch.device(preference)
+    return hardware_device(preference)
 
 
 def launch_env(environ=None) -> tuple[int, int, int, str]:
