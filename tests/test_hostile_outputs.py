@@ -97,7 +97,7 @@ def test_outputs_of_the_previous_run_it_does_not_write_are_dropped_others_kept(t
 def test_stale_temporaries_are_cleaned_by_the_next_run(tmp_path, capsys, data):
     out = tmp_path / "out"
     for name in (".lfbench-stage.999999999.abc", ".figures.x1.tmp", ".maps.x2.tmp", ".data.x3.tmp",
-                 ".figures.x4.old"):
+                 ".figures.x4.old", ".html.x5.tmp"):
         (out / name).mkdir(parents=True)
         (out / name / "junk").write_text("x")
     assert evaluate(capsys, data, out)[0] == 0

@@ -30,8 +30,9 @@ STAGE_PREFIX = ".lfbench-stage."
 JOURNAL = ".lfbench-commit.json"
 MANIFEST = ".lfbench-outputs.json"
 _TRASH = ".trash"
-# temporaries a killed run leaves (suffix .tmp / .old): the demo's data, earlier versions' maps and figures
-_OLD_TEMPORARIES = (".data.", ".figures.", ".maps.")
+# temporaries a killed run leaves (suffix .tmp / .old): the demo's data and HTML report, earlier versions'
+# maps and figures
+_OLD_TEMPORARIES = (".data.", ".figures.", ".html.", ".maps.")
 
 
 class OutputSet:
