@@ -39,7 +39,9 @@ def test_cpu_flags_are_read_from_cpuinfo(tmp_path: Path):
 
 
 def test_the_answer_follows_the_trial_convolution(monkeypatch):
-    # What this CPU can do is decided by running a bf16 convolution, not by the flags alone.
+    # What this CPU can do is decided by running a bf16 convolution, not by the flags alone (the real
+    # detection: a suite run with LFBENCH_FORCE_NO_BF16=1, simulating an AVX2 CPU, must not override it here).
+    monkeypatch.delenv(hardware.FORCE_NO_BF16_ENV, raising=False)
     expected = hardware._bf16_conv_error()
     assert (hardware.cpu_bf16_missing() is None) == (expected is None)
     monkeypatch.setattr(hardware, "_bf16_conv_error", lambda: "mkldnn_convolution: bf16 path needs avx512bw")
