@@ -73,7 +73,11 @@ def plane_scene(folder: Path, d: int, size: int = 40, seed: int = 0) -> Path:
 @pytest.fixture(scope="module")
 def data_root(tmp_path_factory) -> Path:
     """additional/{plane_a (d = 2), plane_b (d = -1)}, stratified/val (d = 1), all 40 x 40."""
-    root = tmp_path_factory.mktemp("hci")
+    return plane_training_root(tmp_path_factory.mktemp("hci"))
+
+
+def plane_training_root(root: Path) -> Path:
+    """additional/{plane_a (d = 2), plane_b (d = -1)}, stratified/val (d = 1), all 40 x 40, under ``root``."""
     plane_scene(root / "additional" / "plane_a", 2, seed=1)
     plane_scene(root / "additional" / "plane_b", -1, seed=2)
     plane_scene(root / "stratified" / "val", 1, seed=3)

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 import torch
-from test_training import plane_scene, tiny_config
+from test_training import plane_training_root, tiny_config
 
 from lfbench.training import checkpoint as ckpt
 from lfbench.training.config import TrainConfig
@@ -18,11 +18,7 @@ pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 @pytest.fixture(scope="module")
 def data_root(tmp_path_factory) -> Path:
-    root = tmp_path_factory.mktemp("hci_init")
-    plane_scene(root / "additional" / "plane_a", 2, seed=1)
-    plane_scene(root / "additional" / "plane_b", -1, seed=2)
-    plane_scene(root / "stratified" / "val", 1, seed=3)
-    return root
+    return plane_training_root(tmp_path_factory.mktemp("hci_init"))
 
 
 def _config(data_root: Path, init: str | None, lr: float = 1e-3, steps: int = 2) -> TrainConfig:

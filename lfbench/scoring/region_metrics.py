@@ -244,13 +244,19 @@ def fine_thinning(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = No
     return _percent_bad(bad, gt, pred, mask, toolkit)
 
 
+def _halfway_to_column(gt: np.ndarray, column: int) -> np.ndarray:
+    """(H, W) float64: half way between each pixel's gt and the gt at ``column`` of its row (the
+    foreground or background extrapolated along the row), in float64 as the toolkit computes it."""
+    return 0.5 * (gt[:, column:column + 1].astype(np.float64) + gt)
+
+
 def backgammon_fattening(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = None, *, fg_column: int,
                          toolkit: bool = False) -> float:
     """Backgammon fattening: % of scored pixels with pred > (gt + fg) / 2, where fg (per row) is
     the gt at column ``fg_column`` (the foreground extrapolated along each row): the prediction
     is nearer to the foreground than to the true (background) disparity."""
     gt, pred, mask = _prepare(gt, pred, mask)
-    half = 0.5 * (gt[:, fg_column:fg_column + 1].astype(np.float64) + gt)  # float64, as the toolkit's extrapolation
+    half = _halfway_to_column(gt, fg_column)
     with np.errstate(invalid="ignore"):
         bad = pred > half
     return _percent_bad(bad, half, pred, mask, toolkit)
@@ -262,7 +268,7 @@ def backgammon_thinning(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | Non
     the gt at column ``bg_column`` (the background extrapolated along each row): the prediction
     is nearer to the background than to the true (foreground) disparity."""
     gt, pred, mask = _prepare(gt, pred, mask)
-    half = 0.5 * (gt[:, bg_column:bg_column + 1].astype(np.float64) + gt)  # float64, as the toolkit's extrapolation
+    half = _halfway_to_column(gt, bg_column)
     with np.errstate(invalid="ignore"):
         bad = pred < half
     return _percent_bad(bad, half, pred, mask, toolkit)
