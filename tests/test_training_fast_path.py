@@ -92,6 +92,18 @@ def test_gathered_volume_matches_grid_sample_values_means_and_gradients(interval
     torch.testing.assert_close(ga, gb, rtol=0, atol=1e-4)
 
 
+def test_two_grids_of_the_same_size_do_not_share_a_gather_index():
+    # Same number of disparities and the same patch shape, other offsets (an ablation over d_min in one
+    # process): the second volume must follow its own grid, not reuse the first one's index.
+    feats = torch.randn(1, 81, 4, 9, 11)
+    for d_min, d_max in ((-4.0, 4.0), (-3.0, 5.0)):
+        net = SubFocalNet(width=2, interval=1.0, d_min=d_min, d_max=d_max)
+        vol = GatheredVolume(net._shift_plan(), feats).volume()
+        ref = shift_views(feats, net.offsets, net.disparities, "bilinear")
+        ref = ref.reshape(1, net.disparities.numel(), 324, 9, 11).transpose(1, 2)
+        torch.testing.assert_close(vol, ref, rtol=0, atol=2e-5)
+
+
 def test_an_integer_shift_is_exact_in_the_gathered_volume():
     # At interval 1 every shift is an integer number of pixels: the volume is a pure copy of the features
     # (zeros outside). out(y, x) = F(y - d dv, x - d du): view (u, v) = (8, 4) at d = 1 moves its map 4 px

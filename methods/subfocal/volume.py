@@ -97,8 +97,8 @@ class GatheredVolume:
         """(B * D * H * W * N,) int64 rows of the flattened maps (B * S * gh * gw * N, C), volume order."""
         plan = self.plan
         b, n, c, h, w = self.shape
-        key = (b, n, h, w, plan.slots, plan.disparities, str(dev))
-        if _INDEX_CACHE.get("key") == key:
+        key = (b, n, h, w, str(dev))
+        if _INDEX_CACHE.get("plan") is plan and _INDEX_CACHE.get("key") == key:
             return _INDEX_CACHE["index"]
         s, gh, gw = plan.slots, self.gh, self.gw
         yy = torch.arange(h, device=dev)[:, None, None]
@@ -109,11 +109,13 @@ class GatheredVolume:
         idx = base[None] + offset.to(dev)[:, None, None, :]  # (D, H, W, N)
         idx = (idx.reshape(1, -1) + torch.arange(b, device=dev)[:, None] * (s * gh * gw * n)).reshape(-1)
         _INDEX_CACHE.clear()
-        _INDEX_CACHE.update(key=key, index=idx)
+        _INDEX_CACHE.update(plan=plan, key=key, index=idx)
         return idx
 
 
-# The last gather index (one training run uses one patch size and grid): (key, index).
+# The last gather index (one training run uses one patch size and one network's cached plan): the plan
+# itself (held, so identity is a safe test: two grids with the same D but other offsets differ), the shape
+# key and the index.
 _INDEX_CACHE: dict = {}
 
 
