@@ -36,6 +36,7 @@ from lfbench.method.base import Prediction
 from lfbench.scoring.metrics import bad_pix_curve, find_metric
 from lfbench.scoring.rules import ScoringRules, align_prediction, border_mask, upsample_nearest
 from lfbench.utils.atomic import write_bytes, write_text
+from lfbench.utils.errors import SpecError
 
 _log = logging.getLogger(__name__)
 
@@ -232,17 +233,45 @@ def _pyplot():
     return plt
 
 
-def save_figure(fig: Any, path: str | Path, dpi: int = DPI) -> Path:
-    """Write a matplotlib figure as PNG atomically and close it (no 'Software' metadata: the PNG
-    carries no link, so it can go into the offline HTML report)."""
-    plt = _pyplot()
+FIGURE_FORMATS = ("png", "pdf", "svg")
+# Metadata left out of each format: the files carry no link, so they can go into the offline HTML report.
+_NO_LINK_METADATA = {"png": {"Software": None}, "pdf": {"Producer": None, "Creator": None}, "svg": {"Creator": None}}
+
+
+def _figure_bytes(fig: Any, fmt: str, dpi: int) -> bytes:
     buf = io.BytesIO()
+    fig.savefig(buf, format=fmt, dpi=dpi, metadata=_NO_LINK_METADATA[fmt])
+    return buf.getvalue()
+
+
+def save_figure(fig: Any, path: str | Path, dpi: int = DPI) -> Path:
+    """Write a matplotlib figure as PNG atomically and close it (no 'Software' metadata)."""
+    plt = _pyplot()
     try:
-        fig.savefig(buf, format="png", dpi=dpi, metadata={"Software": None})
+        data = _figure_bytes(fig, "png", dpi)
     finally:
         plt.close(fig)
-    write_bytes(path, buf.getvalue())
+    write_bytes(path, data)
     return Path(path)
+
+
+def save_formats(fig: Any, path: str | Path, formats: Sequence[str] = ("png",), dpi: int = 110) -> list[Path]:
+    """Write ``fig`` as path.<format> for each of png / pdf / svg (atomically) and close it. The
+    files carry no metadata link (PNG 'Software', PDF 'Producer' and 'Creator' are left out)."""
+    plt = _pyplot()
+    unknown = [f for f in formats if f not in FIGURE_FORMATS]
+    if unknown or not formats:
+        plt.close(fig)
+        raise SpecError(f"unknown figure format {', '.join(unknown) or '(none)'}; use {', '.join(FIGURE_FORMATS)}")
+    written = []
+    try:
+        for fmt in dict.fromkeys(formats):
+            target = Path(path).with_suffix(f".{fmt}")
+            write_bytes(target, _figure_bytes(fig, fmt, dpi))
+            written.append(target)
+    finally:
+        plt.close(fig)
+    return written
 
 
 def write_image(path: str | Path, rgb: np.ndarray) -> Path:

@@ -21,7 +21,6 @@ with ``formats``).
 
 from __future__ import annotations
 
-import io
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -29,7 +28,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from lfbench.utils.atomic import write_bytes
+from lfbench.reports.figures import _as_gray, _colorbar, _colormap, _pyplot, save_formats
 from lfbench.utils.errors import SpecError
 
 __all__ = [
@@ -43,7 +42,6 @@ PAIRWISE_LIMIT = 0.1  # px, colour range of the pairwise maps (the toolkit's)
 PAIRWISE_THRESHOLD = 0.01  # px: smaller differences of absolute error are a tie
 HEATMAP_CMAP, PAIRWISE_CMAP = "inferno", "seismic"
 MEDIAN_ERROR_LIMIT = 0.2  # px, colour range of the median-error heatmap
-FIGURE_FORMATS = ("png", "pdf", "svg")
 
 # pairwise class codes
 OUTSIDE, TIE, A_BETTER, B_BETTER = 0, 1, 2, 3
@@ -98,18 +96,6 @@ def pairwise_shares(codes: np.ndarray) -> dict[str, float]:
             for name, code in (("a_better", A_BETTER), ("b_better", B_BETTER), ("tie", TIE))}
 
 
-def _cmap(name: str):
-    import matplotlib
-
-    return matplotlib.colormaps[name]
-
-
-def _gray(background: np.ndarray | None, shape: tuple[int, ...]) -> np.ndarray | None:
-    from lfbench.reports.figures import _as_gray
-
-    return _as_gray(background, shape)
-
-
 def pairwise_image(gt: np.ndarray, a: np.ndarray, b: np.ndarray, mask: np.ndarray | None = None,
                    threshold: float = PAIRWISE_THRESHOLD, limit: float = PAIRWISE_LIMIT,
                    background: np.ndarray | None = None) -> np.ndarray:
@@ -119,8 +105,8 @@ def pairwise_image(gt: np.ndarray, a: np.ndarray, b: np.ndarray, mask: np.ndarra
     diff = pairwise_difference(gt, a, b)
     codes = pairwise_classes(gt, a, b, mask, threshold)
     t = np.clip((np.nan_to_num(diff, nan=0.0, posinf=limit, neginf=-limit) + limit) / (2 * limit), 0, 1)
-    rgb = _cmap(PAIRWISE_CMAP)(t)[..., :3].astype(np.float32)
-    gray = _gray(background, codes.shape)
+    rgb = _colormap(PAIRWISE_CMAP)(t)[..., :3].astype(np.float32)
+    gray = _as_gray(background, codes.shape)
     tie = np.full(codes.shape, TIE_LIGHT, np.float32) if gray is None else 0.80 + 0.15 * gray
     rgb[codes == TIE] = np.repeat(tie[..., None], 3, axis=2)[codes == TIE]
     rgb[codes == OUTSIDE] = OUTSIDE_GREY
@@ -154,7 +140,7 @@ def heatmap_image(values: np.ndarray, vmin: float, vmax: float, cmap: str = HEAT
     v = np.asarray(values, dtype=np.float64)
     nan = np.isnan(v)
     t = np.clip((np.nan_to_num(v, nan=vmin, posinf=vmax) - vmin) / max(vmax - vmin, 1e-12), 0, 1)
-    rgb = _cmap(cmap)(t)[..., :3].astype(np.float32)
+    rgb = _colormap(cmap)(t)[..., :3].astype(np.float32)
     rgb[nan] = OUTSIDE_GREY
     return rgb
 
@@ -198,41 +184,6 @@ def radar_radii(scores: pd.DataFrame, rings: int = 4) -> pd.DataFrame:
 
 
 # --------------------------------------------------------------------------- drawing
-
-def save_formats(fig: Any, path: str | Path, formats: Sequence[str] = ("png",), dpi: int = 110) -> list[Path]:
-    """Write ``fig`` as path.<format> for each of png / pdf / svg (atomically) and close it. The
-    files carry no metadata link (PNG 'Software', PDF 'Producer' and 'Creator' are left out)."""
-    import matplotlib.pyplot as plt
-
-    unknown = [f for f in formats if f not in FIGURE_FORMATS]
-    if unknown or not formats:
-        plt.close(fig)
-        raise SpecError(f"unknown figure format {', '.join(unknown) or '(none)'}; use {', '.join(FIGURE_FORMATS)}")
-    meta = {"png": {"Software": None}, "pdf": {"Producer": None, "Creator": None}, "svg": {"Creator": None}}
-    written = []
-    try:
-        for fmt in dict.fromkeys(formats):
-            buf = io.BytesIO()
-            fig.savefig(buf, format=fmt, dpi=dpi, metadata=meta[fmt])
-            target = Path(path).with_suffix(f".{fmt}")
-            write_bytes(target, buf.getvalue())
-            written.append(target)
-    finally:
-        plt.close(fig)
-    return written
-
-
-def _pyplot():
-    from lfbench.reports.figures import _pyplot as pyplot
-
-    return pyplot()
-
-
-def _colorbar(fig: Any, ax: Any, cmap: str, vmin: float, vmax: float, label: str) -> None:
-    from lfbench.reports.figures import _colorbar as colorbar
-
-    colorbar(fig, ax, cmap, vmin, vmax, label)
-
 
 def plot_pairwise(gt_by_scene: Mapping[str, np.ndarray], a_by_scene: Mapping[str, np.ndarray],
                   b_by_scene: Mapping[str, np.ndarray], labels: tuple[str, str], path: str | Path, *,
