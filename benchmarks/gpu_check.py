@@ -53,13 +53,6 @@ def _sizes(quick: bool) -> dict:
             "batch": 32, "patch": None, "model_width": None, "synthetic_size": 256, "warmup": 64}
 
 
-def _sync(device) -> None:
-    import torch
-
-    if device.type == "cuda":
-        torch.cuda.synchronize(device)
-
-
 def _memory_gb(device) -> float:
     import torch
 
@@ -73,6 +66,7 @@ def section_inference(device, sizes: dict) -> dict:
     from lfbench_methods.subfocal.inference import infer
     from lfbench_methods.subfocal.network import SubFocalNet
 
+    from lfbench.runs.bench import sync
     from lfbench.utils.hardware import bf16_missing
 
     out: dict = {"size": sizes["size"], "width": sizes["width"], "cases": []}
@@ -90,10 +84,10 @@ def section_inference(device, sizes: dict) -> dict:
             infer(net, warm, precision=precision, max_memory_gb=None)  # cuDNN / oneDNN set-up, lazy init
             if device.type == "cuda":
                 torch.cuda.reset_peak_memory_stats(device)
-            _sync(device)
+            sync(device)
             start = time.perf_counter()
             res = infer(net, views, precision=precision, max_memory_gb=None)
-            _sync(device)
+            sync(device)
             case.update(seconds=time.perf_counter() - start, memory_gb=_memory_gb(device),
                         memory="cuda_max_allocated" if device.type == "cuda" else "peak_rss",
                         finite=bool(torch.isfinite(res.disparity).all()))
