@@ -25,7 +25,6 @@ from lfbench.utils.errors import SpecError
 FORCE_NO_BF16_ENV = "LFBENCH_FORCE_NO_BF16"
 # oneDNN's bf16 convolution path: these three AVX-512 subsets together, or avx_ne_convert, or AMX.
 BF16_AVX512_FLAGS = ("avx512bw", "avx512vl", "avx512dq")
-BF16_ALTERNATIVE_FLAGS = ("avx_ne_convert", "amx_bf16")
 DEVICE_HELP = "auto (CUDA when available, else CPU), cpu, cuda or cuda:K"
 _DEVICE_RE = re.compile(r"^(auto|cpu|cuda)(?::(\d+))?$")
 
