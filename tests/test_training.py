@@ -651,3 +651,53 @@ def test_training_devices_go_through_the_one_device_parser(data_root, monkeypatc
     assert resolve_device("cuda", 2) == torch.device("cuda", 0) and resolve_device("cuda:1", 0).index == 1
     with pytest.raises(SpecError, match="only 2 CUDA GPUs are visible"):
         resolve_device("cuda:5")
+
+
+class _StopAt:
+    """A run logger that interrupts training (as Ctrl-C does) once the log reaches ``global_step``."""
+
+    def __init__(self, global_step: int) -> None:
+        self.global_step = global_step
+
+    def record(self, entry: dict) -> None:
+        if entry["event"] == "train" and entry["global_step"] == self.global_step:
+            os.kill(os.getpid(), signal.SIGINT)
+
+    def close(self) -> None:
+        pass
+
+
+@pytest.mark.parametrize("planned", [3, 7], ids=["extended", "cut"])
+def test_the_stage_in_progress_may_be_cut_or_extended_on_resume(reference_run, tmp_path, planned):
+    """Stage 1 planned with 3 or 7 steps, stopped at step 2, resumed with the reference config (4 steps):
+    the same weights, bit for bit, as the run configured with 4 steps from the start."""
+    from lfbench.training.loop import TrainingInterrupted, train
+
+    cfg, ref_out, _ = reference_run
+    raw = cfg.to_dict()
+    raw["stages"] = [dict(raw["stages"][0], steps=planned), raw["stages"][1]]
+    out = tmp_path / "out"
+    with pytest.raises(TrainingInterrupted, match="stopped at stage 1 step 2"):
+        train(TrainConfig.from_dict(raw), out, progress=False, loggers=[_StopAt(2)])
+    result = train(cfg, out, progress=False, loggers=[])
+    assert result["resumed"] and result["steps"] == 6
+    final, ref = load_state(out / "final.pt"), load_state(ref_out / "final.pt")
+    for k, v in ref["state_dict"].items():
+        assert torch.equal(final["state_dict"][k], v), k
+
+
+def test_a_stage_cut_below_its_checkpoint_step_is_refused(reference_run, tmp_path):
+    from lfbench.training.loop import TrainingInterrupted, train
+    from lfbench.utils.errors import DataError, SpecError
+
+    cfg, _, _ = reference_run
+    out = tmp_path / "out"
+    with pytest.raises(TrainingInterrupted):
+        train(cfg, out, progress=False, loggers=[_StopAt(2)])
+    raw = cfg.to_dict()
+    raw["stages"] = [dict(raw["stages"][0], steps=1), raw["stages"][1]]
+    with pytest.raises(DataError, match="stage 1 step 2, beyond the config's stages"):
+        train(TrainConfig.from_dict(raw), out, progress=False, loggers=[])
+    raw["stages"] = [dict(raw["stages"][0], lr=5e-4), raw["stages"][1]]  # any other change stays refused
+    with pytest.raises(SpecError, match="only the steps of the stage in progress may change"):
+        train(TrainConfig.from_dict(raw), out, progress=False, loggers=[])

@@ -16,7 +16,9 @@ Files under OUT:
   ``summary.json``: the final numbers; ``data/<category>``: generated synthetic scenes.
 
 Samples are a pure function of (seed, stage, step, index) (lfbench.training.data), so a resumed
-run and an uninterrupted one see the same batches. With K processes (torchrun) rank r takes
+run and an uninterrupted one see the same batches. On resume only the ``steps`` of the stage in
+progress may change (cut a long stage short, or extend it): with a constant learning rate per stage
+the result is the run that the new config describes. With K processes (torchrun) rank r takes
 samples [r B/K, (r+1) B/K) of the global batch B, DistributedDataParallel averages the
 gradients, and only rank 0 writes files.
 """
@@ -110,10 +112,14 @@ class RunPaths:
         return self.out / f"stage{index + 1}_{name}.pt"
 
 
-def resume_view(config: dict[str, Any], stages: int) -> dict[str, Any]:
-    """:func:`comparable` with only the first ``stages`` stages: what a resumed run must keep."""
+def resume_view(config: dict[str, Any], stages: int, in_progress: int | None = None) -> dict[str, Any]:
+    """:func:`comparable` with only the first ``stages`` stages: what a resumed run must keep. The stage
+    ``in_progress`` (index) is compared without its ``steps``: the learning rate is constant within a
+    stage, so cutting or extending the stage in progress gives the run the new config describes."""
     d = comparable(config)
-    d["stages"] = list(d.get("stages", []))[:stages]
+    d["stages"] = [dict(s) for s in list(d.get("stages", []))[:stages]]
+    if in_progress is not None and in_progress < len(d["stages"]):
+        d["stages"][in_progress].pop("steps", None)
     return d
 
 
@@ -438,11 +444,12 @@ class Trainer:
             return None
         state = ckpt.load(self.paths.checkpoint, ckpt.CHECKPOINT_FORMAT)
         check_resume_state(state, self.paths.checkpoint)
-        used = state["stage"] + (1 if state["step"] > 0 else 0)
-        if resume_view(state["config"], used) != resume_view(self.cfg.to_dict(), used):
+        in_progress = state["stage"] if state["step"] > 0 else None
+        used = state["stage"] + (1 if in_progress is not None else 0)
+        if resume_view(state["config"], used, in_progress) != resume_view(self.cfg.to_dict(), used, in_progress):
             raise SpecError(f"the config differs from the one {self.paths.checkpoint} was trained with (in a "
-                            f"setting or one of the {used} stage(s) already trained); use another --out folder "
-                            "to start a new run", self.cfg.source)
+                            f"setting or one of the {used} stage(s) already trained; only the steps of the stage "
+                            "in progress may change); use another --out folder to start a new run", self.cfg.source)
         return state
 
     def export(self, path: Path, model, info: dict | None = None) -> None:
@@ -548,9 +555,9 @@ class Trainer:
             model.load_state_dict(state["model"])
             start_stage, start_step, opt_state = state["stage"], state["step"], state["optimizer"]
             done = start_stage == len(cfg.stages) and start_step == 0  # finished, final weights not yet written
-            if not done and (start_stage >= len(cfg.stages) or start_step >= cfg.stages[start_stage].steps):
+            if not done and (start_stage >= len(cfg.stages) or start_step > cfg.stages[start_stage].steps):
                 raise DataError(f"training checkpoint is at stage {start_stage + 1} step {start_step}, beyond the "
-                                "config's stages", paths.checkpoint)
+                                "config's stages", paths.checkpoint)  # steps == the stage's steps: it ends now
             self.global_step = state["global_step"]
             self.elapsed_before = float(state["elapsed_s"])
             self.best_badpix = float(state["best_badpix"])
