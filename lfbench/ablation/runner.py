@@ -40,7 +40,6 @@ from lfbench.utils.atomic import write_text
 from lfbench.utils.errors import DataError, SpecError
 from lfbench.utils.jsonfile import read_json
 from lfbench.utils.log import log_to_file
-from lfbench.utils.threads import torch_threads
 
 Log = Callable[[str], None]
 _log = logging.getLogger(__name__)
@@ -152,7 +151,7 @@ def _shared_stage1(spec: AblationSpec, folder: Path, links: dict[str, str], thre
         return folder
     log(f"stage 1 (shared by {len(spec.cells)} cells) in {folder}")
     command = shlex.join(["lfbench", "train", str(path), "--out", str(folder)])
-    with torch_threads(None), log_to_file(folder / LOG):  # the trainer sets its own thread count
+    with log_to_file(folder / LOG):  # train() restores the caller's thread count itself
         train(TrainConfig.from_toml(path), folder, command=command, progress=progress)
     summary = read_json(folder / "summary.json", "training summary")
     write_text(marker, json.dumps({"steps": summary["steps"], "elapsed_s": summary["elapsed_s"]}, indent=2) + "\n")
