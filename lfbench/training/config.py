@@ -133,8 +133,8 @@ class TrainingConfig:
 
 # Training keys added after configs and cell fingerprints were first written: left out of to_dict() at their
 # defaults, so that those stay the same (and old checkpoints resume).
-NEW_TRAINING_DEFAULTS = {"workers": 0, "pin_memory": True, "precision": "fp32", "tf32": False,
-                         "cudnn_benchmark": False}
+NEW_TRAINING_KEYS = ("workers", "pin_memory", "precision", "tf32", "cudnn_benchmark")
+NEW_TRAINING_DEFAULTS = {k: getattr(TrainingConfig, k) for k in NEW_TRAINING_KEYS}  # the dataclass's defaults
 
 
 @dataclass(frozen=True)
@@ -383,20 +383,21 @@ def _parse_augment(t: _Table) -> AugmentConfig:
 
 
 def _parse_training(t: _Table) -> TrainingConfig:
+    d = TrainingConfig  # the defaults are the dataclass's
     cfg = TrainingConfig(
-        batch_size=t.number("batch_size", 32, low=1, high=MAX_BATCH, integer=True),
-        accumulate=t.number("accumulate", 1, low=1, high=MAX_BATCH, integer=True),
-        threads=t.number("threads", 0, low=0, high=1024, integer=True),
-        device=t.get("device", str, "auto"),
-        checkpoint_every=t.number("checkpoint_every", 500, low=1, integer=True),
-        log_every=t.number("log_every", 50, low=1, integer=True),
-        prefetch=t.number("prefetch", 2, low=0, high=64, integer=True),
-        channels_last=t.get("channels_last", bool, True),
-        workers=t.number("workers", 0, low=0, high=256, integer=True),
-        pin_memory=t.get("pin_memory", bool, True),
-        precision=t.get("precision", str, "fp32"),
-        tf32=t.get("tf32", bool, False),
-        cudnn_benchmark=t.get("cudnn_benchmark", bool, False),
+        batch_size=t.number("batch_size", d.batch_size, low=1, high=MAX_BATCH, integer=True),
+        accumulate=t.number("accumulate", d.accumulate, low=1, high=MAX_BATCH, integer=True),
+        threads=t.number("threads", d.threads, low=0, high=1024, integer=True),
+        device=t.get("device", str, d.device),
+        checkpoint_every=t.number("checkpoint_every", d.checkpoint_every, low=1, integer=True),
+        log_every=t.number("log_every", d.log_every, low=1, integer=True),
+        prefetch=t.number("prefetch", d.prefetch, low=0, high=64, integer=True),
+        channels_last=t.get("channels_last", bool, d.channels_last),
+        workers=t.number("workers", d.workers, low=0, high=256, integer=True),
+        pin_memory=t.get("pin_memory", bool, d.pin_memory),
+        precision=t.get("precision", str, d.precision),
+        tf32=t.get("tf32", bool, d.tf32),
+        cudnn_benchmark=t.get("cudnn_benchmark", bool, d.cudnn_benchmark),
     )
     t.done()
     if cfg.precision not in ("fp32", "bf16"):
