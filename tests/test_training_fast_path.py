@@ -94,14 +94,18 @@ def test_gathered_volume_matches_grid_sample_values_means_and_gradients(interval
 
 def test_two_grids_of_the_same_size_do_not_share_a_gather_index():
     # Same number of disparities and the same patch shape, other offsets (an ablation over d_min in one
-    # process): the second volume must follow its own grid, not reuse the first one's index.
-    feats = torch.randn(1, 81, 4, 9, 11)
-    for d_min, d_max in ((-4.0, 4.0), (-3.0, 5.0)):
-        net = SubFocalNet(width=2, interval=1.0, d_min=d_min, d_max=d_max)
-        vol = GatheredVolume(net._shift_plan(), feats).volume()
+    # process): the second volume and its channel means must follow its own grid, not reuse the first
+    # one's cached index and mean weights; a new patch size of the same grid must not reuse them either.
+    torch.manual_seed(2)
+    nets = {d_min: SubFocalNet(width=2, interval=0.5, d_min=d_min, d_max=d_min + 8) for d_min in (-4.0, -3.0)}
+    for d_min, h, w in ((-4.0, 9, 11), (-3.0, 9, 11), (-3.0, 7, 11)):
+        feats = torch.randn(1, 81, 4, h, w)
+        net = nets[d_min]
+        gathered = GatheredVolume(net._shift_plan(), feats)
         ref = shift_views(feats, net.offsets, net.disparities, "bilinear")
-        ref = ref.reshape(1, net.disparities.numel(), 324, 9, 11).transpose(1, 2)
-        torch.testing.assert_close(vol, ref, rtol=0, atol=2e-5)
+        ref = ref.reshape(1, net.disparities.numel(), 324, h, w).transpose(1, 2)
+        torch.testing.assert_close(gathered.volume(), ref, rtol=0, atol=2e-5)
+        torch.testing.assert_close(gathered.channel_mean(), ref.mean(dim=(2, 3, 4)), rtol=0, atol=1e-6)
 
 
 def test_an_integer_shift_is_exact_in_the_gathered_volume():

@@ -21,6 +21,8 @@ concatenate). Disparities in px per view step, shifts in px.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import torch
 import torch.nn.functional as F
 from lfbench_methods.subfocal.fast import ShiftPlan
@@ -62,11 +64,22 @@ class GatheredVolume:
         """(B, N * C) mean over (D, H, W) of every volume channel, from the padded features: the shifted
         map's sum is sum_{Y,X} cy[Y] cx[X] F[Y, X] with coverage (1 - f) on the window the integer shift
         selects and f on the window one pixel further."""
-        plan = self.plan
         b, n, c, h, w = self.shape
         _, hp, wp, _, _ = self.padded.shape
+        weight = _plan_cached("mean_weight", self.plan, (h, w, str(self.padded.device), self.padded.dtype),
+                              self._mean_weight)
+        # sum over (Y, X) of padded (B, Y, X, N, C) * weight (Y, X, N): one batched matmul per view
+        pv = self.padded.permute(3, 0, 4, 1, 2).reshape(n, b * c, hp * wp)  # (N, B*C, Hp*Wp)
+        mean = torch.bmm(pv, weight)  # (N, B*C, 1)
+        return mean.reshape(n, b, c).permute(1, 0, 2).reshape(b, n * c)
+
+    def _mean_weight(self) -> torch.Tensor:
+        """(N, Hp * Wp, 1) weight of every padded pixel in its view's channel means (a function of the plan,
+        the image size, the device and the dtype only)."""
+        plan = self.plan
+        _, n, _, h, w = self.shape
+        _, hp, wp, _, _ = self.padded.shape
         p = plan.pad
-        dev = self.padded.device
 
         def coverage(o: torch.Tensor, f: torch.Tensor, size: int, total: int) -> torch.Tensor:
             frac = f.double()[plan.slot, torch.arange(n)[None, :]]  # (D, N)
@@ -78,11 +91,7 @@ class GatheredVolume:
         cy = coverage(plan.oy, plan.fy, h, hp)
         cx = coverage(plan.ox, plan.fx, w, wp)
         weight = torch.einsum("dny,dnx->nyx", cy, cx) / (plan.disparities * h * w)  # (N, Hp, Wp)
-        weight = weight.to(dev, self.padded.dtype).permute(1, 2, 0)  # (Hp, Wp, N)
-        # sum over (Y, X) of padded (B, Y, X, N, C) * weight (Y, X, N): one batched matmul per view
-        pv = self.padded.permute(3, 0, 4, 1, 2).reshape(n, b * c, hp * wp)  # (N, B*C, Hp*Wp)
-        mean = torch.bmm(pv, weight.permute(2, 0, 1).reshape(n, hp * wp, 1))  # (N, B*C, 1)
-        return mean.reshape(n, b, c).permute(1, 0, 2).reshape(b, n * c)
+        return weight.to(self.padded.device, self.padded.dtype).reshape(n, hp * wp, 1)
 
     def volume(self, weights: torch.Tensor | None = None) -> torch.Tensor:
         """(B, N * C, D, H, W) channels-last-3d: the gathered volume, times ``weights`` (B, N * C) if given."""
@@ -95,11 +104,12 @@ class GatheredVolume:
 
     def _index(self, dev: torch.device) -> torch.Tensor:
         """(B * D * H * W * N,) int64 rows of the flattened maps (B * S * gh * gw * N, C), volume order."""
+        b, n, c, h, w = self.shape
+        return _plan_cached("index", self.plan, (b, n, h, w, str(dev)), lambda: self._make_index(dev))
+
+    def _make_index(self, dev: torch.device) -> torch.Tensor:
         plan = self.plan
         b, n, c, h, w = self.shape
-        key = (b, n, h, w, str(dev))
-        if _INDEX_CACHE.get("plan") is plan and _INDEX_CACHE.get("key") == key:
-            return _INDEX_CACHE["index"]
         s, gh, gw = plan.slots, self.gh, self.gw
         yy = torch.arange(h, device=dev)[:, None, None]
         xx = torch.arange(w, device=dev)[None, :, None]
@@ -107,16 +117,23 @@ class GatheredVolume:
         base = (yy * gw + xx) * n + nn_  # (H, W, N)
         offset = ((plan.slot * gh + (plan.oy - self.oy_min)) * gw + (plan.ox - self.ox_min)) * n  # (D, N)
         idx = base[None] + offset.to(dev)[:, None, None, :]  # (D, H, W, N)
-        idx = (idx.reshape(1, -1) + torch.arange(b, device=dev)[:, None] * (s * gh * gw * n)).reshape(-1)
-        _INDEX_CACHE.clear()
-        _INDEX_CACHE.update(plan=plan, key=key, index=idx)
-        return idx
+        return (idx.reshape(1, -1) + torch.arange(b, device=dev)[:, None] * (s * gh * gw * n)).reshape(-1)
 
 
-# The last gather index (one training run uses one patch size and one network's cached plan): the plan
-# itself (held, so identity is a safe test: two grids with the same D but other offsets differ), the shape
-# key and the index.
-_INDEX_CACHE: dict = {}
+# The last gather index and channel-mean weight (one training run uses one patch size and one network's
+# cached plan), each as (plan, key, tensor): the plan itself is held, so identity is a safe test (two grids
+# with the same D but other offsets differ).
+_CACHE: dict[str, tuple[ShiftPlan, tuple, torch.Tensor]] = {}
+
+
+def _plan_cached(name: str, plan: ShiftPlan, key: tuple, make: Callable[[], torch.Tensor]) -> torch.Tensor:
+    """The cached ``name`` tensor of ``plan`` and ``key``, else ``make()`` (then cached in its place)."""
+    held = _CACHE.get(name)
+    if held is not None and held[0] is plan and held[1] == key:
+        return held[2]
+    value = make()
+    _CACHE[name] = (plan, key, value)
+    return value
 
 
 class _Gather(torch.autograd.Function):
