@@ -74,6 +74,8 @@ CASES: list[tuple[str, Callable[[Path], list], tuple[str, ...], tuple[str, ...]]
      ("nope", "data root not found"), ("out",)),
     ("evaluate-bad-spec", lambda t: ["evaluate", "--data", _scene(t), "--method", "planesweep:interval=x", "--out",
                                      t / "out"], ("planesweep",), ("out",)),
+    ("evaluate-constant-inf", lambda t: ["evaluate", "--data", _scene(t), "--method", "constant:value=inf", "--out",
+                                         t / "out"], ("constant", "finite disparity of at most 64 px"), ("out",)),
     ("evaluate-unknown-method", lambda t: ["evaluate", "--data", _scene(t), "--method", "nosuch", "--out", t / "out"],
      ("nosuch",), ("out",)),
     ("evaluate-ci-block-0", lambda t: ["evaluate", "--data", _scene(t), "--method", "gt", "--out", t / "out", "--ci",

@@ -100,6 +100,12 @@ def test_every_registered_method_predicts_a_float32_map_of_the_scene(name, synth
     if name == "gt":
         assert np.array_equal(preds["gt"].disparity, synthetic_scene.gt_disparity())
         assert all(r.value == 0.0 for r in results.records)
+    if name == "constant":  # the zero map: hand-computed from the ground truth inside the 15 px border
+        assert not preds["constant"].disparity.any()
+        gt = synthetic_scene.gt_disparity()[15:-15, 15:-15].astype(np.float64)
+        got = {r.metric: r.value for r in results.records}
+        assert got["mse_x100"] == pytest.approx(100 * np.mean(gt**2), rel=1e-6)
+        assert got["badpix_0.07"] == pytest.approx(100 * np.mean(np.abs(gt) > 0.07), rel=1e-9)
     if expected is not None:
         assert np.array_equal(preds[runnable[0].label].disparity, expected)
 
