@@ -90,7 +90,7 @@ def gather_bytes(net: SubFocalNet, rows: int, cols: int, precision: str = "fp32"
     item = 2 if precision == "bf16" else 4
     if net.interpolation != "bilinear":
         return d * rows * cols * FEATURES * n * 4
-    plan = _plan(net) if plan is None else plan
+    plan = net._shift_plan() if plan is None else plan
     return _map_area(plan, rows, cols) * n * FEATURES * plan.slots * item + rows * cols * n * 4
 
 
@@ -131,16 +131,10 @@ def _tile_need(net: SubFocalNet, rows: int, cols: int, precision: str, plan=None
     return max(estimate_tile_bytes(net, rows, cols, precision, device) + held, held + build)
 
 
-def _plan(net: SubFocalNet):
-    from lfbench_methods.subfocal.fast import net_shift_plan
-
-    return net_shift_plan(net)
-
-
 def _fixed_bytes(net: SubFocalNet, height: int, width: int) -> int:
     """Whole-image buffers: zero-padded features (N x 4 ch, fp32), cost, probability and the outputs."""
     d = net.disparities.numel()
-    pad = _plan(net).pad if net.interpolation == "bilinear" else 0
+    pad = net._shift_plan().pad if net.interpolation == "bilinear" else 0
     feats = (height + 2 * pad) * (width + 2 * pad) * FEATURES * net.angular ** 2 * 4
     return feats + 4 * height * width * (5 * d + 4)
 
@@ -164,7 +158,7 @@ def plan_tile(net: SubFocalNet, height: int, width: int, halo: int = EXACT_HALO,
     """The square core tile size (px) for ``max_memory_gb``: the whole image when it fits, else the fewest tiles
     per side k whose largest tile (ceil(size / k) + 2 halo) fits beside the whole-image buffers."""
     budget = _budget(net, height, width, max_memory_gb)
-    plan = _plan(net) if net.interpolation == "bilinear" else None
+    plan = net._shift_plan() if net.interpolation == "bilinear" else None
     for k in range(1, max(height, width) + 1):
         th, tw = math.ceil(height / k), math.ceil(width / k)
         rows, cols = min(th + 2 * halo, height) if k > 1 else height, min(tw + 2 * halo, width) if k > 1 else width
@@ -180,7 +174,7 @@ def plan_tiles(net: SubFocalNet, height: int, width: int, halo: int = EXACT_HALO
     at least 8 px are used even when the budget is smaller than that. ``device`` (default CPU): where it runs
     (see :func:`memory_budget_gb` for the budget of a GPU)."""
     budget = _budget(net, height, width, max_memory_gb, device)
-    plan = _plan(net) if net.interpolation == "bilinear" else None
+    plan = net._shift_plan() if net.interpolation == "bilinear" else None
     best = None
     for ky in range(1, math.ceil(height / 8) + 1):
         th = math.ceil(height / ky)
@@ -229,7 +223,7 @@ def region_volume(net: SubFocalNet, features: torch.Tensor, y0: int, y1: int, x0
     from lfbench_methods.subfocal.fast import VolumeGather, pad_features
 
     b, n, c, h, w = features.shape
-    plan = _plan(net)
+    plan = net._shift_plan()
     gather = VolumeGather(plan, pad_features(features, plan.pad), y0, y1, x0, x1)
     d, rh, rw = plan.disparities, y1 - y0, x1 - x0
     out = torch.empty((b, d, rh, rw, n * c), dtype=torch.float32, device=features.device)
@@ -339,7 +333,7 @@ def eval_cost(net: SubFocalNet, views: torch.Tensor, tile_h: int, tile_w: int, *
     device = views.device
     dtype = DTYPES[precision]
     bilinear = net.interpolation == "bilinear"
-    plan = _plan(net) if bilinear else None
+    plan = net._shift_plan() if bilinear else None
     pad = plan.pad if bilinear else 0
     chunk = view_chunk(h, w, b, max_memory_gb, fixed=_fixed_bytes(net, h, w), device=device)
     padded = padded_features(net, views, pad, chunk)
