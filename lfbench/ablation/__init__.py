@@ -5,5 +5,6 @@ beside ours).
 
 Modules: spec (the TOML spec and its cells), toml_text (writing a cell's training config), cell (one
 cell: train, evaluate, time, marker), runner (all cells, resumable, in parallel processes), report
-(tables) and plots (figures).
+(tables), significance (seeds: intervals and paired tests), baselines (does every cell beat the
+spec's [[methods]]?) and plots (figures).
 """

@@ -8,6 +8,11 @@ Written into OUT (each table as .md, .tex and .csv):
   time, ours beside the paper's Table IV;
 - ``table5`` ("table5"): BadPix 0.07 per fine-tuning loss, ours beside the paper's Table V;
 - ``table_beta`` ("beta"): BadPix 0.07 and MSE x100 per UAFL beta (the paper prints no values);
+- ``table_baselines`` (the spec has [[methods]]): every cell (with seeds: variant) against each extra
+  method, e.g. the plane sweep and the zero map, per scene group in BadPix 0.07 and MSE x100, with a
+  verdict per baseline (lfbench.ablation.baselines); its summary lines ("every cell beats ..." or "K of N
+  cells do not beat ...") are logged and head the captions of table_cells, this table and the paper-style
+  table;
 - ``table_per_scene`` / ``table_average`` (Tables I/II) for every cell and extra method, and, when the
   evaluation includes scenes the paper reports, ``table_per_scene_paper`` / ``table_average_paper``;
 - figures/: ``beta_curve.png`` (BadPix 0.07 against beta), ``accuracy_vs_test_time.png`` (BadPix 0.07
@@ -229,6 +234,25 @@ def seed_means(spec: AblationSpec, frame: pd.DataFrame) -> tuple[pd.DataFrame, d
     return pd.DataFrame(rows), rename
 
 
+def baseline_verdicts(spec: AblationSpec, results: Results) -> tuple[pd.DataFrame, list[str], list[str]]:
+    """table_baselines (every cell or variant against the spec's [[methods]], see lfbench.ablation.baselines),
+    its caption and the summary lines (one per baseline); empty without cells or [[methods]]."""
+    from lfbench.ablation.baselines import baselines_caption, baselines_table, scene_groups, summary_lines
+    from lfbench.ablation.significance import cell_info
+
+    scores = results.to_frame()
+    if not spec.cells or not spec.methods or scores.empty:
+        return pd.DataFrame(), [], []
+    labels = [m.label for m in spec.methods]
+    table = baselines_table(cell_info(spec), scores, labels, seeds=bool(spec.seeds))
+    groups = list(dict.fromkeys(scene_groups(scores).values()))
+    lines = summary_lines(table, labels, groups)
+    what = "every cell against the baselines ([[methods]])" + (
+        f", mean over seeds {', '.join(str(x) for x in spec.seeds)}" if spec.seeds else "")
+    title, ours = caption_lines(spec, None, what)[:2]
+    return table, [title, *lines, baselines_caption(seeds=bool(spec.seeds)), ours], lines
+
+
 def write_seed_tables(spec: AblationSpec, results: Results, out: Path) -> list[Path]:
     """table_seeds (mean and 95 % t-interval over seeds per variant) and table_significance (the paper's
     orderings as paired t-tests over seeds); see lfbench.ablation.significance."""
@@ -273,6 +297,11 @@ def caption_lines(spec: AblationSpec, paper, what: str | None = None, note: str 
             note if paper is not None else "paper: not shown (the paper's tables were not found)"]
 
 
+def _with_summary(caption: list[str], summary: Sequence[str]) -> list[str]:
+    """The caption with the baseline summary lines right under its title line."""
+    return [*caption[:1], *summary, *caption[1:]]
+
+
 def load_paper_tables(paper: str | Path | None, log: Log):
     """The paper's tables, or None (with one line saying so) when no folder is given or found."""
     from lfbench.reports.paper import find_paper_dir, load_paper
@@ -296,22 +325,28 @@ def write_report(spec: AblationSpec, out: str | Path, results: Results, markers:
     frame = cell_frame(spec, results, markers)
     written: list[Path] = []
     if not frame.empty:
-        written += write_table(cells_table(spec, frame), out, "table_cells", caption_lines(spec, None, "all cells"))
+        bar, bar_caption, bar_lines = baseline_verdicts(spec, results)
+        for line in bar_lines:
+            log(line)
+        written += write_table(cells_table(spec, frame), out, "table_cells",
+                               _with_summary(caption_lines(spec, None, "all cells"), bar_lines))
         means, rename = seed_means(spec, frame)
         seeds_note = ([f"ours: mean over seeds {', '.join(str(x) for x in spec.seeds)} (intervals and paired tests: "
                        "table_seeds, table_significance)"] if spec.seeds else [])
         if spec.table == "table4":
             written += write_table(table4(spec, means, paper_tables, log).rename(index=rename), out, "table4",
-                                   [*caption_lines(spec, paper_tables), *seeds_note])
+                                   _with_summary([*caption_lines(spec, paper_tables), *seeds_note], bar_lines))
         elif spec.table == "table5":
             written += write_table(table5(spec, means, paper_tables, log).rename(index=rename), out, "table5",
-                                   [*caption_lines(spec, paper_tables), *seeds_note])
+                                   _with_summary([*caption_lines(spec, paper_tables), *seeds_note], bar_lines))
         elif spec.table == "beta":
-            caption = [*caption_lines(spec, None), *seeds_note,
-                       "paper: no values printed (its figure: BadPix 0.07 improves as beta goes from 1 down to 0.1)"]
+            caption = _with_summary([*caption_lines(spec, None), *seeds_note, "paper: no values printed (its "
+                                     "figure: BadPix 0.07 improves as beta goes from 1 down to 0.1)"], bar_lines)
             written += write_table(table_beta(spec, means).rename(index=rename), out, "table_beta", caption)
         if spec.seeds:
             written += write_seed_tables(spec, results, out)
+        if not bar.empty:
+            written += write_table(bar, out, "table_baselines", bar_caption)
     per_scene, average = per_scene_table(results), average_table(results)
     base_caption = caption_lines(spec, None, "Tables I/II")
     written += write_table(per_scene, out, "table_per_scene", base_caption)

@@ -31,8 +31,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-__all__ = ["ALPHA", "Comparison", "cell_info", "comparisons", "paired_t", "seeds_table", "significance_table",
-           "t_interval", "verdict"]
+__all__ = ["ALPHA", "Comparison", "cell_info", "comparisons", "paired_t", "scene_scores", "seeds_table",
+           "significance_table", "t_interval", "verdict"]
 
 ALPHA = 0.05
 LEVEL = 0.95
@@ -140,7 +140,7 @@ def comparisons(table: str, info: pd.DataFrame) -> list[Comparison]:
     return out
 
 
-def _scores(scores: pd.DataFrame, metric: str) -> pd.DataFrame:
+def scene_scores(scores: pd.DataFrame, metric: str) -> pd.DataFrame:
     """(cell, scene) -> value of one metric (the mean over resolutions, as the cell tables average)."""
     sel = scores[scores["metric"] == metric]
     return sel.groupby(["method", "scene"])["value"].mean().rename("value").reset_index()
@@ -151,7 +151,7 @@ def seeds_table(info: pd.DataFrame, scores: pd.DataFrame, metrics: Sequence[str]
     and the number of seeds. ``scores``: long frame (method = cell id, scene, metric, value)."""
     rows: dict[str, dict[str, Any]] = {}
     for metric in metrics:
-        per_cell = _scores(scores, metric).groupby("method")["value"].mean()
+        per_cell = scene_scores(scores, metric).groupby("method")["value"].mean()
         for variant, group in info.groupby("variant", sort=False):
             vals = [float(per_cell[c]) for c in group.index if c in per_cell.index]
             mean, low, high = t_interval(vals)
@@ -166,7 +166,7 @@ def significance_table(table: str, info: pd.DataFrame, scores: pd.DataFrame,
                        metric: str = ORDERING_METRIC) -> pd.DataFrame:
     """One row per comparison of :func:`comparisons`: both variants' means over the paired seeds, the mean
     paired difference (worse - better) with its 95 % interval, t, p and the verdict."""
-    values = _scores(scores, metric)
+    values = scene_scores(scores, metric)
     cell_scores = {c: dict(zip(g["scene"], g["value"], strict=True)) for c, g in values.groupby("method")}
     rows = []
     for comp in comparisons(table, info):

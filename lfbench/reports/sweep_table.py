@@ -25,7 +25,7 @@ from lfbench.method.registry import parse_spec
 from lfbench.reports.tables import write_table
 from lfbench.utils.errors import DataError, LFBenchError
 
-__all__ = ["collect", "sweep_table", "sweep_figure", "main"]
+__all__ = ["SYNTH_PREFIX", "collect", "main", "scene_group", "sweep_figure", "sweep_table"]
 
 METRICS = ("badpix_0.07", "badpix_0.03", "badpix_0.01", "mse_x100")
 NAMES = {"badpix_0.07": "BadPix 0.07 (%)", "badpix_0.03": "BadPix 0.03 (%)", "badpix_0.01": "BadPix 0.01 (%)",
@@ -58,7 +58,9 @@ def collect(run_dir: str | Path) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def _group(scene: str, synth_count: int) -> str:
+def scene_group(scene: str, synth_count: int) -> str:
+    """The scene group a scene's scores are averaged in: ``synthetic (mean of n)`` for the generated scenes,
+    else the scene itself (each real scene is its own group)."""
     return f"synthetic (mean of {synth_count})" if scene.startswith(SYNTH_PREFIX) else scene
 
 
@@ -68,7 +70,7 @@ def sweep_table(frame: pd.DataFrame) -> pd.DataFrame:
     if frame.empty:
         return pd.DataFrame()
     synth = frame.loc[frame["scene"].str.startswith(SYNTH_PREFIX), "scene"].nunique()
-    f = frame.assign(scenes=[_group(s, synth) for s in frame["scene"]])
+    f = frame.assign(scenes=[scene_group(s, synth) for s in frame["scene"]])
     keys = ["scenes", "interpolation", "subpixel", "interval"]
     values = f.pivot_table(index=keys, columns="metric", values="value", aggfunc="mean")
     times = f.drop_duplicates(["label", "scene"]).groupby(keys)["runtime_s"].mean()
