@@ -216,6 +216,23 @@ def test_runner_with_the_oracle(tmp_path):
     assert len(results.runs) == 1 and results.runs[0].runtime_s >= 0 and results.runs[0].nonfinite_pixels == 0
 
 
+def test_runner_asks_each_method_once_per_scene(tmp_path, monkeypatch, caplog):
+    # The up-front check (a method serving no scene is an error) and the skip of one scene use the same answer.
+    scenes = [Scene(write_scene(tmp_path, name, size=24, views=False)) for name in ("served", "not_served")]
+    method = create("gt")
+    asked = []
+
+    def available_for(lf):
+        asked.append(lf.name)
+        return None if lf.name == "served" else "no map for it"
+
+    monkeypatch.setattr(method, "available_for", available_for)
+    results = evaluate([method], scenes, progress=False)
+    assert asked == ["served", "not_served"]
+    assert results.scenes == ["served"]
+    assert "skipping gt on not_served: no map for it" in caplog.text
+
+
 # --------------------------------------------------------------------------- real data
 
 

@@ -37,14 +37,13 @@ def evaluate(methods: Sequence[Method], scenes: Sequence[Scene], *,
     (logger ``lfbench.runs.runner``); a method that can serve none of the scenes is an error
     (DataError, raised before any work). ``on_prediction`` sees each prediction (to save maps or draw figures).
     """
-    check_runnable(methods, scenes)
+    reasons = check_runnable(methods, scenes)  # each (method, scene) asked once
     results = Results(meta={"scoring": {"border_px": rules.border_px, "toolkit_nonfinite": rules.toolkit,
                                         "highres_scenes": sorted(rules.highres_scenes)}})
-    pairs = [(m, s) for m in methods for s in scenes]
+    pairs = [(m, s, r) for m, row in zip(methods, reasons, strict=True) for s, r in zip(scenes, row, strict=True)]
     bar = tqdm(pairs, desc="evaluate", unit="run", disable=None if progress else True, file=sys.stderr, leave=False)
-    for method, scene in bar:
+    for method, scene, reason in bar:
         bar.set_postfix_str(f"{method.label} / {scene.name}"[-60:])
-        reason = method.available_for(scene)
         if reason is not None:
             log.warning("lfbench: skipping %s on %s: %s", method.label, scene.name, reason)
             continue
@@ -65,13 +64,18 @@ def evaluate(methods: Sequence[Method], scenes: Sequence[Scene], *,
     return results
 
 
-def check_runnable(methods: Sequence[Method], scenes: Sequence[Scene]) -> None:
-    """DataError when a method can run on none of ``scenes`` (its results would silently be empty)."""
+def check_runnable(methods: Sequence[Method], scenes: Sequence[Scene]) -> list[list[str | None]]:
+    """Why each method cannot run on each scene (``available_for``: None where it can), one row per
+    method, one entry per scene. DataError when a method can run on none of ``scenes`` (its results
+    would silently be empty)."""
+    table = []
     for method in methods:
         reasons = [method.available_for(scene) for scene in scenes]
         if scenes and all(r is not None for r in reasons):
             names = ", ".join(s.name for s in scenes[:3]) + (" ..." if len(scenes) > 3 else "")
             raise DataError(f"{method.label} cannot run on any selected scene ({names}): {reasons[0]}")
+        table.append(reasons)
+    return table
 
 
 def save_prediction(out_dir: Path) -> PredictionHook:
