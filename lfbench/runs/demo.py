@@ -27,7 +27,7 @@ from lfbench.utils.errors import DataError, LFBenchError, SpecError
 from lfbench.utils.jsonfile import read_json
 
 MANIFEST = "demo.json"
-DATA_DIR, FIGURES_DIR, MAPS_DIR, HTML_DIR = "data", "figures", "maps", "html"
+DATA_DIR = "data"  # the other folders are named by their owners (runs.folder, reports.maps, reports.html)
 CATEGORY = "synthetic"
 DEFAULT_SEED, DEFAULT_SIZE, DEFAULT_SCENES = 0, 128, 4
 
@@ -181,7 +181,8 @@ def run_demo(out: str | Path = "lfbench-demo", *, seed: int = DEFAULT_SEED, size
     Returns a :class:`DemoOutcome`."""
     from lfbench.data.scene import Benchmark
     from lfbench.method.registry import create_from_spec
-    from lfbench.runs.folder import evaluate_to_folder
+    from lfbench.reports.maps import MAPS_DIR
+    from lfbench.runs.folder import FIGURES_DIR, evaluate_to_folder
 
     if int(scenes) != scenes or scenes < 1:
         raise SpecError(f"--scenes must be a positive integer, got {scenes}")
@@ -198,8 +199,8 @@ def run_demo(out: str | Path = "lfbench-demo", *, seed: int = DEFAULT_SEED, size
     if figures:
         files["figures"] = out / FIGURES_DIR
     if html:
-        from lfbench.reports.html import build_site_from_dir
+        from lfbench.reports.html import SITE_DIR, build_site_from_dir
 
-        files["html"] = build_site_from_dir(out, out / HTML_DIR)
+        files["html"] = build_site_from_dir(out, out / SITE_DIR)
     return DemoOutcome(results=results, methods=[m.label for m in chosen], skipped=skipped, files=files,
                        reused_data=reused)

@@ -24,6 +24,7 @@ from typing import Any
 
 from lfbench.data.scene import Scene
 from lfbench.method.base import Method
+from lfbench.reports.maps import MAPS_DIR
 from lfbench.runs.outputs import staged_outputs
 from lfbench.runs.results import Results
 from lfbench.runs.runner import PredictionHook, evaluate, save_prediction
@@ -90,7 +91,7 @@ def _run_into(stage: Path, methods: Sequence[Method], scenes: Sequence[Scene], *
     results and every file and folder written (paths in ``stage``)."""
     hooks: list[PredictionHook] = [] if on_prediction is None else [on_prediction]
     if save_maps:
-        hooks.append(save_prediction(stage / "maps"))
+        hooks.append(save_prediction(stage / MAPS_DIR))
     if figures:
         from lfbench.reports.figures import scene_figure_hook
 
@@ -129,8 +130,8 @@ def _run_into(stage: Path, methods: Sequence[Method], scenes: Sequence[Scene], *
     files: list[Path] = list(results.write(stage))
     if figures:
         files.append(stage / FIGURES_DIR)
-    if save_maps and (stage / "maps").exists():
-        files.append(stage / "maps")
+    if save_maps and (stage / MAPS_DIR).exists():
+        files.append(stage / MAPS_DIR)
     if tables:
         from lfbench.reports.tables import write_tables
 
