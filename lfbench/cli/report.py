@@ -24,8 +24,6 @@ from pathlib import Path
 
 HELP = "tables (md, tex, csv) and BadPix-series figures from a results.json, optionally beside the paper's numbers"
 
-FORMATS = {"md": ("markdown", "md"), "markdown": ("markdown", "md"), "tex": ("latex", "tex"),
-           "latex": ("latex", "tex"), "csv": ("csv", "csv")}
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -51,16 +49,21 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def parse_formats(text: str) -> list[tuple[str, str]]:
+    """--format as (render format, extension) pairs of lfbench.reports.tables.TABLE_FORMATS, each named
+    by its extension or its format (md or markdown, tex or latex, csv)."""
+    from lfbench.reports.tables import TABLE_FORMATS
     from lfbench.utils.errors import SpecError
 
+    by_name = {name: pair for pair in TABLE_FORMATS for name in pair}
+    known = ", ".join(ext for _, ext in TABLE_FORMATS)
     out = []
     for item in (s.strip().lower() for s in text.split(",") if s.strip()):
-        if item not in FORMATS:
-            raise SpecError(f"--format: unknown table format {item!r}; use md, tex, csv")
-        if FORMATS[item] not in out:
-            out.append(FORMATS[item])
+        if item not in by_name:
+            raise SpecError(f"--format: unknown table format {item!r}; use {known}")
+        if by_name[item] not in out:
+            out.append(by_name[item])
     if not out:
-        raise SpecError("--format: no table format given; use md, tex, csv")
+        raise SpecError(f"--format: no table format given; use {known}")
     return out
 
 
