@@ -233,6 +233,17 @@ def test_runner_asks_each_method_once_per_scene(tmp_path, monkeypatch, caplog):
     assert "skipping gt on not_served: no map for it" in caplog.text
 
 
+def test_scoring_rules_read_back_from_results_meta(tmp_path):
+    rules = ScoringRules(border_px=7, toolkit=True, highres_scenes=frozenset({"dots", "stripes"}))
+    scene = Scene(write_scene(tmp_path, "oracle", size=24, views=False))
+    evaluate([create("gt")], [scene], rules=rules, progress=False).write(tmp_path / "out")
+    meta = json.loads((tmp_path / "out" / "results.json").read_text())["meta"]
+    assert meta["scoring"] == {"border_px": 7, "toolkit_nonfinite": True, "highres_scenes": ["dots", "stripes"]}
+    assert ScoringRules.from_meta(meta) == rules
+    assert ScoringRules.from_meta(meta, allow_highres=False) == ScoringRules(7, rules.highres_scenes, True, False)
+    assert ScoringRules.from_meta({}) == ScoringRules() == ScoringRules.from_meta({"scoring": {"border_px": 15}})
+
+
 # --------------------------------------------------------------------------- real data
 
 

@@ -20,6 +20,7 @@ import pandas as pd
 
 from lfbench.reports.tables import TABLE_FORMATS, average_table, per_scene_table, write_table
 from lfbench.runs.results import Results
+from lfbench.scoring.rules import ScoringRules
 from lfbench.utils.errors import DataError
 
 __all__ = ["ReportOutcome", "report_from_results"]
@@ -86,7 +87,7 @@ def report_from_results(results_path: str | Path, out: str | Path, *,
         outcome.written += sorted(writer.written)
         outcome.written += write_toolkit_figures(
             results, scenes, folders, fig_dir / "toolkit", formats=list(figure_formats),
-            border_px=int((results.meta.get("scoring") or {}).get("border_px", 15)))
+            border_px=ScoringRules.from_meta(results.meta).border_px)
         outcome.curves_source = f"saved maps in {maps}"
     elif curves_path.is_file():
         outcome.written += fig.draw_badpix_curves(fig.read_curves_csv(curves_path), fig_dir)

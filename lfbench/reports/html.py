@@ -319,7 +319,7 @@ def build_site(inputs: SiteInputs, out: str | Path, *, threshold: float = fig.BA
     if not results.records:
         raise DataError("the results hold no records; nothing to report")
     out = check_site_dir(out)
-    border = border_px if border_px is not None else int((results.meta.get("scoring") or {}).get("border_px", 15))
+    border = border_px if border_px is not None else ScoringRules.from_meta(results.meta).border_px
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent))
     try:
@@ -438,16 +438,9 @@ def _metric_order(metrics: Sequence[str]) -> list[str]:
 
 
 def _rules(results: Results) -> ScoringRules:
-    scoring = results.meta.get("scoring") or {}
-    kwargs: dict[str, Any] = {}
-    if "border_px" in scoring:
-        kwargs["border_px"] = int(scoring["border_px"])
-    if "highres_scenes" in scoring:
-        kwargs["highres_scenes"] = frozenset(scoring["highres_scenes"])
-    if "toolkit_nonfinite" in scoring:
-        kwargs["toolkit"] = bool(scoring["toolkit_nonfinite"])
+    """The results' scoring rules; high resolution allowed when any number was scored there (or none is)."""
     highres_used = any(r.resolution == "highres" for r in results.records)
-    return ScoringRules(**kwargs, allow_highres=highres_used or not results.records)
+    return ScoringRules.from_meta(results.meta, allow_highres=highres_used or not results.records)
 
 
 def _scene_order(results: Results, scene: str) -> list[str]:

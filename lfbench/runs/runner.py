@@ -38,8 +38,7 @@ def evaluate(methods: Sequence[Method], scenes: Sequence[Scene], *,
     (DataError, raised before any work). ``on_prediction`` sees each prediction (to save maps or draw figures).
     """
     reasons = check_runnable(methods, scenes)  # each (method, scene) asked once
-    results = Results(meta={"scoring": {"border_px": rules.border_px, "toolkit_nonfinite": rules.toolkit,
-                                        "highres_scenes": sorted(rules.highres_scenes)}})
+    results = Results(meta={"scoring": rules.to_meta()})
     pairs = [(m, s, r) for m, row in zip(methods, reasons, strict=True) for s, r in zip(scenes, row, strict=True)]
     bar = tqdm(pairs, desc="evaluate", unit="run", disable=None if progress else True, file=sys.stderr, leave=False)
     for method, scene, reason in bar:

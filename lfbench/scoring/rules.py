@@ -12,8 +12,9 @@ Predictions cropped symmetrically by a border (482x482, 490x490) are aligned to 
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from scipy import ndimage
@@ -33,6 +34,27 @@ class ScoringRules:
     highres_scenes: frozenset[str] = DEFAULT_HIGHRES_SCENES
     toolkit: bool = False  # reproduce the toolkit's non-finite handling exactly
     allow_highres: bool = True  # False: score everything at low resolution
+
+    def to_meta(self) -> dict[str, Any]:
+        """The rules as a results file records them (``meta["scoring"]``); ``allow_highres`` is not
+        recorded: every number carries its resolution."""
+        return {"border_px": self.border_px, "toolkit_nonfinite": self.toolkit,
+                "highres_scenes": sorted(self.highres_scenes)}
+
+    @classmethod
+    def from_meta(cls, meta: Mapping[str, Any], **overrides: Any) -> ScoringRules:
+        """The rules a results file was scored under, from its ``meta["scoring"]`` (:meth:`to_meta`);
+        what it does not record keeps the default. ``overrides``: fields set by the caller (e.g.
+        ``allow_highres``)."""
+        scoring = meta.get("scoring") or {}
+        recorded: dict[str, Any] = {}
+        if "border_px" in scoring:
+            recorded["border_px"] = int(scoring["border_px"])
+        if "highres_scenes" in scoring:
+            recorded["highres_scenes"] = frozenset(scoring["highres_scenes"])
+        if "toolkit_nonfinite" in scoring:
+            recorded["toolkit"] = bool(scoring["toolkit_nonfinite"])
+        return cls(**{**recorded, **overrides})
 
     def general_resolution(self, scene: Scene) -> str:
         """'highres' for the benchmark's high-resolution scenes when their gt exists, else 'lowres'."""
