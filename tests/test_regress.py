@@ -166,6 +166,16 @@ def test_duplicate_new_records_are_refused(golden, tmp_path, capsys):
     assert "appears twice" in capsys.readouterr().err
 
 
+def test_duplicate_new_records_are_refused_on_update(golden, tmp_path, capsys):
+    before = golden.read_bytes()
+    _new_with(tmp_path, Record("planesweep", "synth_0", "badpix_0.07", 99.0, "lowres"))
+    assert main(["regress", "--update", str(golden), str(tmp_path / "new")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "planesweep/synth_0/badpix_0.07 appears twice" in err[0], err
+    assert str(tmp_path / "new") in err[0] and str(golden) not in err[0]  # the results hold the duplicate
+    assert golden.read_bytes() == before
+
+
 @pytest.mark.parametrize("tolerance", ["-5", "nan", "inf", "*=0.01,mse_x100=-1", "x"])
 def test_bad_tolerance_is_refused_and_golden_untouched(golden, tmp_path, capsys, tolerance):
     before = golden.read_bytes()

@@ -52,13 +52,13 @@ def run(args: argparse.Namespace) -> int:
 
     tolerance = _parse_tolerance(args.tolerance)  # checked even without --update: a typo is an error
     new = Results.read(args.new)
-    check_unique(new, args.new)
     if args.update:
-        n = make_golden(new, tolerance, args.golden)
+        n = make_golden(new, tolerance, args.golden, source=args.new)
         skipped = len(new.records) - n
         print(f"wrote {n} golden records to {args.golden}"
               + (f" ({skipped} non-finite values left out)" if skipped else ""))
         return 0
+    check_unique(new, args.new)
     golden = read_golden(args.golden)
     findings = compare(golden, new, skip_absent_scenes=args.skip_absent_scenes, fail_on_new=args.fail_on_new)
     failed = [f for f in findings if f.failed]

@@ -18,13 +18,15 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
+from lfbench.data.scene import HIGHRES, LOWRES
 from lfbench.runs.results import Results
 from lfbench.scoring.metrics import find_metric
 from lfbench.utils.atomic import write_text
 from lfbench.utils.errors import DataError, SpecError
 from lfbench.utils.jsonfile import read_json
 
-RESOLUTIONS = ("lowres", "highres")
+RESOLUTIONS = (LOWRES, HIGHRES)
+TOLERANCE_RULE = "tolerance must be a finite number >= 0"
 
 
 @dataclass(frozen=True)
@@ -77,8 +79,8 @@ def read_golden(path: str | Path) -> list[GoldenRecord]:
         where = f"golden record {i} ({'/'.join(rec.key)})"
         if not math.isfinite(rec.value):
             raise DataError(f"{where}: value must be a finite number, got {rec.value}", path)
-        if rec.tolerance < 0 or not math.isfinite(rec.tolerance):
-            raise DataError(f"{where}: tolerance must be a finite number >= 0", path)
+        if not _is_tolerance(rec.tolerance):
+            raise DataError(f"{where}: {TOLERANCE_RULE}", path)
         if find_metric(rec.metric) is None:
             raise DataError(f"{where}: unknown metric {rec.metric!r}", path)
         if rec.resolution not in RESOLUTIONS:
@@ -98,6 +100,12 @@ def check_unique(results: Results, path: str | Path) -> None:
         if key in seen:
             raise DataError(f"record {'/'.join(key)} appears twice", path)
         seen.add(key)
+
+
+def _is_tolerance(v: object) -> bool:
+    """A tolerance is a finite number >= 0 (a negative one fails every check, an infinite one passes
+    every check); booleans and strings are not numbers."""
+    return not isinstance(v, bool) and isinstance(v, int | float) and math.isfinite(v) and v >= 0
 
 
 def _number(v: object, name: str) -> float:
@@ -170,17 +178,19 @@ def tolerance_for(method: str, metric: str, tolerance: float | Mapping[str, floa
 
 
 def check_tolerance(tolerance: float | Mapping[str, float]) -> None:
-    """SpecError unless every tolerance is a finite number >= 0 (a negative one fails every check,
-    an infinite one passes every check)."""
+    """SpecError unless every tolerance is a finite number >= 0 (:func:`_is_tolerance`)."""
     values = tolerance.values() if isinstance(tolerance, Mapping) else [tolerance]
     for v in values:
-        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v) or v < 0:
-            raise SpecError(f"tolerance must be a finite number >= 0, got {v!r}")
+        if not _is_tolerance(v):
+            raise SpecError(f"{TOLERANCE_RULE}, got {v!r}")
 
 
-def make_golden(results: Results, tolerance: float | Mapping[str, float], path: str | Path) -> int:
+def make_golden(results: Results, tolerance: float | Mapping[str, float], path: str | Path, *,
+                source: str | Path | None = None) -> int:
     """Write the finite records of ``results`` as golden records; ``tolerance`` as in :func:`tolerance_for`.
-    Every tolerance is checked first, and every record's metric must be known (the file must read back)."""
+    Checked first: no (method, scene, metric) twice (DataError naming ``source``, where the results
+    came from, else ``path``), every tolerance, and every record's metric known (the file must read back)."""
+    check_unique(results, source if source is not None else path)
     check_tolerance(tolerance)
     path = Path(path)
     if path.is_dir():
@@ -189,7 +199,6 @@ def make_golden(results: Results, tolerance: float | Mapping[str, float], path: 
         if find_metric(r.metric) is None:
             raise DataError(f"record {r.method}/{r.scene}/{r.metric}: unknown metric {r.metric!r}, "
                             "cannot make it golden", path)
-    check_unique(results, path)
     records = [{"method": r.method, "scene": r.scene, "metric": r.metric, "value": r.value,
                 "tolerance": tolerance_for(r.method, r.metric, tolerance), "resolution": r.resolution}
                for r in results.records if math.isfinite(r.value)]
