@@ -38,6 +38,16 @@ def test_cpu_flags_are_read_from_cpuinfo(tmp_path: Path):
     assert hardware._missing_flags(hardware.cpu_flags(info)) == "avx512vl, avx512dq"
 
 
+def test_cpuinfo_fields_are_read_from_the_first_processor(tmp_path: Path):
+    info = tmp_path / "cpuinfo"
+    info.write_text("processor\t: 0\nModel Name\t: Example CPU @ 2.0GHz \nvmx flags\t: ept\nflags\t\t: fpu sse\n\n"
+                    "processor\t: 1\nmodel name\t: Other CPU\n")
+    assert hardware.cpuinfo_field("model name", info) == "Example CPU @ 2.0GHz"
+    assert hardware.cpuinfo_field("flags", info) == "fpu sse"  # not the 'vmx flags' line
+    assert hardware.cpuinfo_field("bogomips", info) is None
+    assert hardware.cpuinfo_field("model name", tmp_path / "absent") is None
+
+
 def test_the_answer_follows_the_trial_convolution(monkeypatch):
     # What this CPU can do is decided by running a bf16 convolution, not by the flags alone (the real
     # detection: a suite run with LFBENCH_FORCE_NO_BF16=1, simulating an AVX2 CPU, must not override it here).

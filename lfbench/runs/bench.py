@@ -60,13 +60,10 @@ DEFAULT_MODEL = "subfocal"
 
 def cpu_model() -> str:
     """The CPU's model name (from /proc/cpuinfo on Linux), else platform.processor()."""
-    try:
-        for line in Path("/proc/cpuinfo").read_text(encoding="utf-8", errors="replace").splitlines():
-            if line.lower().startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
+    from lfbench.utils.hardware import cpuinfo_field
+
+    model = cpuinfo_field("model name")
+    return model if model is not None else platform.processor() or platform.machine()
 
 
 def machine_info() -> dict:

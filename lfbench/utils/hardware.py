@@ -29,16 +29,26 @@ DEVICE_HELP = "auto (CUDA when available, else CPU), cpu, cuda or cuda:K"
 _DEVICE_RE = re.compile(r"^(auto|cpu|cuda)(?::(\d+))?$")
 
 
-def cpu_flags(cpuinfo: Path = Path("/proc/cpuinfo")) -> frozenset[str]:
-    """The CPU's feature flags from /proc/cpuinfo (empty where that file does not exist)."""
+CPUINFO = Path("/proc/cpuinfo")
+
+
+def cpuinfo_field(name: str, cpuinfo: Path = CPUINFO) -> str | None:
+    """The value of the first ``name : value`` line of /proc/cpuinfo (``name`` matched without case),
+    stripped; None where the file or the line does not exist."""
     try:
         text = cpuinfo.read_text(encoding="utf-8", errors="replace")
     except OSError:
-        return frozenset()
+        return None
     for line in text.splitlines():
-        if line.startswith("flags"):
-            return frozenset(line.split(":", 1)[1].split())
-    return frozenset()
+        key, sep, value = line.partition(":")
+        if sep and key.strip().lower() == name:
+            return value.strip()
+    return None
+
+
+def cpu_flags(cpuinfo: Path = CPUINFO) -> frozenset[str]:
+    """The CPU's feature flags from /proc/cpuinfo (empty where that file does not exist)."""
+    return frozenset((cpuinfo_field("flags", cpuinfo) or "").split())
 
 
 @functools.cache
@@ -174,5 +184,5 @@ def cuda_devices() -> list[str]:
     return [f"cuda:{k}" for k in range(torch.cuda.device_count())] if torch.cuda.is_available() else []
 
 
-__all__ = ["FORCE_NO_BF16_ENV", "DEVICE_HELP", "cpu_flags", "cpu_bf16_missing", "bf16_missing", "require_bf16",
-           "parse_device", "resolve_device", "set_fp32_numerics", "fp32_numerics", "cuda_devices"]
+__all__ = ["FORCE_NO_BF16_ENV", "DEVICE_HELP", "cpuinfo_field", "cpu_flags", "cpu_bf16_missing", "bf16_missing",
+           "require_bf16", "parse_device", "resolve_device", "set_fp32_numerics", "fp32_numerics", "cuda_devices"]
