@@ -1,11 +1,12 @@
-"""argparse types that check a flag's range when it is parsed (one usage line, exit 2), before any work."""
+"""argparse pieces the commands share: types that check a flag's range when it is parsed (one usage line,
+exit 2), before any work, and flags declared alike by several commands."""
 
 from __future__ import annotations
 
 import argparse
 from collections.abc import Callable
 
-__all__ = ["int_range"]
+__all__ = ["add_method_device", "int_range"]
 
 
 def int_range(low: int, high: int) -> Callable[[str], int]:
@@ -22,3 +23,11 @@ def int_range(low: int, high: int) -> Callable[[str], int]:
 
     parse.__name__ = "integer"
     return parse
+
+
+def add_method_device(p: argparse.ArgumentParser) -> None:
+    """``--device``: where the methods of a command run, handed to ``create_from_spec`` as the default of
+    a method's ``device`` parameter (None: the method's own default)."""
+    p.add_argument("--device", metavar="DEVICE",
+                   help="where methods that have a device parameter run (a spec's own device=... wins): "
+                        "auto, cpu, cuda or cuda:K (default: the method's, auto)")

@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from lfbench.cli.argtypes import int_range
+from lfbench.cli.argtypes import add_method_device, int_range
 
 HELP = "score methods on HCI scenes (results.json, results.csv, tables)"
 
@@ -41,9 +41,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="also rate each method's uncertainty map (SubFocal: std of its distribution): "
                         "sparsification curves and AUSE/AURG in OUT/uncertainty.csv, OUT/table_uncertainty.md "
                         "and OUT/figures/sparsification_*.png")
-    p.add_argument("--device", metavar="DEVICE",
-                   help="where methods that have a device parameter run (a spec's own device=... wins): "
-                        "auto, cpu, cuda or cuda:K (default: the method's, auto)")
+    add_method_device(p)
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 

@@ -9,6 +9,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from lfbench.cli.argtypes import add_method_device
+
 HELP = "predict a disparity map for a scene folder or a VIEWS.npy"
 
 
@@ -16,9 +18,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--method", required=True, metavar="SPEC", help="method spec name[:key=value,...]")
     p.add_argument("--input", required=True, type=Path, help="scene folder (HCI layout) or VIEWS.npy (H, W, 81)")
     p.add_argument("--out", required=True, type=Path, help="OUT.pfm or OUT.npy")
-    p.add_argument("--device", metavar="DEVICE",
-                   help="where methods that have a device parameter run (a spec's own device=... wins): "
-                        "auto, cpu, cuda or cuda:K (default: the method's, auto)")
+    add_method_device(p)
     p.add_argument("--extras", action="store_true",
                    help="also save OUT.distribution.npy (D, H, W), OUT.disparities.npy (D,) and OUT.uncertainty.npy")
 
