@@ -66,3 +66,13 @@ def test_command_writes_table_and_figure(run, tmp_path, capsys):
     assert "made-up numbers" in (out / "table4_sweep.md").read_text()
     assert main([str(tmp_path / "nothing"), str(out)]) == 2
     assert "not an ablation output folder" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("text", ["{not json", '{"records": [{"method": "a", "scene": "s", "metric": "mse_x100"}]}'])
+def test_malformed_method_results_are_one_line_naming_the_file(run, tmp_path, capsys, text):
+    bad = run / "methods" / "a" / "results.json"
+    bad.write_text(text)
+    assert main([str(run), str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and str(bad) in err[0], err
+    assert not (tmp_path / "out").exists()

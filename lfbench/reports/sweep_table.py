@@ -14,16 +14,18 @@ interpolations, from an ablation run of ``[[methods]]`` whose specs carry ``inte
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 
 import pandas as pd
 
+from lfbench.data.scene import LOWRES
 from lfbench.method.registry import parse_spec
 from lfbench.reports.tables import write_table
+from lfbench.runs.results import Results
 from lfbench.utils.errors import DataError, LFBenchError
+from lfbench.utils.jsonfile import read_json
 
 __all__ = ["SYNTH_PREFIX", "collect", "main", "scene_group", "sweep_figure", "sweep_table"]
 
@@ -41,20 +43,17 @@ def collect(run_dir: str | Path) -> pd.DataFrame:
         meta_path, res_path = folder / "method.json", folder / "results.json"
         if not (meta_path.is_file() and res_path.is_file()):
             continue  # not finished yet
-        try:
-            meta = json.loads(meta_path.read_text(encoding="utf-8"))
-            res = json.loads(res_path.read_text(encoding="utf-8"))
-        except (OSError, json.JSONDecodeError) as exc:
-            raise DataError(f"unreadable method output ({type(exc).__name__})", folder) from None
+        meta = read_json(meta_path, "method marker")
+        res = Results.read(res_path)
         name, params = parse_spec(meta["spec"])
-        runtimes = {r["scene"]: r.get("runtime_s") for r in res.get("runs", [])}
-        for r in res.get("records", []):
-            if r.get("resolution") != "lowres" or r.get("metric") not in METRICS:
+        runtimes = {r.scene: r.runtime_s for r in res.runs}
+        for r in res.records:
+            if r.resolution != LOWRES or r.metric not in METRICS:
                 continue
             rows.append({"label": meta["label"], "method": name, "interval": float(params.get("interval", 0.25)),
                          "interpolation": str(params.get("interpolation", "bilinear")),
-                         "subpixel": str(params.get("subpixel", "equiangular")), "scene": r["scene"],
-                         "metric": r["metric"], "value": float(r["value"]), "runtime_s": runtimes.get(r["scene"])})
+                         "subpixel": str(params.get("subpixel", "equiangular")), "scene": r.scene,
+                         "metric": r.metric, "value": r.value, "runtime_s": runtimes.get(r.scene)})
     return pd.DataFrame(rows)
 
 
