@@ -667,23 +667,30 @@ class _StopAt:
         pass
 
 
-@pytest.mark.parametrize("planned", [3, 7], ids=["extended", "cut"])
-def test_the_stage_in_progress_may_be_cut_or_extended_on_resume(reference_run, tmp_path, planned):
-    """Stage 1 planned with 3 or 7 steps, stopped at step 2, resumed with the reference config (4 steps):
-    the same weights, bit for bit, as the run configured with 4 steps from the start."""
+@pytest.mark.parametrize(("planned", "stop"), [(3, 2), (7, 2), (7, 4)], ids=["extended", "cut", "cut-at-step"])
+def test_the_stage_in_progress_may_be_cut_or_extended_on_resume(reference_run, tmp_path, planned, stop):
+    """Stage 1 planned with 3 or 7 steps, stopped at step 2 or 4, resumed with the reference config (4 steps):
+    the same weights, bit for bit, and the same log as the run configured with 4 steps from the start (cut at
+    step 4, the validation it ran before the stop is not repeated)."""
     from lfbench.training.loop import TrainingInterrupted, train
 
     cfg, ref_out, _ = reference_run
     raw = cfg.to_dict()
     raw["stages"] = [dict(raw["stages"][0], steps=planned), raw["stages"][1]]
     out = tmp_path / "out"
-    with pytest.raises(TrainingInterrupted, match="stopped at stage 1 step 2"):
-        train(TrainConfig.from_dict(raw), out, progress=False, loggers=[_StopAt(2)])
+    with pytest.raises(TrainingInterrupted, match=f"stopped at stage 1 step {stop};"):
+        train(TrainConfig.from_dict(raw), out, progress=False, loggers=[_StopAt(stop)])
     result = train(cfg, out, progress=False, loggers=[])
     assert result["resumed"] and result["steps"] == 6
     final, ref = load_state(out / "final.pt"), load_state(ref_out / "final.pt")
     for k, v in ref["state_dict"].items():
         assert torch.equal(final["state_dict"][k], v), k
+
+    def log(folder: Path) -> list[tuple]:
+        entries = [json.loads(x) for x in (folder / "metrics.jsonl").read_text().splitlines()]
+        return [(e["event"], e["global_step"], e.get("loss", e.get("badpix"))) for e in entries]
+
+    assert log(out) == log(ref_out)
 
 
 def test_a_stage_cut_below_its_checkpoint_step_is_refused(reference_run, tmp_path):

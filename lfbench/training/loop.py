@@ -700,7 +700,9 @@ class Trainer:
     def _finish_stage(self, model, validation: list[ValidationScene], si: int) -> None:
         """End of stage: validate, export its weights, checkpoint at (next stage, step 0)."""
         st = self.cfg.stages[si]
-        self.run_validation(model, validation, si, st.steps)
+        last = self.last_validation
+        if last is None or last.get("global_step") != self.global_step:  # a stage cut on resume: done already
+            self.run_validation(model, validation, si, st.steps)
         if self.ctx.is_main:
             self.export(self.paths.stage_weights(si, st.name), model)
         self.save_checkpoint(model, None, si + 1, 0)
