@@ -242,16 +242,15 @@ def _scene_images(sm: SceneMaps, images: _Images, threshold: float, pair_thresho
         out["gt"] = images.rgb(f"{d}/gt.png", fig.disparity_image(sm.gt, *sm.disp_range))
     labels = [m for m in order if m in sm.preds]
     for label in labels:
-        pred = sm.preds[label]
+        panels = fig.method_panels(label, sm.scene, sm.preds[label], gt=sm.gt, mask=sm.mask, background=sm.centre,
+                                   disp_range=sm.disp_range, threshold=threshold)
         stem = f"{d}/{fig.safe_name(label)}"
-        entry = {"disp": images.rgb(f"{stem}.disp.png", fig.disparity_image(pred, *sm.disp_range)),
-                 "badpix": None, "error": None, "badpix_percent": None}
-        if sm.gt is not None:
-            codes = fig.badpix_codes(sm.gt, pred, sm.mask, threshold)
-            scored = np.count_nonzero(codes != fig.OUTSIDE)
-            entry["badpix_percent"] = 100.0 * np.count_nonzero(codes == fig.BAD) / scored if scored else None
-            entry["badpix"] = images.rgb(f"{stem}.badpix.png", fig.badpix_image(codes, sm.centre))
-            entry["error"] = images.rgb(f"{stem}.error.png", fig.signed_error_image(sm.gt, pred, sm.mask))
+        entry = {"disp": images.rgb(f"{stem}.disp.png", panels.disparity), "badpix": None, "error": None,
+                 "badpix_percent": None}
+        if panels.badpix is not None:
+            entry["badpix_percent"] = panels.badpix_percent if math.isfinite(panels.badpix_percent) else None
+            entry["badpix"] = images.rgb(f"{stem}.badpix.png", panels.badpix)
+            entry["error"] = images.rgb(f"{stem}.error.png", panels.error)
         out["methods"][label] = entry
     if sm.gt is None or not labels:
         return out
