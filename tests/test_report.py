@@ -284,6 +284,38 @@ def test_report_without_saved_curves_uses_the_results_thresholds(evaluated, tmp_
     assert (tmp_path / "r" / "figures" / "badpix_series.png").is_file()
 
 
+def test_report_with_maps_and_html_reads_every_input_once(evaluated, tmp_path, monkeypatch):
+    # Tables, figures, the toolkit's figures and the site share one reading of results.json, one discovery
+    # of the scenes and one load of every saved map; the site ranks each metric once for all its tables.
+    from collections import Counter
+
+    import lfbench.data.submission as submission
+    from lfbench.data.scene import Benchmark
+    from lfbench.reports import leaderboard
+
+    counts: Counter = Counter()
+
+    def counted(key, fn):
+        def call(*args, **kwargs):
+            counts[key(*args)] += 1
+            return fn(*args, **kwargs)
+        return call
+
+    monkeypatch.setattr(Results, "read", counted(lambda path: "results.json", Results.read))
+    monkeypatch.setattr(Benchmark, "discover", counted(lambda root: "discover", Benchmark.discover))
+    monkeypatch.setattr(submission, "read_submission_map", counted(lambda root, scene: (Path(root).name, scene),
+                                                                   submission.read_submission_map))
+    monkeypatch.setattr(leaderboard, "metric_ranks", counted(lambda results, metric: metric, leaderboard.metric_ranks))
+    assert main(["report", str(evaluated / "eval"), "--out", str(tmp_path / "r"), "--maps",
+                 str(evaluated / "eval" / "maps"), "--html", "--format", "md"]) == 0
+    assert (tmp_path / "r" / "html" / "scene-synth_3_0.html").is_file()
+    maps = {k: n for k, n in counts.items() if isinstance(k, tuple)}
+    assert len(maps) == 4 and set(maps.values()) == {1}, maps  # 2 methods x 2 scenes, each read once
+    assert counts["results.json"] == 1 and counts["discover"] == 1
+    ranked = {k: n for k, n in counts.items() if isinstance(k, str) and k not in ("results.json", "discover")}
+    assert len(ranked) == 5 and set(ranked.values()) == {1}, ranked  # the five general metrics
+
+
 def test_report_draws_overviews_from_saved_maps(evaluated, tmp_path):
     rc = main(["report", str(evaluated / "eval"), "--out", str(tmp_path / "r"),
                "--maps", str(evaluated / "eval" / "maps"), "--format", "md"])

@@ -73,21 +73,27 @@ def report_from_results(results_path: str | Path, out: str | Path, *,
         outcome.written += write_table(table, out, f"table_{name}", formats=formats)
 
     fig_dir = out / "figures"
+    scenes = scene_maps = None  # with maps: the scenes discovered and their maps loaded once, for figures and site
     if maps is not None:
         from lfbench.data.scene import Benchmark
-        from lfbench.reports.maps import map_folders
-        from lfbench.reports.toolkit_figures import write_toolkit_figures
+        from lfbench.reports.maps import load_scene_maps, map_folders
+        from lfbench.reports.toolkit_figures import toolkit_figures_from_scene_maps
 
         root = data or (Path(results.meta["data_root"]) if results.meta.get("data_root") else None)
         if root is None:
             raise DataError("--maps needs --data ROOT (the results do not record their data root)", results_path)
-        scenes = [s for s in Benchmark.discover(root) if s.name in set(results.scenes) and s.has_gt()]
+        wanted = set(results.scenes)
+        scenes = [s for s in Benchmark.discover(root) if s.name in wanted]
         folders = map_folders(Path(maps), results.methods)
-        writer = fig.figures_from_maps(scenes, folders, fig_dir)
+        border = ScoringRules.from_meta(results.meta).border_px
+        scene_maps = {s.name: load_scene_maps(s, folders, border) for s in scenes if s.has_gt()}
+        writer = fig.SceneFigureWriter(fig_dir)
+        for sm in scene_maps.values():
+            for label, pred in sm.preds.items():
+                writer.add(label, sm.scene, pred)
         outcome.written += sorted(writer.written)
-        outcome.written += write_toolkit_figures(
-            results, scenes, folders, fig_dir / "toolkit", formats=list(figure_formats),
-            border_px=ScoringRules.from_meta(results.meta).border_px)
+        outcome.written += toolkit_figures_from_scene_maps(results, scene_maps.values(), fig_dir / "toolkit",
+                                                           formats=list(figure_formats))
         outcome.curves_source = f"saved maps in {maps}"
     elif curves_path.is_file():
         outcome.written += fig.draw_badpix_curves(fig.read_curves_csv(curves_path), fig_dir)
@@ -101,10 +107,10 @@ def report_from_results(results_path: str | Path, out: str | Path, *,
                                  "for full curves)")
 
     if html:
-        from lfbench.reports.html import SITE_DIR, build_site, site_inputs_from_dir
+        from lfbench.reports.html import SITE_DIR, build_site, site_inputs
 
-        inputs = site_inputs_from_dir(results_path, data_root=data, maps=maps, paper=paper,
-                                      paper_methods=list(paper_methods) or ["SubFocal"])
+        inputs = site_inputs(results, results_dir, data_root=data, maps=maps, scenes=scenes, scene_maps=scene_maps,
+                             paper=paper, paper_methods=list(paper_methods) or ["SubFocal"])
         outcome.html_index = build_site(inputs, out / SITE_DIR)
         outcome.written.append(outcome.html_index)
     return outcome

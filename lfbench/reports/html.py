@@ -34,14 +34,15 @@ import pandas as pd
 
 from lfbench.reports import figures as fig
 from lfbench.reports import toolkit_figures as tk
-from lfbench.reports.leaderboard import metric_info, metric_table, overall_ranks
+from lfbench.reports.leaderboard import all_metric_ranks, metric_info, metric_table, overall_ranks
 from lfbench.reports.maps import MAPS_DIR, SceneMaps, load_scene_maps, map_folders
 from lfbench.runs.results import Results
 from lfbench.scoring.rules import ScoringRules
 from lfbench.utils.atomic import write_text
 from lfbench.utils.errors import DataError
 
-__all__ = ["SITE_DIR", "SiteInputs", "build_site", "build_site_from_dir", "check_site_dir", "site_inputs_from_dir"]
+__all__ = ["SITE_DIR", "SiteInputs", "build_site", "build_site_from_dir", "check_site_dir", "site_inputs",
+           "site_inputs_from_dir"]
 
 SITE_DIR = "html"
 ASSETS = ("site.css", "site.js")
@@ -52,12 +53,15 @@ FLOATFMT = ".3f"
 @dataclass
 class SiteInputs:
     """Everything a site is drawn from. ``scenes``: light fields (ground truth, centre view);
-    ``maps``: method label -> submission folder of its saved maps; ``ci``: the long bootstrap frame
-    of lfbench.scoring.stats.ci_records (ci.csv), or None; ``paper``: PaperTables or None."""
+    ``maps``: method label -> submission folder of its saved maps; ``scene_maps``: scene name ->
+    those maps already loaded (lfbench.reports.maps.load_scene_maps, at the site's border), used instead
+    of loading them again; ``ci``: the long bootstrap frame of lfbench.scoring.stats.ci_records
+    (ci.csv), or None; ``paper``: PaperTables or None."""
 
     results: Results
     scenes: Sequence[Any] = ()
     maps: Mapping[str, Path] = field(default_factory=dict)
+    scene_maps: Mapping[str, SceneMaps] = field(default_factory=dict)
     ci: pd.DataFrame | None = None
     paper: Any = None
     paper_methods: Sequence[str] = ("SubFocal",)
@@ -111,9 +115,9 @@ def _cell(value: Any, rank: Any = None, resolution: str | None = None, ci: tuple
 # --------------------------------------------------------------------------- tables
 
 def _metric_section(results: Results, metric: str, ci: Mapping, scene_pages: Mapping[str, str],
-                    method_pages: Mapping[str, str]) -> dict[str, Any]:
+                    method_pages: Mapping[str, str], ranks: Mapping[str, pd.DataFrame]) -> dict[str, Any]:
     info = metric_info(metric)
-    table = metric_table(results, metric)
+    table = metric_table(results, metric, ranks=ranks[metric])
     scenes = list(dict.fromkeys(s for s, k in table.columns if s not in ("mean", "average rank")))
     header = []
     for s in scenes:
@@ -160,11 +164,11 @@ def _paper_section(results: Results, metric: str, paper: Any, paper_methods: Seq
 
 
 def _overview(results: Results, method_pages: Mapping[str, str], paper: Any,
-              paper_methods: Sequence[str]) -> dict[str, Any]:
+              paper_methods: Sequence[str], metric_ranks: Mapping[str, pd.DataFrame]) -> dict[str, Any]:
     from lfbench.reports.tables import _metric_order
 
     metrics = _metric_order(results.metrics)
-    ranks = overall_ranks(results)
+    ranks = overall_ranks(results, ranks=metric_ranks)
     df = results.to_frame()
     runtime = {}
     for r in results.runs:
@@ -350,16 +354,18 @@ def _write_site(inputs: SiteInputs, root: Path, threshold: float, pair_threshold
     method_pages = {m: page_name("method", m) for m in methods}
     ci = _ci_lookup(inputs.ci)
     metrics = _metric_order(results.metrics)
-    sections = [_metric_section(results, m, ci, scene_pages, method_pages) for m in metrics]
+    ranks = all_metric_ranks(results)  # every table below ranks from these
+    orders = {s: _scene_order(results, s, ranks) for s in scene_names}
+    sections = [_metric_section(results, m, ci, scene_pages, method_pages, ranks) for m in metrics]
     paper_sections = {}
     if inputs.paper is not None:
         for m in metrics:
             sec = _paper_section(results, m, inputs.paper, inputs.paper_methods)
             if sec is not None:
                 paper_sections[m] = sec
-    overview = _overview(results, method_pages, inputs.paper, inputs.paper_methods)
+    overview = _overview(results, method_pages, inputs.paper, inputs.paper_methods, ranks)
 
-    # maps, drawn scene by scene (one scene's arrays in memory at a time)
+    # maps, drawn scene by scene (one scene's arrays in memory at a time unless the caller loaded them all)
     drawn: dict[str, dict[str, Any]] = {}
     curves: list[fig.Curve] = []
     rules = _rules(results)
@@ -367,8 +373,10 @@ def _write_site(inputs: SiteInputs, root: Path, threshold: float, pair_threshold
         scene = scenes_by_name.get(name)
         if scene is None:
             continue
-        sm = load_scene_maps(scene, inputs.maps, border)
-        order = [m for m in _scene_order(results, name) if m in sm.preds]
+        sm = inputs.scene_maps.get(name)
+        if sm is None:
+            sm = load_scene_maps(scene, inputs.maps, border)
+        order = [m for m in orders[name] if m in sm.preds]
         drawn[name] = _scene_images(sm, images, threshold, pair_threshold, order)
         drawn[name]["legend"] = _legend(images, sm.disp_range)
         for label in order:
@@ -415,7 +423,8 @@ def _write_site(inputs: SiteInputs, root: Path, threshold: float, pair_threshold
     write_text(root / "index.html", index)
     for s in scene_names:
         write_text(root / scene_pages[s], env.get_template("scene.html").render(
-            **common, page="scene", scene=s, maps=drawn.get(s), scene_table=_scene_table(results, s, method_pages),
+            **common, page="scene", scene=s, maps=drawn.get(s),
+            scene_table=_scene_table(results, s, method_pages, ranks, orders[s]),
             threshold=threshold, pair_threshold=pair_threshold, border=border))
     for m in methods:
         radar_src = None
@@ -424,7 +433,7 @@ def _write_site(inputs: SiteInputs, root: Path, threshold: float, pair_threshold
             tk.plot_radar(radar, root / rel, highlight=m, title=f"{m} against the other methods (median over scenes)")
             radar_src = rel
         write_text(root / method_pages[m], env.get_template("method.html").render(
-            **common, page="method", method=m, method_table=_method_table(results, m, scene_pages, ci),
+            **common, page="method", method=m, method_table=_method_table(results, m, scene_pages, ci, ranks),
             radar=radar_src, maps=[{"scene": s, "href": scene_pages[s], **drawn[s]["methods"][m]}
                                    for s in scene_names if s in drawn and m in drawn[s]["methods"]],
             threshold=threshold))
@@ -442,25 +451,22 @@ def _rules(results: Results) -> ScoringRules:
     return ScoringRules.from_meta(results.meta, allow_highres=highres_used or not results.records)
 
 
-def _scene_order(results: Results, scene: str) -> list[str]:
+def _scene_order(results: Results, scene: str, metric_ranks: Mapping[str, pd.DataFrame]) -> list[str]:
     """Methods on a scene, best BadPix(0.07) (else first metric) first."""
-    from lfbench.reports.leaderboard import metric_ranks
-
     metric = "badpix_0.07" if "badpix_0.07" in results.metrics else _metric_order(results.metrics)[0]
-    ranks = metric_ranks(results, metric)
+    ranks = metric_ranks[metric]
     ranks = ranks[ranks["scene"] == scene]
     order = dict(zip(ranks["method"], ranks["rank"].fillna(np.inf), strict=True))
     return sorted(results.methods, key=lambda m: (order.get(m, np.inf), results.methods.index(m)))
 
 
-def _scene_table(results: Results, scene: str, method_pages: Mapping[str, str]) -> dict[str, Any]:
-    """Rows method, columns metric: the value with its rank on this scene."""
-    from lfbench.reports.leaderboard import metric_ranks
-
+def _scene_table(results: Results, scene: str, method_pages: Mapping[str, str], ranks: Mapping[str, pd.DataFrame],
+                 order: Sequence[str]) -> dict[str, Any]:
+    """Rows method (in the scene's ``order``), columns metric: the value with its rank on this scene."""
     metrics = [m for m in _metric_order(results.metrics)]
     cols, by = [], {}
     for m in metrics:
-        long = metric_ranks(results, m)
+        long = ranks[m]
         long = long[long["scene"] == scene]
         if long.empty:
             continue
@@ -468,7 +474,7 @@ def _scene_table(results: Results, scene: str, method_pages: Mapping[str, str]) 
         for r in long.itertuples(index=False):
             by[(r.method, m)] = (r.value, r.rank)
     rows = []
-    for method in _scene_order(results, scene):
+    for method in order:
         if not any((method, c["id"]) in by for c in cols):
             continue
         cells = [_cell(*by.get((method, c["id"]), (float("nan"), None)), best=by.get((method, c["id"]),
@@ -477,14 +483,13 @@ def _scene_table(results: Results, scene: str, method_pages: Mapping[str, str]) 
     return {"columns": cols, "rows": rows}
 
 
-def _method_table(results: Results, method: str, scene_pages: Mapping[str, str], ci: Mapping) -> dict[str, Any]:
+def _method_table(results: Results, method: str, scene_pages: Mapping[str, str], ci: Mapping,
+                  ranks: Mapping[str, pd.DataFrame]) -> dict[str, Any]:
     """Rows scene, columns metric: the method's value and rank among all methods on that scene."""
-    from lfbench.reports.leaderboard import metric_ranks
-
     metrics = _metric_order(results.metrics)
     by, res = {}, {}
     for m in metrics:
-        long = metric_ranks(results, m)
+        long = ranks[m]
         n = long.groupby("scene")["rank"].count()
         for r in long[long["method"] == method].itertuples(index=False):
             by[(r.scene, m)] = (r.value, r.rank, int(n.get(r.scene, 0)))
@@ -510,11 +515,21 @@ def site_inputs_from_dir(results_path: str | Path, *, data_root: str | Path | No
     """What a results folder holds for a site: results.json, ci.csv (when ``--ci`` ran), the saved maps
     (``maps`` or RESULTS_DIR/maps when present) and the scenes of ``data_root`` (default: the data
     root the results record, when it exists)."""
+    results_path = Path(results_path)
+    folder = results_path if results_path.is_dir() else results_path.parent
+    return site_inputs(Results.read(results_path), folder, data_root=data_root, maps=maps, paper=paper,
+                       paper_methods=paper_methods, title=title)
+
+
+def site_inputs(results: Results, folder: Path, *, data_root: str | Path | None = None,
+                maps: str | Path | None = None, scenes: Sequence[Any] | None = None,
+                scene_maps: Mapping[str, SceneMaps] | None = None, paper: Any = None,
+                paper_methods: Sequence[str] = ("SubFocal",), title: str | None = None) -> SiteInputs:
+    """:func:`site_inputs_from_dir` for ``results`` already read from the results folder ``folder``.
+    ``scenes``: the results' scenes of the data root when already discovered (then ``data_root`` is
+    not searched again); ``scene_maps``: their saved maps when already loaded (SiteInputs)."""
     from lfbench.data.scene import Benchmark
 
-    results_path = Path(results_path)
-    results = Results.read(results_path)
-    folder = results_path if results_path.is_dir() else results_path.parent
     ci = None
     if (folder / "ci.csv").is_file():
         try:
@@ -528,18 +543,20 @@ def site_inputs_from_dir(results_path: str | Path, *, data_root: str | Path | No
     folders = map_folders(maps_dir, results.methods) if (maps is not None or maps_dir.is_dir()) else {}
     root = Path(data_root) if data_root is not None else (
         Path(results.meta["data_root"]) if results.meta.get("data_root") else None)
-    scenes: list[Any] = []
     notes = []
-    if root is not None and (data_root is not None or root.is_dir()):
+    if scenes is not None:
+        scenes = list(scenes)
+    elif root is not None and (data_root is not None or root.is_dir()):
         wanted = set(results.scenes)
         scenes = [s for s in Benchmark.discover(root) if s.name in wanted]
     elif root is not None:
         notes.append(f"The data root {root} recorded in the results is not here: no maps are shown "
                      "(give --data ROOT).")
+    scenes = scenes or []
     if not folders:
         notes.append("No saved maps: scene pages show the numbers only (evaluate with --save-maps or --html).")
-    return SiteInputs(results=results, scenes=scenes, maps=folders, ci=ci, paper=paper, paper_methods=paper_methods,
-                      title=title or _default_title(results), notes=notes)
+    return SiteInputs(results=results, scenes=scenes, maps=folders, scene_maps=dict(scene_maps or {}), ci=ci,
+                      paper=paper, paper_methods=paper_methods, title=title or _default_title(results), notes=notes)
 
 
 def _default_title(results: Results) -> str:

@@ -11,12 +11,13 @@ mean of its ranks over the scenes (or scene x metric pairs) where it is ranked.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
 
-__all__ = ["MetricInfo", "metric_info", "metric_ranks", "metric_table", "overall_ranks"]
+__all__ = ["MetricInfo", "all_metric_ranks", "metric_info", "metric_ranks", "metric_table", "overall_ranks"]
 
 
 @dataclass(frozen=True)
@@ -54,13 +55,20 @@ def metric_ranks(results, metric: str) -> pd.DataFrame:
     return df.reset_index(drop=True)
 
 
-def metric_table(results, metric: str) -> pd.DataFrame:
+def all_metric_ranks(results) -> dict[str, pd.DataFrame]:
+    """:func:`metric_ranks` of every metric in the results, computed once for every table that
+    ranks (metric id -> long frame)."""
+    return {m: metric_ranks(results, m) for m in results.metrics}
+
+
+def metric_table(results, metric: str, *, ranks: pd.DataFrame | None = None) -> pd.DataFrame:
     """Wide frame of one metric, one row per method (in the results' order): columns
     ``(scene, 'value' | 'rank' | 'resolution')`` for every scene, then ``('mean', 'value')`` (the
     metric's aggregate over the method's scenes, the mean for every benchmark metric),
     ``('mean', 'resolution')`` (the resolutions averaged, e.g.
-    'highres+lowres') and ``('average rank', 'value')``."""
-    long = metric_ranks(results, metric)
+    'highres+lowres') and ``('average rank', 'value')``. ``ranks``: :func:`metric_ranks` of the
+    metric when already computed."""
+    long = ranks if ranks is not None else metric_ranks(results, metric)
     methods = [m for m in results.methods if m in set(long["method"])]
     scenes = [s for s in results.scenes if s in set(long["scene"])]
     cols = pd.MultiIndex.from_tuples([(s, k) for s in scenes for k in ("value", "rank", "resolution")]
@@ -82,11 +90,12 @@ def metric_table(results, metric: str) -> pd.DataFrame:
     return table
 
 
-def overall_ranks(results, metrics=None) -> pd.Series:
+def overall_ranks(results, metrics=None, *, ranks: Mapping[str, pd.DataFrame] | None = None) -> pd.Series:
     """Average rank of each method over every (scene, metric) where it is ranked, for ``metrics``
-    (default: all in the results); index method in the results' order."""
+    (default: all in the results); index method in the results' order. ``ranks``: metric id ->
+    :func:`metric_ranks`, when already computed."""
     metrics = list(metrics) if metrics is not None else results.metrics
-    frames = [metric_ranks(results, m) for m in metrics]
+    frames = [ranks[m] if ranks is not None else metric_ranks(results, m) for m in metrics]
     long = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(columns=["method", "rank"])
     mean = long.groupby("method")["rank"].mean()
     return mean.reindex([m for m in results.methods]).astype(float)

@@ -21,7 +21,7 @@ with ``formats``).
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -35,7 +35,8 @@ __all__ = [
     "A_BETTER", "B_BETTER", "HEATMAP_CMAP", "OUTSIDE", "PAIRWISE_LIMIT", "PAIRWISE_THRESHOLD", "TIE",
     "absolute_error", "bad_fraction_map", "heatmap_image", "median_error_map", "pairwise_classes",
     "pairwise_difference", "pairwise_image", "pairwise_shares", "plot_error_heatmaps", "plot_pairwise",
-    "plot_radar", "radar_metric_ids", "radar_radii", "radar_scores", "save_formats", "write_toolkit_figures",
+    "plot_radar", "radar_metric_ids", "radar_radii", "radar_scores", "save_formats", "toolkit_figures_from_scene_maps",
+    "write_toolkit_figures",
 ]
 
 PAIRWISE_LIMIT = 0.1  # px, colour range of the pairwise maps (the toolkit's)
@@ -295,8 +296,18 @@ def write_toolkit_figures(results: Any, scenes: Sequence[Any], maps: Mapping[str
     """The toolkit's figures for papers into ``out_dir``: ``radar`` (from the results), and from the saved
     ``maps`` (method label -> submission folder) on ``scenes``: ``error_heatmaps`` and
     ``pairwise_<A>_vs_<B>`` for every pair of methods, each in ``formats``."""
-    from lfbench.reports.figures import safe_name
     from lfbench.reports.maps import load_scene_maps
+
+    return toolkit_figures_from_scene_maps(results, (load_scene_maps(scene, maps, border_px) for scene in scenes),
+                                           out_dir, formats=formats, threshold=threshold)
+
+
+def toolkit_figures_from_scene_maps(results: Any, scene_maps: Iterable[Any], out_dir: str | Path, *,
+                                    formats: Sequence[str] = ("png",),
+                                    threshold: float = PAIRWISE_THRESHOLD) -> list[Path]:
+    """:func:`write_toolkit_figures` from maps already loaded (lfbench.reports.maps.SceneMaps, one per
+    scene)."""
+    from lfbench.reports.figures import safe_name
 
     out = Path(out_dir)
     written: list[Path] = []
@@ -304,8 +315,7 @@ def write_toolkit_figures(results: Any, scenes: Sequence[Any], maps: Mapping[str
     if len(scores.index) >= 3:
         written += plot_radar(scores, out / "radar", formats=formats)
     gts, masks, centres, preds = {}, {}, {}, {}
-    for scene in scenes:
-        sm = load_scene_maps(scene, maps, border_px)
+    for sm in scene_maps:
         if sm.gt is None or not sm.preds:
             continue
         gts[sm.name], masks[sm.name], centres[sm.name] = sm.gt, sm.mask, sm.centre
