@@ -17,11 +17,10 @@ from typing import Literal
 
 import numpy as np
 import torch
-from lfbench_methods.subfocal.network import MAX_WIDTH
+from lfbench_methods.subfocal.network import MAX_WIDTH, check_config
 from lfbench_methods.subfocal.trainable import LFAttNetTrainable, SubFocalTrainable  # noqa: F401 (registers them)
 
 from lfbench.data.scene import LightField
-from lfbench.data.shift import INTERPOLATIONS, disparity_grid
 from lfbench.method.base import Method, Prediction
 from lfbench.method.registry import method_info, register_method
 from lfbench.utils.errors import DataError, SpecError
@@ -75,15 +74,13 @@ class SubFocal(Method):
                   "threads": threads, "max_memory_gb": max_memory_gb, "device": device, "tf32": tf32}
         defaults = _signature_defaults()
         super().__init__(**{k: v for k, v in values.items() if v != defaults[k]})
-        if interpolation not in INTERPOLATIONS:
-            raise ValueError(f"interpolation must be one of {', '.join(INTERPOLATIONS)}, got {interpolation!r}")
+        check_config(d_min, d_max, interval, interpolation)  # the network's checks (width: ours, None allowed)
         if precision not in ("fp32", "bf16"):
             raise ValueError(f"precision must be fp32 or bf16, got {precision!r}")
         if width is not None and not 1 <= width <= MAX_WIDTH:
             raise ValueError(f"width must be from 1 to {MAX_WIDTH}, got {width}")
         if tile < 0 or threads < 0 or not 0 < max_memory_gb < float("inf"):
             raise ValueError("tile and threads must be >= 0 and max_memory_gb a finite number > 0")
-        disparity_grid(d_min, d_max, interval)  # ValueError if not a grid
         self.device = resolve_device(device)  # SpecError for a device this machine lacks
         if precision == "bf16":
             require_bf16(self.device)  # one line, before any work (an AVX2-only CPU cannot run it)

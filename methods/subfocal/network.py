@@ -334,6 +334,26 @@ class Aggregation(nn.Module):
         return self.out(F.relu(self.classify(x))).squeeze(1)
 
 
+def check_config(d_min: float, d_max: float, interval: float, interpolation: str, width: int | None = None,
+                 attention: bool | None = None, angular: int | None = None) -> None:
+    """ValueError naming the first bad :class:`SubFocalNet` build parameter (the grid: a bad or oversized one),
+    before anything is allocated; the network, the ``subfocal`` trainable and the method all check with it.
+    width, attention, angular: None = not checked (the method has its own width and fixes angular to 9)."""
+    if interpolation not in INTERPOLATIONS:
+        raise ValueError(f"interpolation must be one of {', '.join(INTERPOLATIONS)}, "
+                         f"got {str(interpolation)[:40]!r}")
+    for name, value, top in (("width", width, MAX_WIDTH), ("angular", angular, MAX_ANGULAR)):
+        if value is None:
+            continue
+        if isinstance(value, bool) or not isinstance(value, numbers.Integral) or not 1 <= value <= top:
+            raise ValueError(f"{name} must be a whole number from 1 to {top}, got {str(value)[:40]}")
+    if angular is not None and angular % 2 == 0:
+        raise ValueError(f"angular must be odd, got {angular}")
+    if attention is not None and not isinstance(attention, bool):
+        raise ValueError(f"attention must be true or false, got {str(attention)[:40]}")
+    disparity_grid(d_min, d_max, interval)
+
+
 class SubFocalNet(nn.Module):
     """SubFocal / LFattNet: views (B, N, H, W) -> (disparity (B, H, W), probability (B, D, H, W)).
 
@@ -346,17 +366,7 @@ class SubFocalNet(nn.Module):
     def __init__(self, d_min: float = -4.0, d_max: float = 4.0, interval: float = 0.5,
                  interpolation: str = "bilinear", width: int = 150, attention: bool = True, angular: int = 9) -> None:
         super().__init__()
-        if interpolation not in INTERPOLATIONS:
-            raise ValueError(f"interpolation must be one of {', '.join(INTERPOLATIONS)}, "
-                             f"got {str(interpolation)[:40]!r}")
-        for name, value, top in (("width", width, MAX_WIDTH), ("angular", angular, MAX_ANGULAR)):
-            if isinstance(value, bool) or not isinstance(value, numbers.Integral) or not 1 <= value <= top:
-                raise ValueError(f"{name} must be a whole number from 1 to {top}, got {str(value)[:40]}")
-        if angular % 2 == 0:
-            raise ValueError(f"angular must be odd, got {angular}")
-        if not isinstance(attention, bool):
-            raise ValueError(f"attention must be true or false, got {str(attention)[:40]}")
-        disparity_grid(d_min, d_max, interval)  # ValueError for a bad or oversized grid, before any allocation
+        check_config(d_min, d_max, interval, interpolation, width, attention, angular)  # before any allocation
         self._config = {"d_min": float(d_min), "d_max": float(d_max), "interval": float(interval),
                         "interpolation": interpolation, "width": int(width), "attention": bool(attention),
                         "angular": int(angular)}

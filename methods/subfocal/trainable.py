@@ -8,7 +8,7 @@ from typing import Any
 
 import torch
 from lfbench_methods.subfocal.bench import bench_peak, bench_volume
-from lfbench_methods.subfocal.network import SubFocalNet
+from lfbench_methods.subfocal.network import SubFocalNet, check_config
 
 from lfbench.method.trainable import Trainable, register_trainable
 
@@ -32,15 +32,8 @@ class SubFocalTrainable(Trainable):
     benches = {"peak": bench_peak, "volume": bench_volume}
 
     def check(self, params: dict[str, Any]) -> None:
-        """The grid and the interpolation, without building the (paper-size) network."""
-        from lfbench.data.shift import INTERPOLATIONS, disparity_grid
-
-        merged = {**self.defaults, **params}
-        if "interpolation" in merged and merged["interpolation"] not in INTERPOLATIONS:
-            raise ValueError(f"interpolation must be one of {', '.join(INTERPOLATIONS)}, "
-                             f"got {merged['interpolation']!r}")
-        disparity_grid(float(merged.get("d_min", -4.0)), float(merged.get("d_max", 4.0)),
-                       float(merged.get("interval", 0.5)))
+        """The network's own parameter checks (network.check_config), without building the (paper-size) network."""
+        check_config(**{**{k: p.default for k, p in self.parameters().items()}, **params})
 
     def load(self, path: str | Path, **overrides: Any) -> SubFocalNet:
         from lfbench_methods.subfocal.keras_import import build_from_checkpoint
