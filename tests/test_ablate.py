@@ -501,3 +501,46 @@ def test_the_shared_stage1_waits_for_another_process_holding_its_lock(tmp_path, 
     other.release()
     worker.join(30)
     assert entered.is_set()
+
+
+def test_ctrl_c_during_a_parallel_ablation_starts_no_further_cells(tmp_path, monkeypatch):
+    """With --jobs N only N cells are in the pool at a time: a process pool feeds submitted calls to its
+    workers ahead of time, beyond the reach of cancel_futures, so Ctrl-C (which stops the running cells at a
+    checkpoint) must find no other cell already handed over."""
+    from concurrent.futures import Future
+
+    from lfbench.ablation import runner
+    from lfbench.ablation.cell import CellTask
+
+    class Pool:  # records what is handed over; every call "finishes" at once
+        submitted: list[str] = []
+
+        def __init__(self, *args, **kwargs) -> None:
+            pass
+
+        def submit(self, fn, task):
+            Pool.submitted.append(task.cell_id)
+            fut: Future = Future()
+            fut.set_result({"id": task.cell_id})
+            return fut
+
+        def shutdown(self, wait: bool = True, cancel_futures: bool = False) -> None:
+            pass
+
+    def interrupted(marker, log):
+        raise KeyboardInterrupt  # Ctrl-C while the first finished cell is reported
+
+    config = {"model": {}, "stages": [{"steps": 10}]}
+    tasks = [CellTask(cell_id=f"c{i}", values={}, config=config, fingerprint="f", eval_fingerprint="e",
+                      cell_dir=str(tmp_path / f"c{i}"), data_links={}, stage1_dir=None, scenes=(), evaluation=None,
+                      threads=1) for i in range(5)]
+    monkeypatch.setattr(runner, "ProcessPoolExecutor", Pool)
+    monkeypatch.setattr(runner, "_report", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        runner.run_cells(tasks, jobs=2, progress=False, log=lambda message: None)
+    assert len(Pool.submitted) == 2  # was 5: every cell was queued into the pool at once
+
+    Pool.submitted = []
+    monkeypatch.setattr(runner, "_report", lambda marker, log: None)
+    runner.run_cells(tasks, jobs=2, progress=False, log=lambda message: None)
+    assert sorted(Pool.submitted) == [t.cell_id for t in tasks]  # without an interrupt every cell runs once

@@ -19,6 +19,7 @@ interrupted one from its training checkpoint.
 from __future__ import annotations
 
 import contextlib
+import itertools
 import json
 import logging
 import os
@@ -227,13 +228,19 @@ def run_cells(tasks: list[CellTask], jobs: int, progress: bool | None, log: Log,
             pool = ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=init_worker,
                                        initargs=(quiet[0].threads, queue))
             try:
-                futures: dict[Future, CellTask] = {pool.submit(run_cell, t): t for t in quiet}
-                remaining = set(futures)
-                while remaining:
-                    done, remaining = wait(remaining, return_when=FIRST_COMPLETED)
+                # At most `jobs` cells are handed to the pool at a time: a pool queues submitted calls into its
+                # workers ahead of time, where cancel_futures cannot reach them, so submitting every cell at once
+                # made Ctrl-C (which stops the running cells at a checkpoint) start the pre-queued ones.
+                waiting = iter(quiet)
+                running: set[Future] = set()
+                for t in itertools.islice(waiting, jobs):
+                    running.add(pool.submit(run_cell, t))
+                while running:
+                    done, running = wait(running, return_when=FIRST_COMPLETED)
                     for fut in done:
-                        _report(fut.result(), log)  # a failed cell stops the run (queued cells are dropped)
+                        _report(fut.result(), log)  # a failed cell stops the run (the waiting ones never start)
                         bar.update(1)
+                        running.update(pool.submit(run_cell, t) for t in itertools.islice(waiting, 1))
             finally:
                 pool.shutdown(wait=True, cancel_futures=True)
     finally:
