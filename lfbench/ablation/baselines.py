@@ -74,12 +74,13 @@ def verdict(cell: dict[tuple[str, str], tuple[float, float]], baseline: dict[tup
             seeds: bool) -> str:
     """The verdict of one cell against one baseline. ``cell``: (metric, group) -> (mean, interval end on the
     baseline's side; NaN without seeds); ``baseline``: (metric, group) -> value."""
-    failed, open_ = [], []
+    failed, open_, unscored = [], [], 0
     for (metric, group), (mean, bound) in cell.items():
         base = baseline.get((metric, group), math.nan)
         where = f"{get_metric(metric).name} on {group}"
         better = (lambda a, b: a < b) if get_metric(metric).lower_is_better else (lambda a, b: a > b)
         if not (math.isfinite(mean) and math.isfinite(base)):
+            unscored += 1
             open_.append(f"{where} (no score)")
         elif not better(mean, base):
             failed.append(f"{where} ({_fmt(mean)} vs {_fmt(base)})")
@@ -87,7 +88,7 @@ def verdict(cell: dict[tuple[str, str], tuple[float, float]], baseline: dict[tup
             open_.append(f"{where} ({_bound_name(metric)} {_fmt(bound)} vs {_fmt(base)})")
     if failed:
         return f"{NOT_BEATEN}: " + "; ".join(failed)
-    if cell and len(open_) == len(cell) and all(o.endswith("(no score)") for o in open_):
+    if cell and unscored == len(cell):
         return f"{NOT_RESOLVED}: {NO_SCORES}"
     return f"{NOT_RESOLVED}: " + "; ".join(open_) if open_ else BEATS
 
