@@ -20,6 +20,7 @@ from lfbench.data.pfm import read_pfm
 from lfbench.data.scene import Benchmark, Scene, rgb_to_gray
 from lfbench.data.synth import Affine, Quadric, generate_scene, quantize, view_offsets, write_benchmark
 from lfbench.scoring.rules import score_scene
+from lfbench.utils.errors import SpecError
 
 SIZE = 64
 
@@ -85,6 +86,17 @@ def test_same_seed_gives_identical_bytes_and_another_seed_differs(tmp_path, writ
     assert a["gt_disp_lowres.pfm"] != b["gt_disp_lowres.pfm"]
     # scenes of one benchmark differ from each other, too
     assert files_of(paths[0])["gt_disp_lowres.pfm"] != files_of(paths[1])["gt_disp_lowres.pfm"]
+
+
+def test_scenes_generated_in_parallel_are_the_same_files(tmp_path, written):
+    _, paths = written
+    parallel = write_benchmark(tmp_path / "parallel", seed=7, size=48, scenes=2, workers=2)
+    assert [p.name for p in parallel] == [p.name for p in paths]
+    for a, b in zip(paths, parallel, strict=True):
+        assert files_of(a) == files_of(b)
+    assert not [p for p in (tmp_path / "parallel" / "synthetic").iterdir() if p.name.startswith(".")]
+    with pytest.raises(SpecError, match="workers"):
+        write_benchmark(tmp_path / "bad", seed=7, size=48, scenes=1, workers=0)
 
 
 def test_generate_scene_is_deterministic_in_memory(scene):

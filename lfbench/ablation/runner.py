@@ -39,18 +39,12 @@ from lfbench.ablation.spec import AblationSpec, Cell, SyntheticEval, _sha
 from lfbench.runs.results import Results
 from lfbench.utils.atomic import write_text
 from lfbench.utils.errors import DataError, SpecError
+from lfbench.utils.hardware import available_cores
 from lfbench.utils.jsonfile import read_json
 from lfbench.utils.log import log_to_file
 
 Log = Callable[[str], None]
 _log = logging.getLogger(__name__)
-
-
-def available_cores() -> int:
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # not on Linux
-        return max(1, os.cpu_count() or 1)
 
 
 def _safe(label: str) -> str:
@@ -71,7 +65,7 @@ def _generate(target: Path, seed: int, size: int, scenes: int, category: str, lo
     log(f"generating {scenes} synthetic scenes ({size} px, seed {seed}) into {target}")
     tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
     try:
-        write_benchmark(tmp, seed=seed, size=size, scenes=scenes, category=category)
+        write_benchmark(tmp, seed=seed, size=size, scenes=scenes, category=category, workers=available_cores())
         os.replace(tmp / category, target)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)

@@ -22,6 +22,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--category", default="synthetic", metavar="NAME", help="category folder (default synthetic)")
     p.add_argument("--angular", type=int, default=9, metavar="A", help="A x A views, odd (default 9)")
     p.add_argument("--force", action="store_true", help="overwrite existing scene folders")
+    p.add_argument("--workers", type=int, default=None, metavar="N",
+                   help="scenes generated at a time in separate processes (default: the available cores)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
@@ -29,10 +31,12 @@ def run(args: argparse.Namespace) -> int:
     import time
 
     from lfbench.data.synth import write_benchmark
+    from lfbench.utils.hardware import available_cores
 
     start = time.perf_counter()
     paths = write_benchmark(args.out, seed=args.seed, size=args.size, scenes=args.scenes, category=args.category,
-                            angular=args.angular, force=args.force, progress=not args.no_progress)
+                            angular=args.angular, force=args.force, progress=not args.no_progress,
+                            workers=args.workers or available_cores())
     for path in paths:
         print(path)
     print(f"wrote {len(paths)} scene(s) of {args.size}x{args.size} px, {args.angular}x{args.angular} views "

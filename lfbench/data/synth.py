@@ -812,19 +812,43 @@ def _fresh_dir(target: Path, suffix: str) -> Path:
             continue
 
 
+def _write_scene(target: Path, seed: int, size: int, angular: int, category: str) -> Path:
+    """Generate one scene and write it as ``target`` (written beside it, renamed into place when complete;
+    an existing ``target`` is swapped out only after the new one is whole)."""
+    scene = generate_scene(seed, size=size, angular=angular, name=target.name, category=category)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    tmp = _fresh_dir(target, ".tmp")
+    try:
+        write_scene(scene, tmp)
+        if target.exists():  # only with force: move the old one aside, then swap
+            old = _fresh_dir(target, ".old")
+            os.replace(target, old / target.name)
+            os.replace(tmp, target)
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            os.replace(tmp, target)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return target
+
+
 def write_benchmark(out: str | Path, seed: int = 0, size: int = 128, scenes: int = 4,
                     category: str | Sequence[str] = "synthetic", angular: int = 9, force: bool = False,
-                    progress: bool = False) -> list[Path]:
+                    progress: bool = False, workers: int = 1) -> list[Path]:
     """Write ``scenes`` scenes as OUT/<category>/synth_<seed>_<i>/ and return their folders.
 
     ``category`` is one name for all scenes or one per scene. Each scene is written into a temporary
     folder beside its destination and renamed into place when complete, so an interrupted run
     leaves no half-written scene. An existing scene folder is an error unless ``force``; all
-    destinations are checked before anything is generated.
+    destinations are checked before anything is generated. ``workers`` > 1 generates that many scenes
+    at a time in separate processes; each scene depends only on its own seed, so the files are the same.
     """
     check_args(size, angular)
     if int(scenes) != scenes or not 1 <= scenes <= MAX_SYNTH_SCENES:
         raise SpecError(f"scenes must be an integer from 1 to {MAX_SYNTH_SCENES}, got {scenes}")
+    if int(workers) != workers or workers < 1:
+        raise SpecError(f"workers must be a positive integer, got {workers}")
     cats = [category] * scenes if isinstance(category, str) else list(category)
     if len(cats) != scenes:
         raise SpecError(f"{len(cats)} categories given for {scenes} scenes")
@@ -837,26 +861,29 @@ def write_benchmark(out: str | Path, seed: int = 0, size: int = 128, scenes: int
         for t in targets:
             if t.exists():
                 raise DataError("scene folder already exists (use --force to overwrite)", t)
-    iterator = range(scenes)
-    if progress:
-        from tqdm import tqdm
+    jobs = [(targets[i], scene_seed(seed, i), size, angular, cats[i]) for i in range(scenes)]
+    from tqdm import tqdm
 
-        iterator = tqdm(iterator, desc="synth", unit="scene")
-    for i in iterator:
-        target = targets[i]
-        scene = generate_scene(scene_seed(seed, i), size=size, angular=angular, name=target.name, category=cats[i])
-        target.parent.mkdir(parents=True, exist_ok=True)
-        tmp = _fresh_dir(target, ".tmp")
-        try:
-            write_scene(scene, tmp)
-            if target.exists():  # only with force: move the old one aside, then swap
-                old = _fresh_dir(target, ".old")
-                os.replace(target, old / target.name)
-                os.replace(tmp, target)
-                shutil.rmtree(old, ignore_errors=True)
-            else:
-                os.replace(tmp, target)
-        except BaseException:
-            shutil.rmtree(tmp, ignore_errors=True)
-            raise
-    return targets
+    bar = tqdm(total=scenes, desc="synth", unit="scene", disable=not progress)
+    try:
+        if min(int(workers), scenes) <= 1:
+            for job in jobs:
+                _write_scene(*job)
+                bar.update()
+            return targets
+        import concurrent.futures as cf
+        import multiprocessing
+
+        # spawn: the caller may hold threads (torch, a prefetcher) that a forked child would inherit locked
+        with cf.ProcessPoolExecutor(min(int(workers), scenes), mp_context=multiprocessing.get_context("spawn")) as pool:
+            futures = [pool.submit(_write_scene, *job) for job in jobs]
+            try:
+                for fut in cf.as_completed(futures):
+                    fut.result()
+                    bar.update()
+            except BaseException:
+                pool.shutdown(wait=True, cancel_futures=True)
+                raise
+        return targets
+    finally:
+        bar.close()

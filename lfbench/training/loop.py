@@ -170,13 +170,15 @@ def prepare_synthetic(cfg: TrainConfig, data_dir: Path, log=logging.getLogger(__
             continue
         try:
             from lfbench.data.synth import write_benchmark
+            from lfbench.utils.hardware import available_cores
         except ImportError as exc:
             raise SpecError(f"[[data.synthetic]] needs lfbench.data.synth ({exc})", cfg.source) from None
         data_dir.mkdir(parents=True, exist_ok=True)
         log(f"generating {spec.scenes} synthetic scenes ({spec.size} px, seed {spec.seed}) into {target}")
         tmp = Path(tempfile.mkdtemp(prefix=f".{spec.category}.", dir=data_dir))
         try:
-            write_benchmark(tmp, seed=spec.seed, size=spec.size, scenes=spec.scenes, category=spec.category)
+            write_benchmark(tmp, seed=spec.seed, size=spec.size, scenes=spec.scenes, category=spec.category,
+                            workers=available_cores())
             produced = tmp / spec.category
             if not produced.is_dir():
                 raise DataError(f"lfbench.data.synth wrote no {spec.category}/ folder", tmp)

@@ -32,6 +32,14 @@ _DEVICE_RE = re.compile(r"^(auto|cpu|cuda)(?::(\d+))?$")
 CPUINFO = Path("/proc/cpuinfo")
 
 
+def available_cores() -> int:
+    """The CPU cores this process may run on (its affinity mask on Linux, else os.cpu_count())."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # not on Linux
+        return max(1, os.cpu_count() or 1)
+
+
 def cpuinfo_field(name: str, cpuinfo: Path = CPUINFO) -> str | None:
     """The value of the first ``name : value`` line of /proc/cpuinfo (``name`` matched without case),
     stripped; None where the file or the line does not exist."""
