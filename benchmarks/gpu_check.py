@@ -146,7 +146,7 @@ def section_phase(device, sizes: dict) -> dict:
     offsets, grid = angular_offsets(9), disparity_grid(-2.0, 2.0, 0.5)
 
     def run(dev):
-        xd = x.to(dev).requires_grad_(True)
+        xd = x.to(dev, copy=True).requires_grad_(True)  # a leaf on each device (x itself stays grad-free)
         y = shift_views(xd, offsets.to(dev), grid.to(dev), "phase")
         (y * weight.to(dev)).sum().backward()
         return y.detach().cpu(), xd.grad.cpu()
