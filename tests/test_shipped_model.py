@@ -48,9 +48,9 @@ def test_shipped_model_predicts_disparity(unseen_scene):
     np.testing.assert_allclose(pred.distribution.sum(axis=0), 1.0, atol=1e-4)
     ours = score_scene(unseen_scene, pred.disparity).values
     zero = score_scene(unseen_scene, np.zeros_like(gt)).values
-    # measured when shipped: BadPix 0.07 = 24.3 %, MSE x100 = 41.9 (a zero map: 99.6 % / 130; the 680-step
-    # model it continues: 31.7 % / 44.7)
-    assert ours["badpix_0.07"] < 30.0 and ours["mse_x100"] < 50.0
+    # measured when shipped: BadPix 0.07 = 15.5 %, MSE x100 = 13.1 (a zero map: 99.6 % / 130; the CPU model
+    # it continues, results/shipped_model/ run 2: 24.3 % / 41.9, which these bounds reject)
+    assert ours["badpix_0.07"] < 20.0 and ours["mse_x100"] < 20.0
     assert zero["badpix_0.07"] > 90.0 and zero["mse_x100"] > 100.0
     rating = scene_sparsification(unseen_scene, pred)
     assert rating.aurg > 0  # its uncertainty ranks pixels better than chance
