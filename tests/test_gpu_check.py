@@ -55,3 +55,27 @@ def test_gpu_check_on_a_missing_gpu_is_one_line(tmp_path: Path):
                            str(tmp_path / "x.json")], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1 and "sees no CUDA GPU" in proc.stderr
     assert not (tmp_path / "x.json").exists()
+
+
+@pytest.mark.slow
+def test_gpu_profile_runs_on_the_cpu(tmp_path: Path):
+    from lfbench.utils.hardware import cpu_bf16_missing
+
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    proc = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "gpu_profile.py"), "--device", "cpu", "--quick",
+                           "--out", str(tmp_path), "--budget", "1e6"],
+                          capture_output=True, text=True, timeout=600, env=env, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
+    report = json.loads((tmp_path / "gpu_profile.json").read_text())
+    assert report["device"] == "cpu" and report["quick"]
+    assert [(c["width"], c["batch"]) for c in report["train"]] == [(4, 2), (4, 1)]
+    assert all(c["steps_per_s"] > 0 for c in report["train"])
+    table = (tmp_path / "profile_w4_b2.txt").read_text()
+    assert "convolution_backward" in table  # the profiled step ran forward and backward
+    for c in report["inference"]:
+        if c["precision"] == "bf16" and cpu_bf16_missing() is not None:
+            assert "lacks" in c["skipped"]
+        else:
+            assert c["seconds"] > 0
+    assert {(c["width"], c["size"], c["precision"]) for c in report["inference"]} == {
+        (w, 32, p) for w in (16, 4) for p in ("fp32", "bf16")}
