@@ -36,7 +36,7 @@ def run(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     paths = write_benchmark(args.out, seed=args.seed, size=args.size, scenes=args.scenes, category=args.category,
                             angular=args.angular, force=args.force, progress=not args.no_progress,
-                            workers=args.workers or available_cores())
+                            workers=available_cores() if args.workers is None else args.workers)
     for path in paths:
         print(path)
     print(f"wrote {len(paths)} scene(s) of {args.size}x{args.size} px, {args.angular}x{args.angular} views "
