@@ -179,6 +179,12 @@ def test_report_writes_the_table_and_heads_the_captions_with_the_summary(tmp_pat
     assert md[1] == summary + "  " and "95 % t-interval over seeds must lie wholly" in md[2]
     for stem in ("table_cells", "table4"):
         assert (tmp_path / "out" / f"{stem}.md").read_text().splitlines()[1] == summary + "  "
+    # no paper tables given: only the table with paper columns says so; the others do not mention the paper
+    not_found = "paper: not shown (the paper's tables were not found)"
+    assert not_found in (tmp_path / "out" / "table4.md").read_text()
+    for stem in ("table_cells", "table_seeds", "table_significance", "table_per_scene", "table_average"):
+        text = (tmp_path / "out" / f"{stem}.md").read_text()
+        assert "paper:" not in text, stem
     # without [[methods]]: no such table, no summary
     bare = _spec(tmp_path / "bare", SEEDS_HEAD, tail="")
     logged.clear()
@@ -227,3 +233,17 @@ def test_report_only_end_to_end_against_the_zero_map_scored_for_real(tmp_path, c
                                                     f"{MSE} on {syn} ({zero_mse - 1:.3f} vs 0.000)")
     assert "1 of 2 cells do not beat Zero map: interval=0.5 (does not beat:" in caplog.text
     assert "2 of 2 cells do not beat Oracle" in caplog.text
+
+    # a copy that keeps only results.json (as results/ablations/ does): the cell markers it recorded rebuild the
+    # same tables; without them the cells count as unfinished (one line, exit 2)
+    kept, saved = tmp_path / "kept", Results.read(out / "results.json")
+    kept.mkdir()
+    saved.write(kept)
+    assert main(["ablate", str(path), "--out", str(kept), "--report-only"]) == 2
+    saved.meta["ablation"] = {"cells": [{**json.loads((out / "cells" / cid / "cell.json").read_text()),
+                                         **json.loads((out / "cells" / cid / "timing.json").read_text())}
+                                        for cid in ("interval=1", "interval=0.5")]}
+    saved.write(kept)
+    assert main(["ablate", str(path), "--out", str(kept), "--report-only"]) == 0
+    for stem in ("table_baselines", "table_cells", "table4"):
+        assert (kept / f"{stem}.csv").read_text() == (out / f"{stem}.csv").read_text(), stem

@@ -8,8 +8,10 @@ from __future__ import annotations
 import contextlib
 import io
 import json
+import os
 import re
 import shutil
+import stat
 from html.parser import HTMLParser
 from pathlib import Path
 
@@ -80,6 +82,9 @@ def test_site_has_an_index_a_page_per_scene_and_per_method(site):
     assert names == {"index.html", *(f"scene-{s}.html" for s in SCENES),
                      *(f"method-{safe_name(m)}.html" for m in ("gt", "published:good", "published:bad"))}
     assert (site / "maps" / "gt" / "disp_maps" / "boxes.pfm").is_file()  # the maps the site was drawn from
+    umask = os.umask(0)
+    os.umask(umask)
+    assert stat.S_IMODE(html.stat().st_mode) == 0o777 & ~umask  # as readable as a folder the user makes
 
 
 def test_every_reference_is_a_file_of_the_site_and_nothing_is_fetched(site):

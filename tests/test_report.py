@@ -337,6 +337,27 @@ def test_report_draws_overviews_from_saved_maps(evaluated, tmp_path):
         assert values[70] == pytest.approx(bp[key])
 
 
+def test_report_curves_from_saved_maps_use_the_recorded_scoring_rules(evaluated, tmp_path):
+    # results scored with a 5 px border: the redrawn curves must use 5 px too, not the default 15
+    from lfbench.data.pfm import read_pfm
+    from lfbench.data.scene import Benchmark
+    from lfbench.data.submission import disp_map_path
+    from lfbench.reports.figures import read_curves_csv
+
+    results = json.loads((evaluated / "eval" / "results.json").read_text())
+    results["meta"]["scoring"]["border_px"] = 5
+    (tmp_path / "eval").mkdir()
+    (tmp_path / "eval" / "results.json").write_text(json.dumps(results))
+    assert main(["report", str(tmp_path / "eval"), "--out", str(tmp_path / "r"), "--maps",
+                 str(evaluated / "eval" / "maps"), "--data", str(evaluated / "data"), "--format", "md"]) == 0
+    curves = {(c.method, c.scene): c.values for c in read_curves_csv(tmp_path / "r" / "figures" / "badpix_series.csv")}
+    for scene in Benchmark.discover(evaluated / "data"):
+        err = np.abs(read_pfm(disp_map_path(evaluated / "sub", scene.name)) - scene.gt_disparity())[5:-5, 5:-5]
+        by_hand = 100 * np.mean(err > 0.07)
+        assert by_hand != pytest.approx(100 * np.mean(err[10:-10, 10:-10] > 0.07))  # the border matters here
+        assert curves[("published:sub", scene.name)][70] == pytest.approx(by_hand)
+
+
 @pytest.mark.parametrize("argv, message", [
     (["report", "MISSING", "--out", "OUT"], "results file not found"),
     (["report", "RESULTS", "--out", "OUT", "--format", "docx"], "unknown table format"),

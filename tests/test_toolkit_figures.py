@@ -140,6 +140,10 @@ def test_figures_are_written_in_the_requested_formats(tmp_path):
     assert written[1].read_bytes()[:5] == b"%PDF-"
     assert b"<svg" in written[2].read_bytes()
     assert b"http" not in written[0].read_bytes()  # no metadata link in the PNG
+    # a dot inside the name is kept (a method label such as 'interval=0.25'); a format suffix is replaced
+    dotted = tk.plot_radar(scores, tmp_path / "radar_interval=0.25", formats=("png", "svg"))
+    assert [p.name for p in dotted] == ["radar_interval=0.25.png", "radar_interval=0.25.svg"]
+    assert [p.name for p in tk.plot_radar(scores, tmp_path / "named.png")] == ["named.png"]
     with pytest.raises(SpecError, match="unknown figure format"):
         tk.plot_radar(scores, tmp_path / "x", formats=("gif",))
     with pytest.raises(SpecError, match="at least 3"):

@@ -65,6 +65,36 @@ def test_registration_parameters_and_axes(registry):
         t.check_params({"slope": 2})
 
 
+class Counted(Line):
+    """Line that records the device of every real build's slope."""
+
+    built: list[str] = []
+
+    def __init__(self, a: float = 1.0, bias: bool = True, angular: int = 3, needs_values: bool = False) -> None:
+        if a < 0:
+            raise ValueError("a must be >= 0")
+        super().__init__(a, bias, angular)
+        if needs_values:
+            self.a.detach().item()  # reads a value: impossible on the meta device
+        Counted.built.append(self.a.device.type)
+
+
+def test_the_default_check_builds_on_the_meta_device_and_falls_back_to_a_real_build(registry):
+    class CountedTrainable(Trainable):
+        network = Counted
+
+    t = register_trainable("counted")(CountedTrainable)()
+    Counted.built.clear()
+    t.check_params({"a": 2.0})
+    assert Counted.built == ["meta"]  # shapes only: no memory allocated, no initialisation run
+    with pytest.raises(ValueError, match="a must be >= 0"):
+        t.check_params({"a": -1.0})
+    Counted.built.clear()
+    t.check_params({"needs_values": True})
+    assert Counted.built == ["cpu"]  # the constructor cannot run on meta: one real build decides
+    assert t.build(a=3.0).a.device.type == "cpu"
+
+
 def test_subfocal_and_lfattnet_are_registered_users_of_the_seam():
     sub, lfa = get_trainable("subfocal"), get_trainable("lfattnet")
     assert sub.distribution and sub.method_name == "subfocal" and lfa.method_name == "lfattnet"

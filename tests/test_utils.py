@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from lfbench.utils.atomic import FILE_MODE, atomic_open, write_text
+from lfbench.utils.atomic import FILE_MODE, atomic_open, fresh_dir, write_text
 from lfbench.utils.envvars import expand_vars
 from lfbench.utils.errors import SpecError
 from lfbench.utils.log import configure_cli_logging, log_to_file
@@ -37,6 +37,19 @@ def test_atomic_write_sets_the_mode_on_the_file_and_never_touches_the_umask(tmp_
     with atomic_open(tmp_path / "x.bin", "wb", file_mode=0o640) as f:
         f.write(b"x")
     assert _mode(tmp_path / "x.bin") == 0o640
+
+
+def test_fresh_dirs_are_new_hidden_and_take_their_mode_from_the_umask(tmp_path):
+    old = os.umask(0o022)
+    try:
+        made = {fresh_dir(tmp_path, ".site.", ".tmp") for _ in range(20)}
+        os.umask(0o077)
+        private = fresh_dir(tmp_path, ".x.")
+    finally:
+        os.umask(old)
+    assert len(made) == 20 and all(p.parent == tmp_path and p.name.startswith(".site.") and p.suffix == ".tmp"
+                                   and not any(p.iterdir()) and _mode(p) == 0o755 for p in made)
+    assert _mode(private) == 0o700  # the user's umask decides, not a fixed 0700 (tempfile.mkdtemp)
 
 
 def test_atomic_write_leaves_the_old_file_on_an_error(tmp_path):

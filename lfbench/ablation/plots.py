@@ -99,9 +99,10 @@ def error_maps(scene_dirs: Sequence[str], maps: Mapping[str, Path], out: Path) -
     from lfbench.reports.figures import SceneFigureWriter
 
     writer = SceneFigureWriter(out)
-    for folder in scene_dirs:
+    present = {label: root for label, root in maps.items() if Path(root).is_dir()}  # a results/ copy has none
+    for folder in scene_dirs if present else []:
         scene = Scene(folder)
-        for label, root in maps.items():
+        for label, root in present.items():
             if not disp_map_path(root, scene.name).is_file():
                 continue
             disp, runtime = read_submission_map(root, scene.name)

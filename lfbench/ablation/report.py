@@ -249,7 +249,7 @@ def baseline_verdicts(spec: AblationSpec, results: Results) -> tuple[pd.DataFram
     lines = summary_lines(table, labels, groups)
     what = "every cell against the baselines ([[methods]])" + (
         f", mean over seeds {', '.join(str(x) for x in spec.seeds)}" if spec.seeds else "")
-    title, ours = caption_lines(spec, None, what)[:2]
+    title, ours = caption_lines(spec, what)
     return table, [title, *lines, baselines_caption(seeds=bool(spec.seeds)), ours], lines
 
 
@@ -259,12 +259,12 @@ def write_seed_tables(spec: AblationSpec, results: Results, out: Path) -> list[P
     from lfbench.ablation.significance import ALPHA, cell_info, seeds_table, significance_table
 
     info, scores = cell_info(spec), results.to_frame()
-    caption = caption_lines(spec, None, f"mean over seeds {', '.join(str(x) for x in spec.seeds)} and 95 % "
+    caption = caption_lines(spec, f"mean over seeds {', '.join(str(x) for x in spec.seeds)} and 95 % "
                                         "t-interval over seeds of the scene-mean score")
     written = write_table(seeds_table(info, scores, METRICS), out, "table_seeds", caption)
     sig = significance_table(spec.table, info, scores)
     if not sig.empty:
-        caption = caption_lines(spec, None, "the paper's orderings, paired t-test over seeds (BadPix 0.07, lower "
+        caption = caption_lines(spec, "the paper's orderings, paired t-test over seeds (BadPix 0.07, lower "
                                             f"is better; two-sided, alpha {ALPHA:g})")
         written += write_table(sig.set_index("claim (paper)"), out, "table_significance", caption)
     return written
@@ -278,8 +278,9 @@ PAPER_BENCHMARK_NOTE = ("paper: Chao et al., IEEE TCI 2023, Tables I/II (HCI ben
                         "scored at high resolution, see 'paper resolution')")
 
 
-def caption_lines(spec: AblationSpec, paper, what: str | None = None, note: str = PAPER_ABLATION_NOTE) -> list[str]:
-    """The lines above a table: what it is, what 'ours' means (budget, scenes, times), what 'paper' means."""
+def caption_lines(spec: AblationSpec, what: str | None = None) -> list[str]:
+    """The first lines above a table: what it is and what 'ours' means (budget, scenes, times). A table with
+    paper columns adds :func:`paper_line`; the others say nothing about the paper."""
     ev = spec.evaluation
     where = []
     if ev.synthetic is not None:
@@ -293,8 +294,12 @@ def caption_lines(spec: AblationSpec, paper, what: str | None = None, note: str 
                 f"9x9x{ev.time_size}x{ev.time_size} light field")
     else:
         ours = f"ours: the methods listed, {scored}"
-    return [spec.title if what is None else f"{spec.title}: {what}", ours,
-            note if paper is not None else "paper: not shown (the paper's tables were not found)"]
+    return [spec.title if what is None else f"{spec.title}: {what}", ours]
+
+
+def paper_line(paper, note: str = PAPER_ABLATION_NOTE) -> str:
+    """What the 'paper' columns of a table that can have them are, or that they are absent and why."""
+    return note if paper is not None else "paper: not shown (the paper's tables were not found)"
 
 
 def _with_summary(caption: list[str], summary: Sequence[str]) -> list[str]:
@@ -329,18 +334,19 @@ def write_report(spec: AblationSpec, out: str | Path, results: Results, markers:
         for line in bar_lines:
             log(line)
         written += write_table(cells_table(spec, frame), out, "table_cells",
-                               _with_summary(caption_lines(spec, None, "all cells"), bar_lines))
+                               _with_summary(caption_lines(spec, "all cells"), bar_lines))
         means, rename = seed_means(spec, frame)
         seeds_note = ([f"ours: mean over seeds {', '.join(str(x) for x in spec.seeds)} (intervals and paired tests: "
                        "table_seeds, table_significance)"] if spec.seeds else [])
+        with_paper = _with_summary([*caption_lines(spec), paper_line(paper_tables), *seeds_note], bar_lines)
         if spec.table == "table4":
             written += write_table(table4(spec, means, paper_tables, log).rename(index=rename), out, "table4",
-                                   _with_summary([*caption_lines(spec, paper_tables), *seeds_note], bar_lines))
+                                   with_paper)
         elif spec.table == "table5":
             written += write_table(table5(spec, means, paper_tables, log).rename(index=rename), out, "table5",
-                                   _with_summary([*caption_lines(spec, paper_tables), *seeds_note], bar_lines))
+                                   with_paper)
         elif spec.table == "beta":
-            caption = _with_summary([*caption_lines(spec, None), *seeds_note, "paper: no values printed (its "
+            caption = _with_summary([*caption_lines(spec), *seeds_note, "paper: no values printed (its "
                                      "figure: BadPix 0.07 improves as beta goes from 1 down to 0.1)"], bar_lines)
             written += write_table(table_beta(spec, means).rename(index=rename), out, "table_beta", caption)
         if spec.seeds:
@@ -348,14 +354,14 @@ def write_report(spec: AblationSpec, out: str | Path, results: Results, markers:
         if not bar.empty:
             written += write_table(bar, out, "table_baselines", bar_caption)
     per_scene, average = per_scene_table(results), average_table(results)
-    base_caption = caption_lines(spec, None, "Tables I/II")
+    base_caption = caption_lines(spec, "Tables I/II")
     written += write_table(per_scene, out, "table_per_scene", base_caption)
     written += write_table(average, out, "table_average", base_caption)
     if paper_tables is not None and not per_scene.empty:
         covered = [s for s in results.scenes if s in paper_tables.scenes]
         if covered:
             methods = [paper_tables.resolve_method(m) for m in spec.paper_methods]
-            caption = caption_lines(spec, paper_tables, "Tables I/II", PAPER_BENCHMARK_NOTE)
+            caption = [*caption_lines(spec, "Tables I/II"), PAPER_BENCHMARK_NOTE]
             written += write_table(per_scene_with_paper(per_scene, paper_tables, methods), out,
                                    "table_per_scene_paper", caption)
             written += write_table(average_with_paper(average, paper_tables, results.scenes, methods), out,

@@ -26,7 +26,6 @@ import os
 import shlex
 import shutil
 import sys
-import tempfile
 from collections.abc import Callable
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass, replace
@@ -37,7 +36,7 @@ from lfbench.ablation.cell import CellTask, is_done, read_marker, run_cell
 from lfbench.ablation.executor import ClusterOptions
 from lfbench.ablation.spec import AblationSpec, Cell, SyntheticEval, _sha
 from lfbench.runs.results import Results
-from lfbench.utils.atomic import write_text
+from lfbench.utils.atomic import fresh_dir, write_text
 from lfbench.utils.errors import DataError, SpecError
 from lfbench.utils.hardware import available_cores
 from lfbench.utils.jsonfile import read_json
@@ -63,7 +62,7 @@ def _generate(target: Path, seed: int, size: int, scenes: int, category: str, lo
 
     target.parent.mkdir(parents=True, exist_ok=True)
     log(f"generating {scenes} synthetic scenes ({size} px, seed {seed}) into {target}")
-    tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
+    tmp = fresh_dir(target.parent, f".{target.name}.")
     try:
         write_benchmark(tmp, seed=seed, size=size, scenes=scenes, category=category, workers=available_cores())
         os.replace(tmp / category, target)
@@ -377,20 +376,22 @@ def merge_results(out: Path, new: Results) -> Results:
 
 def report_only(spec: AblationSpec, out: str | Path, *, paper: str | Path | None = None,
                 log: Log = _log.info) -> list[Path]:
-    """Rewrite the tables and figures from OUT/results.json and the cells' markers (nothing is run)."""
+    """Rewrite the tables and figures from OUT/results.json and the cells' markers (nothing is run). A cell
+    whose folder is gone (e.g. a results/ copy that keeps only results.json) uses the marker that
+    results.json recorded for it, so the tables of a committed run can be rebuilt from its results.json."""
+    from lfbench.ablation.cell import TIMING
     from lfbench.ablation.report import write_report
 
     out = Path(out)
     results = Results.read(out / "results.json")
-    from lfbench.ablation.cell import TIMING
-
+    recorded = {m.get("id"): m for m in results.meta.get("ablation", {}).get("cells", []) if isinstance(m, dict)}
     markers = []
     for c in spec.cells:
         marker = read_marker(out / "cells" / c.id) or {}
         timing = out / "cells" / c.id / TIMING
         if marker and timing.is_file():
             marker.update({k: v for k, v in read_json(timing, "cell timing").items() if k != "key"})
-        markers.append(marker)
+        markers.append(marker or dict(recorded.get(c.id, {})))
     missing = [c.id for c, m in zip(spec.cells, markers, strict=True) if "test_s" not in m]
     if missing:
         raise DataError(f"cell(s) not finished: {', '.join(missing)}; run `lfbench ablate` first", out)

@@ -31,7 +31,6 @@ from __future__ import annotations
 import io
 import math
 import os
-import secrets
 import shutil
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -44,7 +43,7 @@ from scipy import ndimage
 from lfbench.data.params import SceneParameters
 from lfbench.data.pfm import write_pfm
 from lfbench.data.scene import ArrayLightField, rgb_to_gray
-from lfbench.utils.atomic import write_bytes
+from lfbench.utils.atomic import fresh_dir, write_bytes
 from lfbench.utils.errors import DataError, SpecError
 
 GENERATOR_VERSION = "1"
@@ -801,27 +800,16 @@ def scene_seed(seed: int, index: int) -> int:
     return int(np.random.SeedSequence([int(seed), int(index)]).generate_state(1, np.uint32)[0])
 
 
-def _fresh_dir(target: Path, suffix: str) -> Path:
-    """A new hidden folder beside ``target`` (mode from the umask, unlike tempfile.mkdtemp's 0700)."""
-    while True:
-        path = target.parent / f".{target.name}.{secrets.token_hex(4)}{suffix}"
-        try:
-            path.mkdir()
-            return path
-        except FileExistsError:
-            continue
-
-
 def _write_scene(target: Path, seed: int, size: int, angular: int, category: str) -> Path:
     """Generate one scene and write it as ``target`` (written beside it, renamed into place when complete;
     an existing ``target`` is swapped out only after the new one is whole)."""
     scene = generate_scene(seed, size=size, angular=angular, name=target.name, category=category)
     target.parent.mkdir(parents=True, exist_ok=True)
-    tmp = _fresh_dir(target, ".tmp")
+    tmp = fresh_dir(target.parent, f".{target.name}.", ".tmp")
     try:
         write_scene(scene, tmp)
         if target.exists():  # only with force: move the old one aside, then swap
-            old = _fresh_dir(target, ".old")
+            old = fresh_dir(target.parent, f".{target.name}.", ".old")
             os.replace(target, old / target.name)
             os.replace(tmp, target)
             shutil.rmtree(old, ignore_errors=True)

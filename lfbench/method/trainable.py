@@ -96,8 +96,18 @@ class Trainable:
 
     def check(self, params: dict[str, Any]) -> None:
         """Raise ValueError/TypeError if ``params`` cannot build the network. Unknown keys are checked by
-        :meth:`check_params`; this default builds the network once (override with a cheaper check)."""
-        self.build(**params)
+        :meth:`check_params`. This default builds the network on PyTorch's meta device (shapes only: no
+        memory, no initialisation), and for real only when its constructor cannot run there (e.g. it
+        reads a tensor's value); override with a cheaper check where one exists."""
+        import torch
+
+        try:
+            with torch.device("meta"):
+                self.build(**params)
+        except (ValueError, TypeError):
+            raise
+        except Exception:  # noqa: BLE001 - a constructor that needs real tensors: the plain build decides
+            self.build(**params)
 
     def check_params(self, params: dict[str, Any]) -> None:
         """ValueError naming unknown [model] keys, then :meth:`check`."""

@@ -256,17 +256,21 @@ def save_figure(fig: Any, path: str | Path, dpi: int = DPI) -> Path:
 
 
 def save_formats(fig: Any, path: str | Path, formats: Sequence[str] = ("png",), dpi: int = 110) -> list[Path]:
-    """Write ``fig`` as path.<format> for each of png / pdf / svg (atomically) and close it. The
-    files carry no metadata link (PNG 'Software', PDF 'Producer' and 'Creator' are left out)."""
+    """Write ``fig`` as path.<format> for each of png / pdf / svg (atomically) and close it. ``path`` is
+    the file name without its format (a trailing .png / .pdf / .svg is replaced; any other dot, as in
+    'pairwise_planesweep_interval=0.25', is part of the name). The files carry no metadata link (PNG
+    'Software', PDF 'Producer' and 'Creator' are left out)."""
     plt = _pyplot()
     unknown = [f for f in formats if f not in FIGURE_FORMATS]
     if unknown or not formats:
         plt.close(fig)
         raise SpecError(f"unknown figure format {', '.join(unknown) or '(none)'}; use {', '.join(FIGURE_FORMATS)}")
+    path = Path(path)
+    stem = path.with_suffix("") if path.suffix.lstrip(".") in FIGURE_FORMATS else path
     written = []
     try:
         for fmt in dict.fromkeys(formats):
-            target = Path(path).with_suffix(f".{fmt}")
+            target = stem.with_name(f"{stem.name}.{fmt}")
             write_bytes(target, _figure_bytes(fig, fmt, dpi))
             written.append(target)
     finally:

@@ -85,9 +85,9 @@ def report_from_results(results_path: str | Path, out: str | Path, *,
         wanted = set(results.scenes)
         scenes = [s for s in Benchmark.discover(root) if s.name in wanted]
         folders = map_folders(Path(maps), results.methods)
-        border = ScoringRules.from_meta(results.meta).border_px
-        scene_maps = {s.name: load_scene_maps(s, folders, border) for s in scenes if s.has_gt()}
-        writer = fig.SceneFigureWriter(fig_dir)
+        rules = ScoringRules.from_meta(results.meta)  # the curves use the rules the results were scored with
+        scene_maps = {s.name: load_scene_maps(s, folders, rules.border_px) for s in scenes if s.has_gt()}
+        writer = fig.SceneFigureWriter(fig_dir, rules=rules)
         for sm in scene_maps.values():
             for label, pred in sm.preds.items():
                 writer.add(label, sm.scene, pred)

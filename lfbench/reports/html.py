@@ -22,7 +22,6 @@ from __future__ import annotations
 import math
 import os
 import shutil
-import tempfile
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -38,7 +37,7 @@ from lfbench.reports.leaderboard import all_metric_ranks, metric_info, metric_ta
 from lfbench.reports.maps import MAPS_DIR, SceneMaps, load_scene_maps, map_folders
 from lfbench.runs.results import Results
 from lfbench.scoring.rules import ScoringRules
-from lfbench.utils.atomic import write_text
+from lfbench.utils.atomic import fresh_dir, write_text
 from lfbench.utils.errors import DataError
 
 __all__ = ["SITE_DIR", "SiteInputs", "build_site", "build_site_from_dir", "check_site_dir", "site_inputs",
@@ -324,11 +323,11 @@ def build_site(inputs: SiteInputs, out: str | Path, *, threshold: float = fig.BA
     out = check_site_dir(out)
     border = border_px if border_px is not None else ScoringRules.from_meta(results.meta).border_px
     out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent))
+    tmp = fresh_dir(out.parent, f".{out.name}.", ".tmp")
     try:
         _write_site(inputs, tmp, threshold, pairwise_threshold, border)
         if out.exists():
-            old = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".old", dir=out.parent))
+            old = fresh_dir(out.parent, f".{out.name}.", ".old")
             os.replace(out, old / out.name)
             shutil.rmtree(old, ignore_errors=True)
         os.replace(tmp, out)

@@ -18,11 +18,11 @@ import json
 import logging
 import os
 import shutil
-import tempfile
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from lfbench.utils.atomic import fresh_dir
 from lfbench.utils.errors import DataError, LFBenchError, SpecError
 from lfbench.utils.jsonfile import read_json
 
@@ -97,7 +97,7 @@ def prepare_data(out: Path, seed: int, size: int, scenes: int, log: Log = _log.i
     from lfbench.data.synth import write_benchmark
 
     out.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{DATA_DIR}.", suffix=".tmp", dir=out))
+    tmp = fresh_dir(out, f".{DATA_DIR}.", ".tmp")
     try:
         log(f"generating {scenes} synthetic scene(s) of {size}x{size} px, seed {seed}, into {root}")
         dirs = write_benchmark(tmp, seed=seed, size=size, scenes=scenes, category=CATEGORY)

@@ -33,7 +33,6 @@ import os
 import shutil
 import signal
 import sys
-import tempfile
 import time
 from collections.abc import Iterator, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -53,7 +52,7 @@ from lfbench.training.data import PatchSampler, ValidationScene, load_scene_data
 from lfbench.training.distributed import DistContext, agree_on_resume, setup
 from lfbench.training.losses import make_loss
 from lfbench.training.validate import validate
-from lfbench.utils.atomic import write_text
+from lfbench.utils.atomic import fresh_dir, write_text
 from lfbench.utils.errors import DataError, LFBenchError, SpecError
 from lfbench.utils.hardware import require_bf16, set_fp32_numerics
 from lfbench.utils.malloc import retain_freed_memory
@@ -175,7 +174,7 @@ def prepare_synthetic(cfg: TrainConfig, data_dir: Path, log=logging.getLogger(__
             raise SpecError(f"[[data.synthetic]] needs lfbench.data.synth ({exc})", cfg.source) from None
         data_dir.mkdir(parents=True, exist_ok=True)
         log(f"generating {spec.scenes} synthetic scenes ({spec.size} px, seed {spec.seed}) into {target}")
-        tmp = Path(tempfile.mkdtemp(prefix=f".{spec.category}.", dir=data_dir))
+        tmp = fresh_dir(data_dir, f".{spec.category}.")
         try:
             write_benchmark(tmp, seed=spec.seed, size=spec.size, scenes=spec.scenes, category=spec.category,
                             workers=available_cores())

@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import contextlib
 import os
+import secrets
 import stat
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 from typing import IO
 
-__all__ = ["FILE_MODE", "atomic_open", "write_bytes", "write_text"]
+__all__ = ["FILE_MODE", "atomic_open", "fresh_dir", "write_bytes", "write_text"]
 
 
 #: The mode of a new file (rw-r--r--): a result is readable by others, as a file made by open() under
@@ -57,3 +58,17 @@ def write_text(path: str | Path, text: str) -> None:
     """Write UTF-8 ``text`` to ``path`` atomically."""
     with atomic_open(path, "w", encoding="utf-8", newline="\n") as f:
         f.write(text)
+
+
+def fresh_dir(parent: str | Path, prefix: str, suffix: str = "") -> Path:
+    """A new, empty folder ``parent/<prefix><random><suffix>`` for output that is renamed into place when
+    complete. Unlike ``tempfile.mkdtemp`` (always 0700) its mode comes from the umask, as any folder the
+    user makes does, so a renamed result (an HTML site, generated scenes) is as readable as its neighbours."""
+    parent = Path(parent)
+    while True:
+        path = parent / f"{prefix}{secrets.token_hex(4)}{suffix}"
+        try:
+            path.mkdir()
+            return path
+        except FileExistsError:
+            continue
