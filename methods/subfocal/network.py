@@ -50,6 +50,42 @@ def _tile_rows(length: int, limit: int = 64) -> int:
     return k
 
 
+#: Channels from which a CPU view batch norm runs PyTorch's own channels-last batch-norm kernels once per group
+#: (fewer passes over memory) instead of the folded elementwise ops. Measured per layer, forward + backward,
+#: G = 81, L = 4 x 32 x 32, 1 thread, AVX-512: C = 16 20 ms against 28-40 ms; C = 8 level; C = 4 four times
+#: slower (4 channels do not fill a SIMD register). Whole width-16 training step (batch 4, 32 px), best of 3
+#: interleaved rounds: 2.58 against 2.68 CPU s on AVX-512, 3.04 against 3.17 with AVX2 kernels.
+NATIVE_BN_CHANNELS = 16
+
+
+def _channels_last_rows(t: torch.Tensor) -> torch.Tensor:
+    """(L, C) contiguous -> the same memory as a (1, C, L, 1) channels-last tensor (what ATen's batch norm reads)."""
+    length, c = t.shape
+    return t.view(1, length, 1, c).permute(0, 3, 1, 2)
+
+
+def _native_forward(x: torch.Tensor, gamma: torch.Tensor, beta: torch.Tensor, eps: float):
+    """y (G, L, C), mean and 1/sigma (G, C): ATen's training batch norm of every group into one output."""
+    g, _, c = x.shape
+    y, mean, invstd = torch.empty_like(x), x.new_empty(g, c), x.new_empty(g, c)
+    for i in range(g):
+        torch.ops.aten.native_batch_norm.out(_channels_last_rows(x[i]), gamma, beta, None, None, True, 0.0, eps,
+                                             out=_channels_last_rows(y[i]), save_mean=mean[i], save_invstd=invstd[i])
+    return y, mean, invstd
+
+
+def _native_backward(dy: torch.Tensor, x: torch.Tensor, gamma: torch.Tensor, mean: torch.Tensor,
+                     invstd: torch.Tensor, eps: float):
+    """dx (G, L, C), dgamma, dbeta (C,) of :func:`_native_forward`, ATen's batch-norm backward per group."""
+    g, _, c = x.shape
+    dx, dgamma, dbeta = torch.empty_like(x), x.new_empty(g, c), x.new_empty(g, c)
+    for i in range(g):
+        torch.ops.aten.native_batch_norm_backward.out(
+            _channels_last_rows(dy[i]), _channels_last_rows(x[i]), gamma, None, None, mean[i], invstd[i], True, eps,
+            [True, True, True], out0=_channels_last_rows(dx[i]), out1=dgamma[i], out2=dbeta[i])
+    return dx, dgamma.sum(0), dbeta.sum(0)
+
+
 class _ViewBatchNormFn(torch.autograd.Function):
     """Training-mode batch norm of G groups at once, with its closed-form backward.
 
@@ -58,7 +94,8 @@ class _ViewBatchNormFn(torch.autograd.Function):
     differentiable) the per-group mean and biased variance (G, C). Statistics in two passes (mean, then
     the mean square of x - mean) with the rows folded K at a time into (G, L/K, K*C), so every pass is a
     plain reduction or a long contiguous broadcast; the backward is BatchNorm's
-    dx = gamma / sigma * (dy - mean(dy) - xhat * mean(dy * xhat)) as two fused multiply-adds.
+    dx = gamma / sigma * (dy - mean(dy) - xhat * mean(dy * xhat)) as two fused multiply-adds. On the CPU
+    with at least :data:`NATIVE_BN_CHANNELS` channels, ATen's batch-norm kernels per group instead.
     """
 
     @staticmethod
@@ -67,6 +104,15 @@ class _ViewBatchNormFn(torch.autograd.Function):
         if x.dtype in (torch.float16, torch.bfloat16):
             x = x.float()  # statistics in float32 under autocast (the next convolution casts again)
         g, length, c = x.shape
+        ctx.native = (c >= NATIVE_BN_CHANNELS and x.device.type == "cpu" and x.is_contiguous()
+                      and gamma.dtype == torch.float32)
+        if ctx.native:
+            y, mean, invstd = _native_forward(x, gamma, beta, eps)
+            ctx.save_for_backward(x, mean, invstd, gamma)
+            ctx.eps = eps
+            var = invstd.pow(-2).sub_(eps)
+            ctx.mark_non_differentiable(mean, var)
+            return y, mean, var
         k = _tile_rows(length)
         xr = x.reshape(g, length // k, k * c)
 
@@ -87,6 +133,10 @@ class _ViewBatchNormFn(torch.autograd.Function):
 
     @staticmethod
     def backward(ctx, dy: torch.Tensor, *_):  # type: ignore[override]
+        if ctx.native:
+            x, mean, invstd, gamma = ctx.saved_tensors
+            dx, dgamma, dbeta = _native_backward(dy.to(x.dtype).contiguous(), x, gamma, mean, invstd, ctx.eps)
+            return dx.to(ctx.dtype), dgamma, dbeta, None
         centred, invstd, gamma = ctx.saved_tensors
         g, rows, kc = centred.shape
         k = ctx.k
