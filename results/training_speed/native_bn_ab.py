@@ -9,9 +9,9 @@ step, after one warm-up step each); prints every round and the best of each.
 
 import time
 
+import lfbench_methods.subfocal.network as network
 import torch
 
-import lfbench_methods.subfocal.network as network
 from lfbench.utils.malloc import retain_freed_memory
 
 torch.set_num_threads(1)
