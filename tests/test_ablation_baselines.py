@@ -162,7 +162,9 @@ def test_the_direction_comes_from_the_metric_registry(tmp_path, monkeypatch):
     assert "higher is better" in baselines.baselines_caption(seeds=True)
 
 
-def test_report_writes_the_table_and_heads_the_captions_with_the_summary(tmp_path):
+def test_report_writes_the_table_and_heads_the_captions_with_the_summary(tmp_path, monkeypatch):
+    for var in ("LFBENCH_PAPER_DIR", "LFBENCH_HCI_ROOT"):  # no paper tables: the captions must say so
+        monkeypatch.delenv(var, raising=False)
     spec = _spec(tmp_path, SEEDS_HEAD, METHODS.split("[[methods]]\nlabel = \"Zero")[0])
     frame = _seeded_frame()
     results = Results(records=[Record(r.method, r.scene, r.metric, r.value, r.resolution) for r in frame.itertuples()])
