@@ -11,7 +11,7 @@ cd "$(dirname "$0")/../.."
 specs=(table5_cpu beta_cpu table4_cpu)
 # tables12_published scores the real scenes; beta_learned and table5_learned (issue 11: fine-tune the shipped
 # model, 3 seeds; ~1 h and ~1.5 h on 2 free cores) score backgammon beside held-out synthetic scenes.
-if [[ -n "${LFBENCH_HCI_ROOT:-}" ]]; then specs+=(tables12_published beta_learned table5_learned); fi
+if [[ -n "${LFBENCH_HCI_ROOT:-}" ]]; then specs+=(tables12_published beta_learned table5_learned table4_learned); fi
 for spec in "${specs[@]}"; do
     lfbench ablate "ablations/$spec.toml" --jobs 2 --no-progress
     src="runs/ablate/$spec" dst="results/ablations/$spec"
