@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import io
 import math
-import os
 import shutil
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -43,7 +42,7 @@ from scipy import ndimage
 from lfbench.data.params import SceneParameters
 from lfbench.data.pfm import write_pfm
 from lfbench.data.scene import ArrayLightField, rgb_to_gray
-from lfbench.utils.atomic import fresh_dir, write_bytes
+from lfbench.utils.atomic import fresh_dir, replace_dir, write_bytes
 from lfbench.utils.errors import DataError, SpecError
 
 GENERATOR_VERSION = "1"
@@ -808,13 +807,7 @@ def _write_scene(target: Path, seed: int, size: int, angular: int, category: str
     tmp = fresh_dir(target.parent, f".{target.name}.", ".tmp")
     try:
         write_scene(scene, tmp)
-        if target.exists():  # only with force: move the old one aside, then swap
-            old = fresh_dir(target.parent, f".{target.name}.", ".old")
-            os.replace(target, old / target.name)
-            os.replace(tmp, target)
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            os.replace(tmp, target)
+        replace_dir(tmp, target)  # an existing target only with force
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise

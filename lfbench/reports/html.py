@@ -20,7 +20,6 @@ temporary folder and renamed into place when complete.
 from __future__ import annotations
 
 import math
-import os
 import shutil
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -37,7 +36,7 @@ from lfbench.reports.leaderboard import all_metric_ranks, metric_info, metric_ta
 from lfbench.reports.maps import MAPS_DIR, SceneMaps, load_scene_maps, map_folders
 from lfbench.runs.results import Results
 from lfbench.scoring.rules import ScoringRules
-from lfbench.utils.atomic import fresh_dir, write_text
+from lfbench.utils.atomic import fresh_dir, replace_dir, write_text
 from lfbench.utils.errors import DataError
 
 __all__ = ["SITE_DIR", "SiteInputs", "build_site", "build_site_from_dir", "check_site_dir", "site_inputs",
@@ -326,11 +325,7 @@ def build_site(inputs: SiteInputs, out: str | Path, *, threshold: float = fig.BA
     tmp = fresh_dir(out.parent, f".{out.name}.", ".tmp")
     try:
         _write_site(inputs, tmp, threshold, pairwise_threshold, border)
-        if out.exists():
-            old = fresh_dir(out.parent, f".{out.name}.", ".old")
-            os.replace(out, old / out.name)
-            shutil.rmtree(old, ignore_errors=True)
-        os.replace(tmp, out)
+        replace_dir(tmp, out)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise

@@ -5,13 +5,14 @@ from __future__ import annotations
 import contextlib
 import os
 import secrets
+import shutil
 import stat
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 from typing import IO
 
-__all__ = ["FILE_MODE", "atomic_open", "fresh_dir", "write_bytes", "write_text"]
+__all__ = ["FILE_MODE", "atomic_open", "fresh_dir", "replace_dir", "write_bytes", "write_text"]
 
 
 #: The mode of a new file (rw-r--r--): a result is readable by others, as a file made by open() under
@@ -72,3 +73,15 @@ def fresh_dir(parent: str | Path, prefix: str, suffix: str = "") -> Path:
             return path
         except FileExistsError:
             continue
+
+
+def replace_dir(finished: Path, target: Path) -> None:
+    """Rename the complete folder ``finished`` to ``target`` (same file system). An existing ``target`` is
+    moved aside first and removed only after the swap, so ``target`` is at every moment whole (old or new)."""
+    if not target.exists():
+        os.replace(finished, target)
+        return
+    old = fresh_dir(target.parent, f".{target.name}.", ".old")
+    os.replace(target, old / target.name)
+    os.replace(finished, target)
+    shutil.rmtree(old, ignore_errors=True)
