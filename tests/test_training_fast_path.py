@@ -1,6 +1,7 @@
 """The fast training path of SubFocal (fused per-view BatchNorm, grouped stem convolution, gathered
-bilinear cost volume) against the original layer-by-layer ops kept as the ``reference`` path: the same
-outputs, gradients, running statistics and a few optimizer steps, up to float32 rounding."""
+bilinear cost volume, matrix-product weight gradients) against the original layer-by-layer ops kept as the
+``reference`` path: the same outputs, gradients, running statistics and a few optimizer steps, up to float32
+rounding."""
 
 from __future__ import annotations
 
@@ -123,9 +124,10 @@ def test_an_integer_shift_is_exact_in_the_gathered_volume():
 
 
 def _pair(width: int = 4, interval: float = 0.5, attention: bool = True,
-          dtype: torch.dtype = torch.float32) -> tuple[SubFocalNet, SubFocalNet]:
+          dtype: torch.dtype = torch.float32, weight_grad: str = "auto") -> tuple[SubFocalNet, SubFocalNet]:
     torch.manual_seed(3)
     fast = to_channels_last(SubFocalNet(width=width, interval=interval, attention=attention)).to(dtype).train()
+    fast.set_training_path("fast", weight_grad=weight_grad)
     ref = copy.deepcopy(fast).set_training_path("reference")
     return fast, ref
 
@@ -140,9 +142,11 @@ def _batches(count: int, dtype: torch.dtype) -> list[tuple[torch.Tensor, torch.T
 # odd ReLU whose input is within 1e-7 of 0, which moves a gradient element by ~1e-3 of its tensor's largest:
 # chaotic, not systematic. float64 leaves ~5e-6: the reference's sampling positions and the softmax stay
 # float32.)
-@pytest.mark.parametrize("attention", [True, False])
-def test_training_step_gradients_match_the_reference_path(attention):
-    fast, ref = _pair(attention=attention, dtype=torch.float64)
+@pytest.mark.parametrize("attention,weight_grad", [(True, "auto"), (False, "auto"), (True, "gemm")])
+def test_training_step_gradients_match_the_reference_path(attention, weight_grad):
+    # weight_grad "gemm": the matrix-product weight gradients (weight_grad.py) on every layer they apply to,
+    # whatever the CPU ("auto" takes them on CPUs without AVX-512 only)
+    fast, ref = _pair(attention=attention, dtype=torch.float64, weight_grad=weight_grad)
     views, target = _batches(1, torch.float64)[0]
     losses = []
     for net in (fast, ref):
@@ -187,10 +191,11 @@ def test_a_few_sgd_steps_follow_the_reference_in_float64():
         torch.testing.assert_close(pa.detach() - p0, moved, rtol=0, atol=3e-5 * float(moved.abs().max()), msg=name)
 
 
-def test_the_float32_loss_curve_stays_within_rounding_of_the_reference():
+@pytest.mark.parametrize("weight_grad", ["auto", "gemm"])
+def test_the_float32_loss_curve_stays_within_rounding_of_the_reference(weight_grad):
     # Adam divides by sqrt(v) + 1e-7: parameters with near-zero gradients take unit-size steps whose sign is
     # rounding noise, so float32 curves separate slowly (~1e-4 relative after 4 steps) on either path.
-    fast, ref = _pair()
+    fast, ref = _pair(weight_grad=weight_grad)
     batches = _batches(4, torch.float32)
     a, b = _curve(fast, batches), _curve(ref, batches)
     assert a[0] == pytest.approx(b[0], rel=1e-6)  # before any update

@@ -29,6 +29,7 @@ import numbers
 
 import torch
 import torch.nn.functional as F
+from lfbench_methods.subfocal.weight_grad import WEIGHT_GRADS, training_conv
 from torch import nn
 
 from lfbench.data.shift import INTERPOLATIONS, angular_offsets, disparity_grid, shift_views
@@ -219,6 +220,7 @@ class ConvBN2d(nn.Module):
         self.bn = ViewBatchNorm2d(cout, eps=BN_EPS, momentum=BN_MOMENTUM)
 
     reference = False  # see SubFocalNet.set_training_path
+    weight_grad = "auto"
 
     def forward(self, x: torch.Tensor, groups: int = 1) -> torch.Tensor:
         if self.training and not self.reference and self.conv.in_channels == 1 and x.shape[0] > 1:
@@ -229,6 +231,8 @@ class ConvBN2d(nn.Module):
             c = self.conv
             y = F.conv2d(x.reshape(1, m, h, w), c.weight.repeat(m, 1, 1, 1), None, padding=c.padding,
                          dilation=c.dilation, groups=m).reshape(m, -1, h, w)
+        elif self.training and not self.reference:
+            y = training_conv(self.conv, x, self.weight_grad)
         else:
             y = self.conv(x)
         return self.bn(y, groups)
@@ -356,7 +360,12 @@ class ConvBN3d(nn.Module):
         self.conv = nn.Conv3d(cin, cout, 3, padding=1, bias=False)
         self.bn = nn.BatchNorm3d(cout, eps=BN_EPS, momentum=BN_MOMENTUM)
 
+    reference = False  # see SubFocalNet.set_training_path
+    weight_grad = "auto"
+
     def forward(self, x: torch.Tensor) -> torch.Tensor:
+        if self.training and not self.reference:
+            return self.bn(training_conv(self.conv, x, self.weight_grad))
         return self.bn(self.conv(x))
 
 
@@ -458,15 +467,21 @@ class SubFocalNet(nn.Module):
 
     TRAINING_PATHS = ("fast", "reference")
 
-    def set_training_path(self, path: str) -> SubFocalNet:
-        """``fast`` (default): training runs the fused per-view BatchNorm, the grouped stem convolution and
-        the gathered cost volume; ``reference``: the original layer-by-layer ops (same results up to float
-        rounding; kept for the equivalence tests and as the "before" of ``lfbench bench train``)."""
+    def set_training_path(self, path: str, *, weight_grad: str = "auto") -> SubFocalNet:
+        """``fast`` (default): training runs the fused per-view BatchNorm, the grouped stem convolution, the
+        gathered cost volume and, where it pays, convolution weight gradients as matrix products
+        (methods/subfocal/weight_grad.py; ``weight_grad``: auto, gemm or native); ``reference``: the original
+        layer-by-layer ops (same results up to float rounding; kept for the equivalence tests and as the
+        "before" of ``lfbench bench train``)."""
         if path not in self.TRAINING_PATHS:
             raise ValueError(f"Unknown training path {path!r}. Available: {', '.join(self.TRAINING_PATHS)}")
+        if weight_grad not in WEIGHT_GRADS:
+            raise ValueError(f"Unknown weight_grad {weight_grad!r}. Available: {', '.join(WEIGHT_GRADS)}")
         for m in self.modules():
             if hasattr(type(m), "reference"):
                 m.reference = path == "reference"
+            if hasattr(type(m), "weight_grad"):
+                m.weight_grad = weight_grad
         return self
 
     def uses_fast_path(self) -> bool:
