@@ -78,19 +78,21 @@ def test_gathered_volume_matches_grid_sample_values_means_and_gradients(interval
     feats = torch.randn(2, 81, 4, 9, 11)
     fa, fb = feats.clone().requires_grad_(), feats.clone().requires_grad_()
     weights = torch.rand(2, 324) + 0.5
+    wa, wb = weights.clone().requires_grad_(), weights.clone().requires_grad_()
     gathered = GatheredVolume(net._shift_plan(), fa)
     vol_ref = shift_views(fb, net.offsets, net.disparities, "bilinear")  # (B, D, N, C, H, W)
     vol_ref = vol_ref.reshape(2, net.disparities.numel(), 324, 9, 11).transpose(1, 2)
     torch.testing.assert_close(gathered.channel_mean(), vol_ref.mean(dim=(2, 3, 4)), rtol=0, atol=1e-6)
-    vol = gathered.volume(weights)
+    vol = gathered.volume(wa)
     assert vol.shape == vol_ref.shape
     assert vol.is_contiguous(memory_format=torch.channels_last_3d)
-    expected = vol_ref * weights[:, :, None, None, None]
+    expected = vol_ref * wb[:, :, None, None, None]
     torch.testing.assert_close(vol, expected, rtol=0, atol=2e-5)
     g = torch.randn_like(expected)
-    (ga,) = torch.autograd.grad((vol * g).sum() + gathered.channel_mean().sum(), fa)
-    (gb,) = torch.autograd.grad((expected * g).sum() + vol_ref.mean(dim=(2, 3, 4)).sum(), fb)
+    ga, gwa = torch.autograd.grad((vol * g).sum() + gathered.channel_mean().sum(), (fa, wa))
+    gb, gwb = torch.autograd.grad((expected * g).sum() + vol_ref.mean(dim=(2, 3, 4)).sum(), (fb, wb))
     torch.testing.assert_close(ga, gb, rtol=0, atol=1e-4)
+    torch.testing.assert_close(gwa, gwb, rtol=0, atol=1e-4 * float(gwb.abs().max()))
 
 
 def test_two_grids_of_the_same_size_do_not_share_a_gather_index():
