@@ -87,6 +87,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     t.add_argument("--batch", type=int, default=2)
     t.add_argument("--patch", type=int, default=32)
     t.add_argument("--steps", type=int, default=2)
+    t.add_argument("--warmup", type=int, default=1,
+                   help="untimed steps first (one-time costs: kernel setup, caches, the heap growing to its size)")
     t.add_argument("--interval", type=float, default=None)
     t.add_argument("--no-channels-last", action="store_true")
     t.add_argument("--path", nargs="+", default=["fast"], choices=["fast", "reference"],
@@ -191,8 +193,8 @@ def _cases(args: argparse.Namespace) -> list[tuple[str, dict]]:
                                                              else None)
         interval = _given(trainable, "interval", None if args.interval is None else [args.interval])[0]
         cases = [("train", {**_with(net, width=w, interval=interval), "batch": args.batch, "patch": args.patch,
-                            "steps": args.steps, "channels_last": not args.no_channels_last, "path": path,
-                            "precision": precision, **th})
+                            "steps": args.steps, "warmup": args.warmup, "channels_last": not args.no_channels_last,
+                            "path": path, "precision": precision, **th})
                  for _ in range(max(1, args.rounds)) for w in _given(trainable, "width", widths)
                  for path in args.path for precision in args.precision]
     elif which == "metrics":

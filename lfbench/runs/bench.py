@@ -271,13 +271,13 @@ def bench_inference(size: int = 512, precision: str = "fp32", *, model: str = DE
 
 def bench_train(batch: int = 2, patch: int = 32, steps: int = 2, channels_last: bool = True, threads: int = 0,
                 seed: int = 0, *, model: str = DEFAULT_MODEL, device: str = "cpu", path: str = "fast",
-                precision: str = "fp32", **params: Any) -> dict:
+                precision: str = "fp32", warmup: int = 1, **params: Any) -> dict:
     """Training steps per second: the network (``params`` over its defaults) in training mode, Adam (lr 1e-3,
     eps 1e-7) on an L1 loss of its disparity for random (batch, N, patch, patch) views against random
-    disparities in [-4, 4); one warm-up step, then ``steps``. ``path``: ``fast`` (what ``lfbench train``
-    runs) or ``reference`` (a network's original training ops, ``set_training_path("reference")``, with
-    glibc's default heap: the "before" of the training speed-up). ``precision`` bf16: the forward pass under
-    bf16 autocast, as ``[training] precision = "bf16"`` trains."""
+    disparities in [-4, 4); ``warmup`` untimed steps (at least 1), then ``steps``. ``path``: ``fast`` (what
+    ``lfbench train`` runs) or ``reference`` (a network's original training ops,
+    ``set_training_path("reference")``, with glibc's default heap: the "before" of the training speed-up).
+    ``precision`` bf16: the forward pass under bf16 autocast, as ``[training] precision = "bf16"`` trains."""
     import torch
 
     from lfbench.training.loop import to_channels_last
@@ -312,7 +312,8 @@ def bench_train(batch: int = 2, patch: int = 32, steps: int = 2, channels_last: 
         opt.step()
 
     baseline = memory_now_gb(dev)
-    step()
+    for _ in range(max(1, warmup)):
+        step()
     sync(dev)
     t, cpu0 = time.perf_counter(), cpu_seconds()
     for _ in range(max(1, steps)):
@@ -321,9 +322,9 @@ def bench_train(batch: int = 2, patch: int = 32, steps: int = 2, channels_last: 
     seconds = (time.perf_counter() - t) / max(1, steps)
     cpu = (cpu_seconds() - cpu0) / max(1, steps)
     record = {"bench": "train", "model": model, **params, "batch": batch, "patch": patch, "path": path,
-              "channels_last": channels_last, "steps": max(1, steps), "seconds": seconds, "seconds_per_step": seconds,
-              "steps_per_s": 1.0 / seconds, "cpu_seconds": cpu, **memory_fields(dev, baseline),
-              "precision": precision}
+              "channels_last": channels_last, "steps": max(1, steps), "warmup": max(1, warmup), "seconds": seconds,
+              "seconds_per_step": seconds, "steps_per_s": 1.0 / seconds, "cpu_seconds": cpu,
+              **memory_fields(dev, baseline), "precision": precision}
     flops = trainable.flops(net, patch, patch)
     if flops:
         forward = flops["total"] * batch

@@ -123,7 +123,10 @@ def gemm_weight_grad(x: torch.Tensor, grad_out: torch.Tensor, kernel: int, dilat
     pad = dilation * (kernel // 2)
     padded = [s + 2 * pad for s in size]
     to_last = (0, *range(2, nd + 2), 1)
-    xp = x.new_zeros((b, *padded, c))
+    xp = x.new_empty((b, *padded, c))
+    for i in range(nd):  # zero the padding only: the copy below writes the rest
+        xp[(slice(None),) * (i + 1) + (slice(0, pad),)] = 0
+        xp[(slice(None),) * (i + 1) + (slice(pad + size[i], None),)] = 0
     xp[(slice(None), *(slice(pad, pad + s) for s in size))] = x.permute(to_last)
     gp = grad_out.new_zeros((b, *padded, o))
     gp[(slice(None), *(slice(0, s) for s in size))] = grad_out.permute(to_last)  # at the corner: p + k stays in
