@@ -63,8 +63,8 @@ def test_the_convolution_keeps_its_values_and_input_gradient():
     torch.testing.assert_close(gw, gw_ref, rtol=1e-12, atol=1e-12)
 
 
-def _used_on(net: SubFocalNet, monkeypatch, avx512: bool) -> list[nn.Module]:
-    monkeypatch.setattr(wg, "_avx512", lambda: avx512)
+def _used_on(net: SubFocalNet, monkeypatch, avx2: bool) -> list[nn.Module]:
+    monkeypatch.setattr(wg, "_avx2_kernels", lambda: avx2)
     used: list[nn.Module] = []
     real = wg.conv_with_gemm_weight_grad
     monkeypatch.setattr(wg, "conv_with_gemm_weight_grad", lambda x, w, d: used.append(w) or real(x, w, d))
@@ -73,21 +73,27 @@ def _used_on(net: SubFocalNet, monkeypatch, avx512: bool) -> list[nn.Module]:
     return [weights[id(w)] for w in used]
 
 
-def test_auto_uses_it_only_on_the_layers_where_it_pays_and_only_without_avx512(monkeypatch):
+def test_auto_uses_it_only_on_the_layers_where_it_pays_and_only_with_avx2_kernels(monkeypatch):
     torch.manual_seed(0)
     net = SubFocalNet(width=2).train()
-    assert _used_on(net, monkeypatch, avx512=True) == []
-    used = _used_on(net, monkeypatch, avx512=False)
+    assert _used_on(net, monkeypatch, avx2=False) == []
+    used = _used_on(net, monkeypatch, avx2=True)
     expected = [m for m in net.modules() if isinstance(m, (nn.Conv2d, nn.Conv3d)) and wg.pays_off(m)]
     assert sorted(map(id, used)) == sorted(map(id, expected))
     # the 324-channel first 3D convolution and the four dilated 3x3 convolutions of layer 4
     assert net.aggregation.dres0a.conv in used and sum(isinstance(m, nn.Conv2d) for m in used) == 4
     net.set_training_path("fast", weight_grad="native")
-    assert _used_on(net, monkeypatch, avx512=False) == []
+    assert _used_on(net, monkeypatch, avx2=True) == []
     net.set_training_path("reference", weight_grad="gemm")
-    assert _used_on(net, monkeypatch, avx512=False) == []  # the reference path keeps the original ops
+    assert _used_on(net, monkeypatch, avx2=True) == []  # the reference path keeps the original ops
 
 
 def test_unknown_weight_grad_is_refused():
     with pytest.raises(ValueError, match="Unknown weight_grad 'fast'. Available: auto, gemm, native"):
         SubFocalNet(width=2).set_training_path("fast", weight_grad="fast")
+
+
+def test_avx2_kernels_follow_atens_capability(monkeypatch):
+    for capability, expected in (("AVX2", True), ("AVX512", False), ("DEFAULT", False)):
+        monkeypatch.setattr(torch.backends.cpu, "get_cpu_capability", lambda c=capability: c)
+        assert wg._avx2_kernels() is expected

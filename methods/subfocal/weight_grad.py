@@ -31,7 +31,7 @@ from torch import nn
 __all__ = ["WEIGHT_GRADS", "conv_with_gemm_weight_grad", "gemm_weight_grad", "pays_off", "training_conv"]
 
 #: ``weight_grad`` choices of :meth:`SubFocalNet.set_training_path`: ``auto`` (the GEMM gradient on the layers
-#: where it measured faster, on CPUs without AVX-512), ``gemm`` (on every layer it applies to), ``native``
+#: where it measured faster, when ATen runs its AVX2 kernels), ``gemm`` (on every layer it applies to), ``native``
 #: (PyTorch's own, i.e. oneDNN's on the CPU).
 WEIGHT_GRADS = ("auto", "gemm", "native")
 
@@ -60,17 +60,19 @@ def pays_off(conv: nn.Module) -> bool:
     return isinstance(conv, nn.Conv2d) and conv.dilation[0] > 1 and conv.kernel_size[0] > 1
 
 
-def _avx512() -> bool:
-    return str(torch.backends.cpu.get_cpu_capability()).upper().startswith("AVX512")
+def _avx2_kernels() -> bool:
+    """True when ATen runs its AVX2 kernels (an AVX2 CPU, or ATEN_CPU_CAPABILITY=avx2): where the GEMM gradient
+    was measured faster. Elsewhere (AVX-512, ARM, ...) ``auto`` keeps oneDNN's."""
+    return str(torch.backends.cpu.get_cpu_capability()).upper() == "AVX2"
 
 
 def training_conv(conv: nn.Module, x: torch.Tensor, weight_grad: str = "auto") -> torch.Tensor:
     """``conv(x)``, with the GEMM weight gradient when ``weight_grad`` asks for it and the layer allows it:
-    ``gemm`` wherever :func:`_applies`, ``auto`` also only where :func:`pays_off` and ATen runs without
-    AVX-512, ``native`` never."""
+    ``gemm`` wherever :func:`_applies`, ``auto`` also only where :func:`pays_off` and ATen runs its AVX2
+    kernels, ``native`` never."""
     if weight_grad not in WEIGHT_GRADS:
         raise ValueError(f"Unknown weight_grad {weight_grad!r}. Available: {', '.join(WEIGHT_GRADS)}")
-    use = weight_grad == "gemm" or (weight_grad == "auto" and pays_off(conv) and not _avx512())
+    use = weight_grad == "gemm" or (weight_grad == "auto" and pays_off(conv) and _avx2_kernels())
     if use and torch.is_grad_enabled() and conv.weight.requires_grad and _applies(conv, x):
         return conv_with_gemm_weight_grad(x, conv.weight, conv.dilation[0])
     return conv(x)
