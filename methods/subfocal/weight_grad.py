@@ -1,7 +1,7 @@
 """A convolution whose weight gradient is a few large matrix products: faster than oneDNN's on AVX2 CPUs.
 
 oneDNN's weight gradient of SubFocal's first 3D convolution (4N = 324 channels in, 16 out, 3x3x3) runs at a
-quarter of its AVX-512 speed with AVX2 kernels (0.73 s against 0.19 s per training step, width 16, batch 4,
+quarter of its AVX-512 speed with AVX2 kernels (0.75 s against 0.20 s per training step, width 16, batch 4,
 32 px, 1 thread), a quarter of the whole step. Its stride-1 'same' correlation is
 
     grad_weight[o, c, k] = sum over batch and positions p of grad_out[o, p] * x_padded[c, p + dilation * k].
@@ -12,8 +12,8 @@ product of two contiguous matrices: grad_out rows^T (O, R) @ x rows shifted by t
 are taken in chunks of ~4k so that a chunk's rows for all taps stay in cache; zero rows between samples are
 skipped. Measured per layer with AVX2 kernels (ATEN_CPU_CAPABILITY=avx2, ONEDNN_MAX_CPU_ISA=AVX2,
 MKL_ENABLE_INSTRUCTIONS=AVX2), 1 thread, per call (results/training_speed/weight_grad_layers_avx2.md): the
-324-channel 3D convolution 0.37 s against 0.73 s, the dilated 2D convolutions of the extractor (324 views x
-32 x 32) 0.042 s against 0.051 s; oneDNN stays faster on the other layers, and on every layer with AVX-512
+324-channel 3D convolution 0.42 s against 0.75 s, the dilated 2D convolutions of the extractor (324 views x
+32 x 32) 0.044 s against 0.053 s; oneDNN stays faster on the other layers, and on every layer with AVX-512
 kernels (weight_grad_layers_avx512.md).
 
 The input gradient and the forward pass stay oneDNN's. Results equal oneDNN's up to float rounding

@@ -32,29 +32,34 @@ def best_cpu_seconds(fn, repeat: int = 3) -> float:
     return min(times)
 
 
+def measure(shape: tuple[int, ...], out: int, dilation: int) -> tuple[float, float, float]:
+    """(oneDNN s, GEMM s, max relative difference) of one layer's weight gradient."""
+    nd = len(shape) - 2
+    fmt = torch.channels_last_3d if nd == 3 else torch.channels_last
+    g = torch.Generator().manual_seed(0)
+    x = torch.randn(shape, generator=g).contiguous(memory_format=fmt)
+    grad = torch.randn((shape[0], out, *shape[2:]), generator=g).contiguous(memory_format=fmt)
+    weight = torch.zeros((out, shape[1], *[3] * nd)).contiguous(memory_format=fmt)
+    args = ([1] * nd, [dilation] * nd, [dilation] * nd, False, [0] * nd, 1, [False, True, False])
+
+    def native():
+        return torch.ops.aten.convolution_backward(grad, x, weight, None, *args)[1]
+
+    def gemm():
+        return gemm_weight_grad(x, grad, 3, dilation)
+
+    ref = native()
+    diff = float((gemm() - ref).abs().max() / ref.abs().max())
+    return best_cpu_seconds(native), best_cpu_seconds(gemm), diff
+
+
 def main() -> None:
     torch.set_num_threads(1)
     print(f"ATen CPU capability: {torch.backends.cpu.get_cpu_capability()}, torch {torch.__version__}\n")
     print("| layer | input | oneDNN weight grad (s) | GEMM weight grad (s) | ratio | max rel. difference |")
     print("|---|---|---|---|---|---|")
     for shape, out, dilation, where in LAYERS:
-        nd = len(shape) - 2
-        fmt = torch.channels_last_3d if nd == 3 else torch.channels_last
-        g = torch.Generator().manual_seed(0)
-        x = torch.randn(shape, generator=g).contiguous(memory_format=fmt)
-        grad = torch.randn((shape[0], out, *shape[2:]), generator=g).contiguous(memory_format=fmt)
-        weight = torch.zeros((out, shape[1], *[3] * nd)).contiguous(memory_format=fmt)
-        args = ([1] * nd, [dilation] * nd, [dilation] * nd, False, [0] * nd, 1, [False, True, False])
-
-        def native():
-            return torch.ops.aten.convolution_backward(grad, x, weight, None, *args)[1]
-
-        def gemm():
-            return gemm_weight_grad(x, grad, 3, dilation)
-
-        ref = native()
-        diff = float((gemm() - ref).abs().max() / ref.abs().max())
-        a, b = best_cpu_seconds(native), best_cpu_seconds(gemm)
+        a, b, diff = measure(shape, out, dilation)
         print(f"| {where} | {tuple(shape)} | {a:.4f} | {b:.4f} | {a / b:.2f} | {diff:.1e} |")
 
 
