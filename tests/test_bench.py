@@ -9,6 +9,7 @@ import pytest
 
 from lfbench.cli import main
 from lfbench.runs import bench
+from lfbench.utils.errors import SpecError
 from lfbench.utils.hardware import FORCE_NO_BF16_ENV, cpu_bf16_missing
 
 CONTRACT = {"size", "interval", "precision", "seconds", "peak_memory_gb", "gflops_per_s"}
@@ -156,3 +157,28 @@ def test_train_bench_interleaves_the_reference_and_fast_paths():
     r = bench.bench_train(width=2, batch=1, patch=8, steps=1, threads=1, path="reference")
     assert r["path"] == "reference" and r["steps_per_s"] == pytest.approx(1 / r["seconds_per_step"])
     assert 0 < r["cpu_seconds"]
+
+
+def test_train_bench_compares_weight_gradients_on_the_fast_path_only(monkeypatch):
+    import argparse
+
+    from lfbench_methods.subfocal import weight_grad as wg
+
+    from lfbench.cli.bench import _cases, add_arguments
+
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
+    args = parser.parse_args(["train", "--width", "16", "--path", "reference", "fast",
+                              "--weight-grad", "native", "gemm"])
+    assert [(c[1]["path"], c[1].get("weight_grad")) for c in _cases(args)] == [
+        ("reference", None), ("fast", "native"), ("fast", "gemm")]
+    used = []
+    real = wg.conv_with_gemm_weight_grad
+    monkeypatch.setattr(wg, "conv_with_gemm_weight_grad", lambda x, w, d: used.append(w) or real(x, w, d))
+    r = bench.bench_train(width=2, batch=1, patch=8, steps=1, threads=1, weight_grad="gemm")
+    assert r["weight_grad"] == "gemm" and used  # the matrix-product gradients ran
+    used.clear()
+    r = bench.bench_train(width=2, batch=1, patch=8, steps=1, threads=1, weight_grad="native")
+    assert r["weight_grad"] == "native" and not used
+    with pytest.raises(SpecError, match="weight_grad applies to the fast training path"):
+        bench.bench_train(width=2, batch=1, patch=8, steps=1, threads=1, path="reference", weight_grad="gemm")

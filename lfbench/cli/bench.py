@@ -95,6 +95,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="training path(s): fast (what lfbench train runs) and/or reference (the original ops)")
     t.add_argument("--precision", nargs="+", default=["fp32"], choices=["fp32", "bf16"],
                    help="fp32 and/or bf16 (autocast of the forward pass, as [training] precision = 'bf16')")
+    t.add_argument("--weight-grad", nargs="+", default=None, choices=["auto", "gemm", "native"],
+                   help="fast path: convolution weight gradients as matrix products where they pay (auto, the "
+                        "default), on every layer they apply to (gemm), or PyTorch's own (native)")
     t.add_argument("--rounds", type=int, default=1,
                    help="run the width x path cases this many times, interleaved (before/after under the same load)")
     _device_option(t)
@@ -192,11 +195,14 @@ def _cases(args: argparse.Namespace) -> list[tuple[str, dict]]:
         widths = args.width if args.width is not None else ([150, 16] if "width" in trainable.parameters()
                                                              else None)
         interval = _given(trainable, "interval", None if args.interval is None else [args.interval])[0]
+        grads = args.weight_grad or [None]
         cases = [("train", {**_with(net, width=w, interval=interval), "batch": args.batch, "patch": args.patch,
                             "steps": args.steps, "warmup": args.warmup, "channels_last": not args.no_channels_last,
-                            "path": path, "precision": precision, **th})
+                            "path": path, "precision": precision, **th,
+                            **({"weight_grad": grad} if grad is not None else {})})
                  for _ in range(max(1, args.rounds)) for w in _given(trainable, "width", widths)
-                 for path in args.path for precision in args.precision]
+                 for path in args.path for grad in (grads if path == "fast" else [None])
+                 for precision in args.precision]
     elif which == "metrics":
         cases = [("metrics", {"scenes": args.scenes, "methods": args.methods, "size": args.size,
                               "repeat": args.repeat})]

@@ -271,13 +271,15 @@ def bench_inference(size: int = 512, precision: str = "fp32", *, model: str = DE
 
 def bench_train(batch: int = 2, patch: int = 32, steps: int = 2, channels_last: bool = True, threads: int = 0,
                 seed: int = 0, *, model: str = DEFAULT_MODEL, device: str = "cpu", path: str = "fast",
-                precision: str = "fp32", warmup: int = 1, **params: Any) -> dict:
+                precision: str = "fp32", warmup: int = 1, weight_grad: str | None = None, **params: Any) -> dict:
     """Training steps per second: the network (``params`` over its defaults) in training mode, Adam (lr 1e-3,
     eps 1e-7) on an L1 loss of its disparity for random (batch, N, patch, patch) views against random
     disparities in [-4, 4); ``warmup`` untimed steps (at least 1), then ``steps``. ``path``: ``fast`` (what
     ``lfbench train`` runs) or ``reference`` (a network's original training ops,
     ``set_training_path("reference")``, with glibc's default heap: the "before" of the training speed-up).
-    ``precision`` bf16: the forward pass under bf16 autocast, as ``[training] precision = "bf16"`` trains."""
+    ``precision`` bf16: the forward pass under bf16 autocast, as ``[training] precision = "bf16"`` trains.
+    ``weight_grad`` (fast path of SubFocal-style networks): auto, gemm or native convolution weight gradients
+    (methods/subfocal/weight_grad.py); None: the network's default."""
     import torch
 
     from lfbench.training.loop import to_channels_last
@@ -288,8 +290,10 @@ def bench_train(batch: int = 2, patch: int = 32, steps: int = 2, channels_last: 
     trainable, net = _network(model, params, None, seed)
     if path != "fast" and not hasattr(net, "set_training_path"):
         raise SpecError(f"{model} has no {path!r} training path; only SubFocal-style networks have one")
+    if weight_grad is not None and (path != "fast" or not hasattr(net, "set_training_path")):
+        raise SpecError("weight_grad applies to the fast training path of SubFocal-style networks only")
     if hasattr(net, "set_training_path"):
-        net.set_training_path(path)
+        net.set_training_path(path, **({} if weight_grad is None else {"weight_grad": weight_grad}))
     if path == "fast":
         retain_freed_memory()  # as lfbench train does
     net = net.to(dev).train()
@@ -324,7 +328,7 @@ def bench_train(batch: int = 2, patch: int = 32, steps: int = 2, channels_last: 
     record = {"bench": "train", "model": model, **params, "batch": batch, "patch": patch, "path": path,
               "channels_last": channels_last, "steps": max(1, steps), "warmup": max(1, warmup), "seconds": seconds,
               "seconds_per_step": seconds, "steps_per_s": 1.0 / seconds, "cpu_seconds": cpu,
-              **memory_fields(dev, baseline), "precision": precision}
+              **memory_fields(dev, baseline), "precision": precision, "weight_grad": weight_grad}
     flops = trainable.flops(net, patch, patch)
     if flops:
         forward = flops["total"] * batch
@@ -475,8 +479,8 @@ _COLUMNS = {
     "inference": ["size", "interval", "precision", "seconds", "peak_memory_gb", "gflops_per_s", "fraction_of_peak",
                   "fraction_of_peak_cpu", "floor_s", "ratio_to_floor", "tile", "tiles", "phases_s"],
     "volume": ["size", "interval", "precision", "method", "seconds", "volume_gb", "gb_per_s", "peak_memory_gb"],
-    "train": ["width", "batch", "patch", "path", "precision", "seconds_per_step", "steps_per_s", "cpu_seconds",
-              "gflops_per_s", "fraction_of_peak", "fraction_of_peak_cpu", "peak_memory_gb"],
+    "train": ["width", "batch", "patch", "path", "weight_grad", "precision", "seconds_per_step", "steps_per_s",
+              "cpu_seconds", "gflops_per_s", "fraction_of_peak", "fraction_of_peak_cpu", "peak_memory_gb"],
     "metrics": ["scenes", "methods", "size", "seconds", "scores_per_s", "mpixels_per_s", "peak_memory_gb"],
 }
 
