@@ -9,10 +9,11 @@ Eval mode without autograd (``torch.no_grad`` / ``torch.inference_mode``) runs t
 methods/subfocal/fast.py (folded BatchNorm, channels-last, fused oneDNN ops; the bilinear cost
 volume gathered from interpolated maps): the same results up to float rounding. Eval with autograd
 on runs the layer-by-layer modules below; ``net.fast_inference = False`` forces them. Training runs
-them with three faster equivalents (``set_training_path("reference")`` turns them off): per-view
+them with four faster equivalents (``set_training_path("reference")`` turns them off): per-view
 BatchNorm as one fused autograd function on the channels-last memory, the one-channel stem
-convolution as a grouped convolution, and the bilinear volume gathered with its attention applied
-to the interpolated maps (methods/subfocal/volume.py).
+convolution as a grouped convolution, the bilinear volume gathered with its attention applied
+before the interpolation (methods/subfocal/volume.py), and, with AVX2 kernels, the weight gradients
+of the 324-channel 3D and the dilated 2D convolutions as matrix products (methods/subfocal/weight_grad.py).
 
 Conventions taken from Keras: BatchNorm eps 1e-3 and momentum 0.99 (PyTorch momentum 0.01),
 glorot_uniform kernels, zero biases, 'same' average pooling that leaves padded cells out of the
