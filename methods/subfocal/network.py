@@ -30,7 +30,7 @@ import numbers
 
 import torch
 import torch.nn.functional as F
-from lfbench_methods.subfocal.weight_grad import WEIGHT_GRADS, training_conv
+from lfbench_methods.subfocal.weight_grad import check_weight_grad, training_conv
 from torch import nn
 
 from lfbench.data.shift import INTERPOLATIONS, angular_offsets, disparity_grid, shift_views
@@ -476,8 +476,7 @@ class SubFocalNet(nn.Module):
         "before" of ``lfbench bench train``)."""
         if path not in self.TRAINING_PATHS:
             raise ValueError(f"Unknown training path {path!r}. Available: {', '.join(self.TRAINING_PATHS)}")
-        if weight_grad not in WEIGHT_GRADS:
-            raise ValueError(f"Unknown weight_grad {weight_grad!r}. Available: {', '.join(WEIGHT_GRADS)}")
+        check_weight_grad(weight_grad)
         for m in self.modules():
             if hasattr(type(m), "reference"):
                 m.reference = path == "reference"

@@ -28,12 +28,21 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-__all__ = ["WEIGHT_GRADS", "conv_with_gemm_weight_grad", "gemm_weight_grad", "pays_off", "training_conv"]
+__all__ = ["WEIGHT_GRADS", "check_weight_grad", "conv_with_gemm_weight_grad", "gemm_weight_grad", "pays_off",
+           "training_conv"]
 
 #: ``weight_grad`` choices of :meth:`SubFocalNet.set_training_path`: ``auto`` (the GEMM gradient on the layers
 #: where it measured faster, when ATen runs its AVX2 kernels), ``gemm`` (on every layer it applies to), ``native``
 #: (PyTorch's own, i.e. oneDNN's on the CPU).
 WEIGHT_GRADS = ("auto", "gemm", "native")
+
+
+
+def check_weight_grad(weight_grad: str) -> None:
+    """ValueError naming the choices unless ``weight_grad`` is one of :data:`WEIGHT_GRADS`."""
+    if weight_grad not in WEIGHT_GRADS:
+        raise ValueError(f"Unknown weight_grad {weight_grad!r}. Available: {', '.join(WEIGHT_GRADS)}")
+
 
 ROWS_PER_CHUNK = 4096  # rows of a product: chunk + the largest tap offset (~2.4k rows of 324 floats) fit in L3
 
@@ -70,8 +79,7 @@ def training_conv(conv: nn.Module, x: torch.Tensor, weight_grad: str = "auto") -
     """``conv(x)``, with the GEMM weight gradient when ``weight_grad`` asks for it and the layer allows it:
     ``gemm`` wherever :func:`_applies`, ``auto`` also only where :func:`pays_off` and ATen runs its AVX2
     kernels, ``native`` never."""
-    if weight_grad not in WEIGHT_GRADS:
-        raise ValueError(f"Unknown weight_grad {weight_grad!r}. Available: {', '.join(WEIGHT_GRADS)}")
+    check_weight_grad(weight_grad)
     use = weight_grad == "gemm" or (weight_grad == "auto" and pays_off(conv) and _avx2_kernels())
     if use and torch.is_grad_enabled() and conv.weight.requires_grad and _applies(conv, x):
         return conv_with_gemm_weight_grad(x, conv.weight, conv.dilation[0])
@@ -103,16 +111,8 @@ class _ConvGemmWeightGrad(torch.autograd.Function):
                 grad, x, weight, None, [1] * nd, [d * (weight.shape[-1] // 2)] * nd, [d] * nd, False, [0] * nd, 1,
                 [True, False, False])[0]
         if ctx.needs_input_grad[1]:
-            grad_w = gemm_weight_grad(x, grad, weight.shape[-1], d).to(memory_format=_format_of(weight))
+            grad_w = torch.empty_like(weight).copy_(gemm_weight_grad(x, grad, weight.shape[-1], d))  # weight's strides
         return grad_x, grad_w, None
-
-
-def _format_of(t: torch.Tensor) -> torch.memory_format:
-    if t.dim() == 5 and t.is_contiguous(memory_format=torch.channels_last_3d) and not t.is_contiguous():
-        return torch.channels_last_3d
-    if t.dim() == 4 and t.is_contiguous(memory_format=torch.channels_last) and not t.is_contiguous():
-        return torch.channels_last
-    return torch.contiguous_format
 
 
 def gemm_weight_grad(x: torch.Tensor, grad_out: torch.Tensor, kernel: int, dilation: int = 1,
