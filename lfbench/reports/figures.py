@@ -37,6 +37,7 @@ from lfbench.scoring.metrics import bad_pix_curve, find_metric
 from lfbench.scoring.rules import ScoringRules, align_prediction, border_mask, upsample_nearest
 from lfbench.utils.atomic import write_bytes, write_text
 from lfbench.utils.errors import SpecError
+from lfbench.utils.figure_text import plain_text
 
 _log = logging.getLogger(__name__)
 
@@ -315,6 +316,7 @@ def _blank(ax: Any, text: str) -> None:
     ax.text(0.5, 0.5, text, ha="center", va="center", fontsize=8, color="0.4", transform=ax.transAxes, wrap=True)
 
 
+@plain_text
 def draw_method_row(panels: MethodPanels, path: str | Path, resolution_note: str = "") -> Path:
     """One method's row: disparity | BadPix map | signed error | uncertainty, as a PNG of fixed size."""
     fig, axes = _row_figure(panels.label + (f"  ({resolution_note})" if resolution_note else ""))
@@ -340,6 +342,7 @@ def draw_method_row(panels: MethodPanels, path: str | Path, resolution_note: str
     return save_figure(fig, path)
 
 
+@plain_text
 def draw_scene_header(lf: LightField, path: str | Path, gt: np.ndarray | None,
                       disp_range: tuple[float, float], threshold: float = BADPIX_THRESHOLD,
                       border_px: int = 15) -> Path:
@@ -432,6 +435,7 @@ def average_curves(curves: Sequence[Curve]) -> dict[str, tuple[np.ndarray, np.nd
     return {m: (cs[0].thresholds, np.mean([c.values for c in cs], axis=0), len(cs)) for m, cs in out.items()}
 
 
+@plain_text
 def plot_badpix_series(series: Mapping[str, tuple[np.ndarray, np.ndarray]], path: str | Path, title: str,
                        markers: bool = False) -> Path:
     """BadPix(t) (%) against t (px), one line per method; dotted lines mark 0.01, 0.03 and 0.07."""

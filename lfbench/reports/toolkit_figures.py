@@ -30,6 +30,7 @@ import pandas as pd
 
 from lfbench.reports.figures import _as_gray, _colorbar, _colormap, _pyplot, save_formats
 from lfbench.utils.errors import SpecError
+from lfbench.utils.figure_text import plain_text
 
 __all__ = [
     "A_BETTER", "B_BETTER", "HEATMAP_CMAP", "OUTSIDE", "PAIRWISE_LIMIT", "PAIRWISE_THRESHOLD", "TIE",
@@ -186,6 +187,7 @@ def radar_radii(scores: pd.DataFrame, rings: int = 4) -> pd.DataFrame:
 
 # --------------------------------------------------------------------------- drawing
 
+@plain_text
 def plot_pairwise(gt_by_scene: Mapping[str, np.ndarray], a_by_scene: Mapping[str, np.ndarray],
                   b_by_scene: Mapping[str, np.ndarray], labels: tuple[str, str], path: str | Path, *,
                   masks: Mapping[str, np.ndarray] | None = None, backgrounds: Mapping[str, np.ndarray] | None = None,
@@ -215,6 +217,7 @@ def plot_pairwise(gt_by_scene: Mapping[str, np.ndarray], a_by_scene: Mapping[str
     return save_formats(fig, path, formats)
 
 
+@plain_text
 def plot_error_heatmaps(gt_by_scene: Mapping[str, np.ndarray], preds_by_scene: Mapping[str, Sequence[np.ndarray]],
                         path: str | Path, *, masks: Mapping[str, np.ndarray] | None = None, threshold: float = 0.07,
                         methods: Sequence[str] = (), formats: Sequence[str] = ("png",)) -> list[Path]:
@@ -245,6 +248,7 @@ def plot_error_heatmaps(gt_by_scene: Mapping[str, np.ndarray], preds_by_scene: M
     return save_formats(fig, path, formats)
 
 
+@plain_text
 def plot_radar(scores: pd.DataFrame, path: str | Path, *, title: str = "", highlight: str | None = None,
                labels: Mapping[str, str] | None = None, formats: Sequence[str] = ("png",)) -> list[Path]:
     """A radar chart of :func:`radar_scores` (rows metrics, columns methods): one closed line per

@@ -22,6 +22,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, Protocol
 
+from lfbench.utils.figure_text import plain_log_ticks, plain_text
+
 __all__ = ["LEARNING_CURVE", "LearningCurveLogger", "RunLogger", "TensorBoardLogger", "default_loggers",
            "plot_learning_curve", "read_metrics", "tensorboard_available"]
 
@@ -129,6 +131,7 @@ def read_metrics(path: str | Path) -> list[dict[str, Any]]:
     return entries
 
 
+@plain_text
 def plot_learning_curve(entries: Sequence[dict[str, Any]], path: str | Path, title: str = "") -> Path:
     """Training loss (log scale; one colour per stage, boundaries dotted) and validation BadPix (%) and
     MSE x100 against the global step, as a PNG."""
@@ -148,6 +151,7 @@ def plot_learning_curve(entries: Sequence[dict[str, Any]], path: str | Path, tit
         ax_loss.axvline(es[0]["global_step"], color="0.6", linestyle=":", linewidth=1)
     if train and all(e["loss"] > 0 for e in train):
         ax_loss.set_yscale("log")
+        plain_log_ticks(ax_loss.yaxis)
     ax_loss.set_xlabel("global step")
     ax_loss.set_ylabel("training loss")
     ax_loss.grid(alpha=0.3)
