@@ -269,3 +269,188 @@ def test_an_error_naming_a_file_with_a_line_break_is_one_line(tmp_path, capsys):
     rc, _, err = run_cli(capsys, "evaluate", "--data", tmp_path / "data", "--method", "gt", "--out", tmp_path / "o")
     assert_one_error_line(rc, err, "bad\\nname\\x1b[31m", "parameters.cfg")
     assert "\x1b" not in err
+
+
+# --------------------------------------------------------------------------- names that would share a file (class 4)
+
+def test_file_name_rule():
+    from lfbench.utils.names import MAX_NAME_BYTES, file_name
+
+    assert file_name("planesweep:interval=0.25") == "planesweep_interval=0.25"
+    assert file_name("m<1") == file_name("m>1") == "m_1"
+    assert [file_name(x) for x in ("", ".", "..", "...", "a/../b")] == ["_", "_", "__", "___", "a_.._b"]
+    long = "published:path=/" + "x" * 400
+    name = file_name(long)
+    assert len(name.encode()) <= MAX_NAME_BYTES and name == file_name(long) != file_name(long + "y")
+    assert name.startswith("published_path=_xxx") and re.fullmatch(r".*-[0-9a-f]{12}", name)
+    wide = file_name("é" * 200)  # cut on a character, not inside one
+    assert len(wide.encode()) <= MAX_NAME_BYTES and wide.startswith("éé")
+
+
+def test_file_names_refuse_two_labels_of_one_file():
+    from lfbench.utils.errors import DataError
+    from lfbench.utils.names import FileNames, file_names
+
+    assert file_names(["b", "a", "b"], "method label") == {"b": "b", "a": "a"}
+    with pytest.raises(DataError, match=r"method label: 'm<1' and 'm>1' would share the file name 'm_1'"):
+        file_names(["m<1", "ok", "m>1"], "method label")
+    with pytest.raises(DataError, match="'Gt' and 'gt'"):  # one file on macOS and Windows
+        file_names(["Gt", "gt"], "method label")
+    names = FileNames("method label", reserved=["header"])
+    with pytest.raises(DataError, match="method label: 'Header' would have the file name 'Header', which lfbench uses there itself"):
+        names("Header")
+
+
+def _two_subs(tmp: Path, names: tuple[str, str]) -> list[str]:
+    return [f"published:path={write_submission(tmp / n, {'s0': np.ones((SIZE, SIZE), np.float32)})}" for n in names]
+
+
+@pytest.fixture()
+def one_scene(tmp_path) -> Path:
+    write_scene(tmp_path / "data", "s0", "training", size=SIZE)
+    return tmp_path / "data"
+
+
+@pytest.mark.parametrize(("methods", "fragments"), [
+    (("SUBS", ("m<1", "m>1")), ("published:m<1", "published:m>1", "'published_m_1'")),
+    (("SUBS", ("Sub", "sub")), ("published:Sub", "published:sub")),
+    ((), ("'gt'", "twice")),
+], ids=["label-chars", "label-case", "given-twice"])
+def test_evaluate_refuses_methods_of_one_file_before_any_work(tmp_path, capsys, one_scene, methods, fragments):
+    from helpers import assert_one_error_line
+
+    specs = _two_subs(tmp_path, methods[1]) if methods else ["gt", "gt"]
+    args = [a for spec in specs for a in ("--method", spec)]
+    rc, _, err = run_cli(capsys, "evaluate", "--data", one_scene, *args, "--out", tmp_path / "out", "--save-maps")
+    assert_one_error_line(rc, err, *fragments)
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.fixture()
+def twins(tmp_path) -> Path:
+    for category, seed in (("stratified", 0), ("training", 1)):
+        write_scene(tmp_path / "data", "twin", category, size=SIZE, seed=seed)
+    write_scene(tmp_path / "data", "other", "training", size=SIZE, seed=2)
+    return tmp_path / "data"
+
+
+def test_two_scenes_of_one_name_are_refused_naming_both_folders(tmp_path, capsys, twins):
+    """stratified/twin and training/twin would give duplicate (method, scene, metric) records: evaluate
+    refuses them before any work (naming both folders) and runs with one category selected."""
+    from helpers import assert_one_error_line
+
+    for scenes in ([], ["--scenes", "twin"], ["--scenes", "stratified,training"]):
+        rc, _, err = run_cli(capsys, "evaluate", "--data", twins, *scenes, "--method", "gt", "--out", tmp_path / "out")
+        assert_one_error_line(rc, err, "two scenes are named 'twin'", str(twins / "stratified" / "twin"),
+                              str(twins / "training" / "twin"))
+        assert not (tmp_path / "out").exists()
+    rc, _, err = run_cli(capsys, "evaluate", "--data", twins, "--scenes", "training", "--method", "gt", "--out",
+                         tmp_path / "out", "--no-progress")
+    assert rc == 0, err
+
+
+def test_scenes_of_one_file_name_are_refused(tmp_path, capsys):
+    from helpers import assert_one_error_line
+
+    for name in ("a<b", "a>b"):
+        write_scene(tmp_path / "data", name, "training", size=SIZE)
+    rc, _, err = run_cli(capsys, "evaluate", "--data", tmp_path / "data", "--method", "gt", "--out", tmp_path / "out")
+    assert_one_error_line(rc, err, "scene: 'a<b' and 'a>b'", "'a_b'")
+
+
+def _results_file(tmp: Path, records: list[tuple[str, str]]) -> Path:
+    import json
+
+    path = tmp / "r" / "results.json"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps({"records": [{"method": m, "scene": s, "metric": "badpix_0.07", "value": 1.0,
+                                             "resolution": "lowres"} for m, s in records]}), encoding="utf-8")
+    return path
+
+
+@pytest.mark.parametrize(("records", "fragments"), [
+    ([("m<1", "s"), ("m>1", "s")], ("method label: 'm<1' and 'm>1'",)),
+    ([("m", "s<1"), ("m", "s>1")], ("scene: 's<1' and 's>1'",)),
+    ([("m", "twin"), ("m", "twin")], ("record m/twin/badpix_0.07 appears twice",)),
+], ids=["methods", "scenes", "duplicate-record"])
+@pytest.mark.parametrize("command", ["report", "report-html", "regress"])
+def test_results_read_back_with_colliding_names_are_refused(tmp_path, capsys, records, fragments, command):
+    """report and regress refuse alike what evaluate refuses before it runs."""
+    from helpers import assert_one_error_line
+
+    path = _results_file(tmp_path, records)
+    argv = {"report": ["report", path, "--out", tmp_path / "rep"],
+            "report-html": ["report", path, "--out", tmp_path / "rep", "--html"],
+            "regress": ["regress", _results_file(tmp_path / "g", [("m", "s")]), path]}[command]
+    rc, _, err = run_cli(capsys, *argv)
+    assert_one_error_line(rc, err, str(path), *fragments)
+    assert not (tmp_path / "rep").exists()
+
+
+def test_ablation_methods_of_one_folder_or_a_cell_id_are_refused(tmp_path, capsys):
+    from helpers import assert_one_error_line
+    from test_ablate import write_spec
+
+    from lfbench.ablation.spec import load_spec
+    from lfbench.utils.errors import LFBenchError
+
+    tail = '[[methods]]\nlabel = "m<1"\nspec = "constant"\n[[methods]]\nlabel = "m>1"\nspec = "gt"\n'
+    spec = tmp_path / "a" / "spec.toml"
+    spec.parent.mkdir()
+    spec.write_text("[evaluation]\nsynthetic = { seed = 5, size = 48, scenes = 1 }\n" + tail, encoding="utf-8")
+    rc, _, err = run_cli(capsys, "ablate", spec, "--out", tmp_path / "ab")
+    assert_one_error_line(rc, err, "spec.toml", "'m<1' and 'm>1'", "'m_1'")
+    assert not (tmp_path / "ab").exists()
+    with pytest.raises(LFBenchError, match="label 'base' is also the id of a cell"):
+        load_spec(write_spec(tmp_path / "b", "", '[[methods]]\nlabel = "base"\nspec = "gt"\n'))
+    with pytest.raises(LFBenchError, match="'base' and 'Base'"):  # the HTML pages of the two
+        load_spec(write_spec(tmp_path / "c", "", '[[methods]]\nlabel = "Base"\nspec = "gt"\n'))
+
+
+def test_figure_writer_refuses_a_row_named_like_its_own_files(tmp_path):
+    from lfbench.data.scene import Scene
+    from lfbench.reports.figures import SceneFigureWriter
+    from lfbench.utils.errors import DataError
+
+    scene = Scene(write_scene(tmp_path / "data", "s0", "training", size=SIZE))
+    writer = SceneFigureWriter(tmp_path / "fig", curves=False)
+    writer.add("m<1", scene, np.ones((SIZE, SIZE), np.float32))
+    with pytest.raises(DataError, match="'m<1' and 'm>1'"):
+        writer.add("m>1", scene, np.zeros((SIZE, SIZE), np.float32))
+    with pytest.raises(DataError, match="'header' would have the file name 'header'"):
+        writer.add("header", scene, np.zeros((SIZE, SIZE), np.float32))
+    assert sorted(p.name for p in (tmp_path / "fig" / "s0").iterdir()) == ["header.png", "m_1.png"]
+
+
+def test_toolkit_pairwise_names_of_one_file_are_refused_before_drawing(tmp_path):
+    """'a_vs_b' vs 'c' and 'a' vs 'b_vs_c' are both pairwise_a_vs_b_vs_c."""
+    from lfbench.data.scene import Scene
+    from lfbench.reports.maps import load_scene_maps
+    from lfbench.reports.toolkit_figures import toolkit_figures_from_scene_maps
+    from lfbench.runs.results import Record, Results
+    from lfbench.utils.errors import DataError
+
+    scene = Scene(write_scene(tmp_path / "data", "s0", "training", size=SIZE))
+    labels = ["a_vs_b", "c", "a", "b_vs_c"]
+    folders = {m: write_submission(tmp_path / f"sub{i}", {"s0": np.full((SIZE, SIZE), i, np.float32)})
+               for i, m in enumerate(labels)}
+    results = Results([Record(m, "s0", "badpix_0.07", 1.0, "lowres") for m in labels])
+    with pytest.raises(DataError, match="method pair: 'a_vs_b vs c' and 'a vs b_vs_c'"):
+        toolkit_figures_from_scene_maps(results, [load_scene_maps(scene, folders)], tmp_path / "tk")
+    assert not (tmp_path / "tk").exists()
+
+
+def test_training_stage_names_are_file_names(tmp_path):
+    from lfbench.training.config import TrainConfig
+    from lfbench.training.loop import stage_weights_name
+    from lfbench.utils.errors import LFBenchError
+
+    assert stage_weights_name(0, "../../escape") == "stage1_.._.._escape.pt"
+
+    def config(*names: str) -> dict:
+        return {"data": {"roots": [str(tmp_path)]},
+                "stages": [{"name": n, "loss": "l1", "lr": 1e-3, "steps": 1} for n in names]}
+
+    TrainConfig.from_dict(config("l1", "a/b"))
+    with pytest.raises(LFBenchError, match="stage name: 'a/b' and 'a:b'"):
+        TrainConfig.from_dict(config("a/b", "a:b"))

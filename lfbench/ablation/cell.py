@@ -123,6 +123,7 @@ def seed_from_stage1(task: CellTask) -> float:
     """Put the shared run's final checkpoint (next stage = the last, step 0, no optimizer) into the cell
     with the cell's config, unless the cell has a checkpoint already. Returns the stage-1 seconds."""
     from lfbench.training import checkpoint as ckpt
+    from lfbench.training.loop import stage_weights_name
 
     assert task.stage1_dir is not None
     src = Path(task.stage1_dir)
@@ -133,7 +134,7 @@ def seed_from_stage1(task: CellTask) -> float:
                         src / "checkpoint.pt")
     dst = task.path / "checkpoint.pt"
     if not dst.is_file():
-        names = [f"stage{i + 1}_{s['name']}.pt" for i, s in enumerate(task.config["stages"][:n_shared])]
+        names = [stage_weights_name(i, s["name"]) for i, s in enumerate(task.config["stages"][:n_shared])]
         for name in [*names, "best.pt", "metrics.jsonl"]:
             if (src / name).is_file():
                 write_bytes(task.path / name, (src / name).read_bytes())

@@ -34,7 +34,7 @@ from lfbench.reports import figures as fig
 from lfbench.reports import toolkit_figures as tk
 from lfbench.reports.leaderboard import all_metric_ranks, metric_info, metric_table, overall_ranks
 from lfbench.reports.maps import MAPS_DIR, SceneMaps, load_scene_maps, map_folders
-from lfbench.runs.results import Results
+from lfbench.runs.results import Results, check_names
 from lfbench.scoring.rules import ScoringRules
 from lfbench.utils.atomic import fresh_dir, replace_dir, write_text
 from lfbench.utils.errors import DataError
@@ -319,6 +319,7 @@ def build_site(inputs: SiteInputs, out: str | Path, *, threshold: float = fig.BA
     results = inputs.results
     if not results.records:
         raise DataError("the results hold no records; nothing to report")
+    check_names(results)  # pages and images are named after methods and scenes
     out = check_site_dir(out)
     border = border_px if border_px is not None else ScoringRules.from_meta(results.meta).border_px
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -541,8 +542,7 @@ def site_inputs(results: Results, folder: Path, *, data_root: str | Path | None 
     if scenes is not None:
         scenes = list(scenes)
     elif root is not None and (data_root is not None or root.is_dir()):
-        wanted = set(results.scenes)
-        scenes = [s for s in Benchmark.discover(root) if s.name in wanted]
+        scenes = Benchmark.discover(root).named(results.scenes)
     elif root is not None:
         notes.append(f"The data root {root} recorded in the results is not here: no maps are shown "
                      "(give --data ROOT).")

@@ -311,7 +311,7 @@ def toolkit_figures_from_scene_maps(results: Any, scene_maps: Iterable[Any], out
                                     threshold: float = PAIRWISE_THRESHOLD) -> list[Path]:
     """:func:`write_toolkit_figures` from maps already loaded (lfbench.reports.maps.SceneMaps, one per
     scene)."""
-    from lfbench.reports.figures import safe_name
+    from lfbench.utils.names import FileNames, file_names
 
     out = Path(out_dir)
     written: list[Path] = []
@@ -327,14 +327,15 @@ def toolkit_figures_from_scene_maps(results: Any, scene_maps: Iterable[Any], out
     if not gts:
         return written
     labels = [m for m in results.methods if any(m in p for p in preds.values())]
+    names, pair_names = file_names(labels, "method label"), FileNames("method pair")
+    pairs = [(a, b, pair_names.claim(f"{a} vs {b}", f"pairwise_{names[a]}_vs_{names[b]}"))
+             for i, a in enumerate(labels) for b in labels[i + 1:]]  # every name checked before drawing
     written += plot_error_heatmaps(gts, {s: [p[m] for m in labels if m in p] for s, p in preds.items()},
                                    out / "error_heatmaps", masks=masks, methods=labels, formats=formats)
-    for i, a in enumerate(labels):
-        for b in labels[i + 1:]:
-            a_maps = {s: p[a] for s, p in preds.items() if a in p}
-            b_maps = {s: p[b] for s, p in preds.items() if b in p}
-            if set(a_maps) & set(b_maps):
-                name = f"pairwise_{safe_name(a)}_vs_{safe_name(b)}"
-                written += plot_pairwise(gts, a_maps, b_maps, (a, b), out / name, masks=masks, backgrounds=centres,
-                                         threshold=threshold, formats=formats)
+    for a, b, name in pairs:
+        a_maps = {s: p[a] for s, p in preds.items() if a in p}
+        b_maps = {s: p[b] for s, p in preds.items() if b in p}
+        if set(a_maps) & set(b_maps):
+            written += plot_pairwise(gts, a_maps, b_maps, (a, b), out / name, masks=masks, backgrounds=centres,
+                                     threshold=threshold, formats=formats)
     return written

@@ -134,7 +134,25 @@ class Results:
         meta = data.get("meta", {}) if isinstance(data, dict) else {}
         if not isinstance(meta, dict):
             raise DataError("'meta' must be an object", path)
-        return cls(records=records, runs=runs, meta=meta)
+        results = cls(records=records, runs=runs, meta=meta)
+        check_names(results, path)
+        return results
+
+
+def check_names(results: Results, source: str | Path | None = None) -> None:
+    """DataError (naming ``source``) when ``results`` hold a (method, scene, metric) twice (tables and
+    ranks would merge them), or two methods or two scenes whose names are one file name
+    (lfbench.utils.names: their maps, figures and pages would be one file)."""
+    from lfbench.utils.names import file_names
+
+    seen: set[tuple[str, str, str]] = set()
+    for r in results.records:
+        key = (r.method, r.scene, r.metric)
+        if key in seen:
+            raise DataError(f"record {'/'.join(key)} appears twice", source)  # as regress.check_unique says
+        seen.add(key)
+    file_names(results.methods, "method label", source=source)
+    file_names(results.scenes, "scene", source=source)
 
 
 def _list(data: Any, key: str, path: Path) -> list[Any]:

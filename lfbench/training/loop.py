@@ -56,6 +56,7 @@ from lfbench.utils.atomic import fresh_dir, write_text
 from lfbench.utils.errors import DataError, LFBenchError, SpecError
 from lfbench.utils.hardware import require_bf16, set_fp32_numerics
 from lfbench.utils.malloc import retain_freed_memory
+from lfbench.utils.names import file_name
 from lfbench.utils.threads import torch_threads
 
 # Settings that may change between a run and its resumption (they do not change the result).
@@ -108,7 +109,13 @@ class RunPaths:
         return self.out / "data"
 
     def stage_weights(self, index: int, name: str) -> Path:
-        return self.out / f"stage{index + 1}_{name}.pt"
+        return self.out / stage_weights_name(index, name)
+
+
+def stage_weights_name(index: int, name: str) -> str:
+    """File name of the weights after stage ``index`` (0-based) named ``name``: ``stage<k>_<name>.pt``,
+    the name as a file name (lfbench.utils.names; the config refuses two that are one)."""
+    return f"stage{index + 1}_{file_name(name)}.pt"
 
 
 def resume_view(config: dict[str, Any], stages: int, in_progress: int | None = None) -> dict[str, Any]:
