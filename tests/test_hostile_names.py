@@ -297,7 +297,7 @@ def test_file_names_refuse_two_labels_of_one_file():
     with pytest.raises(DataError, match="'Gt' and 'gt'"):  # one file on macOS and Windows
         file_names(["Gt", "gt"], "method label")
     names = FileNames("method label", reserved=["header"])
-    with pytest.raises(DataError, match="method label: 'Header' would have the file name 'Header', which lfbench uses there itself"):
+    with pytest.raises(DataError, match="'Header' would have the file name 'Header', which lfbench uses there itself"):
         names("Header")
 
 
