@@ -19,7 +19,6 @@ bit for bit that of an uninterrupted two-stage ``lfbench train`` of ``train.toml
 from __future__ import annotations
 
 import contextlib
-import json
 import shlex
 import time
 from dataclasses import dataclass
@@ -33,7 +32,7 @@ from lfbench.ablation.toml_text import dumps
 from lfbench.method.trainable import DEFAULT_TRAINABLE
 from lfbench.utils.atomic import write_bytes, write_text
 from lfbench.utils.errors import DataError, SpecError
-from lfbench.utils.jsonfile import read_json
+from lfbench.utils.jsonfile import json_text, read_json
 from lfbench.utils.log import log_to_file
 from lfbench.utils.threads import torch_threads
 
@@ -249,7 +248,7 @@ def time_cell(cell_dir: str | Path, ev: Evaluation, threads: int, network: str =
         times = time_whole_scene(method, ev.time_size, ev.time_repeats, ev.time_warmup)
     out = {"key": key, "test_s": float(np.median(times)), "test_s_all": times, "time_size": ev.time_size,
            "threads": threads, "device": key["device"]}
-    write_text(path, json.dumps(out, indent=2, sort_keys=True) + "\n")
+    write_text(path, json_text(out, indent=2, sort_keys=True) + "\n")
     return out
 
 
@@ -301,7 +300,7 @@ def _run(task: CellTask) -> dict[str, Any]:
     }
     results.meta["cell"] = {k: v for k, v in marker.items() if k not in ("fingerprint", "eval_fingerprint")}
     results.write(task.path)
-    write_text(task.path / MARKER, json.dumps(marker, indent=2, sort_keys=True) + "\n")
+    write_text(task.path / MARKER, json_text(marker, indent=2, sort_keys=True) + "\n")
     return marker
 
 

@@ -39,7 +39,7 @@ from lfbench.runs.results import Results
 from lfbench.utils.atomic import fresh_dir, write_text
 from lfbench.utils.errors import DataError, SpecError
 from lfbench.utils.hardware import available_cores
-from lfbench.utils.jsonfile import read_json
+from lfbench.utils.jsonfile import json_text, read_json
 from lfbench.utils.log import log_to_file
 from lfbench.utils.names import file_name
 
@@ -140,7 +140,7 @@ def _shared_stage1(spec: AblationSpec, folder: Path, links: dict[str, str], thre
     with log_to_file(folder / LOG):  # train() restores the caller's thread count itself
         train(TrainConfig.from_toml(path), folder, command=command, progress=progress)
     summary = read_json(folder / "summary.json", "training summary")
-    write_text(marker, json.dumps({"steps": summary["steps"], "elapsed_s": summary["elapsed_s"]}, indent=2) + "\n")
+    write_text(marker, json_text({"steps": summary["steps"], "elapsed_s": summary["elapsed_s"]}, indent=2) + "\n")
     return folder
 
 
@@ -280,7 +280,7 @@ def run_methods(spec: AblationSpec, out: Path, scenes: tuple[tuple[str, str], ..
                                  on_prediction=save_maps(folder / "maps"), progress=False,
                                  meta={"method": {"label": m.label, "spec": m.spec}})
         if res.records:  # a method that served no scene (e.g. weights not there yet) is tried again next time
-            write_text(marker, json.dumps({"label": m.label, "spec": m.spec, "key": key}, indent=2) + "\n")
+            write_text(marker, json_text({"label": m.label, "spec": m.spec, "key": key}, indent=2) + "\n")
         log(f"method {m.label}: scored on {len(res.scenes)} scene(s)")
         out_list.append(res)
     return out_list

@@ -524,16 +524,9 @@ def site_inputs(results: Results, folder: Path, *, data_root: str | Path | None 
     ``scenes``: the results' scenes of the data root when already discovered (then ``data_root`` is
     not searched again); ``scene_maps``: their saved maps when already loaded (SiteInputs)."""
     from lfbench.data.scene import Benchmark
+    from lfbench.scoring.stats import read_ci_csv
 
-    ci = None
-    if (folder / "ci.csv").is_file():
-        try:
-            ci = pd.read_csv(folder / "ci.csv")
-        except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
-            raise DataError(f"not a readable CSV table: {str(exc).splitlines()[0]}", folder / "ci.csv") from None
-        missing = {"method", "scene", "metric", "low", "high"} - set(ci.columns)
-        if missing:
-            raise DataError(f"missing column(s) {', '.join(sorted(missing))}", folder / "ci.csv")
+    ci = read_ci_csv(folder / "ci.csv") if (folder / "ci.csv").is_file() else None
     maps_dir = Path(maps) if maps is not None else folder / MAPS_DIR
     folders = map_folders(maps_dir, results.methods) if (maps is not None or maps_dir.is_dir()) else {}
     root = Path(data_root) if data_root is not None else (

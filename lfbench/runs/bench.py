@@ -50,6 +50,7 @@ from pathlib import Path
 from typing import Any
 
 from lfbench.utils.errors import SpecError
+from lfbench.utils.jsonfile import json_text
 
 PRECISIONS = ("fp32", "bf16")
 BENCHES = ("peak", "inference", "volume", "train", "metrics")  # the order of the tables
@@ -523,7 +524,7 @@ def write_json(path: str | Path, records: Sequence[dict]) -> None:
     """The records as a JSON list, written atomically."""
     from lfbench.utils.atomic import write_text
 
-    write_text(Path(path), json.dumps(list(records), indent=2, sort_keys=True) + "\n")
+    write_text(Path(path), json_text(list(records), indent=2, sort_keys=True) + "\n")
 
 
 def _main(argv: Sequence[str]) -> int:

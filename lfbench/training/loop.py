@@ -51,10 +51,11 @@ from lfbench.training.curves import RunLogger, default_loggers
 from lfbench.training.data import PatchSampler, ValidationScene, load_scene_data, load_validation_scene
 from lfbench.training.distributed import DistContext, agree_on_resume, setup
 from lfbench.training.losses import make_loss
-from lfbench.training.validate import validate
+from lfbench.training.validate import check_validation_area, validate
 from lfbench.utils.atomic import fresh_dir, write_text
 from lfbench.utils.errors import DataError, LFBenchError, SpecError
 from lfbench.utils.hardware import require_bf16, set_fp32_numerics
+from lfbench.utils.jsonfile import json_text
 from lfbench.utils.malloc import retain_freed_memory
 from lfbench.utils.names import file_name
 from lfbench.utils.threads import torch_threads
@@ -401,7 +402,7 @@ class Trainer:
     def record(self, entry: dict) -> None:
         if self.ctx.is_main:
             with open(self.paths.metrics, "a", encoding="utf-8") as f:
-                f.write(json.dumps(entry, sort_keys=True) + "\n")
+                f.write(json_text(entry, sort_keys=True) + "\n")
             for logger in self.loggers:
                 logger.record(entry)
 
@@ -531,6 +532,7 @@ class Trainer:
 
         bench = discover(cfg, paths.data)
         train_scenes, val_scenes = select_scenes(bench, cfg)
+        check_validation_area(val_scenes, cfg.validation.border, cfg.validation.max_size, cfg.source)
         invalid_area = expand_path(cfg.data.invalid_area, cfg.source) if cfg.data.invalid_area else None
         if invalid_area is not None and not invalid_area.is_dir():
             raise DataError("data.invalid_area folder not found", invalid_area)
@@ -601,7 +603,7 @@ class Trainer:
             info["rank_parameters_sha256"] = digests
             self.export(paths.final, model, info)
             summary = {k: v for k, v in info.items() if k != "config"}
-            write_text(paths.summary, json.dumps(summary, indent=2, sort_keys=True) + "\n")
+            write_text(paths.summary, json_text(summary, indent=2, sort_keys=True) + "\n")
             self.log(f"done: {self.global_step} steps in {self.elapsed():.1f} s; final weights {paths.final}")
         result["rank_parameters_sha256"] = digests
         return result
