@@ -285,9 +285,11 @@ class Scene(LightField):
         return read_mask(path, size=(h * scale, w * scale))
 
     def valid_mask(self) -> np.ndarray | None:
-        """valid_mask.png as bool (H, W) (True = pixel may be scored), or None if absent."""
+        """valid_mask.png as bool (H, W) (True = pixel may be scored), or None if absent. It is at the
+        scene's low resolution (parameters.cfg): any other size is refused (DataError naming the file);
+        high-resolution scoring upsamples it as it upsamples predictions (lfbench.scoring.rules)."""
         path = self.path / "valid_mask.png"
-        return read_mask(path) if path.is_file() else None
+        return read_mask(path, size=self.spatial_size) if path.is_file() else None
 
 
 # --------------------------------------------------------------------------- benchmark layout

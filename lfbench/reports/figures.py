@@ -34,7 +34,7 @@ import numpy as np
 from lfbench.data.scene import LOWRES, LightField
 from lfbench.method.base import Prediction
 from lfbench.scoring.metrics import bad_pix_curve, find_metric
-from lfbench.scoring.rules import ScoringRules, align_prediction, border_mask, upsample_nearest
+from lfbench.scoring.rules import ScoringRules, align_prediction, evaluation_mask, upsample_nearest
 from lfbench.utils.atomic import write_bytes, write_text
 from lfbench.utils.errors import SpecError
 from lfbench.utils.figure_text import plain_text
@@ -161,16 +161,6 @@ def disparity_range(lf: LightField, gt: np.ndarray | None = None,
             lo, hi = float(finite.min()), float(finite.max())
             return (lo, hi) if hi > lo else (lo - 0.5, hi + 0.5)
     return -1.0, 1.0
-
-
-def evaluation_mask(lf: LightField, shape: tuple[int, int], border_px: int = 15) -> np.ndarray:
-    """The low-resolution evaluation mask: all but a ``border_px`` border, and valid_mask.png if any."""
-    mask = border_mask(shape, border_px)
-    valid_fn = getattr(lf, "valid_mask", None)
-    valid = valid_fn() if callable(valid_fn) else None
-    if valid is not None and valid.shape == shape:
-        mask &= valid
-    return mask
 
 
 @dataclass

@@ -544,7 +544,7 @@ def scene_errors(scene, pred: np.ndarray, rules=None, source: str = "prediction"
     ``evaluation.score_scene`` scores the general metrics (alignment of cropped maps, the scene's
     resolution with nearest upsampling, border and valid masks, the rules' non-finite handling).
     Memory: ~8 bytes per scored pixel (2 MB at 512 x 512, ~200 MB for a 5120 x 5120 high-res scene)."""
-    from lfbench.scoring.rules import ScoringRules, align_prediction, border_mask, upsample_nearest
+    from lfbench.scoring.rules import ScoringRules, align_prediction, evaluation_mask, upsample_nearest
 
     rules = rules or ScoringRules()
     h, w = scene.spatial_size
@@ -559,10 +559,7 @@ def scene_errors(scene, pred: np.ndarray, rules=None, source: str = "prediction"
     scale = gt.shape[0] // h
     if scale != 1:
         pred = upsample_nearest(pred, scale)
-    mask = border_mask(gt.shape, rules.border_px * scale)
-    valid = scene.valid_mask()
-    if valid is not None and valid.shape == gt.shape:
-        mask &= valid
+    mask = evaluation_mask(scene, gt.shape, rules.border_px * scale)
     err, scored = _scored(gt, pred, mask, rules.toolkit)
     index = np.flatnonzero(scored)
     index = index.astype(np.int32 if scored.size < 2**31 else np.int64)

@@ -81,11 +81,8 @@ def load_scene_data(scene: Scene, invalid_area: Path | None = None) -> SceneData
         raise DataError("training scene has no gt_disp_lowres.pfm", scene.path)
     gt = np.asarray(gt, dtype=np.float32)
     blocked = ~np.isfinite(gt)
-    valid = scene.valid_mask()
+    valid = scene.valid_mask()  # refused unless the scene's size
     if valid is not None:
-        if valid.shape != gt.shape:
-            raise DataError(f"valid_mask.png is {valid.shape[1]}x{valid.shape[0]}, expected "
-                            f"{gt.shape[1]}x{gt.shape[0]}", scene.path / "valid_mask.png")
         blocked |= ~valid
     if invalid_area is not None:
         path = invalid_area / scene.name / INVALID_AREA_FILE
