@@ -51,6 +51,7 @@ from typing import Any
 
 from lfbench.utils.errors import SpecError
 from lfbench.utils.jsonfile import json_text
+from lfbench.utils.subprocesses import safe_path_env
 
 PRECISIONS = ("fp32", "bf16")
 BENCHES = ("peak", "inference", "volume", "train", "metrics")  # the order of the tables
@@ -436,7 +437,8 @@ def run_isolated(bench: str, params: dict, timeout_s: float | None = None) -> di
         return {"bench": bench, **params, "skipped": reason}
     cmd = [sys.executable, "-m", "lfbench.runs.bench", json.dumps({"bench": bench, "params": params})]
     try:
-        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout_s, check=False)
+        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout_s, check=False,
+                              env=safe_path_env())  # lfbench and plugins as installed, not from the current folder
     except subprocess.TimeoutExpired:
         return {"bench": bench, **params, "error": f"timed out after {timeout_s} s"}
     lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("{")]
