@@ -349,6 +349,23 @@ def test_two_scenes_of_one_name_are_refused_naming_both_folders(tmp_path, capsys
     assert rc == 0, err
 
 
+def test_report_with_maps_on_a_root_of_two_same_named_scenes(tmp_path, capsys, twins):
+    """Results of training/twin, reported with maps from a root that also holds stratified/twin: the
+    report cannot tell which folder the results mean, refuses, and works given the category folder."""
+    from helpers import assert_one_error_line
+
+    out = tmp_path / "out"
+    rc, _, err = run_cli(capsys, "evaluate", "--data", twins, "--scenes", "training", "--method", "gt", "--out", out,
+                         "--save-maps", "--no-progress")
+    assert rc == 0, err
+    rc, _, err = run_cli(capsys, "report", out, "--out", tmp_path / "rep", "--maps", out / "maps")
+    assert_one_error_line(rc, err, "two scenes are named 'twin'", "--data ROOT/CATEGORY")
+    rc, _, err = run_cli(capsys, "report", out, "--out", tmp_path / "rep", "--maps", out / "maps", "--data",
+                         twins / "training")
+    assert rc == 0, err
+    assert (tmp_path / "rep" / "figures" / "overview_twin.png").is_file()
+
+
 def test_scenes_of_one_file_name_are_refused(tmp_path, capsys):
     from helpers import assert_one_error_line
 

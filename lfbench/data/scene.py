@@ -389,6 +389,7 @@ def check_scene_names(scenes: Iterable[SceneT]) -> list[SceneT]:
         path, other_path = getattr(scene, "path", None), getattr(other, "path", None)
         if other is not scene and path != other_path:
             raise DataError(f"two scenes are named {scene.name!r}: {other_path} and {path}; results name a scene by "
-                            "its name, so select one of them (by category) or rename one folder")
+                            "its name, so select one of them by category (--scenes CATEGORY, or --data ROOT/CATEGORY) "
+                            "or rename one folder")
         file_names(scene.name)
     return scenes
