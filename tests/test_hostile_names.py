@@ -345,8 +345,9 @@ def test_two_scenes_of_one_name_are_refused_naming_both_folders(tmp_path, capsys
                               str(twins / "training" / "twin"))
         assert not (tmp_path / "out").exists()
     rc, _, err = run_cli(capsys, "evaluate", "--data", twins, "--scenes", "training", "--method", "gt", "--out",
-                         tmp_path / "out", "--no-progress")
+                         tmp_path / "out", "--no-progress", "--html")  # the site shows the scenes scored
     assert rc == 0, err
+    assert (tmp_path / "out" / "html" / "scene-twin.html").is_file()
 
 
 def test_report_with_maps_on_a_root_of_two_same_named_scenes(tmp_path, capsys, twins):

@@ -505,14 +505,14 @@ def _method_table(results: Results, method: str, scene_pages: Mapping[str, str],
 # --------------------------------------------------------------------------- from a results folder
 
 def site_inputs_from_dir(results_path: str | Path, *, data_root: str | Path | None = None,
-                         maps: str | Path | None = None, paper: Any = None,
+                         maps: str | Path | None = None, scenes: Sequence[Any] | None = None, paper: Any = None,
                          paper_methods: Sequence[str] = ("SubFocal",), title: str | None = None) -> SiteInputs:
     """What a results folder holds for a site: results.json, ci.csv (when ``--ci`` ran), the saved maps
     (``maps`` or RESULTS_DIR/maps when present) and the scenes of ``data_root`` (default: the data
-    root the results record, when it exists)."""
+    root the results record, when it exists), or ``scenes`` (those the results were scored on)."""
     results_path = Path(results_path)
     folder = results_path if results_path.is_dir() else results_path.parent
-    return site_inputs(Results.read(results_path), folder, data_root=data_root, maps=maps, paper=paper,
+    return site_inputs(Results.read(results_path), folder, data_root=data_root, maps=maps, scenes=scenes, paper=paper,
                        paper_methods=paper_methods, title=title)
 
 
