@@ -198,6 +198,14 @@ def test_ablation_title_and_method_label_cannot_inject(tmp_path, capsys):
         assert one_line(label) in [r[0] for r in rows] + rows[0]
     maps = list((tmp_path / "ab" / "figures" / "error_maps").glob("overview_*.png"))
     assert len(maps) == 1  # the label's error maps, drawn as plain text
+    # a note given as a caption line of the sweep table (python -m lfbench.reports.sweep_table)
+    from lfbench.reports.sweep_table import main as sweep_main
+
+    note = "note " + MATHTEXT_BREAKER + "\n\\input{x}\r\\write18{rm}"
+    assert sweep_main([str(tmp_path / "ab"), str(tmp_path / "sweep"), "--caption", note]) == 0
+    captions, rows = read_tex(tmp_path / "sweep" / "table4_sweep.tex")
+    assert captions == [one_line(note)] and len(rows) == 2
+    assert (tmp_path / "sweep" / "figures" / "table4_sweep.png").is_file()
 
 
 def _toml(text: str) -> str:
