@@ -43,7 +43,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from lfbench.data.scene import Benchmark, Scene
+from lfbench.data.scene import Benchmark, Scene, check_scene_names
 from lfbench.method.trainable import check_state_dict, get_trainable
 from lfbench.training import checkpoint as ckpt
 from lfbench.training.config import TrainConfig, expand_path
@@ -211,7 +211,7 @@ def select_scenes(bench: Benchmark, cfg: TrainConfig) -> tuple[list[Scene], list
     if cfg.data.train:
         train = bench.select(list(cfg.data.train))
     else:
-        train = [s for s in bench.scenes if s not in val and s.has_gt()]
+        train = check_scene_names(s for s in bench.scenes if s not in val and s.has_gt())
     if not train:
         raise DataError("no training scenes selected", cfg.source)
     return train, val
