@@ -19,7 +19,6 @@ bit for bit that of an uninterrupted two-stage ``lfbench train`` of ``train.toml
 from __future__ import annotations
 
 import contextlib
-import json
 import shlex
 import time
 from dataclasses import dataclass
@@ -33,7 +32,7 @@ from lfbench.ablation.toml_text import dumps
 from lfbench.method.trainable import DEFAULT_TRAINABLE
 from lfbench.utils.atomic import write_bytes, write_text
 from lfbench.utils.errors import DataError, SpecError
-from lfbench.utils.jsonfile import read_json
+from lfbench.utils.jsonfile import json_text, read_json
 from lfbench.utils.log import log_to_file
 from lfbench.utils.threads import torch_threads
 
@@ -123,6 +122,7 @@ def seed_from_stage1(task: CellTask) -> float:
     """Put the shared run's final checkpoint (next stage = the last, step 0, no optimizer) into the cell
     with the cell's config, unless the cell has a checkpoint already. Returns the stage-1 seconds."""
     from lfbench.training import checkpoint as ckpt
+    from lfbench.training.loop import stage_weights_name
 
     assert task.stage1_dir is not None
     src = Path(task.stage1_dir)
@@ -133,7 +133,7 @@ def seed_from_stage1(task: CellTask) -> float:
                         src / "checkpoint.pt")
     dst = task.path / "checkpoint.pt"
     if not dst.is_file():
-        names = [f"stage{i + 1}_{s['name']}.pt" for i, s in enumerate(task.config["stages"][:n_shared])]
+        names = [stage_weights_name(i, s["name"]) for i, s in enumerate(task.config["stages"][:n_shared])]
         for name in [*names, "best.pt", "metrics.jsonl"]:
             if (src / name).is_file():
                 write_bytes(task.path / name, (src / name).read_bytes())
@@ -248,7 +248,7 @@ def time_cell(cell_dir: str | Path, ev: Evaluation, threads: int, network: str =
         times = time_whole_scene(method, ev.time_size, ev.time_repeats, ev.time_warmup)
     out = {"key": key, "test_s": float(np.median(times)), "test_s_all": times, "time_size": ev.time_size,
            "threads": threads, "device": key["device"]}
-    write_text(path, json.dumps(out, indent=2, sort_keys=True) + "\n")
+    write_text(path, json_text(out, indent=2, sort_keys=True) + "\n")
     return out
 
 
@@ -300,7 +300,7 @@ def _run(task: CellTask) -> dict[str, Any]:
     }
     results.meta["cell"] = {k: v for k, v in marker.items() if k not in ("fingerprint", "eval_fingerprint")}
     results.write(task.path)
-    write_text(task.path / MARKER, json.dumps(marker, indent=2, sort_keys=True) + "\n")
+    write_text(task.path / MARKER, json_text(marker, indent=2, sort_keys=True) + "\n")
     return marker
 
 

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from lfbench.utils.errors import SpecError
+from lfbench.utils.subprocesses import SAFE_PATH, safe_path_environ
 
 EXECUTORS = ("local", "slurm")
 _log = logging.getLogger(__name__)
@@ -92,7 +93,8 @@ def make_executor(options: ClusterOptions, folder: Path, threads: int):
         return ex
     ex = submitit.SlurmExecutor(folder=str(folder))
     params: dict[str, Any] = {"time": options.timeout_min, "cpus_per_task": options.cpus_per_job or threads,
-                              "ntasks_per_node": 1, "nodes": 1}
+                              "ntasks_per_node": 1, "nodes": 1,
+                              "setup": [f"export {k}={v}" for k, v in SAFE_PATH.items()]}  # not from the job's cwd
     if options.gpus_per_job:
         params["gpus_per_node"] = options.gpus_per_job
     if options.partition:
@@ -111,7 +113,8 @@ def submit_cells(fn: Callable[[Any], dict], tasks: Sequence[Any], options: Clust
 
     folder.mkdir(parents=True, exist_ok=True)
     executor = make_executor(options, folder, threads)
-    jobs = [(t, executor.submit(fn, t)) for t in tasks]
+    with safe_path_environ():  # the jobs import lfbench as installed, not from the current folder
+        jobs = [(t, executor.submit(fn, t)) for t in tasks]
     _log.info(f"submitted {len(jobs)} cell job(s) through submitit ({options.executor}); logs in {folder}")
     failed = []
     for task, job in jobs:

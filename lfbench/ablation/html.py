@@ -17,15 +17,15 @@ def write_site(spec: AblationSpec, out: str | Path) -> Path:
 
     from lfbench.ablation.cell import MAPS, load_scenes
     from lfbench.ablation.runner import prepare_evaluation
-    from lfbench.reports.figures import safe_name
     from lfbench.reports.html import SITE_DIR, SiteInputs, build_site
     from lfbench.runs.results import Results
+    from lfbench.utils.names import file_name
 
     out = Path(out)
     results = Results.read(out / "results.json")
     scenes = load_scenes(prepare_evaluation(spec, out, logging.getLogger(__name__).info))
     folders = {cell.id: out / "cells" / cell.id / MAPS for cell in spec.cells}
-    folders |= {m.label: out / "methods" / safe_name(m.label) / "maps" for m in spec.methods}
+    folders |= {m.label: out / "methods" / file_name(m.label) / "maps" for m in spec.methods}
     maps = {label: folder for label, folder in folders.items() if (folder / "disp_maps").is_dir()}
     inputs = SiteInputs(results=results, scenes=scenes, maps=maps, title=spec.title,
                         notes=[f"Ablation {spec.source}: budget {spec.budget_label()}; one method per cell "

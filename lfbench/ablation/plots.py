@@ -10,10 +10,12 @@ import numpy as np
 import pandas as pd
 
 from lfbench.reports.figures import _pyplot, save_figure
+from lfbench.utils.figure_text import plain_text
 
 INTERP_COLOURS = {"bilinear": "tab:blue", "nearest": "tab:orange", "phase": "tab:green"}
 
 
+@plain_text
 def beta_curve(frame: pd.DataFrame, records: pd.DataFrame, path: Path, ours: str) -> Path:
     """BadPix 0.07 (%) against the UAFL beta: the mean over scenes (line) and each scene (faint);
     the axis runs from beta = 1 down to 0.1 as in the paper's figure."""
@@ -70,6 +72,7 @@ def _scatter(ax, xs: Sequence[float], ys: Sequence[float], intervals: Sequence[f
         ax.legend(fontsize=7, title="interpolation (labels: interval px)", title_fontsize=7)
 
 
+@plain_text
 def accuracy_vs_time(frame: pd.DataFrame, paper: pd.DataFrame | None, path: Path, ours: str, time_label: str) -> Path:
     """BadPix 0.07 against test time for each interval and interpolation: ours and, beside, the paper's."""
     plt = _pyplot()

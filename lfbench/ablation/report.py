@@ -388,9 +388,9 @@ def write_figures(spec: AblationSpec, out: Path, frame: pd.DataFrame, results: R
                                               time_label(frame)))
     if spec.evaluation.error_maps:
         maps = {cid: out / "cells" / cid / "maps" for cid in frame.index} if not frame.empty else {}
-        from lfbench.reports.figures import safe_name
+        from lfbench.utils.names import file_name
 
         for m in spec.methods:
-            maps[m.label] = out / "methods" / safe_name(m.label) / "maps"
+            maps[m.label] = out / "methods" / file_name(m.label) / "maps"
         written += plots.error_maps(results.meta.get("scenes", []), maps, fig_dir / "error_maps")
     return written

@@ -39,17 +39,12 @@ from lfbench.runs.results import Results
 from lfbench.utils.atomic import fresh_dir, write_text
 from lfbench.utils.errors import DataError, SpecError
 from lfbench.utils.hardware import available_cores
-from lfbench.utils.jsonfile import read_json
+from lfbench.utils.jsonfile import json_text, read_json
 from lfbench.utils.log import log_to_file
+from lfbench.utils.names import file_name
 
 Log = Callable[[str], None]
 _log = logging.getLogger(__name__)
-
-
-def _safe(label: str) -> str:
-    from lfbench.reports.figures import safe_name
-
-    return safe_name(label)
 
 
 # --------------------------------------------------------------------------- data
@@ -86,7 +81,7 @@ def prepare_training_data(cells: tuple[Cell, ...], out: Path, log: Log) -> dict[
 
 def prepare_evaluation(spec: AblationSpec, out: Path, log: Log) -> tuple[tuple[str, str], ...]:
     """The evaluation scenes as (folder, category): generated synthetic ones and/or the named HCI ones."""
-    from lfbench.data.scene import Benchmark, Scene
+    from lfbench.data.scene import Benchmark, Scene, check_scene_names
 
     ev = spec.evaluation
     scenes: list[Scene] = []
@@ -101,10 +96,7 @@ def prepare_evaluation(spec: AblationSpec, out: Path, log: Log) -> tuple[tuple[s
         scenes += [s for s in chosen if s.has_gt()]
     if not scenes:
         raise DataError("none of the evaluation scenes has ground truth (gt_disp_lowres.pfm)", spec.source)
-    names = [s.name for s in scenes]
-    if len(set(names)) != len(names):
-        raise SpecError(f"evaluation: scene names must be unique, got {', '.join(names)}", spec.source)
-    return tuple((str(s.path), s.category) for s in scenes)
+    return tuple((str(s.path), s.category) for s in check_scene_names(scenes))
 
 
 # --------------------------------------------------------------------------- stage 1
@@ -148,7 +140,7 @@ def _shared_stage1(spec: AblationSpec, folder: Path, links: dict[str, str], thre
     with log_to_file(folder / LOG):  # train() restores the caller's thread count itself
         train(TrainConfig.from_toml(path), folder, command=command, progress=progress)
     summary = read_json(folder / "summary.json", "training summary")
-    write_text(marker, json.dumps({"steps": summary["steps"], "elapsed_s": summary["elapsed_s"]}, indent=2) + "\n")
+    write_text(marker, json_text({"steps": summary["steps"], "elapsed_s": summary["elapsed_s"]}, indent=2) + "\n")
     return folder
 
 
@@ -276,7 +268,7 @@ def run_methods(spec: AblationSpec, out: Path, scenes: tuple[tuple[str, str], ..
     loaded = load_scenes(scenes)
     out_list = []
     for m in spec.methods:
-        folder = out / "methods" / _safe(m.label)
+        folder = out / "methods" / file_name(m.label)
         key = _sha([m.spec, ev.fingerprint(), [s for s, _ in scenes]])
         marker = folder / "method.json"
         done = read_json(marker, "method marker") if marker.is_file() else None
@@ -288,7 +280,7 @@ def run_methods(spec: AblationSpec, out: Path, scenes: tuple[tuple[str, str], ..
                                  on_prediction=save_maps(folder / "maps"), progress=False,
                                  meta={"method": {"label": m.label, "spec": m.spec}})
         if res.records:  # a method that served no scene (e.g. weights not there yet) is tried again next time
-            write_text(marker, json.dumps({"label": m.label, "spec": m.spec, "key": key}, indent=2) + "\n")
+            write_text(marker, json_text({"label": m.label, "spec": m.spec, "key": key}, indent=2) + "\n")
         log(f"method {m.label}: scored on {len(res.scenes)} scene(s)")
         out_list.append(res)
     return out_list

@@ -264,6 +264,7 @@ def parse_spec(raw: dict[str, Any], source: Path, text: str = "") -> AblationSpe
             cells = _with_seeds(cells, seeds, source)
     elif grid_raw:
         raise SpecError("grid: cells need a base training config (base = \"CONFIG.toml\" or [base])", source)
+    _check_method_names(cells, methods, source)
     if not cells and not methods:
         raise SpecError("nothing to run: give a base config (with a [[grid]], or one cell from the base alone) "
                         "and/or [[methods]]", source)
@@ -442,6 +443,21 @@ def _parse_methods(raw: list[Any], source: Path) -> tuple[ExtraMethod, ...]:
     if len(set(labels)) != len(labels):
         raise SpecError(f"methods: labels must be unique, got {labels}", source)
     return tuple(out)
+
+
+def _check_method_names(cells: tuple[Cell, ...], methods: tuple[ExtraMethod, ...], source: Path) -> None:
+    """Cell ids and [[methods]] labels name the records (method = id or label), the HTML pages and the
+    cells/<id> and methods/<label> folders: SpecError when a label is a cell's id, DataError when two
+    are one file name (lfbench.utils.names: 'm<1' and 'm>1' would share methods/m_1)."""
+    from lfbench.utils.names import FileNames
+
+    ids = {c.id for c in cells}
+    for m in methods:
+        if m.label in ids:
+            raise SpecError(f"methods: label {m.label!r} is also the id of a cell; rename it", source)
+    names = FileNames("method (cell id or [[methods]] label)", source=source)
+    for name in [*(c.id for c in cells), *(m.label for m in methods)]:
+        names(name)
 
 
 # --------------------------------------------------------------------------- cells

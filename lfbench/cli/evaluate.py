@@ -75,5 +75,5 @@ def run(args: argparse.Namespace) -> int:
     if args.html:
         from lfbench.reports.html import build_site_from_dir
 
-        print(f"HTML report: {build_site_from_dir(args.out, data_root=args.data)}")
+        print(f"HTML report: {build_site_from_dir(args.out, data_root=args.data, scenes=scenes)}")
     return 0

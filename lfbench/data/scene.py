@@ -13,9 +13,10 @@ import functools
 import os
 import re
 import warnings
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TypeVar
 
 import numpy as np
 from PIL import Image
@@ -23,6 +24,7 @@ from PIL import Image
 from lfbench.data.params import SceneParameters, read_parameters
 from lfbench.data.pfm import read_pfm
 from lfbench.utils.errors import DataError
+from lfbench.utils.names import FileNames
 
 GRAY_WEIGHTS = (0.299, 0.587, 0.114)
 LOWRES, HIGHRES = "lowres", "highres"
@@ -283,9 +285,11 @@ class Scene(LightField):
         return read_mask(path, size=(h * scale, w * scale))
 
     def valid_mask(self) -> np.ndarray | None:
-        """valid_mask.png as bool (H, W) (True = pixel may be scored), or None if absent."""
+        """valid_mask.png as bool (H, W) (True = pixel may be scored), or None if absent. It is at the
+        scene's low resolution (parameters.cfg): any other size is refused (DataError naming the file);
+        high-resolution scoring upsamples it as it upsamples predictions (lfbench.scoring.rules)."""
         path = self.path / "valid_mask.png"
-        return read_mask(path) if path.is_file() else None
+        return read_mask(path, size=self.spatial_size) if path.is_file() else None
 
 
 # --------------------------------------------------------------------------- benchmark layout
@@ -348,9 +352,10 @@ class Benchmark:
         return self.by_category(*SPLITS[name])
 
     def select(self, names: list[str] | None) -> list[Scene]:
-        """Scenes by name (or category name, or split name); all scenes when ``names`` is empty."""
+        """Scenes by name (or category name, or split name); all scenes when ``names`` is empty.
+        DataError when two selected scenes share a name (:func:`check_scene_names`)."""
         if not names:
-            return list(self.scenes)
+            return check_scene_names(self.scenes)
         out: list[Scene] = []
         for n in names:
             if n in SPLITS:
@@ -360,4 +365,31 @@ class Benchmark:
             if not hits:
                 raise DataError(f"no scene {n!r}; available: {', '.join(self.names)}", self.root)
             out += [s for s in hits if s not in out]
-        return out
+        return check_scene_names(out)
+
+    def named(self, names: Iterable[str]) -> list[Scene]:
+        """The scenes whose name is one of ``names`` (e.g. the scenes of a results file; absent ones are
+        left out), refused as :meth:`select` refuses two of one name."""
+        wanted = set(names)
+        return check_scene_names([s for s in self.scenes if s.name in wanted])
+
+
+SceneT = TypeVar("SceneT", bound=LightField)
+
+
+def check_scene_names(scenes: Iterable[SceneT]) -> list[SceneT]:
+    """``scenes`` as a list; DataError when two of them from different folders share a name (results,
+    maps and figures name a scene by its name, so one would overwrite or merge with the other), or when
+    two names are one file name (lfbench.utils.names: 'a<b' and 'a>b' are both 'a_b')."""
+    scenes = list(scenes)
+    first: dict[str, SceneT] = {}
+    file_names = FileNames("scene")
+    for scene in scenes:
+        other = first.setdefault(scene.name, scene)
+        path, other_path = getattr(scene, "path", None), getattr(other, "path", None)
+        if other is not scene and path != other_path:
+            raise DataError(f"two scenes are named {scene.name!r}: {other_path} and {path}; results name a scene by "
+                            "its name, so select one of them by category (--scenes CATEGORY, or --data ROOT/CATEGORY) "
+                            "or rename one folder")
+        file_names(scene.name)
+    return scenes

@@ -34,9 +34,11 @@ import numpy as np
 from lfbench.data.scene import LOWRES, LightField
 from lfbench.method.base import Prediction
 from lfbench.scoring.metrics import bad_pix_curve, find_metric
-from lfbench.scoring.rules import ScoringRules, align_prediction, border_mask, upsample_nearest
+from lfbench.scoring.rules import ScoringRules, align_prediction, evaluation_mask, upsample_nearest
 from lfbench.utils.atomic import write_bytes, write_text
 from lfbench.utils.errors import SpecError
+from lfbench.utils.figure_text import plain_text
+from lfbench.utils.names import FileNames, file_name, file_names
 
 _log = logging.getLogger(__name__)
 
@@ -159,16 +161,6 @@ def disparity_range(lf: LightField, gt: np.ndarray | None = None,
             lo, hi = float(finite.min()), float(finite.max())
             return (lo, hi) if hi > lo else (lo - 0.5, hi + 0.5)
     return -1.0, 1.0
-
-
-def evaluation_mask(lf: LightField, shape: tuple[int, int], border_px: int = 15) -> np.ndarray:
-    """The low-resolution evaluation mask: all but a ``border_px`` border, and valid_mask.png if any."""
-    mask = border_mask(shape, border_px)
-    valid_fn = getattr(lf, "valid_mask", None)
-    valid = valid_fn() if callable(valid_fn) else None
-    if valid is not None and valid.shape == shape:
-        mask &= valid
-    return mask
 
 
 @dataclass
@@ -315,6 +307,7 @@ def _blank(ax: Any, text: str) -> None:
     ax.text(0.5, 0.5, text, ha="center", va="center", fontsize=8, color="0.4", transform=ax.transAxes, wrap=True)
 
 
+@plain_text
 def draw_method_row(panels: MethodPanels, path: str | Path, resolution_note: str = "") -> Path:
     """One method's row: disparity | BadPix map | signed error | uncertainty, as a PNG of fixed size."""
     fig, axes = _row_figure(panels.label + (f"  ({resolution_note})" if resolution_note else ""))
@@ -340,6 +333,7 @@ def draw_method_row(panels: MethodPanels, path: str | Path, resolution_note: str
     return save_figure(fig, path)
 
 
+@plain_text
 def draw_scene_header(lf: LightField, path: str | Path, gt: np.ndarray | None,
                       disp_range: tuple[float, float], threshold: float = BADPIX_THRESHOLD,
                       border_px: int = 15) -> Path:
@@ -432,6 +426,7 @@ def average_curves(curves: Sequence[Curve]) -> dict[str, tuple[np.ndarray, np.nd
     return {m: (cs[0].thresholds, np.mean([c.values for c in cs], axis=0), len(cs)) for m, cs in out.items()}
 
 
+@plain_text
 def plot_badpix_series(series: Mapping[str, tuple[np.ndarray, np.ndarray]], path: str | Path, title: str,
                        markers: bool = False) -> Path:
     """BadPix(t) (%) against t (px), one line per method; dotted lines mark 0.01, 0.03 and 0.07."""
@@ -503,8 +498,9 @@ def draw_badpix_curves(curves: Sequence[Curve], out_dir: str | Path) -> list[Pat
     for c in curves:
         by_scene.setdefault(c.scene, {})[c.method] = (c.thresholds, c.values)
         res_of.setdefault(c.scene, set()).add(c.resolution)
+    folders = file_names(by_scene, "scene", reserved=RESERVED_SCENE_NAMES)
     for scene, series in by_scene.items():
-        written.append(plot_badpix_series(series, out / safe_name(scene) / "badpix_series.png",
+        written.append(plot_badpix_series(series, out / folders[scene] / "badpix_series.png",
                                           f"BadPix series, {scene} ({'/'.join(sorted(res_of[scene]))})"))
     avg = average_curves(curves)
     n = {m: k for m, (_, _, k) in avg.items()}
@@ -537,9 +533,14 @@ def curves_from_records(results: Any) -> dict[str, tuple[np.ndarray, np.ndarray]
 
 # --------------------------------------------------------------------------- the evaluate hook
 
-def safe_name(label: str) -> str:
-    """A method label or scene name as a file name (as lfbench.runs.runner.save_prediction does)."""
-    return "".join(c if c.isalnum() or c in "._-=" else "_" for c in label) or "_"
+#: A method label or scene name as a file name (lfbench.utils.names.file_name, the one rule).
+safe_name = file_name
+
+
+#: Names the figure folder and a scene's folder hold besides the scenes' folders and the methods' rows:
+#: a scene or a method label whose file name is one of them is refused (lfbench.utils.names).
+RESERVED_SCENE_NAMES = ("badpix_series.csv", "badpix_series.png", "toolkit")
+RESERVED_ROW_NAMES = ("header", "badpix_series")
 
 
 class SceneFigureWriter:
@@ -548,7 +549,9 @@ class SceneFigureWriter:
     Writes into ``out_dir``: ``<scene>/header.png`` (centre view, ground truth),
     ``<scene>/<method>.png`` (one row per method), ``overview_<scene>.png`` (header and rows stacked),
     and, when ``curves`` is set, ``badpix_series.csv``, ``badpix_series.png`` (mean over scenes) and
-    ``<scene>/badpix_series.png``. Only the row file names and the curves are kept in memory.
+    ``<scene>/badpix_series.png``. Only the row file names and the curves are kept in memory. Scene and
+    method names are file names by lfbench.utils.names: two that would share a file are refused
+    (DataError) before anything of the second is drawn.
     """
 
     def __init__(self, out_dir: str | Path, rules: ScoringRules = ScoringRules(),
@@ -560,6 +563,8 @@ class SceneFigureWriter:
         self._rows: dict[str, dict[str, Path]] = {}  # scene -> method label -> row PNG (arrival order)
         self._headers: dict[str, tuple[Path, tuple[float, float]]] = {}
         self._curves: dict[tuple[str, str], Curve] = {}
+        self._scene_names = FileNames("scene", reserved=RESERVED_SCENE_NAMES)
+        self._method_names = FileNames("method label", reserved=RESERVED_ROW_NAMES)
         self.written: set[Path] = set()
 
     def __call__(self, method: Any, scene: LightField, prediction: Prediction) -> None:
@@ -572,7 +577,8 @@ class SceneFigureWriter:
     def add(self, label: str, scene: LightField, prediction: Prediction | np.ndarray) -> list[Path]:
         """Draw one prediction's row, re-assemble the scene's overview and update the curves."""
         pred = prediction if isinstance(prediction, Prediction) else Prediction(disparity=np.asarray(prediction))
-        scene_dir = self.out / safe_name(scene.name)
+        scene_name, method_name = self._scene_names(scene.name), self._method_names(label)
+        scene_dir = self.out / scene_name
         gt = scene.gt_disparity()
         written = []
         center = None
@@ -590,10 +596,10 @@ class SceneFigureWriter:
         panels = method_panels(label, scene, pred, gt=gt, background=center, disp_range=disp_range,
                                threshold=self.threshold, border_px=self.rules.border_px)
         rows = self._rows.setdefault(scene.name, {})
-        rows[label] = draw_method_row(panels, scene_dir / f"{safe_name(label)}.png", "low resolution")
+        rows[label] = draw_method_row(panels, scene_dir / f"{method_name}.png", "low resolution")
         del panels
         written.append(rows[label])
-        written.append(stack_rows([header, *rows.values()], self.out / f"overview_{safe_name(scene.name)}.png"))
+        written.append(stack_rows([header, *rows.values()], self.out / f"overview_{scene_name}.png"))
         if self.curves_enabled:
             curve = scene_curve(label, scene, pred.disparity, self.rules)
             if curve is not None:

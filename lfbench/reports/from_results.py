@@ -82,8 +82,7 @@ def report_from_results(results_path: str | Path, out: str | Path, *,
         root = data or (Path(results.meta["data_root"]) if results.meta.get("data_root") else None)
         if root is None:
             raise DataError("--maps needs --data ROOT (the results do not record their data root)", results_path)
-        wanted = set(results.scenes)
-        scenes = [s for s in Benchmark.discover(root) if s.name in wanted]
+        scenes = Benchmark.discover(root).named(results.scenes)
         folders = map_folders(Path(maps), results.methods)
         rules = ScoringRules.from_meta(results.meta)  # the curves use the rules the results were scored with
         scene_maps = {s.name: load_scene_maps(s, folders, rules.border_px) for s in scenes if s.has_gt()}

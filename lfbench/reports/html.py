@@ -34,7 +34,7 @@ from lfbench.reports import figures as fig
 from lfbench.reports import toolkit_figures as tk
 from lfbench.reports.leaderboard import all_metric_ranks, metric_info, metric_table, overall_ranks
 from lfbench.reports.maps import MAPS_DIR, SceneMaps, load_scene_maps, map_folders
-from lfbench.runs.results import Results
+from lfbench.runs.results import Results, check_names
 from lfbench.scoring.rules import ScoringRules
 from lfbench.utils.atomic import fresh_dir, replace_dir, write_text
 from lfbench.utils.errors import DataError
@@ -319,6 +319,7 @@ def build_site(inputs: SiteInputs, out: str | Path, *, threshold: float = fig.BA
     results = inputs.results
     if not results.records:
         raise DataError("the results hold no records; nothing to report")
+    check_names(results)  # pages and images are named after methods and scenes
     out = check_site_dir(out)
     border = border_px if border_px is not None else ScoringRules.from_meta(results.meta).border_px
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -504,14 +505,14 @@ def _method_table(results: Results, method: str, scene_pages: Mapping[str, str],
 # --------------------------------------------------------------------------- from a results folder
 
 def site_inputs_from_dir(results_path: str | Path, *, data_root: str | Path | None = None,
-                         maps: str | Path | None = None, paper: Any = None,
+                         maps: str | Path | None = None, scenes: Sequence[Any] | None = None, paper: Any = None,
                          paper_methods: Sequence[str] = ("SubFocal",), title: str | None = None) -> SiteInputs:
     """What a results folder holds for a site: results.json, ci.csv (when ``--ci`` ran), the saved maps
     (``maps`` or RESULTS_DIR/maps when present) and the scenes of ``data_root`` (default: the data
-    root the results record, when it exists)."""
+    root the results record, when it exists), or ``scenes`` (those the results were scored on)."""
     results_path = Path(results_path)
     folder = results_path if results_path.is_dir() else results_path.parent
-    return site_inputs(Results.read(results_path), folder, data_root=data_root, maps=maps, paper=paper,
+    return site_inputs(Results.read(results_path), folder, data_root=data_root, maps=maps, scenes=scenes, paper=paper,
                        paper_methods=paper_methods, title=title)
 
 
@@ -523,16 +524,9 @@ def site_inputs(results: Results, folder: Path, *, data_root: str | Path | None 
     ``scenes``: the results' scenes of the data root when already discovered (then ``data_root`` is
     not searched again); ``scene_maps``: their saved maps when already loaded (SiteInputs)."""
     from lfbench.data.scene import Benchmark
+    from lfbench.scoring.stats import read_ci_csv
 
-    ci = None
-    if (folder / "ci.csv").is_file():
-        try:
-            ci = pd.read_csv(folder / "ci.csv")
-        except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
-            raise DataError(f"not a readable CSV table: {str(exc).splitlines()[0]}", folder / "ci.csv") from None
-        missing = {"method", "scene", "metric", "low", "high"} - set(ci.columns)
-        if missing:
-            raise DataError(f"missing column(s) {', '.join(sorted(missing))}", folder / "ci.csv")
+    ci = read_ci_csv(folder / "ci.csv") if (folder / "ci.csv").is_file() else None
     maps_dir = Path(maps) if maps is not None else folder / MAPS_DIR
     folders = map_folders(maps_dir, results.methods) if (maps is not None or maps_dir.is_dir()) else {}
     root = Path(data_root) if data_root is not None else (
@@ -541,8 +535,7 @@ def site_inputs(results: Results, folder: Path, *, data_root: str | Path | None 
     if scenes is not None:
         scenes = list(scenes)
     elif root is not None and (data_root is not None or root.is_dir()):
-        wanted = set(results.scenes)
-        scenes = [s for s in Benchmark.discover(root) if s.name in wanted]
+        scenes = Benchmark.discover(root).named(results.scenes)
     elif root is not None:
         notes.append(f"The data root {root} recorded in the results is not here: no maps are shown "
                      "(give --data ROOT).")

@@ -26,7 +26,7 @@ def map_folders(maps: str | Path, labels: Sequence[str]) -> dict[str, Path]:
     """Method label -> submission folder under ``maps`` (folder names as ``save_prediction`` writes
     them, matched back to ``labels``); ``maps`` itself when it is one submission folder. DataError
     when it holds none."""
-    from lfbench.reports.figures import safe_name
+    from lfbench.utils.names import file_names
 
     maps = Path(maps)
     if (maps / "disp_maps").is_dir():
@@ -34,8 +34,8 @@ def map_folders(maps: str | Path, labels: Sequence[str]) -> dict[str, Path]:
     folders = {p.name: p for p in sorted(maps.iterdir()) if (p / "disp_maps").is_dir()} if maps.is_dir() else {}
     if not folders:
         raise DataError("no saved maps found (expected <method>/disp_maps/<scene>.pfm)", maps)
-    by_safe = {safe_name(label): label for label in labels}
-    return {by_safe.get(name, name): path for name, path in folders.items()}
+    by_name = {name: label for label, name in file_names(labels, "method label").items()}
+    return {by_name.get(name, name): path for name, path in folders.items()}
 
 
 @dataclass

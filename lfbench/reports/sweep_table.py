@@ -25,6 +25,7 @@ from lfbench.method.registry import parse_spec
 from lfbench.reports.tables import write_table
 from lfbench.runs.results import Results
 from lfbench.utils.errors import DataError, LFBenchError
+from lfbench.utils.figure_text import plain_text
 from lfbench.utils.jsonfile import read_json
 
 __all__ = ["SYNTH_PREFIX", "collect", "main", "scene_group", "sweep_figure", "sweep_table"]
@@ -85,6 +86,7 @@ def sweep_table(frame: pd.DataFrame) -> pd.DataFrame:
     return out.set_index("scenes")
 
 
+@plain_text
 def sweep_figure(table: pd.DataFrame, path: Path) -> Path:
     """BadPix 0.07 against the interval (log axis, coarse to fine), a line per interpolation and fit, a panel
     per scene group."""

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from lfbench.reports import latex
 from lfbench.runs.results import Results
 from lfbench.scoring.metrics import find_metric, list_metrics
 from lfbench.utils.atomic import write_text
@@ -75,25 +76,29 @@ def average_table(results: Results, metrics: Sequence[str] | None = None) -> pd.
 
 
 def render(table: pd.DataFrame, fmt: str = "markdown", floatfmt: str = ".3f") -> str:
-    """A table as 'markdown' (GitHub pipes), 'latex' (booktabs), 'csv' or 'plain' text."""
+    """A table as 'markdown' (GitHub pipes), 'latex' (booktabs; every string escaped by
+    lfbench.reports.latex), 'csv' or 'plain' text."""
     if table.empty:
         return "(no results)\n"
     flat = table.reset_index()
     headers = [_header(str(c)) for c in flat.columns]
     if fmt == "csv":
         return flat.to_csv(index=False, float_format="%.6g")
-    from tabulate import tabulate
-
-    fmt_name = {"markdown": "github", "latex": "latex_booktabs", "plain": "simple"}.get(fmt)
-    if fmt_name is None:
+    if fmt not in ("markdown", "latex", "plain"):
         raise ValueError(f"unknown table format {fmt!r}: markdown, latex, csv or plain")
+
     def cell(v):
         if isinstance(v, (float, np.floating)):
             return "-" if np.isnan(v) else format(float(v), floatfmt)
         return v
 
     rows = [[cell(v) for v in row] for row in flat.itertuples(index=False)]
-    return tabulate(rows, headers=headers, tablefmt=fmt_name, disable_numparse=True) + "\n"
+    if fmt == "latex":
+        return latex.tabular(headers, rows)  # every cell and header escaped (lfbench.reports.latex)
+    from tabulate import tabulate
+
+    return tabulate(rows, headers=headers, tablefmt="github" if fmt == "markdown" else "simple",
+                    disable_numparse=True) + "\n"
 
 
 #: The formats every table is written in: (render format, file extension).
@@ -102,14 +107,14 @@ TABLE_FORMATS: tuple[tuple[str, str], ...] = (("markdown", "md"), ("latex", "tex
 
 def render_with_caption(table: pd.DataFrame, fmt: str, caption: Sequence[str] = ()) -> str:
     """:func:`render` with caption lines above the table: Markdown lines (hard breaks) or LaTeX
-    comments; CSV stays a plain table."""
+    comments (escaped, one line each: lfbench.reports.latex.comment); CSV stays a plain table."""
     body = render(table, fmt)
     if not caption:
         return body
     if fmt == "markdown":
         return "".join(f"{line}  \n" for line in caption) + "\n" + body
     if fmt == "latex":
-        return "".join(f"% {line}\n" for line in caption) + body
+        return latex.comment(caption) + body
     return body
 
 

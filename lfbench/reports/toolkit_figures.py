@@ -30,6 +30,7 @@ import pandas as pd
 
 from lfbench.reports.figures import _as_gray, _colorbar, _colormap, _pyplot, save_formats
 from lfbench.utils.errors import SpecError
+from lfbench.utils.figure_text import plain_text
 
 __all__ = [
     "A_BETTER", "B_BETTER", "HEATMAP_CMAP", "OUTSIDE", "PAIRWISE_LIMIT", "PAIRWISE_THRESHOLD", "TIE",
@@ -186,6 +187,7 @@ def radar_radii(scores: pd.DataFrame, rings: int = 4) -> pd.DataFrame:
 
 # --------------------------------------------------------------------------- drawing
 
+@plain_text
 def plot_pairwise(gt_by_scene: Mapping[str, np.ndarray], a_by_scene: Mapping[str, np.ndarray],
                   b_by_scene: Mapping[str, np.ndarray], labels: tuple[str, str], path: str | Path, *,
                   masks: Mapping[str, np.ndarray] | None = None, backgrounds: Mapping[str, np.ndarray] | None = None,
@@ -215,6 +217,7 @@ def plot_pairwise(gt_by_scene: Mapping[str, np.ndarray], a_by_scene: Mapping[str
     return save_formats(fig, path, formats)
 
 
+@plain_text
 def plot_error_heatmaps(gt_by_scene: Mapping[str, np.ndarray], preds_by_scene: Mapping[str, Sequence[np.ndarray]],
                         path: str | Path, *, masks: Mapping[str, np.ndarray] | None = None, threshold: float = 0.07,
                         methods: Sequence[str] = (), formats: Sequence[str] = ("png",)) -> list[Path]:
@@ -245,6 +248,7 @@ def plot_error_heatmaps(gt_by_scene: Mapping[str, np.ndarray], preds_by_scene: M
     return save_formats(fig, path, formats)
 
 
+@plain_text
 def plot_radar(scores: pd.DataFrame, path: str | Path, *, title: str = "", highlight: str | None = None,
                labels: Mapping[str, str] | None = None, formats: Sequence[str] = ("png",)) -> list[Path]:
     """A radar chart of :func:`radar_scores` (rows metrics, columns methods): one closed line per
@@ -307,7 +311,7 @@ def toolkit_figures_from_scene_maps(results: Any, scene_maps: Iterable[Any], out
                                     threshold: float = PAIRWISE_THRESHOLD) -> list[Path]:
     """:func:`write_toolkit_figures` from maps already loaded (lfbench.reports.maps.SceneMaps, one per
     scene)."""
-    from lfbench.reports.figures import safe_name
+    from lfbench.utils.names import FileNames, file_names
 
     out = Path(out_dir)
     written: list[Path] = []
@@ -323,14 +327,15 @@ def toolkit_figures_from_scene_maps(results: Any, scene_maps: Iterable[Any], out
     if not gts:
         return written
     labels = [m for m in results.methods if any(m in p for p in preds.values())]
+    names, pair_names = file_names(labels, "method label"), FileNames("method pair")
+    pairs = [(a, b, pair_names.claim(f"{a} vs {b}", f"pairwise_{names[a]}_vs_{names[b]}"))
+             for i, a in enumerate(labels) for b in labels[i + 1:]]  # every name checked before drawing
     written += plot_error_heatmaps(gts, {s: [p[m] for m in labels if m in p] for s, p in preds.items()},
                                    out / "error_heatmaps", masks=masks, methods=labels, formats=formats)
-    for i, a in enumerate(labels):
-        for b in labels[i + 1:]:
-            a_maps = {s: p[a] for s, p in preds.items() if a in p}
-            b_maps = {s: p[b] for s, p in preds.items() if b in p}
-            if set(a_maps) & set(b_maps):
-                name = f"pairwise_{safe_name(a)}_vs_{safe_name(b)}"
-                written += plot_pairwise(gts, a_maps, b_maps, (a, b), out / name, masks=masks, backgrounds=centres,
-                                         threshold=threshold, formats=formats)
+    for a, b, name in pairs:
+        a_maps = {s: p[a] for s, p in preds.items() if a in p}
+        b_maps = {s: p[b] for s, p in preds.items() if b in p}
+        if set(a_maps) & set(b_maps):
+            written += plot_pairwise(gts, a_maps, b_maps, (a, b), out / name, masks=masks, backgrounds=centres,
+                                     threshold=threshold, formats=formats)
     return written

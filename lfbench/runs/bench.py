@@ -50,6 +50,8 @@ from pathlib import Path
 from typing import Any
 
 from lfbench.utils.errors import SpecError
+from lfbench.utils.jsonfile import json_text
+from lfbench.utils.subprocesses import safe_path_env
 
 PRECISIONS = ("fp32", "bf16")
 BENCHES = ("peak", "inference", "volume", "train", "metrics")  # the order of the tables
@@ -435,7 +437,8 @@ def run_isolated(bench: str, params: dict, timeout_s: float | None = None) -> di
         return {"bench": bench, **params, "skipped": reason}
     cmd = [sys.executable, "-m", "lfbench.runs.bench", json.dumps({"bench": bench, "params": params})]
     try:
-        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout_s, check=False)
+        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout_s, check=False,
+                              env=safe_path_env())  # lfbench and plugins as installed, not from the current folder
     except subprocess.TimeoutExpired:
         return {"bench": bench, **params, "error": f"timed out after {timeout_s} s"}
     lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("{")]
@@ -523,7 +526,7 @@ def write_json(path: str | Path, records: Sequence[dict]) -> None:
     """The records as a JSON list, written atomically."""
     from lfbench.utils.atomic import write_text
 
-    write_text(Path(path), json.dumps(list(records), indent=2, sort_keys=True) + "\n")
+    write_text(Path(path), json_text(list(records), indent=2, sort_keys=True) + "\n")
 
 
 def _main(argv: Sequence[str]) -> int:

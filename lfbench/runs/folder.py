@@ -27,7 +27,7 @@ from lfbench.method.base import Method
 from lfbench.reports.maps import MAPS_DIR
 from lfbench.runs.outputs import staged_outputs
 from lfbench.runs.results import Results
-from lfbench.runs.runner import PredictionHook, evaluate, save_prediction
+from lfbench.runs.runner import PredictionHook, check_names, evaluate, save_prediction
 from lfbench.scoring.metrics import GENERAL_METRICS, Metric
 from lfbench.scoring.rules import ScoringRules
 
@@ -71,6 +71,7 @@ def evaluate_to_folder(methods: Sequence[Method], scenes: Sequence[Scene], out: 
     out = Path(out)
     if label is not None and len(methods) != 1:
         raise ValueError("label= names the records of a single method")
+    check_names([(methods, scenes), *more], label)  # records and files that would collide: before any work
     with staged_outputs(out) as outputs:  # OUT checked and its staging folder made before any work
         results, staged = _run_into(outputs.stage, methods, scenes, rules=rules, metrics=metrics,
                                     all_metrics=all_metrics, more=more, label=label, on_prediction=on_prediction,

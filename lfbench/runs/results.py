@@ -8,8 +8,6 @@ from __future__ import annotations
 
 import csv
 import io
-import json
-import math
 import platform
 from dataclasses import asdict, dataclass, field
 from datetime import UTC, datetime
@@ -18,7 +16,7 @@ from typing import Any
 
 from lfbench.utils.atomic import write_text
 from lfbench.utils.errors import DataError
-from lfbench.utils.jsonfile import read_json
+from lfbench.utils.jsonfile import json_text, read_json
 
 CSV_COLUMNS = ("method", "scene", "metric", "value", "resolution")
 
@@ -86,14 +84,14 @@ class Results:
     def to_json_dict(self) -> dict[str, Any]:
         meta = {"lfbench_version": _version(), "created": datetime.now(UTC).isoformat(timespec="seconds"),
                 "python": platform.python_version(), **self.meta}
-        return {"meta": meta, "records": [_clean(asdict(r)) for r in self.records],
-                "runs": [_clean(asdict(r)) for r in self.runs]}
+        return {"meta": meta, "records": [asdict(r) for r in self.records], "runs": [asdict(r) for r in self.runs]}
 
     def write(self, out_dir: str | Path) -> tuple[Path, Path]:
-        """Write results.json and results.csv into ``out_dir`` (atomically)."""
+        """Write results.json (strict JSON: a NaN value is null) and results.csv into ``out_dir``
+        (atomically)."""
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
-        write_text(out / "results.json", json.dumps(self.to_json_dict(), indent=2) + "\n")
+        write_text(out / "results.json", json_text(self.to_json_dict(), indent=2) + "\n")
         buf = io.StringIO()
         w = csv.writer(buf, lineterminator="\n")
         w.writerow(CSV_COLUMNS)
@@ -134,7 +132,25 @@ class Results:
         meta = data.get("meta", {}) if isinstance(data, dict) else {}
         if not isinstance(meta, dict):
             raise DataError("'meta' must be an object", path)
-        return cls(records=records, runs=runs, meta=meta)
+        results = cls(records=records, runs=runs, meta=meta)
+        check_names(results, path)
+        return results
+
+
+def check_names(results: Results, source: str | Path | None = None) -> None:
+    """DataError (naming ``source``) when ``results`` hold a (method, scene, metric) twice (tables and
+    ranks would merge them), or two methods or two scenes whose names are one file name
+    (lfbench.utils.names: their maps, figures and pages would be one file)."""
+    from lfbench.utils.names import file_names
+
+    seen: set[tuple[str, str, str]] = set()
+    for r in results.records:
+        key = (r.method, r.scene, r.metric)
+        if key in seen:
+            raise DataError(f"record {'/'.join(key)} appears twice", source)  # as regress.check_unique says
+        seen.add(key)
+    file_names(results.methods, "method label", source=source)
+    file_names(results.scenes, "scene", source=source)
 
 
 def _list(data: Any, key: str, path: Path) -> list[Any]:
@@ -183,11 +199,6 @@ def _num(v: Any, name: str = "value") -> float:
     if isinstance(v, bool) or not isinstance(v, int | float):
         raise TypeError(f"{name} must be a number or null, got {type(v).__name__}")
     return float(v)
-
-
-def _clean(d: dict[str, Any]) -> dict[str, Any]:
-    """JSON has no NaN: write null instead."""
-    return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in d.items()}
 
 
 def _version() -> str:

@@ -16,6 +16,7 @@ from lfbench.runs.results import Record, Results, RunInfo
 from lfbench.scoring.metrics import GENERAL_METRICS, Metric
 from lfbench.scoring.rules import ScoringRules, score_scene
 from lfbench.utils.errors import DataError
+from lfbench.utils.names import FileNames
 
 log = logging.getLogger(__name__)
 
@@ -37,6 +38,7 @@ def evaluate(methods: Sequence[Method], scenes: Sequence[Scene], *,
     (logger ``lfbench.runs.runner``); a method that can serve none of the scenes is an error
     (DataError, raised before any work). ``on_prediction`` sees each prediction (to save maps or draw figures).
     """
+    check_names([(methods, scenes)])
     reasons = check_runnable(methods, scenes)  # each (method, scene) asked once
     results = Results(meta={"scoring": rules.to_meta()})
     pairs = [(m, s, r) for m, row in zip(methods, reasons, strict=True) for s, r in zip(scenes, row, strict=True)]
@@ -63,6 +65,28 @@ def evaluate(methods: Sequence[Method], scenes: Sequence[Scene], *,
     return results
 
 
+def check_names(groups: Sequence[tuple[Sequence[Method], Sequence[Scene]]], label: str | None = None) -> None:
+    """DataError before any work when the records or files of a run of ``groups`` ((methods, scenes)
+    pairs, each method on each of its scenes) would collide: a (method, scene) pair twice (the same
+    method given twice), two methods or two scenes whose names are one file name (lfbench.utils.names),
+    two scenes of one name from different folders (lfbench.data.scene.check_scene_names). ``label``:
+    the name the records get instead of the method's label."""
+    from lfbench.data.scene import check_scene_names
+
+    check_scene_names([s for _, scenes in groups for s in scenes])
+    names = FileNames("method label")
+    pairs: set[tuple[str, str]] = set()
+    for methods, scenes in groups:
+        for method in methods:
+            name = label if label is not None else method.label
+            names(name)
+            for scene in scenes:
+                if (name, scene.name) in pairs:
+                    raise DataError(f"method {name!r} would run on scene {scene.name!r} twice (given twice?): its "
+                                    "records would be duplicated")
+                pairs.add((name, scene.name))
+
+
 def check_runnable(methods: Sequence[Method], scenes: Sequence[Scene]) -> list[list[str | None]]:
     """Why each method cannot run on each scene (``available_for``: None where it can), one row per
     method, one entry per scene. DataError when a method can run on none of ``scenes`` (its results
@@ -78,12 +102,14 @@ def check_runnable(methods: Sequence[Method], scenes: Sequence[Scene]) -> list[l
 
 
 def save_prediction(out_dir: Path) -> PredictionHook:
-    """A hook writing each prediction in the submission layout under out_dir/<method label>/."""
+    """A hook writing each prediction in the submission layout under out_dir/<method label>/ (the label as a
+    file name, lfbench.utils.names; two labels that would share a folder are refused)."""
     from lfbench.data.submission import write_submission_map
 
+    names = FileNames("method label")
+
     def hook(method: Method, scene: Scene, pred: Prediction) -> None:
-        safe = "".join(c if c.isalnum() or c in "._-=" else "_" for c in method.label)
         runtime = pred.runtime_s if pred.runtime_s and np.isfinite(pred.runtime_s) and pred.runtime_s > 0 else 1e-9
-        write_submission_map(out_dir / safe, scene.name, pred.disparity, runtime)
+        write_submission_map(out_dir / names(method.label), scene.name, pred.disparity, runtime)
 
     return hook

@@ -35,7 +35,7 @@ from scipy import ndimage
 from lfbench.data.params import SceneParameters
 from lfbench.data.scene import Scene, read_png
 from lfbench.scoring.metrics import GENERAL_METRICS, METRICS, Metric, _prepare, bad_pix, mse_x100
-from lfbench.scoring.rules import ScoringRules, metric_resolution
+from lfbench.scoring.rules import ScoringRules, metric_resolution, valid_mask_at
 from lfbench.utils.errors import DataError
 
 __all__ = [
@@ -278,7 +278,7 @@ def backgammon_thinning(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | Non
 
 def missed_dots(gt: np.ndarray, pred: np.ndarray, boxes: np.ndarray, dots_by_size: np.ndarray, *,
                 threshold: float = DOT_THRESHOLD, missed_percent: float = DOT_MISSED_PERCENT,
-                max_label: int = DOT_MAX_LABEL, toolkit: bool = False) -> float:
+                max_label: int = DOT_MAX_LABEL, toolkit: bool = False, valid: np.ndarray | None = None) -> float:
     """Missed dots: % of dots whose BadPix(threshold) is >= ``missed_percent``.
 
     ``boxes`` (H, W) int labels the cells of the dots scene (0 = none); ``dots_by_size`` (H, W)
@@ -288,7 +288,8 @@ def missed_dots(gt: np.ndarray, pred: np.ndarray, boxes: np.ndarray, dots_by_siz
     in the toolkit the border mask does not apply; every pixel of a dot counts. Default: pixels
     with non-finite gt are left out, non-finite predictions are bad, (box, label) pairs without
     pixels are not dots. ``toolkit=True``: NaN is good and an empty pair counts as a missed dot
-    (the toolkit's NaN < 50 is False).
+    (the toolkit's NaN < 50 is False). ``valid`` (H, W) bool, the scene's valid mask (lfbench's, not the
+    toolkit's): pixels outside it are not scored, and a dot with no valid pixel is no dot, in both modes.
     """
     gt, pred, _ = _prepare(gt, pred, None)
     boxes = np.asarray(boxes)
@@ -307,6 +308,14 @@ def missed_dots(gt: np.ndarray, pred: np.ndarray, boxes: np.ndarray, dots_by_siz
     dot_idx = dot_lut[dots_by_size]
     in_dot = (box_idx >= 0) & (dot_idx >= 0)
     key = box_idx * n_labels + dot_idx
+    dropped = 0  # (box, label) pairs whose pixels all lie outside ``valid``
+    if valid is not None:
+        valid = np.asarray(valid, dtype=bool)
+        if valid.shape != gt.shape:
+            raise ValueError(f"valid mask {valid.shape} must match gt {gt.shape}")
+        had_pixels = np.bincount(key[in_dot], minlength=n_pairs) > 0
+        in_dot &= valid
+        dropped = int(np.count_nonzero(had_pixels & (np.bincount(key[in_dot], minlength=n_pairs) == 0)))
     with np.errstate(invalid="ignore"):
         bad = np.abs(gt - pred) > threshold
     if toolkit:
@@ -320,7 +329,7 @@ def missed_dots(gt: np.ndarray, pred: np.ndarray, boxes: np.ndarray, dots_by_siz
         dot_bad_pix = 100.0 * n_bad / n
     missed = (n > 0) & (dot_bad_pix >= missed_percent)
     if toolkit:
-        return _percentage(n_pairs, int(np.count_nonzero(missed | (n == 0))))
+        return _percentage(n_pairs - dropped, int(np.count_nonzero(missed | (n == 0))) - dropped)
     return _percentage(int(np.count_nonzero(n > 0)), int(np.count_nonzero(missed)))
 
 
@@ -402,7 +411,7 @@ def _missed_dots_fn(gt, pred, mask=None, *, toolkit=False, scene: Scene, resolut
         if arr.shape != gt.shape:
             raise DataError(f"mask is {arr.shape[1]}x{arr.shape[0]}, ground truth is {gt.shape[1]}x{gt.shape[0]}",
                             scene.path / f"{name}_{resolution}.png")
-    return missed_dots(gt, pred, boxes, dots, toolkit=toolkit)
+    return missed_dots(gt, pred, boxes, dots, toolkit=toolkit, valid=valid_mask_at(scene, gt.shape))
 
 
 _SLANTED_MASKS = ("mask_sphere_in", "mask_sphere_out", "mask_pyramids")

@@ -6,7 +6,9 @@ Rules (the official toolkit's; docs/benchmark-rules.md, General metrics): a 15 p
 (the 512x512 prediction upsampled x10 by nearest neighbour exactly as ``scipy.ndimage.zoom(order=0)``,
 border 150 px), otherwise at low resolution; the resolution is recorded beside every number.
 Region and stratified metrics (lfbench.scoring.region_metrics) are scored wherever their mask files exist,
-at their own resolution (see :func:`metric_resolution`).
+at their own resolution (see :func:`metric_resolution`). A scene's valid_mask.png (low resolution; any other
+size is refused) leaves its False pixels out of every metric at every resolution, upsampled to high
+resolution exactly as predictions are (:func:`valid_mask_at`), missed dots included.
 Predictions cropped symmetrically by a border (482x482, 490x490) are aligned to the centre.
 """
 
@@ -110,6 +112,32 @@ def upsample_nearest(pred: np.ndarray, factor: int) -> np.ndarray:
     return ndimage.zoom(pred, factor, order=0)
 
 
+def valid_mask_at(scene: Any, shape: tuple[int, int]) -> np.ndarray | None:
+    """The scene's valid_mask.png (True = may be scored) at ``shape``: its own low resolution, or an
+    integer multiple of it, upsampled as predictions are (:func:`upsample_nearest`, the toolkit's
+    ``zoom(order=0)``), so each high-resolution pixel is valid where the low-resolution pixel its
+    prediction comes from is. None without a valid mask (or for a light field that has none)."""
+    valid_fn = getattr(scene, "valid_mask", None)
+    valid = valid_fn() if callable(valid_fn) else None
+    if valid is None or valid.shape == tuple(shape):
+        return valid
+    h, w = valid.shape
+    scale = shape[0] // h
+    if scale < 1 or tuple(shape) != (h * scale, w * scale):
+        raise ValueError(f"valid mask {w}x{h} does not scale to {shape[1]}x{shape[0]}")
+    return upsample_nearest(valid.view(np.uint8), scale).astype(bool)
+
+
+def evaluation_mask(scene: Any, shape: tuple[int, int], border_px: int) -> np.ndarray:
+    """Bool ``shape``: the pixels scored at that resolution: all but ``border_px`` (at that resolution)
+    on each side, and valid_mask.png where the scene has one (:func:`valid_mask_at`)."""
+    mask = border_mask(shape, border_px)
+    valid = valid_mask_at(scene, shape)
+    if valid is not None:
+        mask &= valid
+    return mask
+
+
 def metric_resolution(scene: Scene, metric: Metric, rules: ScoringRules = ScoringRules()) -> str | None:
     """The resolution ``metric`` is scored at on ``scene``, or None when it does not apply.
 
@@ -140,12 +168,12 @@ def score_scene(scene: Scene, pred: np.ndarray, metrics: Sequence[Metric] = GENE
     notes = []
     if aligned_from is not None:
         notes.append(f"{aligned_from[1]}x{aligned_from[0]} prediction aligned to the centre of {w}x{h}")
-    valid = scene.valid_mask()
     values: dict[str, float] = {}
     resolution: dict[str, str] = {}
     gts: dict[str, np.ndarray] = {}
     preds: dict[str, np.ndarray] = {}
-    nonfinite = nonfinite_count(pred, border_mask((h, w), rules.border_px))
+    masks = {LOWRES: evaluation_mask(scene, (h, w), rules.border_px)}  # border and valid mask, per resolution
+    nonfinite = nonfinite_count(pred, masks[LOWRES])
     for metric in metrics:
         res = metric_resolution(scene, metric, rules)
         if res is None:  # a mask file the metric needs is absent: it does not apply to this scene
@@ -159,11 +187,10 @@ def score_scene(scene: Scene, pred: np.ndarray, metrics: Sequence[Metric] = GENE
             scale = gt.shape[0] // h
             gts[res] = gt
             preds[res] = pred if scale == 1 else upsample_nearest(pred, scale)
+            if res not in masks:
+                masks[res] = evaluation_mask(scene, gt.shape, rules.border_px * scale)
         gt, p = gts[res], preds[res]
-        scale = gt.shape[0] // h
-        mask = border_mask(gt.shape, rules.border_px * scale)
-        if valid is not None and valid.shape == gt.shape:
-            mask &= valid
+        mask = masks[res]
         if metric.mask_name is not None:
             if metric.mask_name not in scene.mask_names(res):
                 continue
@@ -172,7 +199,7 @@ def score_scene(scene: Scene, pred: np.ndarray, metrics: Sequence[Metric] = GENE
                 expected = f"{mask.shape[1]}x{mask.shape[0]}"
                 raise DataError(f"mask is {region.shape[1]}x{region.shape[0]}, expected {expected}",
                                 scene.path / f"{metric.mask_name}_{res}.png")
-            mask &= region
+            mask = mask & region
         context = {"scene": scene, "resolution": res} if metric.needs_scene else {}
         values[metric.id] = metric(gt, p, mask, toolkit=rules.toolkit, **context)
         resolution[metric.id] = res

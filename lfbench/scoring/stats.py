@@ -62,15 +62,19 @@ __all__ = [
     "block_groups",
     "scene_errors",
     "ErrorCollector",
+    "CI_COLUMNS",
     "ci_records",
     "ci_table",
     "format_ci_table",
+    "read_ci_csv",
 ]
 
 DEFAULT_RESAMPLES = 1000
 DEFAULT_LEVEL = 0.95
 _CHUNK_ELEMENTS = 1 << 22  # elements per resampling chunk (~16 MiB of int32 indices)
 _EXACT_FLIPS_MAX = 16  # enumerate all 2^k sign flips up to this many scenes/tiles
+#: Columns of ci.csv (``lfbench evaluate --ci``): :func:`ci_records` as CSV.
+CI_COLUMNS = ("method", "scene", "metric", "value", "low", "high", "n_pixels", "resolution")
 
 
 class CI(NamedTuple):
@@ -540,7 +544,7 @@ def scene_errors(scene, pred: np.ndarray, rules=None, source: str = "prediction"
     ``evaluation.score_scene`` scores the general metrics (alignment of cropped maps, the scene's
     resolution with nearest upsampling, border and valid masks, the rules' non-finite handling).
     Memory: ~8 bytes per scored pixel (2 MB at 512 x 512, ~200 MB for a 5120 x 5120 high-res scene)."""
-    from lfbench.scoring.rules import ScoringRules, align_prediction, border_mask, upsample_nearest
+    from lfbench.scoring.rules import ScoringRules, align_prediction, evaluation_mask, upsample_nearest
 
     rules = rules or ScoringRules()
     h, w = scene.spatial_size
@@ -555,10 +559,7 @@ def scene_errors(scene, pred: np.ndarray, rules=None, source: str = "prediction"
     scale = gt.shape[0] // h
     if scale != 1:
         pred = upsample_nearest(pred, scale)
-    mask = border_mask(gt.shape, rules.border_px * scale)
-    valid = scene.valid_mask()
-    if valid is not None and valid.shape == gt.shape:
-        mask &= valid
+    mask = evaluation_mask(scene, gt.shape, rules.border_px * scale)
     err, scored = _scored(gt, pred, mask, rules.toolkit)
     index = np.flatnonzero(scored)
     index = index.astype(np.int32 if scored.size < 2**31 else np.int64)
@@ -625,7 +626,7 @@ def ci_records(results, errors: Mapping[tuple[str, str], ErrorsLike], metrics: S
             ci = bootstrap_errors(err, rec.metric, n, seed, level, toolkit=toolkit, groups=groups)
             low, high, npix = ci.low, ci.high, int(err.size)
         rows.append((rec.method, rec.scene, rec.metric, float(rec.value), low, high, npix, rec.resolution))
-    out = pd.DataFrame(rows, columns=["method", "scene", "metric", "value", "low", "high", "n_pixels", "resolution"])
+    out = pd.DataFrame(rows, columns=list(CI_COLUMNS))
     if average and not out.empty:
         means = []
         for (method, metric), grp in out.groupby(["method", "metric"], sort=False):
@@ -634,6 +635,37 @@ def ci_records(results, errors: Mapping[tuple[str, str], ErrorsLike], metrics: S
             means.append((method, "(mean)", metric, ci.estimate, ci.low, ci.high, int(grp["n_pixels"].sum()), res))
         out = pd.concat([out, pd.DataFrame(means, columns=out.columns)], ignore_index=True)
     return out
+
+
+def read_ci_csv(path):
+    """A ci.csv read back (an untrusted file): a DataFrame with method, scene and metric as text and
+    value, low and high as float (an empty cell is NaN). DataError naming the file, and the line and
+    column, when it is not a CSV table, lacks a column or holds a number that is not one."""
+    from pathlib import Path
+
+    import pandas as pd
+
+    from lfbench.utils.errors import DataError
+
+    path = Path(path)
+    try:
+        ci = pd.read_csv(path, dtype=str, keep_default_na=False)
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
+        raise DataError(f"not a readable CSV table: {str(exc).splitlines()[0]}", path) from None
+    missing = [c for c in ("method", "scene", "metric", "low", "high") if c not in ci.columns]
+    if missing:
+        raise DataError(f"missing column(s) {', '.join(missing)}", path)
+    for column in ("value", "low", "high"):
+        if column not in ci.columns:
+            continue
+        numbers = []
+        for line, text in enumerate(ci[column], start=2):
+            try:
+                numbers.append(float(text) if text.strip() else math.nan)
+            except ValueError:
+                raise DataError(f"line {line}: {column} is not a number", path) from None
+        ci[column] = np.array(numbers, dtype=np.float64)
+    return ci
 
 
 def ci_table(results, errors: Mapping[tuple[str, str], ErrorsLike], metrics: Sequence[str] | None = None,

@@ -32,6 +32,7 @@ import numpy as np
 from lfbench.scoring.metrics import find_metric
 from lfbench.scoring.stats import pixel_loss
 from lfbench.utils.atomic import write_bytes, write_text
+from lfbench.utils.figure_text import plain_text
 
 __all__ = [
     "DEFAULT_FRACTIONS",
@@ -250,6 +251,7 @@ def _measure_label(sp: Sparsification) -> str:
     return f"{name} of remaining pixels{suffix}"
 
 
+@plain_text
 def plot_sparsification(results: Sparsification | Mapping[str, Sparsification], path: str | Path,
                         title: str | None = None, dpi: int = 110) -> Path:
     """Draw sparsification (solid), oracle (dashed) and random (dotted) curves with AUSE/AURG in the

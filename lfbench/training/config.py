@@ -62,6 +62,7 @@ from lfbench.method.trainable import DEFAULT_TRAINABLE
 from lfbench.utils.envvars import expand_vars
 from lfbench.utils.errors import SpecError
 from lfbench.utils.hardware import parse_device
+from lfbench.utils.names import file_names
 
 STAGE_KEYS = {"name", "loss", "lr", "steps", "eps", "betas"}
 # Bounds of the sizes a config asks for, checked before anything is allocated.
@@ -297,6 +298,7 @@ def _parse(raw: dict[str, Any], source: str | None) -> TrainConfig:
     names = [s.name for s in stages]
     if len(set(names)) != len(names):
         raise SpecError(f"stage names must be unique, got {names}", source)
+    file_names(names, "stage name", source=source)  # they name the stage<k>_<name>.pt files
     _check_method(method, stages, source)
     return TrainConfig(stages=stages, seed=seed, out=out, data=data, augment=augment, model=model,
                        training=training, validation=validation, method=method, init=init, source=source)

@@ -22,6 +22,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, Protocol
 
+from lfbench.utils.figure_text import plain_log_ticks, plain_text
+
 __all__ = ["LEARNING_CURVE", "LearningCurveLogger", "RunLogger", "TensorBoardLogger", "default_loggers",
            "plot_learning_curve", "read_metrics", "tensorboard_available"]
 
@@ -129,6 +131,12 @@ def read_metrics(path: str | Path) -> list[dict[str, Any]]:
     return entries
 
 
+def _number(value: Any) -> float:
+    """A logged number as float: null (how metrics.jsonl writes a NaN) or a missing one is NaN."""
+    return float(value) if isinstance(value, int | float) else float("nan")
+
+
+@plain_text
 def plot_learning_curve(entries: Sequence[dict[str, Any]], path: str | Path, title: str = "") -> Path:
     """Training loss (log scale; one colour per stage, boundaries dotted) and validation BadPix (%) and
     MSE x100 against the global step, as a PNG."""
@@ -142,12 +150,13 @@ def plot_learning_curve(entries: Sequence[dict[str, Any]], path: str | Path, tit
     for e in train:
         stages.setdefault((e.get("stage"), e.get("stage_name")), []).append(e)
     for (stage, name), es in stages.items():
-        ax_loss.plot([e["global_step"] for e in es], [e["loss"] for e in es], linewidth=1.4, marker="o",
+        ax_loss.plot([e["global_step"] for e in es], [_number(e.get("loss")) for e in es], linewidth=1.4, marker="o",
                      markersize=2.5, label=f"stage {stage} {name or ''}".strip())
     for es in list(stages.values())[1:]:
         ax_loss.axvline(es[0]["global_step"], color="0.6", linestyle=":", linewidth=1)
-    if train and all(e["loss"] > 0 for e in train):
+    if train and all(_number(e.get("loss")) > 0 for e in train):
         ax_loss.set_yscale("log")
+        plain_log_ticks(ax_loss.yaxis)
     ax_loss.set_xlabel("global step")
     ax_loss.set_ylabel("training loss")
     ax_loss.grid(alpha=0.3)
@@ -155,11 +164,11 @@ def plot_learning_curve(entries: Sequence[dict[str, Any]], path: str | Path, tit
         ax_loss.legend(fontsize=7)
     if val:
         steps = [e["global_step"] for e in val]
-        ax_val.plot(steps, [e.get("badpix") for e in val], marker="o", markersize=3, color="tab:red",
+        ax_val.plot(steps, [_number(e.get("badpix")) for e in val], marker="o", markersize=3, color="tab:red",
                     label="BadPix (%)")
         ax_val.set_ylabel("validation BadPix (%)", color="tab:red")
         twin = ax_val.twinx()
-        twin.plot(steps, [e.get("mse_x100") for e in val], marker="s", markersize=3, color="tab:blue",
+        twin.plot(steps, [_number(e.get("mse_x100")) for e in val], marker="s", markersize=3, color="tab:blue",
                   label="MSE x100")
         twin.set_ylabel("validation MSE x100", color="tab:blue")
     else:

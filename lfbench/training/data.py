@@ -81,11 +81,8 @@ def load_scene_data(scene: Scene, invalid_area: Path | None = None) -> SceneData
         raise DataError("training scene has no gt_disp_lowres.pfm", scene.path)
     gt = np.asarray(gt, dtype=np.float32)
     blocked = ~np.isfinite(gt)
-    valid = scene.valid_mask()
+    valid = scene.valid_mask()  # refused unless the scene's size
     if valid is not None:
-        if valid.shape != gt.shape:
-            raise DataError(f"valid_mask.png is {valid.shape[1]}x{valid.shape[0]}, expected "
-                            f"{gt.shape[1]}x{gt.shape[0]}", scene.path / "valid_mask.png")
         blocked |= ~valid
     if invalid_area is not None:
         path = invalid_area / scene.name / INVALID_AREA_FILE
@@ -246,6 +243,12 @@ class ValidationScene:
     gt: np.ndarray  # (h, w) float32
 
 
+def validation_size(size: tuple[int, int], max_size: int = 0) -> tuple[int, int]:
+    """(H, W) of a validation scene of ``size`` (H, W) px, centre-cropped to ``max_size`` px (0 = whole)."""
+    h, w = size
+    return (min(h, max_size), min(w, max_size)) if max_size else (h, w)
+
+
 def load_validation_scene(scene: Scene, max_size: int = 0) -> ValidationScene:
     """Gray views and ground truth of ``scene``, centre-cropped to ``max_size`` px if larger (0 = whole)."""
     gt = scene.gt_disparity()
@@ -253,7 +256,7 @@ def load_validation_scene(scene: Scene, max_size: int = 0) -> ValidationScene:
         raise DataError("validation scene has no gt_disp_lowres.pfm", scene.path)
     views = scene.gray_views()
     v, u, h, w = views.shape
-    ch, cw = (min(h, max_size), min(w, max_size)) if max_size else (h, w)
+    ch, cw = validation_size((h, w), max_size)
     y0, x0 = (h - ch) // 2, (w - cw) // 2
     crop = np.ascontiguousarray(views[:, :, y0:y0 + ch, x0:x0 + cw].reshape(v * u, ch, cw))
     return ValidationScene(name=scene.name, views=crop, gt=np.asarray(gt[y0:y0 + ch, x0:x0 + cw], dtype=np.float32))

@@ -43,7 +43,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from lfbench.data.scene import Benchmark, Scene
+from lfbench.data.scene import Benchmark, Scene, check_scene_names
 from lfbench.method.trainable import check_state_dict, get_trainable
 from lfbench.training import checkpoint as ckpt
 from lfbench.training.config import TrainConfig, expand_path
@@ -51,11 +51,13 @@ from lfbench.training.curves import RunLogger, default_loggers
 from lfbench.training.data import PatchSampler, ValidationScene, load_scene_data, load_validation_scene
 from lfbench.training.distributed import DistContext, agree_on_resume, setup
 from lfbench.training.losses import make_loss
-from lfbench.training.validate import validate
+from lfbench.training.validate import check_validation_area, validate
 from lfbench.utils.atomic import fresh_dir, write_text
 from lfbench.utils.errors import DataError, LFBenchError, SpecError
 from lfbench.utils.hardware import require_bf16, set_fp32_numerics
+from lfbench.utils.jsonfile import json_text
 from lfbench.utils.malloc import retain_freed_memory
+from lfbench.utils.names import file_name
 from lfbench.utils.threads import torch_threads
 
 # Settings that may change between a run and its resumption (they do not change the result).
@@ -108,7 +110,13 @@ class RunPaths:
         return self.out / "data"
 
     def stage_weights(self, index: int, name: str) -> Path:
-        return self.out / f"stage{index + 1}_{name}.pt"
+        return self.out / stage_weights_name(index, name)
+
+
+def stage_weights_name(index: int, name: str) -> str:
+    """File name of the weights after stage ``index`` (0-based) named ``name``: ``stage<k>_<name>.pt``,
+    the name as a file name (lfbench.utils.names; the config refuses two that are one)."""
+    return f"stage{index + 1}_{file_name(name)}.pt"
 
 
 def resume_view(config: dict[str, Any], stages: int, in_progress: int | None = None) -> dict[str, Any]:
@@ -203,7 +211,7 @@ def select_scenes(bench: Benchmark, cfg: TrainConfig) -> tuple[list[Scene], list
     if cfg.data.train:
         train = bench.select(list(cfg.data.train))
     else:
-        train = [s for s in bench.scenes if s not in val and s.has_gt()]
+        train = check_scene_names(s for s in bench.scenes if s not in val and s.has_gt())
     if not train:
         raise DataError("no training scenes selected", cfg.source)
     return train, val
@@ -394,7 +402,7 @@ class Trainer:
     def record(self, entry: dict) -> None:
         if self.ctx.is_main:
             with open(self.paths.metrics, "a", encoding="utf-8") as f:
-                f.write(json.dumps(entry, sort_keys=True) + "\n")
+                f.write(json_text(entry, sort_keys=True) + "\n")
             for logger in self.loggers:
                 logger.record(entry)
 
@@ -524,6 +532,7 @@ class Trainer:
 
         bench = discover(cfg, paths.data)
         train_scenes, val_scenes = select_scenes(bench, cfg)
+        check_validation_area(val_scenes, cfg.validation.border, cfg.validation.max_size, cfg.source)
         invalid_area = expand_path(cfg.data.invalid_area, cfg.source) if cfg.data.invalid_area else None
         if invalid_area is not None and not invalid_area.is_dir():
             raise DataError("data.invalid_area folder not found", invalid_area)
@@ -594,7 +603,7 @@ class Trainer:
             info["rank_parameters_sha256"] = digests
             self.export(paths.final, model, info)
             summary = {k: v for k, v in info.items() if k != "config"}
-            write_text(paths.summary, json.dumps(summary, indent=2, sort_keys=True) + "\n")
+            write_text(paths.summary, json_text(summary, indent=2, sort_keys=True) + "\n")
             self.log(f"done: {self.global_step} steps in {self.elapsed():.1f} s; final weights {paths.final}")
         result["rank_parameters_sha256"] = digests
         return result

@@ -5,13 +5,28 @@ the authors' validation pools its 8 scenes)."""
 from __future__ import annotations
 
 from collections.abc import Sequence
+from pathlib import Path
 
 import numpy as np
 import torch
 
+from lfbench.data.scene import Scene
 from lfbench.scoring.metrics import bad_pix, mse_x100
 from lfbench.scoring.rules import border_mask
-from lfbench.training.data import ValidationScene
+from lfbench.training.data import ValidationScene, validation_size
+from lfbench.utils.errors import SpecError
+
+
+def check_validation_area(scenes: Sequence[Scene], border: int, max_size: int, source: str | Path | None) -> None:
+    """SpecError (naming the config ``source``) before training when ``border`` (validation.border)
+    leaves no pixel of a validation scene, after the validation.max_size crop, to score: its BadPix and
+    MSE would be NaN at every validation."""
+    for scene in scenes:
+        h, w = validation_size(scene.spatial_size, max_size)
+        if min(h, w) <= 2 * border:
+            crop = " after validation.max_size" if (h, w) != tuple(scene.spatial_size) else ""
+            raise SpecError(f"validation.border = {border} leaves no pixel of validation scene {scene.name!r} "
+                            f"({w}x{h} px{crop}) to score: the border must be below {(min(h, w) + 1) // 2}", source)
 
 
 @torch.no_grad()

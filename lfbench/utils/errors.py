@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import unicodedata
 from pathlib import Path
 
 
@@ -18,8 +19,15 @@ class LFBenchError(Exception):
         super().__init__(message)
 
     def __str__(self) -> str:
-        msg = " ".join(super().__str__().split())  # always a single line
-        return f"{self.path}: {msg}" if self.path is not None else msg
+        msg = _visible(" ".join(super().__str__().split()))  # always a single line
+        return f"{_visible(str(self.path))}: {msg}" if self.path is not None else msg
+
+
+def _visible(text: str) -> str:
+    """``text`` with control characters and line separators written as escapes (a file named
+    'a\\nb' stays on the error's one line, and no terminal escape sequence is sent)."""
+    return "".join(ch.encode("unicode_escape").decode("ascii") if unicodedata.category(ch) in ("Cc", "Zl", "Zp")
+                   else ch for ch in text)
 
 
 class DataError(LFBenchError):

@@ -1,4 +1,5 @@
-"""Read a JSON file written by lfbench (results, golden records, markers) strictly, with one-line errors.
+"""Read a JSON file written by lfbench (results, golden records, markers) strictly, with one-line errors;
+write JSON text strictly (:func:`json_text`: a non-finite number becomes ``null``).
 
 Strict means: UTF-8, no duplicate object keys (Python's json keeps the last one silently), no
 ``NaN``/``Infinity`` literals (not JSON; lfbench writes ``null`` for a missing number) unless
@@ -8,13 +9,14 @@ asked for, bounded size and nesting depth (a deeply nested file raises Recursion
 from __future__ import annotations
 
 import json
+import math
 import re
 from pathlib import Path
 from typing import Any
 
 from lfbench.utils.errors import DataError
 
-__all__ = ["MAX_JSON_BYTES", "MAX_JSON_DEPTH", "read_json", "parse_json"]
+__all__ = ["MAX_JSON_BYTES", "MAX_JSON_DEPTH", "json_text", "read_json", "parse_json"]
 
 MAX_JSON_BYTES = 256 * 1024**2
 MAX_JSON_DEPTH = 64
@@ -69,6 +71,23 @@ def parse_json(text: str, path: str | Path | None = None, what: str = "JSON", *,
         raise DataError(f"{what} is not valid JSON: {exc}", path) from None
     except RecursionError:  # pragma: no cover - the depth check comes first
         raise DataError(f"{what} is nested too deeply", path) from None
+
+
+def json_text(obj: Any, *, indent: int | None = None, sort_keys: bool = False) -> str:
+    """``obj`` as strict JSON text (what every JSON file lfbench writes holds): NaN and +-inf, which JSON
+    has no literal for (Python would write ``NaN``), are written as ``null``, in dicts, lists and tuples at
+    any depth; anything else as :func:`json.dumps` writes it."""
+    return json.dumps(_finite_or_null(obj), indent=indent, sort_keys=sort_keys, allow_nan=False)
+
+
+def _finite_or_null(obj: Any) -> Any:
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: _finite_or_null(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_finite_or_null(v) for v in obj]
+    return obj
 
 
 class _Refused(ValueError):
