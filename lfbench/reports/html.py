@@ -526,10 +526,9 @@ def site_inputs(results: Results, folder: Path, *, data_root: str | Path | None 
 
     ci = None
     if (folder / "ci.csv").is_file():
-        try:
-            ci = pd.read_csv(folder / "ci.csv")
-        except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
-            raise DataError(f"not a readable CSV table: {str(exc).splitlines()[0]}", folder / "ci.csv") from None
+        from lfbench.utils.readfile import read_csv
+
+        ci = read_csv(folder / "ci.csv", "ci.csv")
         missing = {"method", "scene", "metric", "low", "high"} - set(ci.columns)
         if missing:
             raise DataError(f"missing column(s) {', '.join(sorted(missing))}", folder / "ci.csv")

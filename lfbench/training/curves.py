@@ -28,6 +28,7 @@ __all__ = ["LEARNING_CURVE", "LearningCurveLogger", "RunLogger", "TensorBoardLog
 log = logging.getLogger(__name__)
 
 LEARNING_CURVE = "learning_curve.png"
+MAX_LOG_BYTES = 256 * 1024**2  # metrics.jsonl / command.txt read back from a run folder
 TRAIN_SCALARS = (("loss", "train/loss"), ("lr", "train/learning_rate"), ("steps_per_s", "train/steps_per_s"))
 VALIDATION_SCALARS = (("badpix", "validation/badpix"), ("mse_x100", "validation/mse_x100"))
 
@@ -119,7 +120,9 @@ def default_loggers(out: str | Path) -> list[RunLogger]:
 def read_metrics(path: str | Path) -> list[dict[str, Any]]:
     """The entries of a metrics.jsonl (lines that do not parse, e.g. cut by a kill, are skipped)."""
     entries = []
-    for line in Path(path).read_text(encoding="utf-8").splitlines():
+    from lfbench.utils.readfile import read_text
+
+    for line in read_text(path, "training log", MAX_LOG_BYTES, errors="replace").splitlines():
         try:
             entry = json.loads(line)
         except json.JSONDecodeError:
