@@ -83,6 +83,7 @@ from lfbench.utils.errors import SpecError
 TABLES = ("table4", "table5", "beta", "tables12", "none")
 SPECIAL_AXES = ("loss", "beta", "lr", "seed")
 DEVICES = ("cpu", "cuda", "auto")
+MAX_CELLS = 1024  # cells (x seeds) one spec may define: counted before any cell is made
 _ID_SAFE = re.compile(r"[^A-Za-z0-9._=+-]")
 
 
@@ -259,6 +260,7 @@ def parse_spec(raw: dict[str, Any], source: Path, text: str = "") -> AblationSpe
         for key, value in overrides.items():
             _set_dotted(base, key, value, lambda msg, k=key: _fail(source, f"set.{k}", msg))
         _check_config(base, source, "set")
+        _check_cell_count(grid_raw, max(1, len(seeds)), source)
         cells = _expand_grid(grid_raw, base, source)
         if seeds:
             cells = _with_seeds(cells, seeds, source)
@@ -563,6 +565,21 @@ def _check_config(cfg: dict[str, Any], source: Path, where: str) -> TrainConfig:
     except (TypeError, ValueError) as exc:
         _fail(source, where, f"[model]: {exc}")
     return tc
+
+
+def _check_cell_count(grid_raw: list[Any], seeds: int, source: Path) -> None:
+    """SpecError when the [[grid]] tables (the sum of the products of their value lists) times ``seeds``
+    define more than MAX_CELLS cells; counted from the list lengths, before any cell is made."""
+    total = 0
+    for g in grid_raw:
+        count = 1
+        for values in (flatten(g).values() if isinstance(g, dict) else ()):
+            count *= len(values) if isinstance(values, list) else 1
+        total += count
+    if total * seeds > MAX_CELLS:
+        times = f" x {seeds} seeds" if seeds > 1 else ""
+        raise SpecError(f"grid: {total} cells{times} is more than one spec may run ({MAX_CELLS}); split the grid "
+                        "into several specs", source)
 
 
 def _expand_grid(grid_raw: list[Any], base: dict[str, Any], source: Path) -> tuple[Cell, ...]:
