@@ -283,6 +283,22 @@ def test_an_ablation_grid_of_a_million_cells_is_refused_before_any_cell(tmp_path
     assert not (tmp_path / "ab").exists()
 
 
+@pytest.mark.parametrize(("evaluation", "fragment"), [
+    ("time_size = 1000000000", "evaluation.time_size: must be <= 4096"),
+    ("time_repeats = 1000000000", "evaluation.time_repeats: must be <= 1000"),
+    ("synthetic = { seed = 1, size = 100000, scenes = 1 }", "evaluation.synthetic.size: must be <= 4096"),
+    ("synthetic = { seed = 1, size = 32, scenes = 100000000 }", "evaluation.synthetic.scenes: must be <= 1000"),
+])
+def test_ablation_evaluation_sizes_are_bounded(tmp_path, capsys, evaluation, fragment):
+    """A test-time light field of 10**9 px per side was only allocated after every cell had trained."""
+    spec = tmp_path / "spec.toml"
+    synthetic = "" if "synthetic" in evaluation else "synthetic = { seed = 1, size = 32, scenes = 1 }\n"
+    spec.write_text(f'[evaluation]\n{synthetic}{evaluation}\n[[methods]]\nspec = "constant"\n')
+    rc, _, err = run_cli(capsys, "ablate", spec, "--out", tmp_path / "ab")
+    assert_one_error_line(rc, err, "spec.toml", fragment)
+    assert not (tmp_path / "ab").exists()
+
+
 # --------------------------------------------------------------------------- networks: any trainable
 
 def _wide_trainable():

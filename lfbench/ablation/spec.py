@@ -76,6 +76,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from lfbench.data.synth import MAX_SYNTH_SCENES, MAX_SYNTH_SIZE
 from lfbench.training.config import STAGE_KEYS, TrainConfig, _Table
 from lfbench.utils.envvars import expand_vars
 from lfbench.utils.errors import SpecError
@@ -84,6 +85,8 @@ TABLES = ("table4", "table5", "beta", "tables12", "none")
 SPECIAL_AXES = ("loss", "beta", "lr", "seed")
 DEVICES = ("cpu", "cuda", "auto")
 MAX_CELLS = 1024  # cells (x seeds) one spec may define: counted before any cell is made
+MAX_REPEATS = 1000  # timed (and warm-up) runs of the test time
+MAX_THREADS = 4096
 _ID_SAFE = re.compile(r"[^A-Za-z0-9._=+-]")
 
 
@@ -367,7 +370,7 @@ def _parse_budget(t: _Table, base: TrainConfig | None, source: Path) -> Budget:
                     batch=t.number("batch", None, low=1, integer=True) if "batch" in t.raw else None,
                     width=t.number("width", None, low=1, integer=True) if "width" in t.raw else None,
                     patch=t.number("patch", None, low=8, integer=True) if "patch" in t.raw else None,
-                    threads=t.number("threads", 0, low=0, integer=True))
+                    threads=t.number("threads", 0, low=0, high=MAX_THREADS, integer=True))
     t.done()
     if budget.width is not None and base is not None:
         from lfbench.method.trainable import get_trainable
@@ -398,8 +401,8 @@ def _parse_evaluation(t: _Table, source: Path) -> Evaluation:
     if "synthetic" in t.raw:
         st = t.table("synthetic")
         syn = SyntheticEval(seed=st.number("seed", 0, low=0, integer=True),
-                            size=st.number("size", 64, low=32, integer=True),
-                            scenes=st.number("scenes", 3, low=1, integer=True))
+                            size=st.number("size", 64, low=32, high=MAX_SYNTH_SIZE, integer=True),
+                            scenes=st.number("scenes", 3, low=1, high=MAX_SYNTH_SCENES, integer=True))
         st.done()
     data_value = t.get("data", str, None)
     data = _resolve(data_value, source, "evaluation.data") if data_value is not None else None
@@ -413,11 +416,11 @@ def _parse_evaluation(t: _Table, source: Path) -> Evaluation:
     if precision not in ("fp32", "bf16"):
         t._fail("precision", f"expected fp32 or bf16, got {precision!r}")
     ev = Evaluation(synthetic=syn, data=data, scenes=scenes,
-                    time_size=t.number("time_size", 512, low=16, integer=True),
-                    time_repeats=t.number("time_repeats", 1, low=1, integer=True),
-                    time_warmup=t.number("time_warmup", 0, low=0, integer=True),
-                    device=device, threads=t.number("threads", 0, low=0, integer=True),
-                    tile=t.number("tile", 0, low=0, integer=True),
+                    time_size=t.number("time_size", 512, low=16, high=MAX_SYNTH_SIZE, integer=True),
+                    time_repeats=t.number("time_repeats", 1, low=1, high=MAX_REPEATS, integer=True),
+                    time_warmup=t.number("time_warmup", 0, low=0, high=MAX_REPEATS, integer=True),
+                    device=device, threads=t.number("threads", 0, low=0, high=MAX_THREADS, integer=True),
+                    tile=t.number("tile", 0, low=0, high=MAX_SYNTH_SIZE, integer=True),
                     max_memory_gb=t.number("max_memory_gb", 4.0, low=0.0, low_open=True),
                     precision=precision, lowres_only=t.get("lowres_only", bool, False),
                     error_maps=t.get("error_maps", bool, True))
