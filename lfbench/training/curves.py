@@ -119,17 +119,21 @@ def default_loggers(out: str | Path) -> list[RunLogger]:
 
 def read_metrics(path: str | Path) -> list[dict[str, Any]]:
     """The entries of a metrics.jsonl (lines that do not parse, e.g. cut by a kill, are skipped)."""
-    entries = []
     from lfbench.utils.readfile import read_text
 
-    for line in read_text(path, "training log", MAX_LOG_BYTES, errors="replace").splitlines():
-        try:
-            entry = json.loads(line)
-        except json.JSONDecodeError:
-            continue
-        if isinstance(entry, dict):
-            entries.append(entry)
-    return entries
+    entries = (parse_log_line(line) for line in read_text(path, "training log", MAX_LOG_BYTES,
+                                                          errors="replace").splitlines())
+    return [e for e in entries if e is not None]
+
+
+def parse_log_line(line: str) -> dict[str, Any] | None:
+    """One metrics.jsonl entry, or None for a line that is not a JSON object (cut by a kill, or not
+    lfbench's: json's own limits, e.g. 5000-digit integers or deep nesting, included)."""
+    try:
+        entry = json.loads(line)
+    except (ValueError, RecursionError):
+        return None
+    return entry if isinstance(entry, dict) else None
 
 
 def plot_learning_curve(entries: Sequence[dict[str, Any]], path: str | Path, title: str = "") -> Path:

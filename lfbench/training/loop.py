@@ -47,7 +47,7 @@ from lfbench.data.scene import Benchmark, Scene
 from lfbench.method.trainable import check_state_dict, get_trainable
 from lfbench.training import checkpoint as ckpt
 from lfbench.training.config import TrainConfig, expand_path
-from lfbench.training.curves import MAX_LOG_BYTES, RunLogger, default_loggers
+from lfbench.training.curves import MAX_LOG_BYTES, RunLogger, default_loggers, parse_log_line
 from lfbench.training.data import PatchSampler, ValidationScene, load_scene_data, load_validation_scene
 from lfbench.training.distributed import DistContext, agree_on_resume, setup
 from lfbench.training.losses import make_loss
@@ -410,11 +410,9 @@ class Trainer:
             return
         kept = []
         for line in read_text(p, "training log", MAX_LOG_BYTES, errors="replace").splitlines():
-            try:
-                entry = json.loads(line)
-            except json.JSONDecodeError:
-                continue  # a line cut by the kill
-            if entry.get("global_step", 0) <= global_step:
+            entry = parse_log_line(line)  # None: a line cut by the kill
+            step = entry.get("global_step", 0) if entry is not None else None
+            if isinstance(step, int | float) and step <= global_step:
                 kept.append(line)
         write_text(p, "".join(k + "\n" for k in kept))
 
