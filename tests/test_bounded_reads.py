@@ -164,7 +164,7 @@ def test_a_sparse_pfm_is_refused_from_its_header(tmp_path, which):
         sub = write_submission(tmp_path / "sub", {"tiny": np.zeros((SIZE, SIZE), np.float32)})
         bad = _sparse_pfm(sub / "disp_maps" / "tiny.pfm")
         method = f"published:path={sub}"
-        expected = f"is 46341x46341, larger than the scene ({SIZE}x{SIZE})"
+        expected = f"prediction is 46341x46341, scene is {SIZE}x{SIZE}: larger than the scene"
     proc = _run_limited("evaluate", "--data", tmp_path / "data", "--method", method, "--out", tmp_path / "out",
                         "--no-progress")
     assert_one_error_line(proc.returncode, proc.stderr, str(bad), expected)
@@ -179,7 +179,7 @@ def test_pfm_headers_are_checked_before_the_data(tmp_path):
     assert read_pfm(path, shape=(4, 6)).shape == (4, 6) and read_pfm(path, max_shape=(4, 6)).shape == (4, 6)
     with pytest.raises(DataError, match="map is 6x4, expected 4x4"):
         read_pfm(path, shape=(4, 4))
-    with pytest.raises(DataError, match=r"map is 6x4, larger than the scene \(5x5\)"):
+    with pytest.raises(DataError, match=r"map is 6x4, scene is 5x5: larger than the scene"):
         read_pfm(path, max_shape=(5, 5))
     side = int(MAX_PFM_PIXELS**0.5) + 1
     with pytest.raises(DataError, match="more than lfbench reads"):

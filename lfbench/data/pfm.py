@@ -72,7 +72,8 @@ def _check_dimensions(width: int, height: int, shape: Shape | None, max_shape: S
     if shape is not None and (height, width) != tuple(shape):
         raise DataError(f"{what} is {width}x{height}, expected {shape[1]}x{shape[0]}", path)
     if max_shape is not None and (height > max_shape[0] or width > max_shape[1]):
-        raise DataError(f"{what} is {width}x{height}, larger than the scene ({max_shape[1]}x{max_shape[0]})", path)
+        raise DataError(f"{what} is {width}x{height}, scene is {max_shape[1]}x{max_shape[0]}: larger than the scene",
+                        path)
     if width * height > MAX_PFM_PIXELS:
         raise DataError(f"{what} is {width}x{height} ({width * height} px), more than lfbench reads "
                         f"({MAX_PFM_PIXELS} px)", path)

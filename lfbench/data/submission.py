@@ -80,7 +80,7 @@ def read_submission_map(root: str | Path, scene: str, max_shape: tuple[int, int]
     (H, W): the largest map the scene can take (its own size; a cropped map is smaller), checked against
     the PFM header before the data is read."""
     check_inside(root, disp_map_path(root, scene))
-    disp = read_pfm(disp_map_path(root, scene), max_shape=max_shape)
+    disp = read_pfm(disp_map_path(root, scene), max_shape=max_shape, what="prediction")
     rt = runtime_path(root, scene)
     if not (rt.exists() or rt.is_symlink()):
         return disp, None
