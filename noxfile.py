@@ -34,7 +34,9 @@ def lint(session: nox.Session) -> None:
 
 @nox.session
 def regress(session: nox.Session) -> None:
-    """Recompute the deterministic golden runs and compare them with results/golden.json."""
+    """Recompute the deterministic golden runs and compare them with results/golden.json. Without
+    LFBENCH_HCI_ROOT the synthetic runs are compared and the real-scene records skipped (the summary
+    counts both and names the absent scenes); a run that compared nothing fails."""
     _install(session)
     out = Path(session.create_tmp()) / "regress"
     hci = os.environ.get("LFBENCH_HCI_ROOT")

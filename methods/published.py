@@ -11,6 +11,13 @@ from lfbench.method.registry import register_method
 from lfbench.utils.errors import DataError
 
 
+def _scene_shape(lf: LightField) -> tuple[int, int] | None:
+    """(H, W) of the scene's views when it knows them without reading images (a stored map is checked
+    against it before its data is read), else None."""
+    shape = getattr(lf, "spatial_size", None)
+    return tuple(shape) if shape is not None else None
+
+
 @register_method("published")
 class PublishedResults(Method):
     """Precomputed results in the benchmark's submission layout (disp_maps/, runtimes/).
@@ -39,5 +46,5 @@ class PublishedResults(Method):
         path = disp_map_path(self.path, lf.name)
         if not (path.exists() or path.is_symlink()):
             raise DataError(f"no disparity map for scene {lf.name!r}", path)
-        disparity, runtime = read_submission_map(self.path, lf.name)
+        disparity, runtime = read_submission_map(self.path, lf.name, max_shape=_scene_shape(lf))
         return Prediction(disparity=disparity, runtime_s=float("nan") if runtime is None else runtime)

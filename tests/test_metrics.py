@@ -239,10 +239,11 @@ def test_metric_ids_and_toolkit_ids():
 
 def test_one_registry_for_every_metric():
     ids = [m.id for m in list_metrics()]
-    assert ids[:5] == [m.id for m in GENERAL_METRICS] and len(ids) == len(set(ids)) == 21
+    assert ids[:5] == [m.id for m in GENERAL_METRICS] and len(ids) == len(set(ids)) == 23
     assert get_metric("discontinuities").category == "region"
     assert get_metric("missed_dots_50_0400").id == "missed_dots"
-    with pytest.raises(SpecError, match=r"Unknown metric 'psnr'\. Available: badpix_0\.01, .*missed_dots.*badpix_<t>"):
+    available = r"Available: badpix_0\.01, .*runtime_log, .*missed_dots.*badpix_<t>, q<p>_x100"
+    with pytest.raises(SpecError, match=r"Unknown metric .psnr.\. " + available):
         get_metric("psnr")
     with pytest.raises(TypeError, match="needs a lfbench Metric"):
         METRICS.register(object())

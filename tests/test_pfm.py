@@ -95,8 +95,9 @@ def test_parse_pfm_from_memory_matches_file(tmp_path):
     (b"Pf\n2 2\nnan\n" + b"\0" * 16, "bad PFM scale"),
     (b"Pf\n2 2\n-1\n" + b"\0" * 15, "truncated"),
     (b"Pf\n2 2\n-1\n" + b"\0" * 17, "trailing bytes"),
-    (b"Pf\n100000 100000\n-1\n" + b"\0" * 16, "truncated"),  # absurd size: no huge allocation
-    (b"Pf\n99999999999 99999999999\n-1\n" + b"\0" * 16, "truncated"),
+    (b"Pf\n100000 100000\n-1\n" + b"\0" * 16, "more than lfbench reads"),  # absurd size: no huge allocation
+    (b"Pf\n3000 3000\n-1\n" + b"\0" * 16, "truncated"),
+    (b"Pf\n99999999999 99999999999\n-1\n" + b"\0" * 16, "more than lfbench reads"),
 ])
 def test_malformed_files_raise_one_line_data_error_naming_the_file(tmp_path, raw, fragment):
     path = tmp_path / "bad.pfm"

@@ -450,5 +450,6 @@ def test_cli_evaluate_all_metrics(tmp_path):
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr
     records = {r["metric"]: r for r in json.loads((out / "results.json").read_text())["records"]}
-    assert set(records) == set(GENERAL_IDS) | {"bumpiness_planes", "mae_planes"}
+    # and the runtime metrics: the gt method reports the wall time lfbench measured
+    assert set(records) == set(GENERAL_IDS) | {"bumpiness_planes", "mae_planes", "runtime", "runtime_log"}
     assert records["bumpiness_planes"]["value"] == 0.0 and records["bumpiness_planes"]["resolution"] == "lowres"

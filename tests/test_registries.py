@@ -242,6 +242,11 @@ CASES: dict[str, Callable[[Path], tuple[Scene, np.ndarray, float]]] = {
     "badpix_0.5": lambda r: (*_general(r), 100.0 * 10 / SCORED),  # the badpix_<t> family
     "mse_x100": lambda r: (*_general(r), 100.0 * _ERR2 / SCORED),
     "q25_x100": lambda r: (*_general(r), 0.5),  # index int(0.25 * 1156) = 289 of the sorted errors: 0.005 px
+    # the q<p>_x100 family: index int(0.9 * 1156) = 1040 lies in the 100 errors of 0.05 px (sorted 956..1055)
+    "q90_x100": lambda r: (*_general(r), 5.0),
+    # runtime metrics: the runtime the method reports (RUNTIME_S), not the maps
+    "runtime": lambda r: (*_general(r), RUNTIME_S),
+    "runtime_log": lambda r: (*_general(r), math.log10(RUNTIME_S)),
     "discontinuities": _badpix_on("mask_discontinuities", "training", "toy", 30),
     "bumpiness_planes": _bumpiness("mask_planes", 0.005),
     "bumpiness_contin_surfaces": _bumpiness("mask_smooth_surfaces", 0.02),  # 4a = 0.08 is clipped to 0.05
@@ -261,13 +266,16 @@ CASES: dict[str, Callable[[Path], tuple[Scene, np.ndarray, float]]] = {
 }
 
 
-@pytest.mark.parametrize("metric_id", [m.id for m in list_metrics()] + ["badpix_0.5"])
+RUNTIME_S = 2.5  # the runtime every case's method reports (s)
+
+
+@pytest.mark.parametrize("metric_id", [m.id for m in list_metrics()] + ["badpix_0.5", "q90_x100"])
 def test_every_registered_metric_against_a_hand_computed_case(metric_id, tmp_path):
     if metric_id not in CASES:
         pytest.fail(f"metric {metric_id} has no hand-computed case: add one to CASES in {Path(__file__).name}")
     metric = get_metric(metric_id)
     scene, pred, expected = CASES[metric_id](tmp_path)
-    score = score_scene(scene, pred, [metric])
+    score = score_scene(scene, pred, [metric], runtime_s=RUNTIME_S)
     assert metric_id in score.values, f"{metric_id} did not apply to its case"
     assert score.resolution[metric_id] == "lowres"
     if metric.unit.startswith("%"):  # a count over a count: no rounding beyond the division

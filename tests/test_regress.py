@@ -76,11 +76,11 @@ def test_cli_exit_codes_and_diff(golden, tmp_path, capsys):
     _results().write(good)
     _results(**{"badpix_0.07": 7.5}).write(bad)  # doctored: BadPix worsened by 2.5
     assert main(["regress", str(golden), str(good)]) == 0
-    assert "OK: 2 golden metrics, 0 regressions" in capsys.readouterr().out
+    assert "OK: 2 compared, 0 regressions" in capsys.readouterr().out
     assert main(["regress", str(golden), str(bad / "results.json")]) == 1
     out = capsys.readouterr().out
     assert "WORSE    planesweep/synth_0/badpix_0.07: 5 -> 7.5 (+2.5, tolerance 0.01)" in out
-    assert "FAIL: 2 golden metrics, 1 regressions" in out
+    assert "FAIL: 2 compared, 1 regressions" in out
 
 
 def test_cli_bad_golden_is_one_line_exit_2(tmp_path, capsys):
@@ -157,7 +157,7 @@ def test_new_records_absent_from_golden_are_reported_and_fail_on_request(golden,
     assert "NEW      planesweep/synth_0/q25_x100: 3 is not in the golden file" in out
     assert "1 new records not in the golden file" in out
     assert main(["regress", "--fail-on-new", str(golden), str(tmp_path / "new")]) == 1
-    assert "FAIL: 2 golden metrics, 1 regressions" in capsys.readouterr().out
+    assert "FAIL: 2 compared, 1 regressions" in capsys.readouterr().out
 
 
 def test_duplicate_new_records_are_refused(golden, tmp_path, capsys):
@@ -209,3 +209,104 @@ def test_malformed_runs_in_results_are_one_line(tmp_path, runs):
         return
     with pytest.raises(DataError, match="results.json"):
         Results.read(path)
+
+
+# ------------------------------------------------------------------- a gate that cannot pass on nothing (issue 20.5)
+
+@pytest.mark.parametrize("text", ["[]", '{"records": []}'])
+def test_an_empty_golden_file_fails_unless_allowed(tmp_path, capsys, text):
+    """It printed "OK: 0 golden metrics" and exited 0: a gate that compared nothing passed."""
+    path = _golden_text(tmp_path, text)
+    _results().write(tmp_path / "new")
+    assert main(["regress", str(path), str(tmp_path / "new")]) == 1
+    summary = capsys.readouterr().out.strip().splitlines()[-1]
+    assert summary.startswith("FAIL: 0 compared, 0 regressions")
+    assert "nothing was compared (the golden file holds no records)" in summary and "--allow-empty" in summary
+    assert main(["regress", "--allow-empty", str(path), str(tmp_path / "new")]) == 0
+    assert capsys.readouterr().out.strip().splitlines()[-1].startswith("OK: 0 compared")
+
+
+def test_every_golden_scene_absent_fails_and_says_what_was_skipped(golden, tmp_path, capsys):
+    """--skip-absent-scenes with every golden scene absent printed "OK: 2 golden metrics, 0 regressions"."""
+    Results(records=[Record("planesweep", "elsewhere", "badpix_0.07", 1.0, "lowres")]).write(tmp_path / "new")
+    argv = ["regress", "--skip-absent-scenes", str(golden), str(tmp_path / "new")]
+    assert main(argv) == 1
+    summary = capsys.readouterr().out.strip().splitlines()[-1]
+    assert summary.startswith("FAIL: 0 compared, 0 regressions")
+    assert "2 skipped: scene absent from the new results (synth_0)" in summary
+    assert "nothing was compared (every golden record was skipped)" in summary
+    assert main([*argv, "--allow-empty"]) == 0
+    assert capsys.readouterr().out.strip().splitlines()[-1].startswith("OK: 0 compared")
+
+
+def test_summary_counts_compared_and_skipped_records(tmp_path, capsys):
+    golden = tmp_path / "golden.json"
+    both = Results(records=[*_results().records, Record("published:x", "backgammon", "mse_x100", 1.5, "lowres"),
+                            Record("published:x", "antinous", "mse_x100", 0.5, "lowres")])
+    make_golden(both, 0.01, golden)
+    _results().write(tmp_path / "new")
+    assert main(["regress", "--skip-absent-scenes", str(golden), str(tmp_path / "new")]) == 0
+    assert capsys.readouterr().out.strip() == ("OK: 2 compared, 0 regressions, 0 improved beyond tolerance; 2 skipped: "
+                                               "scene absent from the new results (backgammon, antinous)")
+    assert main(["regress", str(golden), str(tmp_path / "new")]) == 1  # without the flag: missing records
+    assert capsys.readouterr().out.strip().splitlines()[-1].startswith("FAIL: 4 compared, 2 regressions")
+
+
+@pytest.mark.parametrize(("metric", "tolerance", "refused"), [
+    ("badpix_0.07", "1e308", True), ("badpix_0.07", "100", True), ("badpix_0.07", "99.5", False),
+    ("stripes_dark", "100", True), ("missed_dots", "1e308", True), ("bumpiness_planes", "5", True),
+    ("bumpiness_planes", "4.9", False), ("mae_planes", "180", True), ("mse_x100", "1e6", False),
+])
+def test_tolerances_are_bounded_by_the_metric_range(tmp_path, capsys, metric, tolerance, refused):
+    """A tolerance of 1e308 on a 0-100 % metric was accepted: every value passed."""
+    path = _golden_text(tmp_path, "[" + _REC.format(metric=metric, value=1, tol=tolerance) + "]")
+    Results(records=[Record("planesweep", "synth_0", metric, 1.0, "lowres")]).write(tmp_path / "new")
+    rc = main(["regress", str(path), str(tmp_path / "new")])
+    captured = capsys.readouterr()
+    if refused:
+        assert rc == 2 and "as wide as the range of" in captured.err and str(path) in captured.err
+    else:
+        assert rc == 0 and captured.out.startswith("OK: 1 compared")
+
+
+def test_values_outside_the_metric_range_are_refused_or_fail(tmp_path, capsys):
+    path = _golden_text(tmp_path, "[" + _REC.format(metric="badpix_0.07", value=150, tol=0) + "]")
+    _results().write(tmp_path / "new")
+    assert main(["regress", str(path), str(tmp_path / "new")]) == 2
+    assert "value 150 is outside the range of badpix_0.07 (0 to 100 %)" in capsys.readouterr().err
+    golden = tmp_path / "g2.json"
+    make_golden(_results(), 0.5, golden)
+    _results(**{"badpix_0.07": -3.0}).write(tmp_path / "neg")  # "better" by 8, but not a percentage
+    assert main(["regress", str(golden), str(tmp_path / "neg")]) == 1
+    assert ("INVALID  planesweep/synth_0/badpix_0.07: new value -3 is outside the range of badpix_0.07 (0 to 100 %)"
+            in capsys.readouterr().out)
+
+
+def test_update_refuses_an_empty_golden_file_and_wide_tolerances(tmp_path, capsys):
+    Results(records=[Record("m", "s", "mse_x100", float("nan"), "lowres")]).write(tmp_path / "nan")
+    target = tmp_path / "g.json"
+    assert main(["regress", "--update", str(target), str(tmp_path / "nan")]) == 2
+    assert "no finite records to make golden" in capsys.readouterr().err and not target.exists()
+    assert main(["regress", "--update", "--allow-empty", str(target), str(tmp_path / "nan")]) == 0
+    assert json.loads(target.read_text()) == []
+    _results().write(tmp_path / "new")
+    assert main(["regress", "--update", "--tolerance", "badpix_*=250,*=0.01", str(tmp_path / "g3.json"),
+                 str(tmp_path / "new")]) == 2
+    err = capsys.readouterr().err
+    assert "--tolerance for record planesweep/synth_0/badpix_0.07" in err and "as wide as the range" in err
+    assert not (tmp_path / "g3.json").exists()
+
+
+@pytest.mark.parametrize("value", ["9" * 400, "9" * 5000, "-" + "9" * 30, "18446744073709551616"])
+def test_huge_integers_in_golden_or_new_results_are_one_line(tmp_path, capsys, value):
+    """A 400-digit integer ended in OverflowError, a 5000-digit one in ValueError (Python's int limit)."""
+    path = _golden_text(tmp_path, "[" + _REC.format(metric="mse_x100", value=value, tol=0) + "]")
+    _results().write(tmp_path / "new")
+    assert main(["regress", str(path), str(tmp_path / "new")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and str(path) in err[0] and ("digits" in err[0] or "64-bit" in err[0]), err
+    new = tmp_path / "new.json"
+    new.write_text('[{"method": "planesweep", "scene": "synth_0", "metric": "mse_x100", "value": %s}]' % value)
+    assert main(["regress", str(path.with_name("golden_ok.json")), str(new)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and str(new) in err[0] and ("digits" in err[0] or "64-bit" in err[0]), err

@@ -34,10 +34,12 @@ from lfbench.utils.atomic import write_bytes, write_text
 from lfbench.utils.errors import DataError, SpecError
 from lfbench.utils.jsonfile import json_text, read_json
 from lfbench.utils.log import log_to_file
+from lfbench.utils.readfile import read_bytes
 from lfbench.utils.threads import torch_threads
 
 MARKER, TRAIN_CONFIG, LOG, MAPS, TIMING = "cell.json", "train.toml", "log.txt", "maps", "timing.json"
 UNCERTAINTY_DIR = "uncertainty"
+MAX_COPY_BYTES = 4 * 1024**3  # a shared stage-1 export copied into a cell (weights of at most 2 GiB, its log)
 
 
 @dataclass(frozen=True)
@@ -136,7 +138,7 @@ def seed_from_stage1(task: CellTask) -> float:
         names = [stage_weights_name(i, s["name"]) for i, s in enumerate(task.config["stages"][:n_shared])]
         for name in [*names, "best.pt", "metrics.jsonl"]:
             if (src / name).is_file():
-                write_bytes(task.path / name, (src / name).read_bytes())
+                write_bytes(task.path / name, read_bytes(src / name, name, MAX_COPY_BYTES))
         state["config"] = task.config
         ckpt.save(dst, state)  # last: its presence means "seeded"
     return float(state["elapsed_s"])
@@ -201,8 +203,7 @@ def save_maps(folder: Path):
     from lfbench.data.submission import write_submission_map
 
     def hook(method, scene, pred) -> None:
-        runtime = pred.runtime_s if pred.runtime_s and np.isfinite(pred.runtime_s) and pred.runtime_s > 0 else 1e-9
-        write_submission_map(folder, scene.name, pred.disparity, runtime)
+        write_submission_map(folder, scene.name, pred.disparity, pred.runtime_s)
         if pred.uncertainty is not None:
             write_pfm(folder / UNCERTAINTY_DIR / f"{scene.name}.pfm", np.asarray(pred.uncertainty, np.float32))
 

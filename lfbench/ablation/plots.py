@@ -108,8 +108,9 @@ def error_maps(scene_dirs: Sequence[str], maps: Mapping[str, Path], out: Path) -
         for label, root in present.items():
             if not disp_map_path(root, scene.name).is_file():
                 continue
-            disp, runtime = read_submission_map(root, scene.name)
+            disp, runtime = read_submission_map(root, scene.name, max_shape=scene.spatial_size)
             unc_path = Path(root) / "uncertainty" / f"{scene.name}.pfm"
-            unc = read_pfm(unc_path) if unc_path.is_file() else None
+            unc = (read_pfm(unc_path, max_shape=scene.spatial_size, what="uncertainty map")
+                   if unc_path.is_file() else None)
             writer.add(label, scene, Prediction(disparity=disp, uncertainty=unc, runtime_s=runtime))
     return sorted(writer.written)

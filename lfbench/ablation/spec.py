@@ -76,6 +76,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from lfbench.data.synth import MAX_SYNTH_SCENES, MAX_SYNTH_SIZE
 from lfbench.training.config import STAGE_KEYS, TrainConfig, _Table
 from lfbench.utils.envvars import expand_vars
 from lfbench.utils.errors import SpecError
@@ -83,6 +84,9 @@ from lfbench.utils.errors import SpecError
 TABLES = ("table4", "table5", "beta", "tables12", "none")
 SPECIAL_AXES = ("loss", "beta", "lr", "seed")
 DEVICES = ("cpu", "cuda", "auto")
+MAX_CELLS = 1024  # cells (x seeds) one spec may define: counted before any cell is made
+MAX_REPEATS = 1000  # timed (and warm-up) runs of the test time
+MAX_THREADS = 4096
 _ID_SAFE = re.compile(r"[^A-Za-z0-9._=+-]")
 
 
@@ -259,6 +263,7 @@ def parse_spec(raw: dict[str, Any], source: Path, text: str = "") -> AblationSpe
         for key, value in overrides.items():
             _set_dotted(base, key, value, lambda msg, k=key: _fail(source, f"set.{k}", msg))
         _check_config(base, source, "set")
+        _check_cell_count(grid_raw, max(1, len(seeds)), source)
         cells = _expand_grid(grid_raw, base, source)
         if seeds:
             cells = _with_seeds(cells, seeds, source)
@@ -366,7 +371,7 @@ def _parse_budget(t: _Table, base: TrainConfig | None, source: Path) -> Budget:
                     batch=t.number("batch", None, low=1, integer=True) if "batch" in t.raw else None,
                     width=t.number("width", None, low=1, integer=True) if "width" in t.raw else None,
                     patch=t.number("patch", None, low=8, integer=True) if "patch" in t.raw else None,
-                    threads=t.number("threads", 0, low=0, integer=True))
+                    threads=t.number("threads", 0, low=0, high=MAX_THREADS, integer=True))
     t.done()
     if budget.width is not None and base is not None:
         from lfbench.method.trainable import get_trainable
@@ -397,8 +402,8 @@ def _parse_evaluation(t: _Table, source: Path) -> Evaluation:
     if "synthetic" in t.raw:
         st = t.table("synthetic")
         syn = SyntheticEval(seed=st.number("seed", 0, low=0, integer=True),
-                            size=st.number("size", 64, low=32, integer=True),
-                            scenes=st.number("scenes", 3, low=1, integer=True))
+                            size=st.number("size", 64, low=32, high=MAX_SYNTH_SIZE, integer=True),
+                            scenes=st.number("scenes", 3, low=1, high=MAX_SYNTH_SCENES, integer=True))
         st.done()
     data_value = t.get("data", str, None)
     data = _resolve(data_value, source, "evaluation.data") if data_value is not None else None
@@ -412,11 +417,11 @@ def _parse_evaluation(t: _Table, source: Path) -> Evaluation:
     if precision not in ("fp32", "bf16"):
         t._fail("precision", f"expected fp32 or bf16, got {precision!r}")
     ev = Evaluation(synthetic=syn, data=data, scenes=scenes,
-                    time_size=t.number("time_size", 512, low=16, integer=True),
-                    time_repeats=t.number("time_repeats", 1, low=1, integer=True),
-                    time_warmup=t.number("time_warmup", 0, low=0, integer=True),
-                    device=device, threads=t.number("threads", 0, low=0, integer=True),
-                    tile=t.number("tile", 0, low=0, integer=True),
+                    time_size=t.number("time_size", 512, low=16, high=MAX_SYNTH_SIZE, integer=True),
+                    time_repeats=t.number("time_repeats", 1, low=1, high=MAX_REPEATS, integer=True),
+                    time_warmup=t.number("time_warmup", 0, low=0, high=MAX_REPEATS, integer=True),
+                    device=device, threads=t.number("threads", 0, low=0, high=MAX_THREADS, integer=True),
+                    tile=t.number("tile", 0, low=0, high=MAX_SYNTH_SIZE, integer=True),
                     max_memory_gb=t.number("max_memory_gb", 4.0, low=0.0, low_open=True),
                     precision=precision, lowres_only=t.get("lowres_only", bool, False),
                     error_maps=t.get("error_maps", bool, True))
@@ -579,6 +584,21 @@ def _check_config(cfg: dict[str, Any], source: Path, where: str) -> TrainConfig:
     except (TypeError, ValueError) as exc:
         _fail(source, where, f"[model]: {exc}")
     return tc
+
+
+def _check_cell_count(grid_raw: list[Any], seeds: int, source: Path) -> None:
+    """SpecError when the [[grid]] tables (the sum of the products of their value lists) times ``seeds``
+    define more than MAX_CELLS cells; counted from the list lengths, before any cell is made."""
+    total = 0
+    for g in grid_raw:
+        count = 1
+        for values in (flatten(g).values() if isinstance(g, dict) else ()):
+            count *= len(values) if isinstance(values, list) else 1
+        total += count
+    if total * seeds > MAX_CELLS:
+        times = f" x {seeds} seeds" if seeds > 1 else ""
+        raise SpecError(f"grid: {total} cells{times} is more than one spec may run ({MAX_CELLS}); split the grid "
+                        "into several specs", source)
 
 
 def _expand_grid(grid_raw: list[Any], base: dict[str, Any], source: Path) -> tuple[Cell, ...]:

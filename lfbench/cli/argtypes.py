@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable
 
-__all__ = ["add_method_device", "int_range"]
+__all__ = ["add_method_device", "float_range", "int_range"]
 
 
 def int_range(low: int, high: int) -> Callable[[str], int]:
@@ -22,6 +22,23 @@ def int_range(low: int, high: int) -> Callable[[str], int]:
         return value
 
     parse.__name__ = "integer"
+    return parse
+
+
+def float_range(low: float, high: float, *, low_open: bool = False) -> Callable[[str], float]:
+    """An argparse ``type``: a finite number from ``low`` (excluded with ``low_open``) to ``high``."""
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number, got {text[:40]!r}") from None
+        if not (low < value if low_open else low <= value) or not value <= high:
+            raise argparse.ArgumentTypeError(f"must be {'above' if low_open else 'from'} {low:g} to {high:g}, "
+                                             f"got {text[:40]}")
+        return value
+
+    parse.__name__ = "number"
     return parse
 
 

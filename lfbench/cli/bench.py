@@ -29,14 +29,28 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from lfbench.cli.argtypes import float_range, int_range
+
 HELP = "speed and memory benchmarks (inference, cost volume, training, metrics, conv peak)"
+
+# Bounds of the flags, checked when they are parsed (one usage line, exit 2) before any case runs: a case
+# allocates from them (81 views of SIZE^2 px, BATCH patches of PATCH^2 px), in a worker process.
+MAX_SIZE = 4096  # px per side of a timed light field (as lfbench synth)
+MAX_BATCH = 4096  # as a training config's batch_size
+MAX_PATCH = 1024  # px, as a training config's patch
+MAX_COUNT = 10**6  # steps, repeats, rounds, scenes, methods
+MAX_THREADS = 4096
+_SIZE = int_range(8, MAX_SIZE)
+_COUNT = int_range(1, MAX_COUNT)
+_WIDTH = int_range(1, 1 << 16)  # the network bounds it further (its own check and MAX_NETWORK_BYTES)
+_POSITIVE = float_range(0.0, 1e12, low_open=True)
 
 
 def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", type=Path, metavar="OUT.json", help="write the records (a JSON list) here")
     p.add_argument("--table", type=Path, metavar="OUT.md", help="also write the table (Markdown) here")
-    p.add_argument("--threads", type=int, default=0, help="torch threads (0 = all cores)")
-    p.add_argument("--timeout", type=float, default=None, metavar="S", help="give up a case after S seconds")
+    p.add_argument("--threads", type=int_range(0, MAX_THREADS), default=0, help="torch threads (0 = all cores)")
+    p.add_argument("--timeout", type=_POSITIVE, default=None, metavar="S", help="give up a case after S seconds")
     p.add_argument("--model", default="subfocal", metavar="NAME[:key=value,...]",
                    help="trainable network to time, with parameters (default subfocal; see lfbench.method.trainable)")
 
@@ -48,16 +62,19 @@ def _device_option(p: argparse.ArgumentParser) -> None:
 
 
 def _inference_options(p: argparse.ArgumentParser, size: int, intervals: list[float] | None) -> None:
-    p.add_argument("--size", type=int, default=size, help="image size in px (a size x size scene, 81 views)")
-    p.add_argument("--interval", type=float, nargs="+", default=intervals,
+    p.add_argument("--size", type=_SIZE, default=size, help=f"image size in px (a size x size scene, 81 views; "
+                                                            f"8 to {MAX_SIZE})")
+    p.add_argument("--interval", type=_POSITIVE, nargs="+", default=intervals,
                    help="disparity intervals (px; default: the network's, SubFocal 0.5)")
     p.add_argument("--precision", nargs="+", default=["fp32", "bf16"], choices=["fp32", "bf16"])
-    p.add_argument("--width", type=int, default=None, help="aggregation width (default: the network's, SubFocal 150)")
+    p.add_argument("--width", type=_WIDTH, default=None,
+                   help="aggregation width (default: the network's, SubFocal 150)")
     p.add_argument("--weights", help="checkpoint .pt (default: random weights)")
-    p.add_argument("--max-memory", type=float, default=None, metavar="GB",
+    p.add_argument("--max-memory", type=_POSITIVE, default=None, metavar="GB",
                    help="memory budget of inference (default: 4 on the CPU, the GPU's free memory on CUDA)")
-    p.add_argument("--tile", type=int, default=0, help="core tile size in px (0 = from --max-memory)")
-    p.add_argument("--repeat", type=int, default=1, help="runs per case (the best is kept)")
+    p.add_argument("--tile", type=int_range(0, MAX_SIZE), default=0,
+                   help="core tile size in px (0 = from --max-memory)")
+    p.add_argument("--repeat", type=_COUNT, default=1, help="runs per case (the best is kept)")
     p.add_argument("--no-peak", action="store_true", help="do not measure the conv3d peak around each case")
     _device_option(p)
 
@@ -68,28 +85,28 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     _inference_options(s, 512, None)
     s.add_argument("--quick", action="store_true", help="64x64 scene, tiny training and metric cases (seconds)")
     s.add_argument("--skip", nargs="+", default=[], choices=["peak", "inference", "volume", "train", "metrics"])
-    s.add_argument("--train-batch", type=int, default=2)
-    s.add_argument("--train-steps", type=int, default=2)
-    s.add_argument("--small-width", type=int, default=16, help="the small width of the training bench")
+    s.add_argument("--train-batch", type=int_range(1, MAX_BATCH), default=2)
+    s.add_argument("--train-steps", type=_COUNT, default=2)
+    s.add_argument("--small-width", type=_WIDTH, default=16, help="the small width of the training bench")
     _common(s)
     i = sub.add_parser("inference", help="one scene per interval x precision (seconds, peak memory, GFLOP/s)")
     _inference_options(i, 512, None)
     _common(i)
     v = sub.add_parser("volume", help="the cost volume alone (GB/s)")
-    v.add_argument("--size", type=int, default=512)
-    v.add_argument("--interval", type=float, nargs="+", default=[0.5])
+    v.add_argument("--size", type=_SIZE, default=512)
+    v.add_argument("--interval", type=_POSITIVE, nargs="+", default=[0.5])
     v.add_argument("--precision", nargs="+", default=["fp32", "bf16"], choices=["fp32", "bf16"])
     v.add_argument("--method", nargs="+", default=["gather", "grid_sample"], choices=["gather", "grid_sample"])
-    v.add_argument("--repeat", type=int, default=1)
+    v.add_argument("--repeat", type=_COUNT, default=1)
     _common(v)
     t = sub.add_parser("train", help="training steps per second (Adam + L1 on random patches)")
-    t.add_argument("--width", type=int, nargs="+", default=None, help="widths (default SubFocal: 150 16)")
-    t.add_argument("--batch", type=int, default=2)
-    t.add_argument("--patch", type=int, default=32)
-    t.add_argument("--steps", type=int, default=2)
-    t.add_argument("--warmup", type=int, default=1,
+    t.add_argument("--width", type=_WIDTH, nargs="+", default=None, help="widths (default SubFocal: 150 16)")
+    t.add_argument("--batch", type=int_range(1, MAX_BATCH), default=2, help=f"patches per step (1 to {MAX_BATCH})")
+    t.add_argument("--patch", type=int_range(8, MAX_PATCH), default=32, help=f"patch size in px (8 to {MAX_PATCH})")
+    t.add_argument("--steps", type=_COUNT, default=2)
+    t.add_argument("--warmup", type=int_range(0, MAX_COUNT), default=1,
                    help="untimed steps first (one-time costs: kernel setup, caches, the heap growing to its size)")
-    t.add_argument("--interval", type=float, default=None)
+    t.add_argument("--interval", type=_POSITIVE, default=None)
     t.add_argument("--no-channels-last", action="store_true")
     t.add_argument("--path", nargs="+", default=["fast"], choices=["fast", "reference"],
                    help="training path(s): fast (what lfbench train runs) and/or reference (the original ops)")
@@ -98,19 +115,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     t.add_argument("--weight-grad", nargs="+", default=None, choices=["auto", "gemm", "native"],
                    help="fast path: convolution weight gradients as matrix products where they pay (auto, the "
                         "default), on every layer they apply to (gemm), or PyTorch's own (native)")
-    t.add_argument("--rounds", type=int, default=1,
+    t.add_argument("--rounds", type=_COUNT, default=1,
                    help="run the width x path cases this many times, interleaved (before/after under the same load)")
     _device_option(t)
     _common(t)
     m = sub.add_parser("metrics", help="the metric engine over synthetic scenes x methods")
-    m.add_argument("--scenes", type=int, default=12)
-    m.add_argument("--methods", type=int, default=5)
-    m.add_argument("--size", type=int, default=512)
-    m.add_argument("--repeat", type=int, default=1)
+    m.add_argument("--scenes", type=int_range(1, 1000), default=12)
+    m.add_argument("--methods", type=int_range(1, 1000), default=5)
+    m.add_argument("--size", type=_SIZE, default=512)
+    m.add_argument("--repeat", type=_COUNT, default=1)
     _common(m)
     k = sub.add_parser("peak", help="the conv3d peak (GFLOP/s) of the paper's 3D convolution")
     k.add_argument("--precision", nargs="+", default=["fp32", "bf16"], choices=["fp32", "bf16"])
-    k.add_argument("--repeat", type=int, default=3)
+    k.add_argument("--repeat", type=_COUNT, default=3)
     _device_option(k)
     _common(k)
 
@@ -211,6 +228,25 @@ def _cases(args: argparse.Namespace) -> list[tuple[str, dict]]:
     return cases
 
 
+def _check_networks(args: argparse.Namespace, cases: list[tuple[str, dict]]) -> None:
+    """SpecError naming --model when a case would build a network its trainable refuses (bad values, or
+    more than MAX_NETWORK_BYTES of parameters: checked on the meta device), before any case runs."""
+    from lfbench.utils.errors import SpecError
+
+    _, _, trainable = _model(args)
+    accepted = trainable.parameters()
+    checked: list[dict] = []
+    for bench, params in cases:
+        net = {k: v for k, v in params.items() if k in accepted and k != "model"}
+        if bench not in ("inference", "train") or net in checked:
+            continue
+        checked.append(net)
+        try:
+            trainable.check_params(net)
+        except (TypeError, ValueError) as exc:
+            raise SpecError(f"--model {args.model}: {' '.join(str(exc).split())[:200]}") from None
+
+
 def _line(record: dict) -> str:
     from lfbench.runs.bench import _fmt
 
@@ -244,6 +280,7 @@ def run(args: argparse.Namespace) -> int:
         args.device = str(resolve_device(args.device))  # SpecError (exit 2) before any case
     records: list[dict] = []
     cases = _cases(args)
+    _check_networks(args, cases)
     print(f"lfbench bench {args.which}: {len(cases)} cases, each in a fresh process", flush=True)
     for bench, params in cases:
         record = run_isolated(bench, params, args.timeout)

@@ -22,11 +22,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scenes", default="", help="comma-separated scene, category or split names (default: all)")
     p.add_argument("--out", required=True, type=Path, metavar="DIR", help="output folder")
     p.add_argument("--toolkit-nonfinite", action="store_true",
-                   help="treat NaN/inf predictions exactly as the official toolkit (BadPix counts NaN as good)")
+                   help="score as the official toolkit's own code: NaN/inf predictions count as good in BadPix and "
+                        "the other percentage metrics and are left out of Q25, bumpiness and MAE (by default they "
+                        "are bad / the worst value); it also switches the missed-dots rule for (box, label) pairs "
+                        "without pixels to the toolkit's (counted as missed dots), which changes missed_dots even "
+                        "for finite predictions (docs/benchmark-rules.md, deliberate differences)")
     p.add_argument("--lowres-only", action="store_true",
                    help="score every scene at 512x512, even where high-resolution ground truth exists")
     p.add_argument("--all-metrics", action="store_true",
-                   help="also score the region and stratified metrics wherever the scene has their mask files")
+                   help="also score the region and stratified metrics wherever the scene has their mask files, "
+                        "and the toolkit's runtime and runtime_log (log10 s) wherever the method reports a "
+                        "runtime (a submission's runtimes/<scene>.txt, else the measured wall time)")
     p.add_argument("--save-maps", action="store_true",
                    help="also write each prediction as OUT/maps/<method>/ (submission layout)")
     p.add_argument("--ci", action="store_true",

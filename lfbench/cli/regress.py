@@ -1,9 +1,17 @@
 """Check new results against golden metrics: exit 1 with a readable diff when any metric worsened
-beyond its tolerance, went missing, changed resolution or is not finite; exit 0 otherwise. The
-golden file is validated first (finite numbers, known metrics, no duplicates: exit 2 otherwise);
-records of NEW absent from it are reported (and fail with --fail-on-new).
+beyond its tolerance, went missing, changed resolution or is not finite (or outside the metric's
+range), and exit 1 when nothing was compared (an empty golden file, or every golden scene absent
+under --skip-absent-scenes) unless --allow-empty; exit 0 otherwise. The summary line says how many
+golden records were compared and how many were skipped, and why. The golden file is validated first
+(finite numbers within each metric's range, tolerances narrower than it, known metrics, no
+duplicates: exit 2 otherwise); records of NEW absent from it are reported (and fail with
+--fail-on-new).
 
-With --update, write NEW as the golden file instead (tolerance from --tolerance)."""
+Exit codes: 0 the gate passed; 1 it ran and did not pass (a regression, or nothing compared);
+2 the input is unusable (a malformed golden or results file, a bad flag).
+
+With --update, write NEW as the golden file instead (tolerance from --tolerance; refused when NEW
+holds no finite record, unless --allow-empty)."""
 
 from __future__ import annotations
 
@@ -25,6 +33,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="ignore golden records of scenes absent from NEW (e.g. real scenes when the data is not here)")
     p.add_argument("--fail-on-new", action="store_true",
                    help="fail when NEW holds records that the golden file lacks (default: report them only)")
+    p.add_argument("--allow-empty", action="store_true",
+                   help="pass when nothing was compared (an empty golden file, or every golden scene absent with "
+                        "--skip-absent-scenes); by default a gate that compared nothing fails (exit 1)")
     p.add_argument("--quiet", action="store_true", help="print only failures and the summary")
 
 
@@ -47,27 +58,23 @@ def _parse_tolerance(text: str):
 
 
 def run(args: argparse.Namespace) -> int:
-    from lfbench.runs.regress import check_unique, compare, make_golden, read_golden
+    from lfbench.runs.regress import check, check_unique, make_golden, read_golden
     from lfbench.runs.results import Results
 
     tolerance = _parse_tolerance(args.tolerance)  # checked even without --update: a typo is an error
     new = Results.read(args.new)
     if args.update:
-        n = make_golden(new, tolerance, args.golden, source=args.new)
+        n = make_golden(new, tolerance, args.golden, source=args.new, allow_empty=args.allow_empty)
         skipped = len(new.records) - n
         print(f"wrote {n} golden records to {args.golden}"
               + (f" ({skipped} non-finite values left out)" if skipped else ""))
         return 0
     check_unique(new, args.new)
     golden = read_golden(args.golden)
-    findings = compare(golden, new, skip_absent_scenes=args.skip_absent_scenes, fail_on_new=args.fail_on_new)
-    failed = [f for f in findings if f.failed]
-    for f in findings:
+    result = check(golden, new, skip_absent_scenes=args.skip_absent_scenes, fail_on_new=args.fail_on_new,
+                   allow_empty=args.allow_empty)
+    for f in result.findings:
         if f.failed or not args.quiet:
             print(f.message)
-    better = sum(f.kind == "better" for f in findings)
-    new_records = sum(f.kind == "new" for f in findings)
-    status = "FAIL" if failed else "OK"
-    print(f"{status}: {len(golden)} golden metrics, {len(failed)} regressions, {better} improved beyond tolerance"
-          + (f", {new_records} new records not in the golden file" if new_records else ""))
-    return 1 if failed else 0
+    print(result.summary())
+    return 0 if result.passed else 1

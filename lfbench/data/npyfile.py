@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from lfbench.utils.errors import DataError
+from lfbench.utils.readfile import check_regular_file
 
 __all__ = ["MAX_NPY_BYTES", "read_npy"]
 
@@ -26,6 +27,8 @@ def read_npy(path: str | Path, check: Callable[[tuple[int, ...], np.dtype], str 
     is larger than ``max_bytes``, has a size that does not match its header, or when ``check(shape,
     dtype)`` returns a reason (called before the data is read)."""
     path = Path(path)
+    if path.exists():  # a device or FIFO would block or never end; a missing file is reported below
+        check_regular_file(path, "input")
     try:
         with open(path, "rb") as f:
             try:

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from lfbench.utils.errors import DataError
+from lfbench.utils.readfile import read_text
 
 # (section, key, type) of every value lfbench needs; the rest of the file is kept in ``extra``.
 REQUIRED_KEYS: tuple[tuple[str, str, type], ...] = (
@@ -28,6 +29,7 @@ MAX_CAMS = 33  # per side; HCI has 9x9
 MAX_RESOLUTION_PX = 16384  # per side
 MAX_VIEW_PIXELS = 2**29  # num_cams_x * num_cams_y * width * height (81 views of 2574x2574 px)
 MAX_DEPTH_MAP_SCALE = 16  # side ratio of the high-resolution ground truth (HCI: 10)
+MAX_PARAMETERS_BYTES = 1024**2  # the file itself (HCI's: under 1 kB)
 _POSITIVE = {"focal_length_mm", "sensor_size_mm", "focus_distance_m"}
 
 
@@ -122,8 +124,9 @@ def read_parameters(path: str | Path) -> SceneParameters:
     if not path.is_file():
         raise DataError("missing parameters.cfg", path)
     parser = configparser.ConfigParser(interpolation=None)
+    text = read_text(path, "parameters.cfg", MAX_PARAMETERS_BYTES, errors="replace")
     try:
-        parser.read_string(path.read_text(encoding="utf-8", errors="replace"), source=str(path))
+        parser.read_string(text, source=str(path))
     except configparser.Error as exc:
         raise DataError(f"cannot parse: {str(exc).splitlines()[0]}", path) from None
     values: dict[str, object] = {}

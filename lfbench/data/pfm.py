@@ -15,8 +15,14 @@ import numpy as np
 
 from lfbench.utils.atomic import atomic_open
 from lfbench.utils.errors import DataError
+from lfbench.utils.readfile import check_regular_file
 
 _MAX_HEADER_LINE = 256
+#: The most pixels of any PFM lfbench reads (HCI's high-resolution ground truth: 5120 x 5120 = 2**24.6),
+#: checked against the header before the data is read.
+MAX_PFM_PIXELS = 2**27
+
+Shape = tuple[int, int]
 
 
 def _header_line(f, path: Path) -> str:
@@ -32,13 +38,18 @@ def _header_line(f, path: Path) -> str:
             return line
 
 
-def read_pfm(path: str | Path) -> np.ndarray:
+def read_pfm(path: str | Path, *, shape: Shape | None = None, max_shape: Shape | None = None,
+             what: str = "PFM map") -> np.ndarray:
     """Read a PFM file as float32, (H, W) for ``Pf`` or (H, W, 3) for ``PF``, rows top-down.
 
     Values are multiplied by |scale| as the benchmark toolkit does (scale is 1 in HCI files).
-    Raises DataError naming the file for any malformed or truncated input.
+    The header's dimensions are checked before any data is read: against ``shape`` (H, W) exactly
+    when given (e.g. a scene's ground truth), against ``max_shape`` (H, W) as an upper bound per side
+    (e.g. a prediction, which may be cropped), and always against MAX_PFM_PIXELS; ``what`` names the
+    map in those errors. Raises DataError naming the file for any malformed, truncated or oversized input.
     """
     path = Path(path)
+    check_regular_file(path, "PFM file")  # a FIFO would block open(), a device never end
     try:
         f = open(path, "rb")
     except FileNotFoundError:
@@ -46,15 +57,30 @@ def read_pfm(path: str | Path) -> np.ndarray:
     except IsADirectoryError:
         raise DataError("is a folder, expected a PFM file", path) from None
     with f:
-        return _read_pfm_stream(f, path)
+        return _read_pfm_stream(f, path, shape, max_shape, what)
 
 
-def parse_pfm(data: bytes, source: str | Path = "<bytes>") -> np.ndarray:
+def parse_pfm(data: bytes, source: str | Path = "<bytes>", *, shape: Shape | None = None,
+              max_shape: Shape | None = None, what: str = "PFM map") -> np.ndarray:
     """Like :func:`read_pfm` for a PFM held in memory (e.g. a zip member); errors name ``source``."""
-    return _read_pfm_stream(io.BytesIO(data), Path(source))
+    return _read_pfm_stream(io.BytesIO(data), Path(source), shape, max_shape, what)
 
 
-def _read_pfm_stream(f: BinaryIO, path: Path) -> np.ndarray:
+def _check_dimensions(width: int, height: int, shape: Shape | None, max_shape: Shape | None, path: Path,
+                      what: str) -> None:
+    """DataError unless the header's width x height fits ``shape``, ``max_shape`` and MAX_PFM_PIXELS."""
+    if shape is not None and (height, width) != tuple(shape):
+        raise DataError(f"{what} is {width}x{height}, expected {shape[1]}x{shape[0]}", path)
+    if max_shape is not None and (height > max_shape[0] or width > max_shape[1]):
+        raise DataError(f"{what} is {width}x{height}, scene is {max_shape[1]}x{max_shape[0]}: larger than the scene",
+                        path)
+    if width * height > MAX_PFM_PIXELS:
+        raise DataError(f"{what} is {width}x{height} ({width * height} px), more than lfbench reads "
+                        f"({MAX_PFM_PIXELS} px)", path)
+
+
+def _read_pfm_stream(f: BinaryIO, path: Path, shape: Shape | None = None, max_shape: Shape | None = None,
+                     what: str = "PFM map") -> np.ndarray:
     ident = _header_line(f, path)
     if ident not in ("Pf", "PF"):
         raise DataError("not a PFM file: the first line is not 'Pf' or 'PF'", path)  # never echo content
@@ -66,6 +92,7 @@ def _read_pfm_stream(f: BinaryIO, path: Path) -> np.ndarray:
             raise ValueError
     except ValueError:
         raise DataError("bad PFM dimensions: expected two positive integers 'width height'", path) from None
+    _check_dimensions(width, height, shape, max_shape, path, what)
     try:
         scale = float(_header_line(f, path))
         if scale == 0 or not np.isfinite(scale):

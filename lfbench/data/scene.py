@@ -25,6 +25,7 @@ from lfbench.data.params import SceneParameters, read_parameters
 from lfbench.data.pfm import read_pfm
 from lfbench.utils.errors import DataError
 from lfbench.utils.names import FileNames
+from lfbench.utils.readfile import check_regular_file
 
 GRAY_WEIGHTS = (0.299, 0.587, 0.114)
 LOWRES, HIGHRES = "lowres", "highres"
@@ -47,6 +48,8 @@ _SIXTEEN_BIT = {"I;16", "I;16B", "I;16L", "I;16N", "I"}  # 16-bit gray PNG (Pill
 def _open_png(path: Path, what: str, size: tuple[int, int] | None) -> Iterator[Image.Image]:
     """The PNG opened lazily, its dimensions checked from the header before any pixel is decoded
     (against ``size`` (H, W) when given, else against MAX_PNG_PIXELS). Errors name the file."""
+    if path.exists():  # not a device or FIFO (a FIFO would block open); a missing file is reported below
+        check_regular_file(path, what)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", Image.DecompressionBombWarning)  # our own limits apply
@@ -252,14 +255,11 @@ class Scene(LightField):
         path = self.path / f"gt_disp_{resolution}.pfm"
         if not path.is_file():
             return None
-        gt = read_pfm(path)
-        if gt.ndim != 2:
-            raise DataError("ground truth is a 3-channel PF map, expected a gray Pf map", path)
         h, w = self.spatial_size
         scale = 1 if resolution == LOWRES else self.params.highres_scale
-        if gt.shape != (h * scale, w * scale):
-            raise DataError(f"ground truth is {gt.shape[1]}x{gt.shape[0]}, expected {w * scale}x{h * scale}",
-                            path)
+        gt = read_pfm(path, shape=(h * scale, w * scale), what="ground truth")  # checked before the data is read
+        if gt.ndim != 2:
+            raise DataError("ground truth is a 3-channel PF map, expected a gray Pf map", path)
         bad = int(np.count_nonzero(~np.isfinite(gt)))
         if bad:
             raise DataError(f"ground truth has {bad} non-finite values of {gt.size} (NaN or inf): it cannot be "

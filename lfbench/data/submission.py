@@ -13,6 +13,7 @@ import numpy as np
 from lfbench.data.pfm import read_pfm, write_pfm
 from lfbench.utils.atomic import write_text
 from lfbench.utils.errors import DataError
+from lfbench.utils.readfile import read_text
 
 DISP_DIR, RUNTIME_DIR = "disp_maps", "runtimes"
 
@@ -42,20 +43,21 @@ def check_inside(root: str | Path, path: str | Path) -> None:
         raise DataError("not a regular file", path)
 
 
+MAX_RUNTIME_BYTES = 4096  # a runtime file holds one number
+
+
 def read_runtime(path: str | Path) -> float:
-    """The runtime in s from a runtimes/<scene>.txt (first line, one float)."""
+    """The runtime in s from a runtimes/<scene>.txt as the toolkit reads it: its first line as one float
+    (surrounding spaces allowed; what follows the first line is ignored). The value is returned as
+    written (NaN, 0 or a negative number included: runtime metrics leave such a runtime out).
+    DataError naming the file when it is missing, larger than MAX_RUNTIME_BYTES or its first line is not
+    a number (an empty file included, which the toolkit cannot read either)."""
     path = Path(path)
+    text = read_text(path, "runtime file", MAX_RUNTIME_BYTES, errors="replace")
     try:
-        first = path.read_text(encoding="utf-8", errors="replace").strip().splitlines()
-    except FileNotFoundError:
-        raise DataError("missing runtime file", path) from None
-    except OSError as exc:
-        raise DataError(f"cannot read runtime file: {exc.strerror or exc}", path) from None
-    try:
-        value = float(first[0]) if first else float("nan")
+        return float(text.split("\n", 1)[0])
     except ValueError:  # the file's text is not shown: never echo file content
         raise DataError("runtime is not a number (expected one number of seconds)", path) from None
-    return value
 
 
 def write_runtime(path: str | Path, seconds: float) -> None:
@@ -72,10 +74,13 @@ def submission_scenes(root: str | Path) -> list[str]:
     return sorted(p.stem for p in d.glob("*.pfm"))
 
 
-def read_submission_map(root: str | Path, scene: str) -> tuple[np.ndarray, float | None]:
-    """(disparity (H, W) float32, runtime in s or None if its file is absent) of one scene."""
+def read_submission_map(root: str | Path, scene: str, max_shape: tuple[int, int] | None = None
+                        ) -> tuple[np.ndarray, float | None]:
+    """(disparity (H, W) float32, runtime in s or None if its file is absent) of one scene. ``max_shape``
+    (H, W): the largest map the scene can take (its own size; a cropped map is smaller), checked against
+    the PFM header before the data is read."""
     check_inside(root, disp_map_path(root, scene))
-    disp = read_pfm(disp_map_path(root, scene))
+    disp = read_pfm(disp_map_path(root, scene), max_shape=max_shape, what="prediction")
     rt = runtime_path(root, scene)
     if not (rt.exists() or rt.is_symlink()):
         return disp, None
@@ -83,10 +88,12 @@ def read_submission_map(root: str | Path, scene: str) -> tuple[np.ndarray, float
     return disp, read_runtime(rt)
 
 
-def write_submission_map(root: str | Path, scene: str, disparity: np.ndarray, runtime_s: float) -> None:
-    """Write one scene's map and runtime, each atomically."""
+def write_submission_map(root: str | Path, scene: str, disparity: np.ndarray, runtime_s: float | None) -> None:
+    """Write one scene's map and runtime, each atomically; no runtime file unless ``runtime_s`` is a positive
+    finite number (a method that reports no runtime gets none made up: its runtime records stay absent)."""
     disparity = np.asarray(disparity, dtype=np.float32)
     if disparity.ndim != 2:
         raise ValueError(f"disparity must be (H, W), got {disparity.shape}")
     write_pfm(disp_map_path(root, scene), disparity)
-    write_runtime(runtime_path(root, scene), runtime_s)
+    if runtime_s is not None and math.isfinite(runtime_s) and runtime_s > 0:
+        write_runtime(runtime_path(root, scene), runtime_s)

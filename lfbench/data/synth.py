@@ -698,6 +698,7 @@ class SyntheticScene:
 
 MAX_SYNTH_SIZE = 4096  # px per side of a generated view
 MAX_SYNTH_SCENES = 1000
+MAX_SEED = 2**63 - 1  # seeds are 64-bit signed integers, as in TOML configs
 
 
 def check_args(size: int, angular: int = 9) -> None:
@@ -826,6 +827,8 @@ def write_benchmark(out: str | Path, seed: int = 0, size: int = 128, scenes: int
     at a time in separate processes; each scene depends only on its own seed, so the files are the same.
     """
     check_args(size, angular)
+    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or not 0 <= seed <= MAX_SEED:
+        raise SpecError(f"seed must be an integer from 0 to {MAX_SEED}, got {str(seed)[:40]}")
     if int(scenes) != scenes or not 1 <= scenes <= MAX_SYNTH_SCENES:
         raise SpecError(f"scenes must be an integer from 1 to {MAX_SYNTH_SCENES}, got {scenes}")
     if int(workers) != workers or workers < 1:

@@ -48,6 +48,36 @@ if TYPE_CHECKING:  # torch is imported where a network is built, not by `lfbench
     from lfbench.method.base import Method
 
 DEFAULT_TRAINABLE = "subfocal"  # what a training config without ``method = ...`` trains
+#: The most a network may hold in parameters and buffers (SubFocal at the paper's width: 19 MiB; at its
+#: largest width, 1024: 0.7 GiB), checked on PyTorch's meta device before the network is built for real.
+MAX_NETWORK_BYTES = 2 * 1024**3
+
+
+def network_bytes(build: Callable[..., torch.nn.Module], params: dict[str, Any]) -> int | None:
+    """Bytes of the parameters and buffers ``build(**params)`` would allocate, from a build on PyTorch's
+    meta device (shapes only: nothing is allocated or initialised); None when the constructor cannot
+    run there (e.g. it reads a tensor's value). ValueError/TypeError of the constructor propagate."""
+    import torch
+
+    try:
+        with torch.device("meta"):
+            net = build(**params)
+    except (ValueError, TypeError):
+        raise
+    except Exception:  # noqa: BLE001 - a constructor that needs real tensors: its size is unknown here
+        return None
+    tensors = [*net.parameters(), *net.buffers()] if isinstance(net, torch.nn.Module) else []
+    return sum(t.numel() * t.element_size() for t in tensors)
+
+
+def check_network_size(build: Callable[..., torch.nn.Module], params: dict[str, Any]) -> int | None:
+    """ValueError when ``build(**params)`` would hold more than MAX_NETWORK_BYTES; else its size in bytes
+    (None when it cannot be known before a real build: see :func:`network_bytes`)."""
+    size = network_bytes(build, params)
+    if size is not None and size > MAX_NETWORK_BYTES:
+        raise ValueError(f"the network would hold {size / 1024**3:.3g} GiB of parameters and buffers, more than "
+                         f"lfbench builds ({MAX_NETWORK_BYTES / 1024**3:g} GiB)")
+    return size
 
 
 class Trainable:
@@ -95,27 +125,24 @@ class Trainable:
         return tuple(self.axes) if self.axes is not None else tuple(self.parameters())
 
     def check(self, params: dict[str, Any]) -> None:
-        """Raise ValueError/TypeError if ``params`` cannot build the network. Unknown keys are checked by
-        :meth:`check_params`. This default builds the network on PyTorch's meta device (shapes only: no
-        memory, no initialisation), and for real only when its constructor cannot run there (e.g. it
-        reads a tensor's value); override with a cheaper check where one exists."""
-        import torch
-
-        try:
-            with torch.device("meta"):
-                self.build(**params)
-        except (ValueError, TypeError):
-            raise
-        except Exception:  # noqa: BLE001 - a constructor that needs real tensors: the plain build decides
+        """Raise ValueError/TypeError if ``params`` cannot build the network. Unknown keys and the network's
+        size are checked by :meth:`check_params`. This default builds the network on PyTorch's meta device
+        (shapes only: no memory, no initialisation), and for real only when its constructor cannot run
+        there (e.g. it reads a tensor's value; such a network's size cannot be bounded before it is
+        built); override with a cheaper check where one exists."""
+        if check_network_size(self.build, params) is None:  # a constructor that needs real tensors decides
             self.build(**params)
 
     def check_params(self, params: dict[str, Any]) -> None:
-        """ValueError naming unknown [model] keys, then :meth:`check`."""
+        """ValueError naming unknown [model] keys, then :meth:`check`, then the network's size: at most
+        MAX_NETWORK_BYTES of parameters and buffers (a build on the meta device, for every network)."""
         accepted = set(self.parameters())
         unknown = sorted(set(params) - accepted)
         if unknown:
             raise ValueError(f"unknown [model] key(s) {', '.join(unknown)} (accepted: {', '.join(sorted(accepted))})")
         self.check(params)
+        if type(self).check is not Trainable.check:  # the default check has measured it already
+            check_network_size(self.build, params)
 
     def config_of(self, net: torch.nn.Module, params: dict[str, Any]) -> dict[str, Any]:
         """What a checkpoint stores as ``config``: ``net.config()`` when the network has one, else ``params``."""
@@ -172,9 +199,11 @@ class Trainable:
 def network_from_state(build: Callable[..., torch.nn.Module], state: dict, config: dict, path: str | Path
                        ) -> torch.nn.Module:
     """``build(**config)`` with ``state`` loaded, in eval mode; DataError naming ``path`` (the checkpoint)
-    when the config does not build or the weights do not fit it."""
+    when the config does not build, would hold more than MAX_NETWORK_BYTES (checked on the meta device
+    before anything is allocated) or the weights do not fit it."""
     try:
-        net = build(**config)  # the network checks every size against its bound before allocating
+        check_network_size(build, config)
+        net = build(**config)
     except (TypeError, ValueError) as exc:
         raise DataError(f"checkpoint config is not valid: {' '.join(str(exc).split())[:200]}", path) from None
     check_state_dict(state, net.state_dict(), path)
@@ -248,5 +277,6 @@ def list_trainables() -> list[str]:
     return TRAINABLES.names()
 
 
-__all__ = ["Trainable", "TrainableRegistry", "network_from_state", "TRAINABLES", "DEFAULT_TRAINABLE",
+__all__ = ["Trainable", "TrainableRegistry", "network_from_state", "network_bytes", "check_network_size",
+           "MAX_NETWORK_BYTES", "TRAINABLES", "DEFAULT_TRAINABLE",
            "register_trainable", "get_trainable", "list_trainables"]

@@ -371,8 +371,11 @@ def stack_rows(row_paths: Sequence[str | Path], path: str | Path) -> Path:
     """Stack row PNGs (equal widths, as drawn by this module) vertically into one PNG (atomic)."""
     from PIL import Image
 
+    from lfbench.utils.readfile import check_regular_file
+
     images = []
     for p in row_paths:
+        check_regular_file(p, "figure row")
         with Image.open(p) as img:
             images.append(img.convert("RGB"))
     width = max(img.width for img in images)
@@ -469,19 +472,17 @@ def read_curves_csv(path: str | Path) -> list[Curve]:
 
     path = Path(path)
     rows: dict[tuple[str, str, str], list[tuple[float, float]]] = {}
-    try:
-        with open(path, encoding="utf-8", newline="") as f:
-            reader = csv.DictReader(f)
-            if tuple(reader.fieldnames or ()) != CURVE_CSV_COLUMNS:
-                raise DataError(f"expected columns {', '.join(CURVE_CSV_COLUMNS)}", path)
-            for i, r in enumerate(reader, start=2):
-                try:
-                    rows.setdefault((r["method"], r["scene"], r["resolution"]), []).append(
-                        (float(r["threshold"]), float(r["value"])))
-                except (TypeError, ValueError):
-                    raise DataError(f"line {i}: threshold and value must be numbers", path) from None
-    except FileNotFoundError:
-        raise DataError("curve file not found", path) from None
+    from lfbench.utils.readfile import read_text
+
+    reader = csv.DictReader(io.StringIO(read_text(path, "curve file"), newline=""))
+    if tuple(reader.fieldnames or ()) != CURVE_CSV_COLUMNS:
+        raise DataError(f"expected columns {', '.join(CURVE_CSV_COLUMNS)}", path)
+    for i, r in enumerate(reader, start=2):
+        try:
+            rows.setdefault((r["method"], r["scene"], r["resolution"]), []).append(
+                (float(r["threshold"]), float(r["value"])))
+        except (TypeError, ValueError):
+            raise DataError(f"line {i}: threshold and value must be numbers", path) from None
     out = []
     for (m, s, res), pts in rows.items():
         arr = np.array(sorted(pts), dtype=np.float64)
@@ -637,7 +638,7 @@ def figures_from_maps(scenes: Sequence[LightField], maps: Mapping[str, str | Pat
         for label, folder in maps.items():
             if not disp_map_path(folder, scene.name).is_file():
                 continue
-            disp, runtime = read_submission_map(folder, scene.name)
+            disp, runtime = read_submission_map(folder, scene.name, max_shape=getattr(scene, "spatial_size", None))
             writer.add(label, scene, Prediction(disparity=disp, runtime_s=runtime))
             if progress:
                 _log.info("drew %s on %s", label, scene.name)

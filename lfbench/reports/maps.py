@@ -71,7 +71,7 @@ def load_scene_maps(scene: LightField, folders: Mapping[str, str | Path], border
     preds = {}
     for label, folder in folders.items():
         if disp_map_path(folder, scene.name).is_file():
-            disp, _ = read_submission_map(folder, scene.name)
+            disp, _ = read_submission_map(folder, scene.name, max_shape=shape)
             preds[label], _ = align_prediction(disp, shape, f"{label} on {scene.name}", max_crop=border_px)
     first = next(iter(preds.values()), None)
     return SceneMaps(scene=scene, gt=gt, mask=evaluation_mask(scene, shape, border_px), centre=centre,

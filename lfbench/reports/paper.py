@@ -85,12 +85,9 @@ class PaperTables:
 
 
 def _read_csv(path: Path, columns: Sequence[str] | None) -> pd.DataFrame:
-    try:
-        df = pd.read_csv(path)
-    except FileNotFoundError:
-        raise DataError("paper table not found", path) from None
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
-        raise DataError(f"not a readable CSV table: {str(exc).splitlines()[0]}", path) from None
+    from lfbench.utils.readfile import read_csv
+
+    df = read_csv(path, "paper table")
     if columns is None:
         return df
     missing = [c for c in columns if c not in df.columns]

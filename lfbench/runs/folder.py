@@ -28,7 +28,7 @@ from lfbench.reports.maps import MAPS_DIR
 from lfbench.runs.outputs import staged_outputs
 from lfbench.runs.results import Results
 from lfbench.runs.runner import PredictionHook, check_names, evaluate, save_prediction
-from lfbench.scoring.metrics import GENERAL_METRICS, Metric
+from lfbench.scoring.metrics import GENERAL_METRICS, RUNTIME_METRICS, Metric
 from lfbench.scoring.rules import ScoringRules
 
 __all__ = ["CIOptions", "evaluate_to_folder"]
@@ -61,7 +61,8 @@ def evaluate_to_folder(methods: Sequence[Method], scenes: Sequence[Scene], out: 
     """Run every method on every scene, score and write the run into ``out``; returns the Results.
 
     metrics: the metrics of every scene (default the general ones); all_metrics: also the region and
-    stratified metrics wherever the scene has their mask files. more: further (methods, scenes)
+    stratified metrics wherever the scene has their mask files, and the runtime metrics wherever the
+    method reports a runtime (runtime, runtime_log). more: further (methods, scenes)
     groups scored with the same rules into the same results (e.g. stored maps on real scenes beside
     a synthetic run). label: the name the records get instead of the method's label (one method
     only). on_prediction: a further hook that sees each prediction. meta: added to results.meta.
@@ -80,6 +81,14 @@ def evaluate_to_folder(methods: Sequence[Method], scenes: Sequence[Scene], out: 
         outputs.commit([p.relative_to(outputs.stage).parts[0] for p in staged])
     results.files = [outputs.final(p) for p in staged]
     return results
+
+
+def _all_metrics(scene: Scene, rules: ScoringRules) -> list[Metric]:
+    """Everything the toolkit scores on ``scene``: the general metrics, the region / stratified ones whose
+    masks exist, and the runtime metrics (recorded where the method reports a runtime)."""
+    from lfbench.scoring.region_metrics import applicable_metrics
+
+    return [*applicable_metrics(scene, rules=rules), *RUNTIME_METRICS]
 
 
 def _run_into(stage: Path, methods: Sequence[Method], scenes: Sequence[Scene], *, rules: ScoringRules,
@@ -116,9 +125,7 @@ def _run_into(stage: Path, methods: Sequence[Method], scenes: Sequence[Scene], *
 
     chosen = metrics if metrics is not None else GENERAL_METRICS
     if all_metrics:
-        from lfbench.scoring.region_metrics import applicable_metrics
-
-        chosen = functools.partial(applicable_metrics, rules=rules)
+        chosen = functools.partial(_all_metrics, rules=rules)
     run = functools.partial(evaluate, metrics=chosen, rules=rules, on_prediction=each_prediction if hooks else None,
                             progress=progress)
     results = run(methods, scenes)

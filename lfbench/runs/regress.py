@@ -3,10 +3,17 @@
 Golden file: a JSON list of records {method, scene, metric, value, tolerance, resolution}. A check
 fails when a metric worsens by more than its tolerance (in the metric's own units; lower is better
 for every benchmark metric unless the metric says otherwise), when a golden (method, scene, metric)
-is missing from the new results, when its resolution changed or when the new value is not finite.
-Improvements beyond the tolerance and new records absent from the golden file are reported (so the
-golden file can be refreshed) but do not fail (new records fail on request). Golden files are
-validated before any comparison: a NaN golden value would otherwise pass every check.
+is missing from the new results, when its resolution changed or when the new value is not finite or
+outside the metric's range. Improvements beyond the tolerance and new records absent from the golden
+file are reported (so the golden file can be refreshed) but do not fail (new records fail on request).
+Golden files are validated before any comparison: a NaN golden value would otherwise pass every
+check, and so would a tolerance as wide as the metric's range (``Metric.value_range``: a 0-100 %
+metric cannot take a tolerance of 100 or more).
+
+A gate that compared nothing does not pass (:class:`GateResult`): an empty golden file, or one whose
+every scene is absent from the new results under ``skip_absent_scenes``, fails unless
+``allow_empty`` says comparing nothing is intended; the summary says how many golden records were
+compared and how many were skipped, and why.
 """
 
 from __future__ import annotations
@@ -20,7 +27,7 @@ from pathlib import Path
 
 from lfbench.data.scene import HIGHRES, LOWRES
 from lfbench.runs.results import Results
-from lfbench.scoring.metrics import find_metric
+from lfbench.scoring.metrics import Metric, find_metric
 from lfbench.utils.atomic import write_text
 from lfbench.utils.errors import DataError, SpecError
 from lfbench.utils.jsonfile import read_json
@@ -53,6 +60,51 @@ class Finding:
     failed: bool = True
 
 
+@dataclass(frozen=True)
+class GateResult:
+    """The outcome of :func:`check`: the findings, how many golden records were compared (a missing
+    record counts: it was looked for), which were skipped and why, and whether the gate passes."""
+
+    findings: list[Finding]
+    golden: int
+    compared: int
+    skipped_scenes: tuple[str, ...] = ()  # scenes absent from the new results (skip_absent_scenes)
+    allow_empty: bool = False
+
+    @property
+    def failures(self) -> list[Finding]:
+        return [f for f in self.findings if f.failed]
+
+    @property
+    def skipped(self) -> int:
+        return self.golden - self.compared
+
+    @property
+    def compared_nothing(self) -> bool:
+        return self.compared == 0
+
+    @property
+    def passed(self) -> bool:
+        """No failure, and something was compared (or ``allow_empty``)."""
+        return not self.failures and (self.compared > 0 or self.allow_empty)
+
+    def summary(self) -> str:
+        """One line: OK/FAIL, records compared, regressions, improvements, new records, what was skipped
+        and why, and why a gate that compared nothing failed."""
+        better = sum(f.kind == "better" for f in self.findings)
+        new = sum(f.kind == "new" for f in self.findings)
+        text = (f"{'OK' if self.passed else 'FAIL'}: {self.compared} compared, {len(self.failures)} regressions, "
+                f"{better} improved beyond tolerance"
+                + (f", {new} new records not in the golden file" if new else ""))
+        if self.skipped:
+            text += f"; {self.skipped} skipped: scene absent from the new results ({', '.join(self.skipped_scenes)})"
+        if self.compared_nothing:
+            why = "the golden file holds no records" if not self.golden else "every golden record was skipped"
+            text += (f" -- nothing was compared ({why}): intended with --allow-empty" if self.allow_empty
+                     else f" -- nothing was compared ({why}), so the gate cannot pass (--allow-empty if intended)")
+        return text
+
+
 def read_golden(path: str | Path) -> list[GoldenRecord]:
     """Golden records of ``path``, validated: every value and tolerance a finite JSON number (no NaN,
     Infinity or "NaN" strings), tolerance >= 0, a known metric id, resolution lowres/highres, no
@@ -81,8 +133,12 @@ def read_golden(path: str | Path) -> list[GoldenRecord]:
             raise DataError(f"{where}: value must be a finite number, got {rec.value}", path)
         if not _is_tolerance(rec.tolerance):
             raise DataError(f"{where}: {TOLERANCE_RULE}", path)
-        if find_metric(rec.metric) is None:
+        metric = find_metric(rec.metric)
+        if metric is None:
             raise DataError(f"{where}: unknown metric {rec.metric!r}", path)
+        problem = _out_of_range(metric, rec.value) or _tolerance_too_wide(metric, rec.tolerance)
+        if problem:
+            raise DataError(f"{where}: {problem}", path)
         if rec.resolution not in RESOLUTIONS:
             raise DataError(f"{where}: resolution must be one of {', '.join(RESOLUTIONS)}", path)
         if rec.key in seen:
@@ -115,21 +171,51 @@ def _number(v: object, name: str) -> float:
     return float(v)
 
 
+def _range_text(metric: Metric) -> str:
+    low, high = metric.value_range
+    return f"{low:g} to {high:g} {metric.unit}"
+
+
+def _out_of_range(metric: Metric, value: float) -> str | None:
+    """Why ``value`` cannot be a value of ``metric`` (outside its declared range), or None."""
+    low, high = metric.value_range
+    if low <= value <= high:
+        return None
+    return f"value {value:.6g} is outside the range of {metric.id} ({_range_text(metric)})"
+
+
+def _tolerance_too_wide(metric: Metric, tolerance: float) -> str | None:
+    """Why ``tolerance`` cannot guard ``metric`` (as wide as its range: every value would pass), or None."""
+    if tolerance < metric.span:
+        return None
+    return (f"tolerance {tolerance:g} is as wide as the range of {metric.id} ({_range_text(metric)}): every value "
+            "would pass")
+
+
 def compare(golden: list[GoldenRecord], new: Results, skip_absent_scenes: bool = False,
             fail_on_new: bool = False) -> list[Finding]:
-    """All findings of ``new`` against ``golden``, failures first in golden order.
+    """All findings of ``new`` against ``golden``, failures first in golden order (:func:`check`'s findings)."""
+    return check(golden, new, skip_absent_scenes=skip_absent_scenes, fail_on_new=fail_on_new).findings
+
+
+def check(golden: list[GoldenRecord], new: Results, *, skip_absent_scenes: bool = False, fail_on_new: bool = False,
+          allow_empty: bool = False) -> GateResult:
+    """``new`` against ``golden``: the findings (failures first, in golden order) and what was compared.
 
     ``skip_absent_scenes``: golden records of scenes that no new record mentions are left out (e.g.
-    real-data scenes on a machine without the data); a method or metric missing on a scene that
-    was evaluated still fails. New records absent from the golden file are reported ("NEW"), and
-    fail only with ``fail_on_new``. A non-finite new value always fails.
+    real-data scenes on a machine without the data) and counted as skipped; a method or metric missing
+    on a scene that was evaluated still fails. New records absent from the golden file are reported
+    ("NEW"), and fail only with ``fail_on_new``. A non-finite new value, or one outside the metric's
+    range, always fails. The gate does not pass when it compared nothing, unless ``allow_empty``.
     """
     current = {(r.method, r.scene, r.metric): r for r in new.records}
     scenes = {r.scene for r in new.records}
     findings: list[Finding] = []
+    skipped: dict[str, None] = {}
     for g in golden:
         name = "/".join(g.key)
         if skip_absent_scenes and g.scene not in scenes:
+            skipped[g.scene] = None
             continue
         r = current.get(g.key)
         if r is None:
@@ -140,10 +226,11 @@ def compare(golden: list[GoldenRecord], new: Results, skip_absent_scenes: bool =
             findings.append(Finding("resolution", g.key,
                                     f"CHANGED  {name}: scored at {r.resolution}, golden at {g.resolution}"))
             continue
-        if not math.isfinite(r.value):
-            findings.append(Finding("nan", g.key, f"INVALID  {name}: new value is {r.value}"))
+        metric = find_metric(g.metric)  # known: read_golden refuses unknown ids
+        if not math.isfinite(r.value) or (metric is not None and _out_of_range(metric, r.value)):
+            why = f"value is {r.value}" if not math.isfinite(r.value) else _out_of_range(metric, r.value)
+            findings.append(Finding("nan", g.key, f"INVALID  {name}: new {why}"))
             continue
-        metric = find_metric(g.metric)  # unknown ids (a plugin's column) are error measures
         sign = -1.0 if metric is not None and metric.higher_is_better else 1.0
         change = sign * (r.value - g.value)  # > 0 means worse
         detail = f"{name}: {g.value:.6g} -> {r.value:.6g} ({r.value - g.value:+.3g}, tolerance {g.tolerance:g})"
@@ -157,7 +244,9 @@ def compare(golden: list[GoldenRecord], new: Results, skip_absent_scenes: bool =
             findings.append(Finding("new", key, f"NEW      {'/'.join(key)}: {r.value:.6g} is not in the golden file",
                                     failed=fail_on_new or not math.isfinite(r.value)))
     findings.sort(key=lambda f: not f.failed)
-    return findings
+    compared = sum(1 for g in golden if g.scene not in skipped)
+    return GateResult(findings, golden=len(golden), compared=compared, skipped_scenes=tuple(skipped),
+                      allow_empty=allow_empty)
 
 
 def tolerance_for(method: str, metric: str, tolerance: float | Mapping[str, float]) -> float:
@@ -186,21 +275,33 @@ def check_tolerance(tolerance: float | Mapping[str, float]) -> None:
 
 
 def make_golden(results: Results, tolerance: float | Mapping[str, float], path: str | Path, *,
-                source: str | Path | None = None) -> int:
+                source: str | Path | None = None, allow_empty: bool = False) -> int:
     """Write the finite records of ``results`` as golden records; ``tolerance`` as in :func:`tolerance_for`.
     Checked first: no (method, scene, metric) twice (DataError naming ``source``, where the results
-    came from, else ``path``), every tolerance, and every record's metric known (the file must read back)."""
+    came from, else ``path``), every tolerance (and narrower than the range of each record's metric),
+    every record's metric known and value within its range (the file must read back), and at least one
+    record to write (an empty golden file is a gate that cannot pass, unless ``allow_empty``)."""
     check_unique(results, source if source is not None else path)
     check_tolerance(tolerance)
     path = Path(path)
     if path.is_dir():
         raise DataError("golden file is a folder, expected a file", path)
     for r in results.records:
-        if find_metric(r.metric) is None:
-            raise DataError(f"record {r.method}/{r.scene}/{r.metric}: unknown metric {r.metric!r}, "
-                            "cannot make it golden", path)
+        metric = find_metric(r.metric)
+        where = f"record {r.method}/{r.scene}/{r.metric}"
+        if metric is None:
+            raise DataError(f"{where}: unknown metric {r.metric!r}, cannot make it golden", path)
+        problem = _out_of_range(metric, r.value) if math.isfinite(r.value) else None
+        if problem:
+            raise DataError(f"{where}: {problem}", source if source is not None else path)
+        problem = _tolerance_too_wide(metric, tolerance_for(r.method, r.metric, tolerance))
+        if problem:
+            raise SpecError(f"--tolerance for {where}: {problem}")
     records = [{"method": r.method, "scene": r.scene, "metric": r.metric, "value": r.value,
                 "tolerance": tolerance_for(r.method, r.metric, tolerance), "resolution": r.resolution}
                for r in results.records if math.isfinite(r.value)]
+    if not records and not allow_empty:
+        raise DataError("no finite records to make golden: an empty golden file is a gate that compares nothing "
+                        "(--allow-empty writes one anyway)", source if source is not None else path)
     write_text(path, json.dumps(records, indent=1, allow_nan=False) + "\n")
     return len(records)

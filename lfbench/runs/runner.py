@@ -52,7 +52,8 @@ def evaluate(methods: Sequence[Method], scenes: Sequence[Scene], *,
         if on_prediction is not None:
             on_prediction(method, scene, pred)
         scene_metrics = metrics(scene) if callable(metrics) else metrics
-        score = score_scene(scene, pred.disparity, scene_metrics, rules, source=f"{method.label} on {scene.name}")
+        score = score_scene(scene, pred.disparity, scene_metrics, rules, source=f"{method.label} on {scene.name}",
+                            runtime_s=pred.runtime_s)
         for metric_id, value in score.values.items():
             results.records.append(Record(method.label, scene.name, metric_id, value, score.resolution[metric_id]))
         results.runs.append(RunInfo(method.label, scene.name, float(pred.runtime_s or np.nan), score.nonfinite_pixels,
@@ -109,7 +110,6 @@ def save_prediction(out_dir: Path) -> PredictionHook:
     names = FileNames("method label")
 
     def hook(method: Method, scene: Scene, pred: Prediction) -> None:
-        runtime = pred.runtime_s if pred.runtime_s and np.isfinite(pred.runtime_s) and pred.runtime_s > 0 else 1e-9
-        write_submission_map(out_dir / names(method.label), scene.name, pred.disparity, runtime)
+        write_submission_map(out_dir / names(method.label), scene.name, pred.disparity, pred.runtime_s)
 
     return hook

@@ -16,6 +16,8 @@ good; ``toolkit=True`` does too).
 
 from __future__ import annotations
 
+import math
+import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
@@ -31,12 +33,16 @@ __all__ = [
     "quantile_x100",
     "nonfinite_count",
     "bad_pix_metric",
+    "quantile_metric",
     "Metric",
     "PixelStatistic",
     "MetricRegistry",
     "METRICS",
     "SCENE_AGGREGATES",
     "GENERAL_METRICS",
+    "RUNTIME_METRICS",
+    "PERCENT",
+    "NON_NEGATIVE",
     "get_metric",
     "find_metric",
     "list_metrics",
@@ -137,7 +143,10 @@ def q25_x100(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = None, *
 
 MetricFn = Callable[..., float]
 
-
+#: Value ranges (low, high) a metric declares: every value it can take lies in [low, high].
+PERCENT: tuple[float, float] = (0.0, 100.0)
+NON_NEGATIVE: tuple[float, float] = (0.0, math.inf)
+ANY_VALUE: tuple[float, float] = (-math.inf, math.inf)
 
 def _mean_of_finite(values: np.ndarray) -> float:
     v = values[~np.isnan(values)]
@@ -180,6 +189,10 @@ class Metric:
     ``vmin``/``vmax``/``cmap``: plot settings. ``scene_aggregate``: a key of :data:`SCENE_AGGREGATES`.
     ``bootstrap``: the metric as a :class:`PixelStatistic` of the general scoring's per-pixel errors,
     or None when it cannot be resampled from them (region metrics score other pixels).
+    ``value_range``: (low, high), every value the metric can take (e.g. (0, 100) for a percentage;
+    infinite ends where it has no bound): it bounds regression tolerances and golden values.
+    Category 'runtime' (:data:`RUNTIME_METRICS`): ``fn(runtime_s)`` of the runtime a method reports
+    for a scene (no maps, no masks, no resolution of its own; see :func:`lfbench.scoring.rules.score_scene`).
     """
 
     id: str
@@ -199,11 +212,28 @@ class Metric:
     needs_scene: bool = False
     scene_aggregate: str = "mean"
     bootstrap: PixelStatistic | None = None
+    value_range: tuple[float, float] = NON_NEGATIVE
 
     def __post_init__(self) -> None:
         if self.scene_aggregate not in SCENE_AGGREGATES:
             raise ValueError(f"metric {self.id!r}: unknown scene_aggregate {self.scene_aggregate!r}; "
                              f"use one of {', '.join(SCENE_AGGREGATES)}")
+        low, high = self.value_range
+        if math.isnan(low) or math.isnan(high) or not low < high:
+            raise ValueError(f"metric {self.id!r}: value_range must be (low, high) with low < high, "
+                             f"got {self.value_range}")
+
+    @property
+    def span(self) -> float:
+        """high - low of :attr:`value_range` (inf when a side is unbounded): no change of the metric's
+        value is larger, so a regression tolerance of this much or more accepts anything."""
+        low, high = self.value_range
+        return high - low
+
+    @property
+    def is_runtime(self) -> bool:
+        """Scored from the runtime a method reports for a scene, not from its disparity map."""
+        return self.category == "runtime"
 
     @property
     def lower_is_better(self) -> bool:
@@ -214,12 +244,23 @@ class Metric:
         """Every mask file (``<name>_<resolution>.png``) the metric needs."""
         return ((self.mask_name,) if self.mask_name else ()) + self.extra_masks
 
+    def score_runtime(self, runtime_s: float | None) -> float | None:
+        """A runtime metric's value for the runtime ``runtime_s`` (s) a method reports for a scene, or None
+        (no record) when it reports none (None, NaN) or one that is not a positive finite number."""
+        if not self.is_runtime:
+            raise TypeError(f"metric {self.id!r} is scored from maps, not from a runtime")
+        if runtime_s is None or not math.isfinite(runtime_s) or runtime_s <= 0:
+            return None
+        return float(self.fn(runtime_s))
+
     def aggregate(self, values: Sequence[float] | np.ndarray) -> float:
         """The per-scene ``values`` combined as the metric says (NaN scenes left out)."""
         return SCENE_AGGREGATES[self.scene_aggregate](np.asarray(values, dtype=np.float64))
 
     def __call__(self, gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = None, *,
                  toolkit: bool = False, **context) -> float:
+        if self.is_runtime:
+            raise TypeError(f"metric {self.id!r} is scored from a runtime (score_runtime), not from maps")
         return self.fn(gt, pred, mask, toolkit=toolkit, **context)
 
 
@@ -287,7 +328,7 @@ def _bad_pix_metric(t: float) -> Metric:
         id=f"badpix_{t:g}", name=f"BadPix({t:g})",
         description=f"Percentage of pixels with |gt - pred| > {t:g} px (non-finite predictions count as bad).",
         unit="%", fn=fn, toolkit_id=("badpix_%0.3f" % t).replace(".", ""), vmin=0, vmax=1, cmap="RdYlGn_r",
-        bootstrap=PixelStatistic("badpix", t),
+        bootstrap=PixelStatistic("badpix", t), value_range=PERCENT,
     )
 
 
@@ -296,6 +337,27 @@ def _mse_metric() -> Metric:
         id="mse_x100", name="MSE x100", description="Mean squared disparity error (px^2) multiplied by 100.",
         unit="px^2 x 100", fn=mse_x100, toolkit_id="mse_100", vmin=-0.2, vmax=0.2, cmap="seismic",
         bootstrap=PixelStatistic("mse"),
+    )
+
+
+def _ordinal(p: float) -> str:
+    if p != int(p):
+        return f"{p:g}th"
+    n = int(p)
+    suffix = "th" if 10 <= n % 100 <= 20 else {1: "st", 2: "nd", 3: "rd"}.get(n % 10, "th")
+    return f"{n}{suffix}"
+
+
+def _quantile_metric(p: float) -> Metric:
+    """Quantile(p): 100 x the |error| at index int(n * p / 100) of the n sorted errors, 0 <= p < 100."""
+    def fn(gt, pred, mask=None, *, toolkit=False):
+        return quantile_x100(gt, pred, p, mask, toolkit=toolkit)
+
+    return Metric(
+        id=f"q{p:g}_x100", name=f"Q{p:g}",
+        description=f"{_ordinal(p)} percentile of the absolute disparity error, x100.",
+        unit="px x 100", fn=fn, toolkit_id=f"q_{p:g}_100" if p == int(p) else None, vmin=0, vmax=0.5,
+        cmap="YlOrRd", bootstrap=PixelStatistic("quantile", p),
     )
 
 
@@ -311,10 +373,33 @@ GENERAL_METRICS: tuple[Metric, ...] = (
     _bad_pix_metric(0.01), _bad_pix_metric(0.03), _bad_pix_metric(0.07), _mse_metric(), _q25_metric(),
 )
 
-#: The process-wide registry: the general metrics here, the region and stratified ones from
-#: :mod:`lfbench.scoring.region_metrics` (registered when :func:`get_metric` first needs them).
+
+def _runtime_s(runtime_s: float) -> float:
+    """The runtime in s, as reported."""
+    return float(runtime_s)
+
+
+def _runtime_log10(runtime_s: float) -> float:
+    """log10 of the runtime in s (negative below 1 s)."""
+    return math.log10(runtime_s)
+
+
+#: The toolkit's runtime metrics: the runtime a method reports for a scene (a submission's
+#: runtimes/<scene>.txt, or the wall time lfbench measured around ``predict``), not scored from maps.
+RUNTIME_METRICS: tuple[Metric, ...] = (
+    Metric(id="runtime", name="Runtime", description="The runtime in seconds, as the method reports it.",
+           unit="s", fn=_runtime_s, toolkit_id="runtime", category="runtime", vmin=0, vmax=1, cmap="YlOrRd"),
+    Metric(id="runtime_log", name="Runtime (log10)",
+           description="Decadic logarithm of the runtime in seconds, as the method reports it (negative below 1 s).",
+           unit="log10 s", fn=_runtime_log10, toolkit_id="runtime_log", category="runtime", vmin=0, vmax=1,
+           cmap="YlOrRd", value_range=ANY_VALUE),
+)
+
+#: The process-wide registry: the general and runtime metrics here, the region and stratified ones from
+#: :mod:`lfbench.scoring.region_metrics` (registered when :func:`get_metric` first needs them), and the
+#: families ``badpix_<t>`` and ``q<p>_x100``.
 METRICS = MetricRegistry()
-for _m in GENERAL_METRICS:
+for _m in GENERAL_METRICS + RUNTIME_METRICS:
     METRICS.register(_m)
 
 
@@ -330,12 +415,33 @@ def _badpix_family(metric_id: str) -> Metric | None:
     return _bad_pix_metric(t) if np.isfinite(t) and t >= 0 else None
 
 
+_QUANTILE_ID = re.compile(r"q(?P<p>\d{1,2}(?:\.\d{1,6})?)_x100|q_(?P<tk>\d{1,2})_100")
+
+
+def _quantile_family(metric_id: str) -> Metric | None:
+    """``q<p>_x100`` for a percentage 0 <= p < 100 ('q50_x100', 'q2.5_x100'); the toolkit's 'q_50_100'."""
+    m = _QUANTILE_ID.fullmatch(metric_id)
+    if m is None:
+        return None
+    p = float(m["p"] if m["p"] is not None else m["tk"])
+    return _quantile_metric(p) if f"q{p:g}_x100" == metric_id or m["tk"] is not None else None
+
+
 METRICS.register_family("badpix_<t>", _badpix_family)
+METRICS.register_family("q<p>_x100", _quantile_family)
 
 
 def bad_pix_metric(threshold: float) -> Metric:
     """The BadPix metric for any threshold (px)."""
     return _bad_pix_metric(float(threshold))
+
+
+def quantile_metric(percentage: float) -> Metric:
+    """The Quantile metric for any percentage 0 <= p < 100 (Q25 is ``quantile_metric(25)``)."""
+    p = float(percentage)
+    if not 0 <= p < 100:
+        raise ValueError(f"quantile percentage must be from 0 to below 100, got {percentage}")
+    return METRICS.get(f"q{p:g}_x100")
 
 
 def _registry() -> MetricRegistry:

@@ -34,7 +34,16 @@ from scipy import ndimage
 
 from lfbench.data.params import SceneParameters
 from lfbench.data.scene import Scene, read_png
-from lfbench.scoring.metrics import GENERAL_METRICS, METRICS, Metric, _prepare, bad_pix, mse_x100
+from lfbench.scoring.metrics import (
+    GENERAL_METRICS,
+    METRICS,
+    NON_NEGATIVE,
+    PERCENT,
+    Metric,
+    _prepare,
+    bad_pix,
+    mse_x100,
+)
 from lfbench.scoring.rules import ScoringRules, metric_resolution, valid_mask_at
 from lfbench.utils.errors import DataError
 
@@ -432,14 +441,19 @@ def _slanted_fn(gt, pred, mask=None, *, toolkit=False, scene: Scene, resolution:
     return bumpiness_x100(gt, pred, union if mask is None else mask & union, toolkit=toolkit)
 
 
+_BUMP_UNIT = "px/px^2 x 100"
+#: The values a region / stratified metric can take, by its unit: percentages, the bumpiness (a mean of
+#: norms clipped at 0.05, x 100), angles between normals, and mean squared errors.
+_RANGE_OF_UNIT = {"%": PERCENT, "% of dots": PERCENT, _BUMP_UNIT: (0.0, 100 * BUMPINESS_CLIP), "deg": (0.0, 180.0),
+                  "px^2 x 100": NON_NEGATIVE}
+
+
 def _region(id, name, description, unit, fn, toolkit_id, mask_name, resolution, vmin, vmax, cmap, *,
             category="region", extra_masks=(), needs_scene=False) -> Metric:
     return Metric(id=id, name=name, description=description, unit=unit, fn=fn, toolkit_id=toolkit_id,
                   mask_name=mask_name, resolution=resolution, vmin=vmin, vmax=vmax, cmap=cmap, category=category,
-                  extra_masks=tuple(extra_masks), needs_scene=needs_scene)
+                  extra_masks=tuple(extra_masks), needs_scene=needs_scene, value_range=_RANGE_OF_UNIT[unit])
 
-
-_BUMP_UNIT = "px/px^2 x 100"
 _BUMP_DESC = ("100 x the mean of min(||Scharr Hessian of (pred - gt)||_F, 0.05) over {}: 0 = as smooth as the ground "
               "truth (a constant or planar offset is not penalised).")
 

@@ -160,8 +160,13 @@ def metric_resolution(scene: Scene, metric: Metric, rules: ScoringRules = Scorin
 
 
 def score_scene(scene: Scene, pred: np.ndarray, metrics: Sequence[Metric] = GENERAL_METRICS,
-                rules: ScoringRules = ScoringRules(), source: str = "prediction") -> SceneScore:
-    """Score ``pred`` (H, W) disparity on ``scene`` with the benchmark's masks and resolution rules."""
+                rules: ScoringRules = ScoringRules(), source: str = "prediction", *,
+                runtime_s: float | None = None) -> SceneScore:
+    """Score ``pred`` (H, W) disparity on ``scene`` with the benchmark's masks and resolution rules.
+
+    Runtime metrics (``Metric.is_runtime``) take ``runtime_s``, the runtime in s the method reports for
+    this scene; they give no value (no record) when it reports none (None or NaN) or one that is not a
+    positive number (noted), and are recorded at low resolution (the resolution of the map timed)."""
     h, w = scene.spatial_size
     pred, aligned_from = align_prediction(pred, (h, w), source, max_crop=rules.border_px)
     pred = pred.astype(np.float32, copy=False)
@@ -175,6 +180,8 @@ def score_scene(scene: Scene, pred: np.ndarray, metrics: Sequence[Metric] = GENE
     masks = {LOWRES: evaluation_mask(scene, (h, w), rules.border_px)}  # border and valid mask, per resolution
     nonfinite = nonfinite_count(pred, masks[LOWRES])
     for metric in metrics:
+        if metric.is_runtime:
+            continue
         res = metric_resolution(scene, metric, rules)
         if res is None:  # a mask file the metric needs is absent: it does not apply to this scene
             continue
@@ -203,5 +210,12 @@ def score_scene(scene: Scene, pred: np.ndarray, metrics: Sequence[Metric] = GENE
         context = {"scene": scene, "resolution": res} if metric.needs_scene else {}
         values[metric.id] = metric(gt, p, mask, toolkit=rules.toolkit, **context)
         resolution[metric.id] = res
+    timed = [m for m in metrics if m.is_runtime]
+    for metric in timed:
+        value = metric.score_runtime(runtime_s)
+        if value is not None:
+            values[metric.id], resolution[metric.id] = value, LOWRES
+    if timed and runtime_s is not None and not np.isnan(runtime_s) and timed[0].score_runtime(runtime_s) is None:
+        notes.append(f"runtime {runtime_s:g} s is not a positive number: no runtime record")
     return SceneScore(scene=scene.name, values=values, resolution=resolution, nonfinite_pixels=nonfinite,
                       aligned_from=aligned_from, notes=notes)

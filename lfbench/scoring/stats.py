@@ -643,15 +643,11 @@ def read_ci_csv(path):
     column, when it is not a CSV table, lacks a column or holds a number that is not one."""
     from pathlib import Path
 
-    import pandas as pd
-
     from lfbench.utils.errors import DataError
+    from lfbench.utils.readfile import read_csv
 
     path = Path(path)
-    try:
-        ci = pd.read_csv(path, dtype=str, keep_default_na=False)
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
-        raise DataError(f"not a readable CSV table: {str(exc).splitlines()[0]}", path) from None
+    ci = read_csv(path, "ci.csv", dtype=str, keep_default_na=False)
     missing = [c for c in ("method", "scene", "metric", "low", "high") if c not in ci.columns]
     if missing:
         raise DataError(f"missing column(s) {', '.join(missing)}", path)

@@ -18,6 +18,7 @@ import torch
 
 from lfbench.utils.atomic import atomic_open
 from lfbench.utils.errors import DataError, LFBenchError
+from lfbench.utils.readfile import check_regular_file
 
 CHECKPOINT_FORMAT = "lfbench.train.checkpoint"
 WEIGHTS_FORMAT = "lfbench.subfocal.weights"  # the name weights files have carried since SubFocal was the only network
@@ -63,6 +64,8 @@ def save(path: str | Path, payload: dict[str, Any]) -> None:
 def load(path: str | Path, expected_format: str | None = None) -> dict[str, Any]:
     """torch.load(weights_only=True) on CPU; DataError naming the file if unreadable or of another format."""
     path = Path(path)
+    if path.exists():  # torch.load would block on a FIFO and read a device forever
+        check_regular_file(path, "checkpoint")
     try:
         payload = torch.load(path, map_location="cpu", weights_only=True)
     except FileNotFoundError:

@@ -30,6 +30,7 @@ __all__ = ["LEARNING_CURVE", "LearningCurveLogger", "RunLogger", "TensorBoardLog
 log = logging.getLogger(__name__)
 
 LEARNING_CURVE = "learning_curve.png"
+MAX_LOG_BYTES = 256 * 1024**2  # metrics.jsonl / command.txt read back from a run folder
 TRAIN_SCALARS = (("loss", "train/loss"), ("lr", "train/learning_rate"), ("steps_per_s", "train/steps_per_s"))
 VALIDATION_SCALARS = (("badpix", "validation/badpix"), ("mse_x100", "validation/mse_x100"))
 
@@ -120,15 +121,21 @@ def default_loggers(out: str | Path) -> list[RunLogger]:
 
 def read_metrics(path: str | Path) -> list[dict[str, Any]]:
     """The entries of a metrics.jsonl (lines that do not parse, e.g. cut by a kill, are skipped)."""
-    entries = []
-    for line in Path(path).read_text(encoding="utf-8").splitlines():
-        try:
-            entry = json.loads(line)
-        except json.JSONDecodeError:
-            continue
-        if isinstance(entry, dict):
-            entries.append(entry)
-    return entries
+    from lfbench.utils.readfile import read_text
+
+    entries = (parse_log_line(line) for line in read_text(path, "training log", MAX_LOG_BYTES,
+                                                          errors="replace").splitlines())
+    return [e for e in entries if e is not None]
+
+
+def parse_log_line(line: str) -> dict[str, Any] | None:
+    """One metrics.jsonl entry, or None for a line that is not a JSON object (cut by a kill, or not
+    lfbench's: json's own limits, e.g. 5000-digit integers or deep nesting, included)."""
+    try:
+        entry = json.loads(line)
+    except (ValueError, RecursionError):
+        return None
+    return entry if isinstance(entry, dict) else None
 
 
 def _number(value: Any) -> float:

@@ -47,7 +47,7 @@ from lfbench.data.scene import Benchmark, Scene, check_scene_names
 from lfbench.method.trainable import check_state_dict, get_trainable
 from lfbench.training import checkpoint as ckpt
 from lfbench.training.config import TrainConfig, expand_path
-from lfbench.training.curves import RunLogger, default_loggers
+from lfbench.training.curves import MAX_LOG_BYTES, RunLogger, default_loggers, parse_log_line
 from lfbench.training.data import PatchSampler, ValidationScene, load_scene_data, load_validation_scene
 from lfbench.training.distributed import DistContext, agree_on_resume, setup
 from lfbench.training.losses import make_loss
@@ -58,7 +58,9 @@ from lfbench.utils.hardware import require_bf16, set_fp32_numerics
 from lfbench.utils.jsonfile import json_text
 from lfbench.utils.malloc import retain_freed_memory
 from lfbench.utils.names import file_name
+from lfbench.utils.readfile import read_text
 from lfbench.utils.threads import torch_threads
+from lfbench.utils.tomlfile import MAX_TOML_BYTES
 
 # Settings that may change between a run and its resumption (they do not change the result).
 RESUME_FREE_KEYS = (("out",), ("training", "threads"), ("training", "prefetch"), ("training", "log_every"),
@@ -415,19 +417,18 @@ class Trainer:
         if not p.is_file():
             return
         kept = []
-        for line in p.read_text(encoding="utf-8").splitlines():
-            try:
-                entry = json.loads(line)
-            except json.JSONDecodeError:
-                continue  # a line cut by the kill
-            if entry.get("global_step", 0) <= global_step:
+        for line in read_text(p, "training log", MAX_LOG_BYTES, errors="replace").splitlines():
+            entry = parse_log_line(line)  # None: a line cut by the kill
+            step = entry.get("global_step", 0) if entry is not None else None
+            if isinstance(step, int | float) and step <= global_step:
                 kept.append(line)
         write_text(p, "".join(k + "\n" for k in kept))
 
     def _record_command(self, resumed: bool) -> None:
         stamp = time.strftime("%Y-%m-%d %H:%M:%S")
         line = f"# {stamp} world_size={self.ctx.world_size}{' (resumed)' if resumed else ''}\n{self.command or ''}\n"
-        old = self.paths.command.read_text(encoding="utf-8") if self.paths.command.is_file() else ""
+        old = read_text(self.paths.command, "command log", MAX_LOG_BYTES, errors="replace") \
+            if self.paths.command.is_file() else ""
         write_text(self.paths.command, old + line)
 
     # -- state -------------------------------------------------------------------------------
@@ -521,7 +522,7 @@ class Trainer:
         if ctx.is_main:
             paths.out.mkdir(parents=True, exist_ok=True)
             if cfg.source and Path(cfg.source).is_file():
-                write_text(paths.config, Path(cfg.source).read_text(encoding="utf-8"))
+                write_text(paths.config, read_text(cfg.source, "config file", MAX_TOML_BYTES, error=SpecError))
             self._record_command(resumed=state is not None)
             if state is None:
                 write_text(paths.metrics, "")

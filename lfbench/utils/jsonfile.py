@@ -3,7 +3,10 @@ write JSON text strictly (:func:`json_text`: a non-finite number becomes ``null`
 
 Strict means: UTF-8, no duplicate object keys (Python's json keeps the last one silently), no
 ``NaN``/``Infinity`` literals (not JSON; lfbench writes ``null`` for a missing number) unless
-asked for, bounded size and nesting depth (a deeply nested file raises RecursionError in json).
+asked for, integers within 64 bits (a 5000-digit one raises ValueError in Python's int, a 400-digit
+one OverflowError wherever it meets a float), bounded size (read with a byte cap: a device such as
+/dev/zero reports size 0 and never ends) and nesting depth (a deeply nested file raises
+RecursionError in json).
 """
 
 from __future__ import annotations
@@ -15,11 +18,14 @@ from pathlib import Path
 from typing import Any
 
 from lfbench.utils.errors import DataError
+from lfbench.utils.readfile import read_bytes
 
-__all__ = ["MAX_JSON_BYTES", "MAX_JSON_DEPTH", "json_text", "read_json", "parse_json"]
+__all__ = ["MAX_JSON_BYTES", "MAX_JSON_DEPTH", "INT_RANGE", "json_text", "read_json", "parse_json"]
 
 MAX_JSON_BYTES = 256 * 1024**2
 MAX_JSON_DEPTH = 64
+#: The integers a JSON file may hold: 64-bit, signed or unsigned.
+INT_RANGE = (-(2**63), 2**64 - 1)
 
 
 def read_json(path: str | Path, what: str = "JSON file", *, allow_nonfinite: bool = False) -> Any:
@@ -27,16 +33,7 @@ def read_json(path: str | Path, what: str = "JSON file", *, allow_nonfinite: boo
     larger than MAX_JSON_BYTES, not UTF-8, not valid JSON, nested deeper than MAX_JSON_DEPTH, has a
     duplicate key or (unless ``allow_nonfinite``) a NaN/Infinity literal. ``what`` names it in errors."""
     path = Path(path)
-    try:
-        if path.is_dir():
-            raise DataError(f"{what} is a folder, expected a file", path)
-        if path.stat().st_size > MAX_JSON_BYTES:
-            raise DataError(f"{what} is larger than {MAX_JSON_BYTES // 1024**2} MiB", path)
-        raw = path.read_bytes()
-    except FileNotFoundError:
-        raise DataError(f"{what} not found", path) from None
-    except OSError as exc:
-        raise DataError(f"cannot read {what}: {exc.strerror or exc}", path) from None
+    raw = read_bytes(path, what, MAX_JSON_BYTES)
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError:
@@ -55,6 +52,15 @@ def parse_json(text: str, path: str | Path | None = None, what: str = "JSON", *,
             raise _Refused(f"{name} is not a JSON number (write null for a missing value)")
         return float(name)
 
+    def integer(text: str) -> int:
+        digits = len(text.lstrip("-"))
+        if digits > 20:  # never hand Python's int() thousands of digits
+            raise _Refused(f"integer with {digits} digits (at most 64-bit integers)")
+        value = int(text)
+        if not INT_RANGE[0] <= value <= INT_RANGE[1]:
+            raise _Refused(f"integer {value} is outside the 64-bit range")
+        return value
+
     def pairs(items: list[tuple[str, Any]]) -> dict[str, Any]:
         out: dict[str, Any] = {}
         for key, value in items:
@@ -64,13 +70,15 @@ def parse_json(text: str, path: str | Path | None = None, what: str = "JSON", *,
         return out
 
     try:
-        return json.loads(text, object_pairs_hook=pairs, parse_constant=constant)
+        return json.loads(text, object_pairs_hook=pairs, parse_constant=constant, parse_int=integer)
     except _Refused as exc:
         raise DataError(f"{what}: {exc}", path) from None
     except json.JSONDecodeError as exc:
         raise DataError(f"{what} is not valid JSON: {exc}", path) from None
     except RecursionError:  # pragma: no cover - the depth check comes first
         raise DataError(f"{what} is nested too deeply", path) from None
+    except ValueError as exc:  # pragma: no cover - json's own limits (the hooks refuse first)
+        raise DataError(f"{what} is not valid JSON: {' '.join(str(exc).split())[:120]}", path) from None
 
 
 def json_text(obj: Any, *, indent: int | None = None, sort_keys: bool = False) -> str:

@@ -24,6 +24,7 @@ from torch import nn
 
 from lfbench.utils.atomic import write_bytes
 from lfbench.utils.errors import DataError
+from lfbench.utils.readfile import check_regular_file
 
 _SUFFIX = re.compile(r"^(?P<base>.*?)(?:_(?P<n>\d+))?$")
 
@@ -91,6 +92,8 @@ def read_keras_layers(path: Path) -> tuple[list[tuple[str, dict]], list[tuple[st
     (name, {weight name: array}) for layers that hold weights, in file order of ``layer_names``."""
     import h5py
 
+    if Path(path).exists():  # a FIFO would block HDF5's open, a device never end
+        check_regular_file(path, "Keras checkpoint")
     try:
         f = h5py.File(path, "r")
     except FileNotFoundError:
@@ -266,8 +269,7 @@ def load_checkpoint(path: str | Path) -> tuple[dict, dict, str]:
     """(state_dict, config, source) of a checkpoint written by :func:`save_checkpoint` or training
     (``torch.load(weights_only=True)``); DataError naming the file otherwise."""
     path = Path(path)
-    if not path.is_file():
-        raise DataError("checkpoint not found", path)
+    check_regular_file(path, "checkpoint")  # not found, a folder, a device or a FIFO: one line
     try:
         ckpt = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as exc:  # pickle, zip and format errors all mean: not our checkpoint

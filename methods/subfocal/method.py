@@ -171,7 +171,9 @@ class SubFocal(Method):
                 hint = f", or run the shipped CPU-trained model: {self.variant}:{spec}"
             return ("no weights for this configuration: give weights=CHECKPOINT.pt (lfbench train or "
                     f"lfbench convert-keras){hint}")
-        return None if p.is_file() else f"weights file {p} not found"
+        if p.is_file():
+            return None
+        return f"weights file {p} is not a regular file" if p.exists() else f"weights file {p} not found"
 
     def load_network(self):
         """The SubFocalNet with the checkpoint's weights (eval mode), loaded once."""
