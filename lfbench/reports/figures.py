@@ -539,7 +539,8 @@ def curves_from_records(results: Any) -> dict[str, tuple[np.ndarray, np.ndarray]
 
 def safe_name(label: str) -> str:
     """A method label or scene name as a file name (as lfbench.runs.runner.save_prediction does)."""
-    return "".join(c if c.isalnum() or c in "._-=" else "_" for c in label) or "_"
+    name = "".join(c if c.isalnum() or c in "._-=" else "_" for c in label) or "_"
+    return name if name.strip(".") else "_" * len(name)  # never '.' or '..': a name, not a way up
 
 
 class SceneFigureWriter:
