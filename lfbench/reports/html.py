@@ -328,6 +328,12 @@ def build_site(inputs: SiteInputs, out: str | Path, *, threshold: float = fig.BA
     try:
         _write_site(inputs, tmp, threshold, pairwise_threshold, border)
         replace_dir(tmp, out)
+    except OSError as exc:  # named where the file would have landed, not in the temporary folder
+        shutil.rmtree(tmp, ignore_errors=True)
+        name = Path(exc.filename) if exc.filename else None
+        if name is None or not name.is_relative_to(tmp) or exc.errno is None:
+            raise
+        raise type(exc)(exc.errno, exc.strerror, str(out / name.relative_to(tmp))) from None
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
@@ -387,7 +393,7 @@ def _write_site(inputs: SiteInputs, root: Path, threshold: float, pair_threshold
             fig.plot_badpix_series(series, path, f"BadPix series, {name} ({res})")
             drawn[name]["series"] = f"img/{fig.safe_name(name)}/badpix_series.png"
         del sm
-    figures = {}
+    figures: dict[str, str | None] = {"series": None, "radar": None, "radar_metrics": None}
     if curves:
         avg = fig.average_curves(curves)
         series = {f"{m} ({k} scene{'s' if k != 1 else ''})": (t, v) for m, (t, v, k) in avg.items()}

@@ -52,6 +52,7 @@ _MAX_BOOK_BYTES = 1024**2  # a journal or manifest lists top-level names: far be
 # temporaries a killed run leaves (suffix .tmp / .old): the demo's data and HTML report, earlier versions'
 # maps and figures
 _OLD_TEMPORARIES = (".data.", ".figures.", ".html.", ".maps.")
+_BOOK_TEMPORARIES = (".lfbench-commit", ".lfbench-outputs")  # atomic_open's temporaries of journals, manifests
 
 
 def journal_name(name: str | None = None) -> str:
@@ -178,6 +179,8 @@ def recover(out: Path) -> None:
         name = entry.name
         if (name.startswith(STAGE_PREFIX) and not _alive(name)) or (
                 name.startswith(_OLD_TEMPORARIES) and name.endswith((".tmp", ".old"))):
+            _remove(entry)
+        elif name.startswith(_BOOK_TEMPORARIES) and name.endswith(".tmp"):  # a journal write cut by a kill
             _remove(entry)
 
 
