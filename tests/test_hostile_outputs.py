@@ -326,3 +326,20 @@ def test_a_journal_whose_staging_folder_is_gone_is_refused_not_guessed(tmp_path,
     rc, _, err = evaluate(capsys, data, out)
     assert_one_error_line(rc, err, str(out / JOURNAL), "staging folder", "is gone")
     assert tree(tmp_path) == before
+
+
+@pytest.mark.parametrize("where", ["stage1", "cells", "methods/zero"])
+def test_an_ablation_folder_leading_out_of_out_is_refused_before_any_work(tmp_path, capsys, where):
+    """An ablation trains and scores into OUT/stage1, OUT/cells/<id> and OUT/methods/<label>: a symbolic
+    link there to a folder elsewhere would make it write (and replace files) outside OUT."""
+    out = tmp_path / "out"
+    spec = _spec(tmp_path, out)
+    spec.write_text(spec.read_text() + '[[methods]]\nlabel = "zero"\nspec = "constant:value=0"\n')
+    _victims(tmp_path)
+    (out / where).parent.mkdir(parents=True, exist_ok=True)
+    (out / where).symlink_to(tmp_path / "victim_dir")
+    before = tree(tmp_path)
+    rc, _, err = run_cli(capsys, "ablate", spec, "--out", out, "--no-progress")
+    assert_one_error_line(rc, err, str(out / where), "symbolic link leading out of the ablation folder")
+    after = {k: v for k, v in tree(tmp_path).items() if not k.endswith(".lock")}
+    assert after == before

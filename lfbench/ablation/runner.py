@@ -142,6 +142,9 @@ def _shared_stage1(spec: AblationSpec, folder: Path, links: dict[str, str], thre
     write_text(path, dumps(cfg, f"The shared stage 1 of {spec.source}: written by lfbench ablate."))
     for category, target in links.items():
         link = folder / "data" / category
+        if link.is_symlink() and link.resolve() != Path(target).resolve():
+            raise DataError("symbolic link to another folder than the ablation's generated scenes (not allowed)",
+                            link)
         if not (link.exists() or link.is_symlink()):
             link.parent.mkdir(parents=True, exist_ok=True)
             with contextlib.suppress(OSError):
@@ -325,6 +328,7 @@ def run_ablation(spec: AblationSpec, out: str | Path, *, jobs: int = 1, progress
     with _set_lock(out):
         recover(out)  # a cut commit of an earlier run is finished (or its journal refused) before any work
         read_manifest(out)
+    check_folders(spec, out)
     cores = available_cores()
     threads = spec.budget.threads or max(1, cores // jobs)
     log(f"{spec.title}: {len(spec.cells)} cell(s), {len(spec.methods)} extra method(s), budget "
@@ -355,6 +359,18 @@ def run_ablation(spec: AblationSpec, out: str | Path, *, jobs: int = 1, progress
         log(f"{out / 'results.json'}: {len(combined.methods)} of {len(merged.methods)} cells/methods from this run "
             "(the others from earlier runs); `lfbench ablate SPEC --report-only` tabulates them all")
     return AblationRun(out=out, results=combined, markers=markers, written=written)
+
+
+def check_folders(spec: AblationSpec, out: Path) -> None:
+    """DataError when a folder the run trains, scores or generates into (stage1, cells/<id>, methods/<label>,
+    data, eval_data, submitit) leads out of OUT through a symbolic link: an ablation writes inside OUT only."""
+    from lfbench.runs.outputs import check_within
+
+    names = ["cells", "methods", "stage1", "data", "eval_data", "submitit"]
+    names += [f"cells/{c.id}" for c in spec.cells] + [f"methods/{_safe(m.label)}" for m in spec.methods]
+    for name in names:
+        if (out / name).is_symlink():
+            check_within(out / name, out, "the ablation folder")
 
 
 def _set_lock(out: Path):
