@@ -59,10 +59,11 @@ def _reports(work: Path) -> None:
                      "--figures", "--no-progress"]) == 0
 
 
-@pytest.mark.parametrize("html", [(), ("--html",)], ids=["report", "report-html"])
-def test_report_killed_anywhere_leaves_the_old_set_or_the_new(tmp_path, html):
-    def report(results: str):
-        return lambda w: ["report", w / results, "--out", w / "rep", "--maps", w / results / "maps", *html]
+@pytest.mark.parametrize("extra", [(), ("--html", "--maps", "maps")], ids=["report", "report-html"])
+def test_report_killed_anywhere_leaves_the_old_set_or_the_new(tmp_path, extra):
+    def report(results: str):  # with --maps: overviews and the toolkit's figures too
+        return lambda w: ["report", w / results, "--out", w / "rep",
+                          *(w / results / x if x == "maps" else x for x in extra)]
 
     _assert_counts(check_writer(tmp_path, "rep", report("r1"), report("r2"), setup=_reports))
 
@@ -165,7 +166,7 @@ def _fill(mnt: Path, leave: int) -> Path:
                                     pytest.param("ablate", marks=pytest.mark.slow)])
 def test_a_full_disk_is_one_line_naming_the_file_and_keeps_the_old_set(tmp_path, capsys, small_disk, writer):
     data = tmp_path / "in"
-    _reports(data)
+    (_reports if writer.startswith("report") else _data)(data)
     (data / "a.toml").write_text(ABLATION, encoding="utf-8")
     (data / "b.toml").write_text(ABLATION + '[[methods]]\nlabel = "zero"\nspec = "constant:value=0"\n',
                                  encoding="utf-8")
