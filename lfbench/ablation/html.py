@@ -25,7 +25,7 @@ def write_site(spec: AblationSpec, out: str | Path, *, results_dir: str | Path |
     from lfbench.runs.results import Results
 
     out = Path(out)
-    results = Results.read(Path(results_dir if results_dir is not None else out) / "results.json")
+    results = Results.read(Path(results_dir if results_dir is not None else out))  # its results.json
     scenes = load_scenes(prepare_evaluation(spec, out, logging.getLogger(__name__).info))
     folders = {cell.id: out / "cells" / cell.id / MAPS for cell in spec.cells}
     folders |= {m.label: out / "methods" / safe_name(m.label) / "maps" for m in spec.methods}

@@ -346,7 +346,7 @@ def run_ablation(spec: AblationSpec, out: str | Path, *, jobs: int = 1, progress
                                           "budget": spec.budget_label(), "shared_stage1": spec.shared_stage1,
                                           "cells": markers}})
     for t in tasks:
-        combined.extend(Results.read(Path(t.cell_dir) / "results.json"))
+        combined.extend(Results.read(Path(t.cell_dir)))  # the folder: its results.json may not lead out of it
     for res in run_methods(spec, out, scenes, log):
         combined.extend(res)
     combined.meta["scenes"] = [s for s, _ in scenes]
@@ -412,7 +412,7 @@ def merge_results(out: Path, new: Results, dest: Path | None = None) -> Results:
     if not path.is_file():
         new.write(dest)
         return new
-    old = Results.read(path)
+    old = Results.read(out)
     replaced = set(new.methods)
     merged = Results(records=[r for r in old.records if r.method not in replaced] + list(new.records),
                      runs=[r for r in old.runs if r.method not in replaced] + list(new.runs),
@@ -443,7 +443,7 @@ def _report_only(spec: AblationSpec, out: Path, *, paper: str | Path | None, log
 
     recover(out)  # a cut commit is finished (or a journal that is not lfbench's refused) before reading
     read_manifest(out)
-    results = Results.read(out / "results.json")
+    results = Results.read(out if out.is_dir() else out / "results.json")  # a folder: no link out of it
     recorded = {m.get("id"): m for m in results.meta.get("ablation", {}).get("cells", []) if isinstance(m, dict)}
     markers = []
     for c in spec.cells:
