@@ -24,6 +24,8 @@ import os
 import re
 import shutil
 import signal
+import subprocess
+import sys
 import time
 from collections.abc import Callable, Collection, Sequence
 from pathlib import Path
@@ -235,21 +237,28 @@ def sample(points: Sequence[str], folder: str, spread: int) -> list[int]:
 
 def check_writer(tmp: Path, folder: str, first: Callable[[Path], Sequence], second: Callable[[Path], Sequence],
                  setup: Callable[[Path], None] | None = None, kills: int = 1,
-                 ignore: Collection[str] = ()) -> dict[str, int]:
+                 ignore: Collection[str] = (), first_apart: bool = False) -> dict[str, int]:
     """The kill check of one set writer (see the module docstring). ``first``/``second``: argv given the
     work folder W, run inside W (given as '.', so that the paths they record are the same in every copy
     of W); they write W/``folder``. ``setup(W)`` prepares inputs in W before ``first``. ``kills``: real
     kills spread over the staging, besides those at the commit. ``ignore``: top-level entries of the
     folder that are not part of its set (e.g. generated data). Returns counts: points, real kills, and
-    of all the points those that left the old set, the new set, and a cut commit."""
+    of all the points those that left the old set, the new set, and a cut commit. ``first_apart``: run
+    ``first`` in a new interpreter instead of a forked child (training: torch's thread pool, once used by
+    this process, does not survive a fork)."""
     warm()
     here = Path(".")
     base = tmp / "base"
     base.mkdir()
     if setup is not None:
         setup(base)
-    rc, _ = run(first(here), tmp / "first.log", cwd=base)
-    assert rc == 0, (tmp / "first.log").read_text()
+    if first_apart:
+        done = subprocess.run([sys.executable, "-m", "lfbench", *map(str, first(here))], cwd=base,
+                              capture_output=True, text=True, timeout=CHILD_TIMEOUT_S)
+        assert done.returncode == 0, done.stderr[-3000:]
+    else:
+        rc, _ = run(first(here), tmp / "first.log", cwd=base)
+        assert rc == 0, (tmp / "first.log").read_text()
     old = visible(base / folder, ignore)
     ref = tmp / "ref"
     shutil.copytree(base, ref, symlinks=True)

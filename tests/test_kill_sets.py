@@ -117,8 +117,9 @@ interpolation = ["bilinear"]
 
 @pytest.mark.slow
 def test_ablate_killed_anywhere_leaves_the_old_set_or_the_new(tmp_path):
-    """The cell is trained once (by ``first``); the killed runs re-tabulate it with one more extra method
-    (the zero map), which changes results.json, every table, the figures and the site."""
+    """The cell is trained once (by ``first``, in its own interpreter); the killed runs re-tabulate it with
+    one more extra method (the zero map), which changes results.json, every table, the figures and the
+    site, and use no torch (the cell's scores and test time are cached)."""
     def setup(work: Path) -> None:
         (work / "a.toml").write_text(ABLATION, encoding="utf-8")
         (work / "b.toml").write_text(ABLATION + '[[methods]]\nlabel = "zero"\nspec = "constant:value=0"\n',
@@ -127,7 +128,7 @@ def test_ablate_killed_anywhere_leaves_the_old_set_or_the_new(tmp_path):
     def ablate(spec: str):
         return lambda w: ["-q", "ablate", w / spec, "--out", w / "ab", "--html", "--no-progress"]
 
-    _assert_counts(check_writer(tmp_path, "ab", ablate("a.toml"), ablate("b.toml"), setup=setup,
+    _assert_counts(check_writer(tmp_path, "ab", ablate("a.toml"), ablate("b.toml"), setup=setup, first_apart=True,
                                 ignore={"cells", "data", "eval_data", "methods", "stage1"}))
 
 
