@@ -359,7 +359,7 @@ def check_folders(spec: AblationSpec, out: Path) -> None:
     from lfbench.runs.outputs import check_within
 
     names = ["cells", "methods", "stage1", "data", "eval_data", "submitit"]
-    names += [f"cells/{c.id}" for c in spec.cells] + [f"methods/{_safe(m.label)}" for m in spec.methods]
+    names += [f"cells/{c.id}" for c in spec.cells] + [f"methods/{file_name(m.label)}" for m in spec.methods]
     for name in names:
         if (out / name).is_symlink():
             check_within(out / name, out, "the ablation folder")
