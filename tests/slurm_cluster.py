@@ -152,6 +152,17 @@ class SlurmCluster:
             jobs[job_id] = {"raw": raw, "name": name, "state": state, "reason": reason}
         return jobs
 
+    def batch(self, *args: str, timeout_s: float = 600) -> tuple[str, str]:
+        """``sbatch ARGS``, then wait for the job to end (polling squeue every 0.2 s: ``sbatch --wait`` polls
+        every 10 s). Returns (job id, final state)."""
+        job = self.run("sbatch", "--parsable", *args).stdout.strip().split(";")[0]
+        deadline = time.monotonic() + timeout_s
+        while (state := self.jobs().get(job, {}).get("state", "")) not in FINAL_STATES:
+            if time.monotonic() > deadline:
+                raise TimeoutError(f"job {job} still {state or 'unknown'} after {timeout_s:.0f} s")
+            time.sleep(0.2)
+        return job, state
+
     def completed(self) -> list[dict[str, str]]:
         """The job completion log (jobcomp/filetxt): one dict of its KEY=VALUE fields per finished job run."""
         if not self.jobcomp.is_file():

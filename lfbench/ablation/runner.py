@@ -315,6 +315,10 @@ def run_ablation(spec: AblationSpec, out: str | Path, *, jobs: int = 1, progress
 
     if jobs < 1:
         raise SpecError(f"--jobs must be >= 1, got {jobs}")
+    if cluster is not None:
+        from lfbench.ablation.executor import check_executor
+
+        check_executor(cluster)  # before any work: no data generated, nothing submitted
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     if spec.text:
