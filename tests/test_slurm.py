@@ -45,8 +45,10 @@ LONG = GRID.replace("seeds = [1, 2]\n", "").replace("steps = [20, 5]", "steps = 
 "training.checkpoint_every" = 25
 """
 
-# A cell whose learning rate makes the loss NaN after 21 steps, beside one that trains for 405.
-FAILING = GRID.replace("seeds = [1, 2]\n", "").replace("channels = [4, 8]", """lr = [1e30]
+# A cell whose learning rate makes the loss NaN after 21 steps, beside one that trains for 405; no threads in
+# the budget (the cells get --cpus-per-job).
+FAILING = GRID.replace("seeds = [1, 2]\n", "").replace("threads = 1\n\n", "\n")
+FAILING = FAILING.replace("channels = [4, 8]", """lr = [1e30]
 [[grid]]
 lr = [1e-3]
 "stages.1.steps" = [400]""")
@@ -151,8 +153,16 @@ def test_ablation_through_sbatch_gives_the_local_and_jobs_1_results(slurm_cluste
         assert "RUNNING" in watch.seen[job], (cell, job, dict(watch.seen))
         assert completed[watch.raw[job]] == "COMPLETED", (cell, job, completed)
     # one sbatch: an array of the 4 cells, at most 2 running at once, 1 CPU each
-    (script,) = (tmp_path / "slurm" / "submitit").glob("*_submission.sh")
-    assert {"#SBATCH --array=0-3%2", "#SBATCH --cpus-per-task=1"} <= set(script.read_text().splitlines())
+    cells_job = jobs[cells[0]].split("_")[0]
+    script = (tmp_path / "slurm" / "submitit" / f"{cells_job}_submission.sh").read_text().splitlines()
+    assert {"#SBATCH --array=0-3%2", "#SBATCH --cpus-per-task=1"} <= set(script)
+    # then the test times, measured one cell after the other in one more job (on a cell's resources, not on
+    # the machine that submitted the jobs)
+    (timing_job,) = re.findall(r"test time: job (\S+), log", log)
+    assert "RUNNING" in watch.seen[timing_job] and completed[watch.raw[timing_job]] == "COMPLETED"
+    for cell in cells:
+        timing = json.loads((tmp_path / "slurm" / "cells" / cell / "timing.json").read_text())
+        assert timing["slurm_job_id"] == watch.raw[timing_job] and timing["threads"] == 1, timing
     # the jobs' logs are in OUT/submitit/, one pair per cell, each naming its job
     for cell, job in jobs.items():
         for stream in ("out", "err"):
@@ -231,7 +241,7 @@ def test_a_cancelled_cell_resumes_from_its_checkpoint_when_the_command_runs_agai
     assert rc == 2, err[-3000:]
     last = err.strip().splitlines()[-1]
     log = out / "submitit" / f"{job}_0_log.err"
-    assert last.startswith(f"lfbench ablate: error: 1 of 2 cell job(s) did not finish: cell channels=4 (job {job}) "
+    assert last.startswith(f"lfbench ablate: error: 1 of 2 job(s) did not finish: cell channels=4 (job {job}) "
                            "ended CANCELLED without a result"), last
     assert f"its log: {log})" in last and log.is_file()
     assert "stopped at stage 1 step" in log.read_text()  # SIGTERM: the cell wrote a checkpoint and stopped
@@ -276,14 +286,15 @@ def test_a_job_requeued_by_slurm_resumes_from_its_checkpoint(slurm_cluster, plug
 def test_a_failing_cell_is_one_line_naming_it_and_its_log_after_the_others_finish(slurm_cluster, plugin, tmp_path):
     src, env = plugin
     out = tmp_path / "out"
-    proc = lfbench(env, "ablate", src / "failing.toml", "--out", out, "--executor", "slurm", "--no-progress")
+    proc = lfbench(env, "ablate", src / "failing.toml", "--out", out, "--executor", "slurm", "--cpus-per-job", "1",
+                   "--no-progress")
     assert proc.returncode == 2, proc.stderr[-3000:]
     lines = proc.stderr.strip().splitlines()
     job = dict(re.findall(r"cell (\S+): job (\S+), log", proc.stderr))["lr=1e+30"]
     log = out / "submitit" / f"{job}_0_log.err"
     reason = (r"the loss became (nan|inf) at stage 2 step \d+; lower the learning rate \(the last checkpoint is "
               + re.escape(str(out / "cells" / "lr=1e+30" / "checkpoint.pt")) + r"\)")
-    expected = (re.escape(f"lfbench ablate: error: 1 of 2 cell job(s) did not finish: cell lr=1e+30 (job {job}) "
+    expected = (re.escape(f"lfbench ablate: error: 1 of 2 job(s) did not finish: cell lr=1e+30 (job {job}) "
                           "failed: ") + reason
                 + re.escape(f" (its log: {log}); run the same command again to resume them"))
     assert re.fullmatch(expected, lines[-1]), lines[-1]
@@ -292,6 +303,9 @@ def test_a_failing_cell_is_one_line_naming_it_and_its_log_after_the_others_finis
     good = "lr=0.001_stages.1.steps=400"
     assert (out / "cells" / good / "cell.json").is_file()
     assert any(line.startswith(f"cell {good}: trained 405 steps") for line in lines[:-1])
+    # each cell trained with the CPUs of its job (--cpus-per-job 1), not with the submitting machine's cores
+    assert "threads = 1\n" in (out / "cells" / good / "train.toml").read_text()
+    assert "(1 threads)" in (out / "cells" / good / "log.txt").read_text().splitlines()[0]
 
 
 def test_executor_slurm_without_sbatch_is_one_line_before_any_work(tmp_path):
@@ -315,7 +329,7 @@ def test_a_partition_sbatch_refuses_is_one_line(slurm_cluster, plugin, tmp_path)
                    "--partition", "nosuch", "--no-progress")
     assert proc.returncode == 2
     last = proc.stderr.strip().splitlines()[-1]  # sbatch's own words, e.g. "Invalid partition name specified"
-    assert last.startswith("lfbench ablate: error: submitting the cell jobs failed: sbatch: error: ") and \
+    assert last.startswith("lfbench ablate: error: submitting the jobs failed: sbatch: error: ") and \
         "partition" in last, last
     assert "Traceback" not in proc.stderr
 

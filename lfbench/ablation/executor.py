@@ -11,7 +11,6 @@ cancelled job continues where it stopped.
 from __future__ import annotations
 
 import contextlib
-import functools
 import io
 import logging
 import os
@@ -134,30 +133,32 @@ def check_executor(options: ClusterOptions) -> None:
                             "commands are (e.g. a login node), or use --executor local or --jobs N")
 
 
-def run_job(fn: Callable[[Any], dict], task: Any) -> dict:
-    """What each cluster job runs: ``fn(task)``. An exception reaches the submitting command as one line (the
-    traceback goes to the job's log). Training stopped by SIGTERM at a checkpoint (scancel, a pre-emption,
-    ``scontrol requeue``, the time limit) ends the job without a result, so that the submitting command
-    asks the scheduler what became of the job: requeued, it waits for its next run (which resumes from the
-    checkpoint); cancelled or timed out, it reports the cell."""
+def run_job(fn: Callable[[Any], Any], arg: Any, label: str) -> Any:
+    """What each cluster job runs: ``fn(arg)``; ``label`` names the job in messages (e.g. ``cell ID``). An
+    exception reaches the submitting command as one line (the traceback goes to the job's log). Training
+    stopped by SIGTERM at a checkpoint (scancel, a pre-emption, ``scontrol requeue``, the time limit) ends the
+    job without a result, so that the submitting command asks the scheduler what became of the job:
+    requeued, it waits for its next run (which resumes from the checkpoint); cancelled or timed out, it
+    reports the cell."""
     from lfbench.training.loop import TrainingInterrupted
 
     try:
-        return fn(task)
+        return fn(arg)
     except TrainingInterrupted as exc:
-        raise SystemExit(f"cell {task.cell_id}: {exc}; the job ends without a result") from None
+        raise SystemExit(f"{label}: {exc}; the job ends without a result") from None
     except Exception as exc:
-        _log.exception(f"cell {task.cell_id} failed")
+        _log.exception(f"{label} failed")
         message = str(exc) if isinstance(exc, LFBenchError) else f"{type(exc).__name__}: {exc}"
         raise RuntimeError(FAILED + " ".join(message.split())) from None
 
 
-def submit_cells(fn: Callable[[Any], dict], tasks: Sequence[Any], options: ClusterOptions, folder: Path,
-                 threads: int, on_done: Callable[[dict], None]) -> None:
-    """Submit ``fn(task)`` for each task as one job (one job array on SLURM, at most ``max_parallel`` running)
-    and wait for all; ``on_done`` sees each result as it comes. A job that fails, or ends without a result
-    (cancelled, timed out, killed), is reported after the other jobs finish: one LFBenchError naming each such
-    cell and its log (re-running the command resumes them). A job the scheduler requeues is waited for."""
+def run_as_jobs(fn: Callable[[Any], Any], args: Sequence[Any], labels: Sequence[str], options: ClusterOptions,
+                folder: Path, threads: int, on_done: Callable[[Any], None]) -> None:
+    """Run ``fn(arg)`` for each arg as one job (one job array on SLURM, at most ``max_parallel`` running, logs in
+    ``folder``) and wait for all; ``on_done`` sees each result as it comes. A job that fails, or ends without a
+    result (cancelled, timed out, killed), is reported after the other jobs finish: one LFBenchError naming
+    each such job by its label and its log (re-running the command resumes them). A job the scheduler
+    requeues is waited for."""
     folder.mkdir(parents=True, exist_ok=True)
     executor = make_executor(options, folder, threads)
     if options.executor == "slurm":
@@ -165,34 +166,38 @@ def submit_cells(fn: Callable[[Any], dict], tasks: Sequence[Any], options: Clust
     sbatch_errors = io.StringIO()
     try:
         with contextlib.redirect_stderr(sbatch_errors):  # submitit prints sbatch's complaint, then raises it
-            jobs = executor.map_array(functools.partial(run_job, fn), tasks)
+            jobs = executor.map_array(run_job, [fn] * len(args), args, labels)
     except Exception as exc:  # noqa: BLE001 - the scheduler refused the jobs (partition, limits, ...)
-        raise SpecError(f"submitting the cell jobs failed: {_last_line(str(exc) or sbatch_errors.getvalue())}") \
-            from None
-    _log.info(f"submitted {len(jobs)} cell job(s) through submitit ({options.executor}); logs in {folder}")
-    for task, job in zip(tasks, jobs, strict=True):
-        _log.info(f"cell {task.cell_id}: job {job.job_id}, log {job.paths.stderr}")
+        raise SpecError(f"submitting the jobs failed: {_last_line(str(exc) or sbatch_errors.getvalue())}") from None
+    _log.info(f"submitted {len(jobs)} job(s) through submitit ({options.executor}); logs in {folder}")
+    for label, job in zip(labels, jobs, strict=True):
+        _log.info(f"{label}: job {job.job_id}, log {job.paths.stderr}")
     failed = []
-    for task, job, ended in _wait(jobs, tasks, options.executor):
+    for k, job, ended in _wait(jobs, options.executor):
         if ended is not None:
-            failed.append(f"cell {task.cell_id} (job {job.job_id}) ended{' ' + ended if ended else ''} without a "
-                          f"result (cancelled, timed out, pre-empted or killed; its log: {job.paths.stderr})")
+            failed.append(f"{labels[k]} (job {job.job_id}) ended{' ' + ended if ended else ''} without a result "
+                          f"(cancelled, timed out, pre-empted or killed; its log: {job.paths.stderr})")
             continue
         try:
             result = job.result()
         except Exception as exc:  # noqa: BLE001 - a job's failure is reported per cell
-            failed.append(f"cell {task.cell_id} (job {job.job_id}) failed: {_reason(exc)} (its log: "
-                          f"{job.paths.stderr})")
+            failed.append(f"{labels[k]} (job {job.job_id}) failed: {_reason(exc)} (its log: {job.paths.stderr})")
             continue
         on_done(result)
     if failed:
-        raise LFBenchError(f"{len(failed)} of {len(jobs)} cell job(s) did not finish: {'; '.join(failed)}; run the "
-                           "same command again to resume them")
+        raise LFBenchError(f"{len(failed)} of {len(jobs)} job(s) did not finish: {'; '.join(failed)}; run the same "
+                           "command again to resume them")
 
 
-def _wait(jobs: list, tasks: Sequence[Any], executor: str) -> Iterator[tuple[Any, Any, str | None]]:
-    """(task, job, None) for each job with a result, as they come; (task, job, its final state or "") for a job
-    that ended without one. A SLURM job's state comes from squeue (submitit asks sacct, which needs an
+def submit_cells(fn: Callable[[Any], dict], tasks: Sequence[Any], options: ClusterOptions, folder: Path,
+                 threads: int, on_done: Callable[[dict], None]) -> None:
+    """:func:`run_as_jobs` of ``fn(task)`` for each cell's task, labelled ``cell ID``."""
+    run_as_jobs(fn, tasks, [f"cell {t.cell_id}" for t in tasks], options, folder, threads, on_done)
+
+
+def _wait(jobs: list, executor: str) -> Iterator[tuple[int, Any, str | None]]:
+    """(index, job, None) for each job with a result, as they come; (index, job, its final state or "") for a
+    job that ended without one. A SLURM job's state comes from squeue (submitit asks sacct, which needs an
     accounting database that not every cluster has: without one, a job that ended without a result was
     waited for forever); a pending, running or requeued job is waited for."""
     pending = dict(enumerate(jobs))
@@ -206,7 +211,7 @@ def _wait(jobs: list, tasks: Sequence[Any], executor: str) -> Iterator[tuple[Any
         for k, job in list(pending.items()):
             if job.paths.result_pickle.exists():
                 del pending[k]
-                yield tasks[k], job, None
+                yield k, job, None
                 continue
             if executor == "slurm":
                 state = "UNKNOWN" if states is None else states.get(job.job_id, "(gone from squeue)")
@@ -217,7 +222,7 @@ def _wait(jobs: list, tasks: Sequence[Any], executor: str) -> Iterator[tuple[Any
                 ended_since.pop(k, None)
             elif time.monotonic() - ended_since.setdefault(k, time.monotonic()) > RESULT_GRACE_S:
                 del pending[k]  # its result file would have appeared by now, even on a slow shared file system
-                yield tasks[k], job, state
+                yield k, job, state
         if pending:
             time.sleep(min(30.0, max(1.0, (time.monotonic() - start) / 20)))
 
@@ -250,4 +255,4 @@ def _last_line(text: str) -> str:
 
 
 __all__ = ["EXECUTORS", "SLURM_COMMANDS", "ClusterOptions", "visible_gpus", "worker_gpus", "init_worker",
-           "check_executor", "make_executor", "run_job", "submit_cells"]
+           "check_executor", "make_executor", "run_job", "run_as_jobs", "submit_cells"]
