@@ -283,6 +283,31 @@ def test_a_job_requeued_by_slurm_resumes_from_its_checkpoint(slurm_cluster, plug
 
 
 @pytest.mark.slow
+def test_the_time_limit_warning_stops_a_cell_at_a_checkpoint(slurm_cluster, plugin, tmp_path):
+    """SIGUSR2, which the job script asks SLURM for 90 s before the time limit: the cell writes a checkpoint and
+    its job ends without a result, named on one line (submitit's own handler would end the cell with an error,
+    without a checkpoint: "timed-out and not checkpointable")."""
+    src, env = plugin
+    out = tmp_path / "out"
+    cell = out / "cells" / "channels=4"
+    run = Background(env, tmp_path / "run.log", "ablate", src / "long.toml", "--out", out, "--executor", "slurm",
+                     "--no-progress", "--cells", "channels=4", "--timeout-min", "5")
+    job = run.job_of("channels=4")
+    wait_until(running_with_checkpoint(slurm_cluster, job, cell), what="the cell's first checkpoint")
+    slurm_cluster.run("scancel", "--signal=USR2", job)
+    rc, err = run.finish()
+    assert rc == 2, err[-3000:]
+    log = out / "submitit" / f"{job}_0_log.err"
+    assert err.strip().splitlines()[-1] == (
+        f"lfbench ablate: error: 1 of 1 job(s) did not finish: cell channels=4 (job {job}) ended FAILED without a "
+        f"result (cancelled, timed out, pre-empted or killed; its log: {log}); run the same command again to resume "
+        "them")
+    step = checkpoint_step(cell)
+    assert f"cell channels=4: stopped at stage 1 step {step}; checkpoint written" in log.read_text()
+    assert 0 < step < 800 and not (cell / "cell.json").exists()
+
+
+@pytest.mark.slow
 def test_a_failing_cell_is_one_line_naming_it_and_its_log_after_the_others_finish(slurm_cluster, plugin, tmp_path):
     src, env = plugin
     out = tmp_path / "out"

@@ -15,7 +15,9 @@ import io
 import logging
 import os
 import shutil
+import signal
 import subprocess
+import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
@@ -136,12 +138,14 @@ def check_executor(options: ClusterOptions) -> None:
 def run_job(fn: Callable[[Any], Any], arg: Any, label: str) -> Any:
     """What each cluster job runs: ``fn(arg)``; ``label`` names the job in messages (e.g. ``cell ID``). An
     exception reaches the submitting command as one line (the traceback goes to the job's log). Training
-    stopped by SIGTERM at a checkpoint (scancel, a pre-emption, ``scontrol requeue``, the time limit) ends the
-    job without a result, so that the submitting command asks the scheduler what became of the job:
-    requeued, it waits for its next run (which resumes from the checkpoint); cancelled or timed out, it
-    reports the cell."""
+    stopped at a checkpoint by SIGTERM (scancel, a pre-emption, ``scontrol requeue``, the time limit) or by
+    SIGUSR2 (90 s before the time limit) ends the job without a result, so that the submitting command asks
+    the scheduler what became of the job: requeued, it waits for its next run (which resumes from the
+    checkpoint); cancelled or timed out, it reports the cell."""
     from lfbench.training.loop import TrainingInterrupted
 
+    if hasattr(signal, "SIGUSR2") and threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGUSR2, _stop_at_a_checkpoint)
     try:
         return fn(arg)
     except TrainingInterrupted as exc:
@@ -150,6 +154,13 @@ def run_job(fn: Callable[[Any], Any], arg: Any, label: str) -> Any:
         _log.exception(f"{label} failed")
         message = str(exc) if isinstance(exc, LFBenchError) else f"{type(exc).__name__}: {exc}"
         raise RuntimeError(FAILED + " ".join(message.split())) from None
+
+
+def _stop_at_a_checkpoint(signum, frame) -> None:
+    """SIGUSR2, which submitit's job scripts ask SLURM for 90 s before the time limit: stop the training at a
+    checkpoint as on SIGTERM (submitit's own handler would end a cell that is not a submitit Checkpointable
+    with an error, and requeue it otherwise, either way without a checkpoint)."""
+    os.kill(os.getpid(), signal.SIGTERM)
 
 
 def run_as_jobs(fn: Callable[[Any], Any], args: Sequence[Any], labels: Sequence[str], options: ClusterOptions,
