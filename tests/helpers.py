@@ -216,6 +216,15 @@ def assert_one_error_line(rc: int, err: str, *fragments: str) -> str:
     return lines[0]
 
 
+def example_grid() -> str:
+    """The example plugin's ablation (examples/tiny_plugin/ablate_channels.toml: channels 4 and 8, 20 + 5 steps,
+    1 thread) with every cell once per seed 1 and 2: 4 cells of seconds each (base: train_tiny.toml beside it)."""
+    text = (EXAMPLE_PLUGIN / "ablate_channels.toml").read_text()
+    base = 'base = "train_tiny.toml"\n'
+    assert base in text
+    return text.replace(base, base + "seeds = [1, 2]\n")
+
+
 def install_example_plugin(tmp: Path) -> tuple[Path, Path, dict[str, str]]:
     """examples/tiny_plugin copied to tmp/src and installed into tmp/site the way a user installs it: pip install
     --target (no network: --no-index, --no-deps, no build isolation); where setuptools is absent (venvs of

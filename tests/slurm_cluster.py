@@ -18,8 +18,8 @@ Needs slurm-wlm and munge (Debian: ``apt-get install slurm-wlm munge``; checked 
 Debian 12, also inside gVisor). Where they are missing or the daemons do not come up,
 :func:`start_cluster` raises :class:`ClusterUnavailable` with the reason (the ``slurm_cluster`` fixture
 skips with it; with ``LFBENCH_REQUIRE_SLURM=1``, as CI sets after installing the packages, it fails).
-SLURM runs jobs as their owner, which needs slurmd to run as root; as another user the daemons run as
-that user, which works for that user's own jobs where SLURM allows it, and otherwise skips with the log.
+As root (CI) the daemons run as root; as another user they run as that user (``SlurmUser``), which runs
+that user's own jobs (checked on Debian 12 as an unprivileged user: sinfo, srun and sbatch work).
 """
 
 from __future__ import annotations

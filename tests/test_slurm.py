@@ -16,28 +16,10 @@ from pathlib import Path
 
 import pytest
 import torch
-from helpers import install_example_plugin
+from helpers import example_grid, install_example_plugin
 
-# The example plugin's ablation over channels, each cell once per seed: 4 cells of ~25 training steps.
-GRID = """
-title = "tinycnn: channels x seeds"
-table = "none"
-base = "train_tiny.toml"
-seeds = [1, 2]
-
-[budget]
-steps = [20, 5]
-threads = 1
-
-[[grid]]
-channels = [4, 8]
-
-[evaluation]
-synthetic = { seed = 11, size = 48, scenes = 1 }
-time_size = 32
-device = "cpu"
-threads = 1
-"""
+# The example plugin's ablation over channels, each cell once per seed: 4 cells of 25 training steps.
+GRID = example_grid()
 
 # Two cells long enough (800 steps, a checkpoint every 25) to be cancelled or requeued while they train.
 LONG = GRID.replace("seeds = [1, 2]\n", "").replace("steps = [20, 5]", "steps = [800, 5]") + """
@@ -361,6 +343,7 @@ def test_a_partition_sbatch_refuses_is_one_line(slurm_cluster, plugin, tmp_path)
 
 # --------------------------------------------------------------------------- training under srun
 
+@pytest.mark.slow
 def test_train_under_srun_takes_its_ranks_from_slurm_and_matches_torchrun(slurm_cluster, plugin, tmp_path):
     """`srun --ntasks 2 lfbench train` (no torchrun: rank, world size and local rank from SLURM_PROCID,
     SLURM_NTASKS and SLURM_LOCALID; MASTER_ADDR / MASTER_PORT from the job script, as the README says) trains

@@ -1,11 +1,13 @@
 """Where ablation cells run: worker processes on this machine, each with its own GPU (round-robin over the
-visible CUDA devices; the CPU when there are none), or a cluster through submitit (``--executor slurm``,
-one job per cell; ``--executor local`` runs the same path as local subprocesses, which is how it is
-tested without a cluster).
+visible CUDA devices; the CPU when there are none), or a cluster through submitit (``--executor slurm``:
+the cells as one job array, then one job that measures their test times; ``--executor local`` runs the
+same path as local subprocesses). Tested against a real one-node SLURM cluster (tests/test_slurm.py).
 
 Every path runs :func:`lfbench.ablation.cell.run_cell`, which skips a finished cell and resumes an
 interrupted one from its checkpoint, so re-running the command after a crash, a pre-emption or a
-cancelled job continues where it stopped.
+cancelled job continues where it stopped. On a cluster, SIGTERM or the time limit's SIGUSR2 stops a cell at
+a checkpoint and ends its job without a result; the submitting command then asks squeue what became of the
+job: it waits for a requeued one (which resumes) and names a cancelled or timed-out one on one line.
 """
 
 from __future__ import annotations
