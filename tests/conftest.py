@@ -1,7 +1,9 @@
 """Shared fixtures. Real-data tests read LFBENCH_HCI_ROOT (the HCI data root, e.g. ../shared/data/hci)
 and skip cleanly when it is unset; the folder beside it (its parent) holds published/, reference/
 and paper/ when present. Every test that uses the ``hci_root`` fixture (directly or through another
-fixture) carries the ``realdata`` marker, so ``-m "not realdata"`` runs without the data."""
+fixture) carries the ``realdata`` marker, so ``-m "not realdata"`` runs without the data. Every test
+that uses the ``slurm_cluster`` fixture (a single-node SLURM cluster, tests/slurm_cluster.py) carries the
+``slurm`` marker: ``pytest -m slurm`` runs just them."""
 
 from __future__ import annotations
 
@@ -9,6 +11,7 @@ import os
 from pathlib import Path
 
 import pytest
+from slurm_cluster import ClusterUnavailable, running_cluster
 
 
 def _hci_root() -> Path | None:
@@ -20,6 +23,8 @@ def pytest_collection_modifyitems(config, items) -> None:
     for item in items:
         if "hci_root" in getattr(item, "fixturenames", ()):
             item.add_marker(pytest.mark.realdata)
+        if "slurm_cluster" in getattr(item, "fixturenames", ()):
+            item.add_marker(pytest.mark.slurm)
 
 
 @pytest.fixture(scope="session")
@@ -29,6 +34,22 @@ def hci_root() -> Path:
     if root is None:
         pytest.skip("LFBENCH_HCI_ROOT is not set (real HCI data not available)")
     return root
+
+
+@pytest.fixture(scope="session")
+def slurm_cluster(tmp_path_factory):
+    """A running single-node SLURM cluster (munged, slurmctld, slurmd of this host; tests/slurm_cluster.py),
+    started once per session and stopped at its end. Skips with the reason where it cannot run (not
+    installed, daemons refused by the container); fails instead when LFBENCH_REQUIRE_SLURM=1 (CI sets it after
+    installing slurm-wlm and munge)."""
+    root = tmp_path_factory.mktemp("slurm")
+    try:
+        with running_cluster(root) as cluster:
+            yield cluster
+    except ClusterUnavailable as exc:
+        if os.environ.get("LFBENCH_REQUIRE_SLURM") == "1":
+            pytest.fail(f"LFBENCH_REQUIRE_SLURM=1 but the SLURM test cluster did not start: {exc}")
+        pytest.skip(f"no SLURM test cluster: {exc}")
 
 
 @pytest.fixture(scope="session")

@@ -9,7 +9,13 @@ gt_disp_highres.pfm at 10x) written by :func:`write_pfm`.
 
 from __future__ import annotations
 
+import importlib.util
 import io
+import os
+import shutil
+import subprocess
+import sys
+import tomllib
 import zipfile
 from collections.abc import Iterable, Mapping
 from pathlib import Path
@@ -21,6 +27,7 @@ from lfbench.data.params import SceneParameters
 from lfbench.data.pfm import write_pfm
 
 ANGULAR = 9
+EXAMPLE_PLUGIN = Path(__file__).resolve().parent.parent / "examples" / "tiny_plugin"
 
 
 def scene_parameters(name: str, category: str, size: int, angular: int = ANGULAR) -> SceneParameters:
@@ -207,3 +214,38 @@ def assert_one_error_line(rc: int, err: str, *fragments: str) -> str:
     for fragment in fragments:
         assert fragment in lines[0], (fragment, lines[0])
     return lines[0]
+
+
+def example_grid() -> str:
+    """The example plugin's ablation (examples/tiny_plugin/ablate_channels.toml: channels 4 and 8, 20 + 5 steps,
+    1 thread) with every cell once per seed 1 and 2: 4 cells of seconds each (base: train_tiny.toml beside it)."""
+    text = (EXAMPLE_PLUGIN / "ablate_channels.toml").read_text()
+    base = 'base = "train_tiny.toml"\n'
+    assert base in text
+    return text.replace(base, base + "seeds = [1, 2]\n")
+
+
+def install_example_plugin(tmp: Path) -> tuple[Path, Path, dict[str, str]]:
+    """examples/tiny_plugin copied to tmp/src and installed into tmp/site the way a user installs it: pip install
+    --target (no network: --no-index, --no-deps, no build isolation); where setuptools is absent (venvs of
+    Python >= 3.12), the same distribution written by hand (the package and a dist-info with the pyproject's
+    entry points). Returns (src, site, an environment whose PYTHONPATH holds site, one OpenMP thread)."""
+    src, site = tmp / "src", tmp / "site"
+    shutil.copytree(EXAMPLE_PLUGIN, src, ignore=shutil.ignore_patterns("build", "*.egg-info", "__pycache__"))
+    if importlib.util.find_spec("setuptools") is not None:
+        subprocess.run([sys.executable, "-m", "pip", "install", "-q", "--no-deps", "--no-build-isolation",
+                        "--no-index", "--target", str(site), str(src)], check=True, capture_output=True)
+    else:
+        project = tomllib.loads((src / "pyproject.toml").read_text())["project"]
+        shutil.copytree(src / "lfbench_tiny", site / "lfbench_tiny")
+        dist = site / f"{project['name'].replace('-', '_')}-{project['version']}.dist-info"
+        dist.mkdir(parents=True)
+        (dist / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {project['name']}\n"
+                                       f"Version: {project['version']}\n")
+        lines = [f"[{group}]\n" + "".join(f"{k} = {v}\n" for k, v in eps.items())
+                 for group, eps in project["entry-points"].items()]
+        (dist / "entry_points.txt").write_text("\n".join(lines))
+    assert (site / "lfbench_tiny" / "plugin.py").is_file()
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in (str(site), os.environ.get("PYTHONPATH")) if p),
+           "OMP_NUM_THREADS": "1"}
+    return src, site, env

@@ -19,7 +19,9 @@ bit for bit that of an uninterrupted two-stage ``lfbench train`` of ``train.toml
 from __future__ import annotations
 
 import contextlib
+import os
 import shlex
+import socket
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -251,7 +253,8 @@ def time_cell(cell_dir: str | Path, ev: Evaluation, threads: int, network: str =
         method = make_method(Path(cell_dir) / "final.pt", ev, threads, network)
         times = time_whole_scene(method, ev.time_size, ev.time_repeats, ev.time_warmup)
     out = {"key": key, "test_s": float(np.median(times)), "test_s_all": times, "time_size": ev.time_size,
-           "threads": threads, "device": key["device"]}
+           "threads": threads, "device": key["device"], "host": socket.gethostname(),
+           "slurm_job_id": os.environ.get("SLURM_JOB_ID")}
     write_text(path, json_text(out, indent=2, sort_keys=True) + "\n")
     return out
 

@@ -24,6 +24,7 @@ interrupted one from its training checkpoint.
 from __future__ import annotations
 
 import contextlib
+import functools
 import itertools
 import json
 import logging
@@ -247,20 +248,34 @@ def _report(marker: dict[str, Any], log: Log) -> None:
         f" (own {marker.get('own_train_s', float('nan')):.1f} s), scored on {len(marker.get('scenes', []))} scene(s)")
 
 
-def time_cells(tasks: list[CellTask], threads: int, progress: bool | None, log: Log) -> list[dict[str, Any]]:
-    """Test time of every finished cell, one at a time in this process (cached in CELL/timing.json)."""
+def time_cells(tasks: list[CellTask], threads: int, progress: bool | None, log: Log,
+               cluster: ClusterOptions | None = None, out: Path | None = None) -> list[dict[str, Any]]:
+    """Test time of every finished cell, one at a time (cached in CELL/timing.json): in this process, or with
+    ``cluster``, in one job on a cell's resources (logs in OUT/submitit), so that the time is that of the
+    device the cells ran on, not of the machine that submitted them (e.g. a login node without a GPU)."""
     from tqdm import tqdm
 
-    from lfbench.ablation.cell import time_cell
+    if cluster is not None and tasks:
+        from lfbench.ablation.executor import run_as_jobs
 
-    out = []
-    for t in tqdm(tasks, desc="test time", unit="cell", disable=None if progress is None else not progress,
-                  file=sys.stderr, leave=False):
-        timing = time_cell(t.cell_dir, t.evaluation, threads, t.network)
+        folder = (out or Path(tasks[0].cell_dir).parent.parent) / "submitit"
+        timings: list[dict[str, Any]] = []
+        run_as_jobs(functools.partial(_time_all, threads=threads), [tasks], ["test time"], cluster, folder, threads,
+                    timings.extend)
+    else:
+        timings = _time_all(tqdm(tasks, desc="test time", unit="cell", file=sys.stderr, leave=False,
+                                 disable=None if progress is None else not progress), threads)
+    for t, timing in zip(tasks, timings, strict=True):
         log(f"cell {t.cell_id}: test time {timing['test_s']:.2f} s for 9x9x{timing['time_size']}x{timing['time_size']}"
             f" ({timing['device']}, {threads} thread{'s' if threads != 1 else ''})")
-        out.append(timing)
-    return out
+    return timings
+
+
+def _time_all(tasks, threads: int) -> list[dict[str, Any]]:
+    """:func:`lfbench.ablation.cell.time_cell` of each task, one after the other."""
+    from lfbench.ablation.cell import time_cell
+
+    return [time_cell(t.cell_dir, t.evaluation, threads, t.network) for t in tasks]
 
 
 # --------------------------------------------------------------------------- extra methods
@@ -315,6 +330,10 @@ def run_ablation(spec: AblationSpec, out: str | Path, *, jobs: int = 1, progress
     (``--cells``, several processes or machines) add up."""
     if jobs < 1:
         raise SpecError(f"--jobs must be >= 1, got {jobs}")
+    if cluster is not None:
+        from lfbench.ablation.executor import check_executor
+
+        check_executor(cluster)  # before any work: no data generated, nothing submitted
     out = Path(out)
     prepare_output_folder(out)
     with _set_lock(out):
@@ -322,7 +341,8 @@ def run_ablation(spec: AblationSpec, out: str | Path, *, jobs: int = 1, progress
         read_manifest(out)
     check_folders(spec, out)
     cores = available_cores()
-    threads = spec.budget.threads or max(1, cores // jobs)
+    per_job = cluster.cpus_per_job if cluster is not None else 0  # a cluster job's CPUs, not this machine's cores
+    threads = spec.budget.threads or per_job or max(1, cores // jobs)
     log(f"{spec.title}: {len(spec.cells)} cell(s), {len(spec.methods)} extra method(s), budget "
         f"{spec.budget_label()}; {jobs} process(es) x {threads} thread(s) on {cores} core(s)")
     scenes = prepare_evaluation(spec, out, log)
@@ -332,7 +352,7 @@ def run_ablation(spec: AblationSpec, out: str | Path, *, jobs: int = 1, progress
         stage1 = run_shared_stage1(spec, out, links[spec.cells[0].id], spec.budget.threads or cores, progress, log)
     tasks = make_tasks(spec, out, links, scenes, threads, stage1, progress)
     markers = run_cells(tasks, jobs, progress, log, cluster, out)
-    timings = time_cells(tasks, spec.evaluation.threads or cores, progress, log)
+    timings = time_cells(tasks, spec.evaluation.threads or per_job or cores, progress, log, cluster, out)
     markers = [{**m, **{k: v for k, v in t.items() if k != "key"}} for m, t in zip(markers, timings, strict=True)]
     combined = Results(meta={"ablation": {"title": spec.title, "spec": str(spec.source), "table": spec.table,
                                           "budget": spec.budget_label(), "shared_stage1": spec.shared_stage1,
