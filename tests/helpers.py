@@ -166,17 +166,28 @@ def write_fake_plugin(root: Path, tag: str) -> dict[str, str]:
     return names
 
 
-def install_fake_plugin(site: Path, monkeypatch) -> dict[str, str]:
-    """Write a fake plugin distribution into ``site``, put it on sys.path and swap in a fresh
-    ``lfbench.method.registry.REGISTRY`` (undone by ``monkeypatch``; the caller drops the module from
-    sys.modules afterwards: see :func:`forget_module`)."""
-    import uuid
-
+def isolate_registries(monkeypatch) -> None:
+    """Let the process-wide method and trainable registries take what a test registers (and load entry
+    points added since they were filled), and forget it afterwards (undone by ``monkeypatch``)."""
     import lfbench.method.registry as registry
+    import lfbench.method.trainable as trainable
+
+    for reg in (registry.REGISTRY, trainable.TRAINABLES):
+        reg.names()  # every plugin installed before the test, loaded
+        for attr in ("_objects", "_entries", "_aliases", "load_errors"):
+            monkeypatch.setattr(reg, attr, dict(getattr(reg, attr)))
+        monkeypatch.setattr(reg, "_loaded", False)
+
+
+def install_fake_plugin(site: Path, monkeypatch) -> dict[str, str]:
+    """Write a fake plugin distribution into ``site``, put it on sys.path and isolate the registries
+    (:func:`isolate_registries`; the caller drops the module from sys.modules afterwards: see
+    :func:`forget_module`)."""
+    import uuid
 
     names = write_fake_plugin(site, uuid.uuid4().hex[:10])
     monkeypatch.syspath_prepend(str(site))
-    monkeypatch.setattr(registry, "REGISTRY", registry.MethodRegistry())
+    isolate_registries(monkeypatch)
     return names
 
 
