@@ -139,9 +139,12 @@ class NetworkMethod(Method):
             reason = self.missing_reason()
             if reason:
                 raise DataError(reason)
+            # the architecture the weights were trained with (a key left out: the network's default), checked
+            # against the parameters given before anything is built; DataError for a file of another kind
+            defaults = {k: p.default for k, p in self.trainable.parameters().items() if not p.required}
+            self.check_config({**defaults, **self.trainable.stored_config(self.weights_path)})
             net = self.trainable.load(self.weights_path)
-            self.check_config(self.trainable.config_of(net, {}))
-            if self.tile and self.trainable.receptive_radius(net) is None:
+            if self.tile and not self.trainable.can_tile(net):
                 raise SpecError(f"{self.name or self.trainable.name}: tile={self.tile}, but network "
                                 f"{self.trainable.name!r} runs on whole images only (it has no receptive_radius)")
             self._net = net.to(self.device)
@@ -208,7 +211,7 @@ class NetworkMethod(Method):
         net = self.load_network()
         facts["weights"] = str(path)
         facts["weights_sha256"] = self.provenance()["weights"]["sha256"]
-        facts["architecture"] = ", ".join(f"{k}={v}" for k, v in self.trainable.config_of(net, {}).items())
+        facts["architecture"] = ", ".join(f"{k}={v}" for k, v in self.trainable.stored_config(path).items())
         facts["trainable_parameters"] = sum(p.numel() for p in net.parameters() if p.requires_grad)
         return facts
 

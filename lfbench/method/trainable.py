@@ -233,6 +233,11 @@ class Trainable:
         radius = getattr(net, "receptive_radius", None)
         return int(radius) if isinstance(radius, int) and not isinstance(radius, bool) and radius >= 0 else None
 
+    def can_tile(self, net: torch.nn.Module) -> bool:
+        """Whether :meth:`infer` runs ``net`` in exact tiles when given ``tile`` (default: when it has a
+        receptive radius; a trainable whose own ``infer`` tiles says so)."""
+        return self.receptive_radius(net) is not None
+
     def infer(self, net: torch.nn.Module, views: torch.Tensor, *, precision: str = "fp32",
               max_memory_gb: float | None = None, tile: int = 0, timings: dict | None = None
               ) -> tuple[torch.Tensor, torch.Tensor | None]:

@@ -51,6 +51,9 @@ class SubFocalTrainable(Trainable):
 
         return build_from_checkpoint(path, network=self.name or None, **overrides)
 
+    def can_tile(self, net: SubFocalNet) -> bool:
+        return True  # infer tiles exactly (features and attention of the whole image, a 9 px halo per tile)
+
     def infer(self, net: SubFocalNet, views: torch.Tensor, *, precision: str = "fp32",
               max_memory_gb: float | None = 4.0, tile: int = 0,
               timings: dict | None = None) -> tuple[torch.Tensor, torch.Tensor]:
