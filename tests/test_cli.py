@@ -467,3 +467,24 @@ def test_convert_keras_is_the_subfocal_plugin_command():
     eps = {ep.name: ep.value for ep in metadata.entry_points(group="lfbench.commands")}
     assert eps.get("convert-keras") == "lfbench_methods.subfocal.cli"
     assert "convert-keras" not in main.__globals__["COMMANDS"]
+
+
+def test_a_stop_on_sigint_is_reported_as_a_stop_not_an_error(tmp_path, monkeypatch, capsys):
+    """Issue 22.10: a resumable stop (SIGINT/SIGTERM during lfbench train) exits 130 with one line that
+    says it stopped and how to resume, not 'error:'."""
+    import types
+
+    import lfbench.training.config as config
+    import lfbench.training.loop as loop
+
+    def stop(cfg, out, **kwargs):
+        raise loop.TrainingInterrupted(f"stopped at stage 1 step 3; checkpoint written to {out}/checkpoint.pt; "
+                                       "run the same command to resume")
+
+    monkeypatch.setattr(config.TrainConfig, "from_toml", staticmethod(lambda path: types.SimpleNamespace(out=None)))
+    monkeypatch.setattr(loop, "train", stop)
+    rc, _, err = run_cli(capsys, "train", tmp_path / "c.toml", "--out", tmp_path / "run")
+    assert rc == 130 and err.strip().splitlines() == [
+        f"lfbench train: stopped at stage 1 step 3; checkpoint written to {tmp_path / 'run'}/checkpoint.pt; "
+        "run the same command to resume"]
+    assert "error" not in err

@@ -10,7 +10,7 @@ replace a built-in one (it is left out with a warning); one that fails to load i
 run and a warning where ``--help`` lists it.
 
 Errors caused by input (files, specs, options) print one line on stderr and exit with code 2; a stop on
-SIGINT/SIGTERM that can be resumed prints one line (``stopped``) and exits with 130.
+SIGINT/SIGTERM that can be resumed prints one line (``stopped at ...``, not ``error:``) and exits with 130.
 Library messages go through ``logging`` and are shown on stderr (``-v``: also debug, ``-q``: only warnings).
 """
 
@@ -218,7 +218,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         try:
             rc = int(args._run(args) or 0)
         except Interrupted as exc:  # a stop, not an error: the work is kept and can be resumed
-            print(f"lfbench {args.command}: stopped: {exc}", file=sys.stderr)
+            print(f"lfbench {args.command}: {exc}", file=sys.stderr)
             return exc.exit_code
         except LFBenchError as exc:
             print(f"lfbench {args.command}: error: {exc}", file=sys.stderr)

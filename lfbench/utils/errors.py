@@ -32,7 +32,7 @@ def _visible(text: str) -> str:
 
 class Interrupted(LFBenchError):
     """Work stopped on request (SIGINT/SIGTERM) after saving what it had done: a stop, not an error; the
-    same command resumes it. The CLI reports it as ``stopped: ...`` with exit code 130."""
+    same command resumes it. The CLI prints its message (``stopped at ...``) without ``error:``, exit code 130."""
 
     exit_code = 130
 
