@@ -218,3 +218,29 @@ def assert_one_error_line(rc: int, err: str, *fragments: str) -> str:
     for fragment in fragments:
         assert fragment in lines[0], (fragment, lines[0])
     return lines[0]
+
+
+def install_package(src: Path, site: Path) -> None:
+    """``pip install SRC --target SITE`` (no network: --no-index, --no-deps, no build isolation); where
+    setuptools is absent (venvs of Python >= 3.12), the same distribution written by hand: the packages
+    the pyproject lists and a dist-info with its entry points."""
+    import importlib.util
+    import shutil
+    import subprocess
+    import sys
+    import tomllib
+
+    if importlib.util.find_spec("setuptools") is not None:
+        subprocess.run([sys.executable, "-m", "pip", "install", "-q", "--no-deps", "--no-build-isolation",
+                        "--no-index", "--target", str(site), str(src)], check=True, capture_output=True)
+        return
+    pyproject = tomllib.loads((src / "pyproject.toml").read_text())
+    project = pyproject["project"]
+    for package in pyproject["tool"]["setuptools"]["packages"]:
+        shutil.copytree(src / package, site / package)
+    dist = site / f"{project['name'].replace('-', '_')}-{project['version']}.dist-info"
+    dist.mkdir(parents=True)
+    (dist / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {project['name']}\nVersion: {project['version']}\n")
+    lines = [f"[{group}]\n" + "".join(f"{k} = {v}\n" for k, v in eps.items())
+             for group, eps in project["entry-points"].items()]
+    (dist / "entry_points.txt").write_text("\n".join(lines))

@@ -6,19 +6,18 @@ the plugin. The two-class style (a Method of its own beside the Trainable): test
 from __future__ import annotations
 
 import hashlib
-import importlib.util
 import json
 import os
 import shutil
 import subprocess
 import sys
-import tomllib
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
 import torch
+from helpers import install_package
 
 from lfbench.data.scene import Benchmark
 
@@ -28,24 +27,6 @@ EXAMPLE = ROOT / "examples" / "tiny_plugin"
 pytestmark = pytest.mark.slow
 
 
-def _install(src: Path, site: Path) -> None:
-    """pip install --target (no network: --no-index, --no-deps, no build isolation); where setuptools is
-    absent (venvs of Python >= 3.12), the same distribution written by hand: the package and a
-    dist-info with the pyproject's entry points."""
-    if importlib.util.find_spec("setuptools") is not None:
-        subprocess.run([sys.executable, "-m", "pip", "install", "-q", "--no-deps", "--no-build-isolation",
-                        "--no-index", "--target", str(site), str(src)], check=True, capture_output=True)
-        return
-    project = tomllib.loads((src / "pyproject.toml").read_text())["project"]
-    shutil.copytree(src / "lfbench_tiny", site / "lfbench_tiny")
-    dist = site / f"{project['name'].replace('-', '_')}-{project['version']}.dist-info"
-    dist.mkdir(parents=True)
-    (dist / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {project['name']}\nVersion: {project['version']}\n")
-    lines = [f"[{group}]\n" + "".join(f"{k} = {v}\n" for k, v in eps.items())
-             for group, eps in project["entry-points"].items()]
-    (dist / "entry_points.txt").write_text("\n".join(lines))
-
-
 @pytest.fixture(scope="module")
 def plugin(tmp_path_factory):
     """(example folder copy, environment whose PYTHONPATH holds the installed plugin, site folder)."""
@@ -53,7 +34,7 @@ def plugin(tmp_path_factory):
     src = tmp / "src"
     shutil.copytree(EXAMPLE, src, ignore=shutil.ignore_patterns("build", "*.egg-info", "__pycache__"))
     site = tmp / "site"
-    _install(src, site)
+    install_package(src, site)
     assert (site / "lfbench_tiny" / "plugin.py").is_file()
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in (str(site), os.environ.get("PYTHONPATH")) if p),
            "OMP_NUM_THREADS": "1"}

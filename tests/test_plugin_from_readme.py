@@ -11,12 +11,12 @@ import re
 import shlex
 import subprocess
 import sys
-import tomllib
 from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
+from helpers import install_package
 
 from lfbench.data.scene import Benchmark
 
@@ -53,27 +53,6 @@ def _commands(section: str) -> list[list[str]]:
     return [shlex.split(line.split("  #")[0]) for line in block.splitlines() if line.startswith("lfbench ")]
 
 
-def _install(src: Path, site: Path) -> None:
-    """``pip install .`` into ``site`` (no network, no build isolation); where setuptools is absent, the
-    same distribution written by hand from the pyproject's entry points."""
-    import importlib.util
-
-    if importlib.util.find_spec("setuptools") is not None:
-        subprocess.run([sys.executable, "-m", "pip", "install", "-q", "--no-deps", "--no-build-isolation",
-                        "--no-index", "--target", str(site), str(src)], check=True, capture_output=True)
-        return
-    import shutil
-
-    project = tomllib.loads((src / "pyproject.toml").read_text())["project"]
-    shutil.copytree(src / "my_lfnet", site / "my_lfnet")
-    dist = site / "my_lfnet-0.1.0.dist-info"
-    dist.mkdir(parents=True)
-    (dist / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {project['name']}\nVersion: {project['version']}\n")
-    (dist / "entry_points.txt").write_text("\n".join(
-        f"[{group}]\n" + "".join(f"{k} = {v}\n" for k, v in eps.items())
-        for group, eps in project["entry-points"].items()))
-
-
 @pytest.fixture(scope="module")
 def readme_plugin(tmp_path_factory):
     """(source folder written from the README, environment with the plugin installed)."""
@@ -86,7 +65,7 @@ def readme_plugin(tmp_path_factory):
         (src / name).write_text(text, encoding="utf-8")
     (src / "my_lfnet" / "__init__.py").touch()  # as the README says
     site = tmp_path_factory.mktemp("readme_site")
-    _install(src, site)
+    install_package(src, site)
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in (str(site), os.environ.get("PYTHONPATH")) if p),
            "OMP_NUM_THREADS": "1"}
     return src, env, _commands(section)
