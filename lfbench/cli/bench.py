@@ -39,6 +39,7 @@ from pathlib import Path
 from typing import Any
 
 from lfbench.cli.argtypes import float_range, int_range
+from lfbench.method.trainable import DEFAULT_TRAINABLE
 
 HELP = "speed and memory benchmarks (inference, cost volume, training, metrics, conv peak)"
 
@@ -49,7 +50,7 @@ MAX_BATCH = 4096  # as a training config's batch_size
 MAX_PATCH = 1024  # px, as a training config's patch
 MAX_COUNT = 10**6  # steps, repeats, rounds, scenes, methods
 MAX_THREADS = 4096
-DEFAULT_MODEL = "subfocal"
+DEFAULT_MODEL = DEFAULT_TRAINABLE  # the network a bench times without --model
 _SIZE = int_range(8, MAX_SIZE)
 _COUNT = int_range(1, MAX_COUNT)
 _POSITIVE = float_range(0.0, 1e12, low_open=True)

@@ -50,13 +50,14 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+from lfbench.method.trainable import DEFAULT_TRAINABLE
 from lfbench.utils.errors import SpecError
 from lfbench.utils.jsonfile import json_text
 from lfbench.utils.subprocesses import safe_path_env
 
 PRECISIONS = ("fp32", "bf16")
 BENCHES = ("peak", "inference", "volume", "train", "metrics")  # the order of the tables
-DEFAULT_MODEL = "subfocal"
+DEFAULT_MODEL = DEFAULT_TRAINABLE  # the network a bench times without --model
 
 
 # --------------------------------------------------------------------------- machine and memory
