@@ -67,7 +67,7 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
-def command_registry(warn: bool = True) -> Registry[Any]:
+def command_registry() -> Registry[Any]:
     """The built-in commands and the plugins' (``lfbench.commands`` entry points), none imported yet. A
     plugin command named like a built-in one is left out (with a one-line warning on stderr)."""
     commands: Registry[Any] = Registry("command", Command)
@@ -75,18 +75,12 @@ def command_registry(warn: bool = True) -> Registry[Any]:
         commands.add(name, Lazy(module))
     for ep in sorted(metadata.entry_points(group=COMMAND_GROUP), key=lambda e: e.name):
         if ep.name in BUILTIN_COMMANDS:
-            if warn:
-                print(f"lfbench: warning: plugin command {ep.name!r} ({ep.value}) would replace a built-in "
-                      "command; left out", file=sys.stderr)
+            print(f"lfbench: warning: plugin command {ep.name!r} ({ep.value}) would replace a built-in command; "
+                  "left out", file=sys.stderr)
             continue
         if ep.name not in commands.registered():
             commands.add(ep.name, Lazy(ep.value))
     return commands
-
-
-def plugin_commands() -> list[str]:
-    """The names of the plugin commands (``lfbench.commands`` entry points), sorted."""
-    return [n for n in command_registry(warn=False).registered() if n not in BUILTIN_COMMANDS]
 
 
 def load_command(commands: Registry[Any], name: str) -> Any:
