@@ -65,7 +65,8 @@ class NetworkMethod(Method):
     """Runs the weights of a registered trainable network (``NAME:weights=PATH[,key=value,...]``).
 
     ``network``: the trainable's name (a subclass may fix it as a class attribute); ``weights``: the
-    weights file; ``arch``: network parameters the weights must have (checked when they are loaded).
+    weights file; ``arch``: network parameters the weights must have (checked when they are loaded: the
+    registry records them in ``params``, :meth:`explicit_arch`).
     """
 
     network: ClassVar[str] = ""
@@ -89,7 +90,6 @@ class NetworkMethod(Method):
         if precision == "bf16":
             require_bf16(self.device)  # one line, before any work
         self.precision, self.threads, self.tile = precision, threads, tile
-        self.arch = dict(arch)
         self._net: torch.nn.Module | None = None
 
     # -- weights ---------------------------------------------------------------------------------

@@ -101,7 +101,6 @@ class SubFocal(NetworkMethod):
         if precision == "bf16":
             require_bf16(self.device)  # one line, before any work (an AVX2-only CPU cannot run it)
         self.precision, self.threads, self.tile = precision, threads, tile
-        self.arch = {k: values[k] for k in _ARCH_KEYS}
         self.values = values
         self._net = None
 
