@@ -168,12 +168,12 @@ def write_fake_plugin(root: Path, tag: str) -> dict[str, str]:
 
 def isolate_registries(monkeypatch) -> None:
     """Let the process-wide method and trainable registries take what a test registers (and load entry
-    points added since they were filled), and forget it afterwards (undone by ``monkeypatch``)."""
+    points added since they were filled: the installed plugins were loaded when the session started, see
+    conftest.pytest_sessionstart), and forget it afterwards (undone by ``monkeypatch``)."""
     import lfbench.method.registry as registry
     import lfbench.method.trainable as trainable
 
     for reg in (registry.REGISTRY, trainable.TRAINABLES):
-        reg.names()  # every plugin installed before the test, loaded
         for attr in ("_objects", "_entries", "_aliases", "load_errors"):
             monkeypatch.setattr(reg, attr, dict(getattr(reg, attr)))
         monkeypatch.setattr(reg, "_loaded", False)

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from helpers import install_package
+from helpers import install_package, isolate_registries
 
 from lfbench.data.scene import Benchmark
 
@@ -97,11 +97,12 @@ def test_the_readme_plugin_runs_with_the_readme_commands(readme_plugin):
     saved = json.loads((src / "runs" / "epi" / "eval" / "results.json").read_text())
     (label,) = {r["method"] for r in saved["records"]}
     assert label.startswith("epinet:weights=sha256:")
-    sys.path.insert(0, str(src))
-    try:
-        from my_lfnet.plugin import EpiNet  # noqa: PLC0415 - the README's own network
-    finally:
-        sys.path.remove(str(src))
+    with pytest.MonkeyPatch.context() as mp:  # its registration is forgotten afterwards
+        isolate_registries(mp)
+        mp.syspath_prepend(str(src))
+        from my_lfnet.plugin import EpiNet  # the README's own network
+    sys.modules.pop("my_lfnet.plugin", None)
+    sys.modules.pop("my_lfnet", None)
     net = EpiNet(**final["config"]).eval()
     net.load_state_dict(final["state_dict"])
     scene = Benchmark.discover(src / "data").scenes[0]
