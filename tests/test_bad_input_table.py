@@ -68,6 +68,42 @@ def _train_config(tmp: Path, extra: str) -> Path:
     return _file(tmp, "c.toml", f'[data]\nroots = ["{root}"]\n[model]\nwidth = 2\n{extra}')
 
 
+VICTIM = "victim"  # a folder beside OUT that a hostile output folder points at: it must stay as it was
+ABLATION_SPEC = ('title = "t"\n[base.data]\ntrain = ["synthetic"]\n[[base.data.synthetic]]\ncategory = "synthetic"\n'
+                 'seed = 1\nsize = 48\nscenes = 1\n[base.model]\nwidth = 2\n[[base.stages]]\nname = "l1"\n'
+                 'loss = "l1"\nlr = 1e-3\nsteps = 1\n[evaluation]\nsynthetic = { seed = 5, size = 48, scenes = 1 }\n'
+                 '[[grid]]\ninterval = [1.0]\n')
+RESULTS = '{"records": [{"method": "m", "scene": "s", "metric": "mse_x100", "value": 1.0, "resolution": "lowres"}]}'
+
+
+def _hostile(tmp: Path, name: str = "out") -> Path:
+    """An output folder whose commit journal names a folder beside it as its staging folder (the next run
+    would have deleted it)."""
+    victim = tmp / VICTIM
+    victim.mkdir(exist_ok=True)
+    (victim / "keep.txt").write_text("mine")
+    return _file(tmp, f"{name}/.lfbench-commit.json",
+                 json.dumps({"stage": str(victim), "entries": [], "remove": []})).parent
+
+
+def _cut(tmp: Path) -> Path:
+    """A results folder whose commit was cut short (its journal pending)."""
+    folder = _file(tmp, "res/results.json", RESULTS).parent
+    (folder / ".lfbench-stage.1.planted").mkdir()
+    _file(folder, ".lfbench-commit.json", json.dumps({"stage": ".lfbench-stage.1.planted", "entries": [],
+                                                      "remove": []}))
+    return folder
+
+
+def _maps_leading_out(tmp: Path) -> Path:
+    """A results folder whose saved maps of method 'm' are a link to a folder outside it."""
+    folder = _file(tmp, "res/results.json", RESULTS).parent
+    write_submission(tmp / "elsewhere", {"s": np.zeros((SIZE, SIZE), np.float32)})
+    (folder / "maps").mkdir()
+    (folder / "maps" / "m").symlink_to(tmp / "elsewhere")
+    return folder
+
+
 # (id, argv builder given tmp_path, fragments of the one error line, paths that must not exist afterwards)
 CASES: list[tuple[str, Callable[[Path], list], tuple[str, ...], tuple[str, ...]]] = [
     ("evaluate-no-data", lambda t: ["evaluate", "--data", t / "nope", "--method", "gt", "--out", t / "out"],
@@ -133,6 +169,29 @@ CASES: list[tuple[str, Callable[[Path], list], tuple[str, ...], tuple[str, ...]]
     ("ablate-missing", lambda t: ["ablate", t / "nope.toml", "--out", t / "ab"], ("nope.toml",), ("ab",)),
     ("ablate-jobs-0", lambda t: ["ablate", t / "nope.toml", "--jobs", "0"], ("--jobs",), ()),
     ("bench-bad-model", lambda t: ["bench", "--model", "nosuch", "--json", t / "b.json"], ("nosuch",), ("b.json",)),
+    # hostile output folders (issue 20.1): every command that reads one or writes a set into one
+    ("evaluate-hostile-out", lambda t: ["evaluate", "--data", _scene(t), "--method", "gt", "--out", _hostile(t)],
+     (".lfbench-commit.json", "nothing was changed"), ()),
+    ("evaluate-html-hostile-out", lambda t: ["evaluate", "--data", _scene(t), "--method", "gt", "--html", "--out",
+                                             _hostile(t)], (".lfbench-commit.json", "nothing was changed"), ()),
+    ("demo-hostile-out", lambda t: ["demo", "--out", _hostile(t), "--size", "32", "--scenes", "1", "--methods", "gt"],
+     (".lfbench-commit.json", "nothing was changed"), ("out/data",)),
+    ("report-hostile-out", lambda t: ["report", _file(t, "r.json", RESULTS), "--out", _hostile(t), "--html"],
+     (".lfbench-commit.json", "nothing was changed"), ("out/html",)),
+    ("report-cut-results", lambda t: ["report", _cut(t), "--out", t / "rep"], ("res", "interrupted run"), ("rep",)),
+    ("report-maps-leading-out", lambda t: ["report", _maps_leading_out(t), "--out", t / "rep", "--html"],
+     ("maps/m", "symbolic link leading out of"), ("rep",)),
+    ("report-into-its-results", lambda t: ["report", _file(t, "res/results.json", RESULTS), "--out", t / "res"],
+     ("res", "folder of the results being reported"), ("res/table_average.md",)),
+    ("regress-cut-results", lambda t: ["regress", _file(t, "g.json", "[]"), _cut(t)], ("res", "interrupted run"), ()),
+    ("ablate-hostile-out", lambda t: ["ablate", _file(t, "a.toml", ABLATION_SPEC), "--out", _hostile(t)],
+     (".lfbench-commit.json", "nothing was changed"), ("out/eval_data", "out/cells")),
+    ("ablate-report-only-hostile-out", lambda t: ["ablate", _file(t, "a.toml", ABLATION_SPEC), "--out", _hostile(t),
+                                                  "--report-only", "--html"],
+     (".lfbench-commit.json", "nothing was changed"), ("out/html",)),
+    ("train-hostile-out", lambda t: ["-q", "train", _train_config(t, '[[stages]]\nloss = "l1"\nlr = 1e-3\nsteps = 1\n'),
+                                     "--out", _hostile(t, "run")], (".lfbench-commit.json", "nothing was changed"),
+     ("run/final.pt", "run/metrics.jsonl")),
 ]
 
 
@@ -152,7 +211,10 @@ def test_bad_input_is_one_line_exit_2_nothing_written(tmp_path, capsys, build, f
     assert line.startswith("lfbench ")
     for name in absent:
         assert not (tmp_path / name).exists(), f"{name} was written"
-    assert not [p for p in tmp_path.rglob("*") if p.name.startswith(".lfbench-stage") or p.name.endswith(".tmp")]
+    if (tmp_path / VICTIM).exists():  # what a hostile output folder pointed at is untouched
+        assert sorted(p.name for p in (tmp_path / VICTIM).iterdir()) == ["keep.txt"]
+    assert not [p for p in tmp_path.rglob("*") if (p.name.startswith(".lfbench-stage") or p.name.endswith(".tmp"))
+                and not p.name.endswith(".planted")]
 
 
 # --------------------------------------------------------------------------- random bytes into the readers

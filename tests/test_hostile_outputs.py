@@ -5,13 +5,14 @@ half-written."""
 from __future__ import annotations
 
 import errno
+import json
 import os
 from pathlib import Path
 
 import pytest
 from helpers import assert_one_error_line, run_cli, write_scene
 
-from lfbench.runs.outputs import JOURNAL, recover
+from lfbench.runs.outputs import JOURNAL, MANIFEST, recover
 from lfbench.runs.results import Results
 from lfbench.utils.errors import DataError
 
@@ -129,3 +130,216 @@ def test_a_scene_folder_name_that_is_not_utf8_is_one_line(tmp_path, capsys, data
     rc, _, err = evaluate(capsys, data, tmp_path / "out")
     assert_one_error_line(rc, err, "caf\\xe9", "not valid UTF-8")
     assert not (tmp_path / "out").exists()
+
+
+# --------------------------------------------------------------------------- a hostile output folder (issue 20.1)
+# Everything read back from an output folder is untrusted: a journal or manifest naming paths outside OUT, a
+# symbolic link among the staged files, must be refused in one line (exit 2) with nothing touched, in OUT or
+# beside it.
+
+PLANTED = ".lfbench-stage.1.planted"  # pid 1 is alive, but a journal names it: the commit is rolled forward
+
+
+def tree(root: Path) -> dict[str, object]:
+    """Every path under ``root``: file bytes, 'dir', or ('link', target); symbolic links are not followed."""
+    out: dict[str, object] = {}
+    for folder, dirs, files in os.walk(root):
+        for name in dirs + files:
+            path = Path(folder) / name
+            rel = str(path.relative_to(root))
+            if path.is_symlink():
+                out[rel] = ("link", os.readlink(path))
+            elif path.is_dir():
+                out[rel] = "dir"
+            else:
+                out[rel] = path.read_bytes()
+    return out
+
+
+def _journal(out: Path, stage: str = PLANTED, entries=(), remove=(), name: str = JOURNAL) -> Path:
+    (out / name).write_text(json.dumps({"stage": stage, "entries": list(entries), "remove": list(remove)}))
+    return out / name
+
+
+def _victims(tmp: Path) -> Path:
+    """A folder and a file beside OUT, as a user's own files."""
+    (tmp / "victim_dir").mkdir()
+    (tmp / "victim_dir" / "precious.txt").write_text("mine")
+    (tmp / "victim_dir" / "results.json").write_text("not yours")
+    (tmp / "victim.txt").write_text("mine too")
+    return tmp
+
+
+def _stage(out: Path) -> Path:
+    (out / PLANTED).mkdir()
+    return out / PLANTED
+
+
+ATTACKS = {  # name -> (plant the attack into OUT beside the victims in tmp, file the one line names)
+    "absolute-stage": (lambda out, t: _journal(out, stage=str(t / "victim_dir")), JOURNAL),
+    "stage-dotdot": (lambda out, t: _journal(out, stage=".."), JOURNAL),
+    "stage-is-out-itself": (lambda out, t: _journal(out, stage="."), JOURNAL),
+    "remove-outside": (lambda out, t: (_stage(out), _journal(out, remove=["../victim.txt"])), JOURNAL),
+    "remove-absolute": (lambda out, t: (_stage(out), _journal(out, remove=[str(t / "victim.txt")])), JOURNAL),
+    "entry-outside": (lambda out, t: (_stage(out), (out / "X").write_text("planted"),
+                                      _journal(out, entries=["../X"])), JOURNAL),
+    "symlinked-stage": (lambda out, t: ((out / PLANTED).symlink_to(t / "victim_dir"),
+                                        _journal(out, entries=["results.json"])), JOURNAL),
+    "symlinked-entry": (lambda out, t: (_stage(out), (out / PLANTED / "results.json").symlink_to(t / "victim.txt"),
+                                        _journal(out, entries=["results.json"])), JOURNAL),
+    "symlink-inside-an-entry": (lambda out, t: (_stage(out), (out / PLANTED / "maps").mkdir(),
+                                                (out / PLANTED / "maps" / "m").symlink_to(t / "victim_dir"),
+                                                _journal(out, entries=["maps"])), JOURNAL),
+    "symlinked-trash": (lambda out, t: (_stage(out), (out / PLANTED / ".trash").symlink_to(t / "victim_dir"),
+                                        _journal(out, remove=["results.csv"])), JOURNAL),
+    "journal-is-a-symlink": (lambda out, t: (out / JOURNAL).symlink_to(t / "victim.txt"), JOURNAL),
+    "named-journal-absolute-stage": (lambda out, t: _journal(out, stage=str(t / "victim_dir"),
+                                                             name=".lfbench-commit.train.json"),
+                                     ".lfbench-commit.train.json"),
+    "manifest-dotdot": (lambda out, t: (out / MANIFEST).write_text(
+        json.dumps({"entries": ["results.json", "../victim.txt"]})), MANIFEST),
+    "manifest-absolute": (lambda out, t: (out / MANIFEST).write_text(
+        json.dumps({"entries": [str(t / "victim_dir")]})), MANIFEST),
+    "manifest-names-the-journal": (lambda out, t: (out / MANIFEST).write_text(
+        json.dumps({"entries": [JOURNAL]})), MANIFEST),
+}
+
+
+@pytest.mark.parametrize("attack", sorted(ATTACKS))
+def test_a_hostile_journal_or_manifest_is_refused_and_nothing_is_touched(tmp_path, capsys, data, attack):
+    out = tmp_path / "out"
+    assert evaluate(capsys, data, out)[0] == 0
+    plant, named = ATTACKS[attack]
+    plant(out, _victims(tmp_path))
+    before = tree(tmp_path)
+    rc, _, err = evaluate(capsys, data, out, "--scenes", "s0")
+    assert_one_error_line(rc, err, str(out / named), "nothing was changed")
+    assert tree(tmp_path) == before  # the victims beside OUT, and OUT itself, exactly as they were
+
+
+def _spec(tmp: Path, out: Path) -> Path:
+    path = tmp / "spec.toml"
+    path.write_text(f'title = "t"\nout = "{out}"\n[base.data]\ntrain = ["synthetic"]\n'
+                    '[[base.data.synthetic]]\ncategory = "synthetic"\nseed = 1\nsize = 48\nscenes = 1\n'
+                    '[base.model]\nwidth = 2\n[[base.stages]]\nname = "l1"\nloss = "l1"\nlr = 1e-3\nsteps = 1\n'
+                    '[evaluation]\nsynthetic = { seed = 5, size = 48, scenes = 1 }\n[[grid]]\ninterval = [1.0]\n')
+    return path
+
+
+def _train_config(tmp: Path, data: Path) -> Path:
+    path = tmp / "train.toml"
+    path.write_text(f'[data]\nroots = ["{data}"]\n[model]\nwidth = 2\n[[stages]]\nloss = "l1"\nlr = 1e-3\n'
+                    'steps = 1\n')
+    return path
+
+
+SET_WRITERS = {  # every command that writes a set (or finishes a cut commit) into OUT, and its argv
+    "evaluate": lambda t, d, out: ["evaluate", "--data", d, "--method", "gt", "--out", out, "--no-progress"],
+    "evaluate-html": lambda t, d, out: ["evaluate", "--data", d, "--method", "gt", "--out", out, "--html",
+                                        "--no-progress"],
+    "demo": lambda t, d, out: ["demo", "--out", out, "--size", "32", "--scenes", "1", "--methods", "gt",
+                               "--no-progress"],
+    "report": lambda t, d, out: ["report", _results(t, d), "--out", out, "--html"],
+    "ablate": lambda t, d, out: ["ablate", _spec(t, out), "--out", out, "--no-progress"],
+    "ablate-report-only": lambda t, d, out: ["ablate", _spec(t, out), "--out", out, "--report-only", "--html"],
+    "train": lambda t, d, out: ["-q", "train", _train_config(t, d), "--out", out, "--no-progress"],
+}
+
+
+def _results(tmp: Path, data: Path) -> Path:
+    from lfbench.cli import main
+
+    assert main(["-q", "evaluate", "--data", str(data), "--method", "gt", "--out", str(tmp / "ev"),
+                 "--no-progress"]) == 0
+    return tmp / "ev"
+
+
+@pytest.mark.parametrize("command", sorted(SET_WRITERS))
+@pytest.mark.parametrize("attack", ["absolute-stage", "remove-outside", "manifest-dotdot"])
+def test_every_set_writer_refuses_a_hostile_folder_before_any_work(tmp_path, capsys, data, command, attack):
+    out = tmp_path / "out"
+    out.mkdir()
+    argv = SET_WRITERS[command](tmp_path, data, out)
+    capsys.readouterr()
+    plant, named = ATTACKS[attack]
+    plant(out, _victims(tmp_path))
+    if command == "train" and named == MANIFEST:  # a training run's exports are the set named 'train'
+        named = ".lfbench-outputs.train.json"
+        os.rename(out / MANIFEST, out / named)
+    before = tree(tmp_path)
+    rc, _, err = run_cli(capsys, *argv)
+    assert_one_error_line(rc, err, str(out / named), "nothing was changed")
+    after = {k: v for k, v in tree(tmp_path).items() if not k.endswith(".lock")}  # the commands' locks
+    assert after == before
+
+
+def test_a_report_never_writes_outside_its_folder_whatever_names_the_results_hold(tmp_path, capsys, data):
+    """Method and scene names are file names in a report (figures, pages, images): '..', '.' or a path
+    in results.json or its curves must stay names inside the report's folder."""
+    res = tmp_path / "res"
+    assert evaluate(capsys, data, res, "--figures")[0] == 0
+    doc = json.loads((res / "results.json").read_text())
+    names = {"s0": "..", "s1": "../../escaped"}
+    for item in doc["records"] + doc["runs"]:
+        item["scene"] = names[item["scene"]]
+        item["method"] = "." if item["method"] == "gt" else "/abs/method"
+    (res / "results.json").write_text(json.dumps(doc))
+    curves = res / "figures" / "badpix_series.csv"
+    text = curves.read_text()
+    for old, new in names.items():
+        text = text.replace(f",{old},", f",{new},")
+    curves.write_text(text)
+    before = tree(tmp_path)
+    rc, _, err = run_cli(capsys, "report", res, "--out", tmp_path / "rep" / "r", "--html")
+    assert rc == 0, err
+    after = tree(tmp_path)
+    new = sorted(k for k in after if k not in before)
+    assert all(k == "rep" or k.startswith("rep/r") for k in new), new  # nothing beside the report's folder
+    top = sorted(p.name for p in (tmp_path / "rep" / "r").iterdir())
+    assert top == [MANIFEST, "figures", "html", "table_average.csv", "table_average.md", "table_average.tex",
+                   "table_per_scene.csv", "table_per_scene.md", "table_per_scene.tex"]
+
+
+@pytest.mark.parametrize("where", ["method-folder", "maps-folder"])
+def test_saved_maps_that_lead_out_of_the_results_folder_are_refused(tmp_path, capsys, data, where):
+    res = tmp_path / "res"
+    assert evaluate(capsys, data, res, "--save-maps")[0] == 0
+    elsewhere = tmp_path / "elsewhere"
+    if where == "method-folder":  # maps/gt -> a folder outside, holding maps of its own
+        os.rename(res / "maps" / "gt", elsewhere)
+        (res / "maps" / "gt").symlink_to(elsewhere)
+        link = res / "maps" / "gt"
+    else:  # maps itself -> outside
+        os.rename(res / "maps", elsewhere)
+        (res / "maps").symlink_to(elsewhere)
+        link = res / "maps"
+    rc, _, err = run_cli(capsys, "report", res, "--out", tmp_path / "rep", "--html")
+    assert_one_error_line(rc, err, str(link), "symbolic link leading out of")
+    assert not (tmp_path / "rep").exists()
+
+
+def test_a_journal_whose_staging_folder_is_gone_is_refused_not_guessed(tmp_path, capsys, data):
+    out = tmp_path / "out"
+    assert evaluate(capsys, data, out)[0] == 0
+    _journal(out, entries=["results.json"])
+    before = tree(tmp_path)
+    rc, _, err = evaluate(capsys, data, out)
+    assert_one_error_line(rc, err, str(out / JOURNAL), "staging folder", "is gone")
+    assert tree(tmp_path) == before
+
+
+@pytest.mark.parametrize("where", ["stage1", "cells", "methods/zero"])
+def test_an_ablation_folder_leading_out_of_out_is_refused_before_any_work(tmp_path, capsys, where):
+    """An ablation trains and scores into OUT/stage1, OUT/cells/<id> and OUT/methods/<label>: a symbolic
+    link there to a folder elsewhere would make it write (and replace files) outside OUT."""
+    out = tmp_path / "out"
+    spec = _spec(tmp_path, out)
+    spec.write_text(spec.read_text() + '[[methods]]\nlabel = "zero"\nspec = "constant:value=0"\n')
+    _victims(tmp_path)
+    (out / where).parent.mkdir(parents=True, exist_ok=True)
+    (out / where).symlink_to(tmp_path / "victim_dir")
+    before = tree(tmp_path)
+    rc, _, err = run_cli(capsys, "ablate", spec, "--out", out, "--no-progress")
+    assert_one_error_line(rc, err, str(out / where), "symbolic link leading out of the ablation folder")
+    after = {k: v for k, v in tree(tmp_path).items() if not k.endswith(".lock")}
+    assert after == before

@@ -170,3 +170,42 @@ def test_disk_full_while_checkpointing_is_one_line_and_keeps_the_old_checkpoint(
     kept = torch.load(tmp_path / "run" / "checkpoint.pt", weights_only=True)
     assert kept["global_step"] == 1  # the last good checkpoint, not half of a new one
     assert not [p.name for p in (tmp_path / "run").iterdir() if p.name.endswith(".tmp")]
+
+
+def test_final_weights_and_summary_are_one_set(tmp_path, capsys, data_root, monkeypatch, one_torch_thread):
+    """final.pt and summary.json appear together (issue 20.3): a kill between them is finished by the next
+    run, and a folder with final.pt but no summary.json (a kill there by an earlier version) is not taken
+    for a finished run."""
+    import json
+    import os
+
+    import lfbench.runs.outputs as outputs
+    from lfbench.runs.outputs import check_complete
+    from lfbench.utils.errors import DataError
+
+    out = tmp_path / "run"
+    config = write_config(tmp_path, config_text(data_root, STAGE1))
+    real_replace = os.replace
+
+    def killed(src, dst):  # stands for kill -9 right after final.pt was moved into the run folder
+        real_replace(src, dst)
+        if Path(dst) == out / "final.pt":
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(outputs.os, "replace", killed)
+    rc, _, _ = run_cli(capsys, "-q", "train", config, "--out", out, "--no-progress")
+    monkeypatch.setattr(outputs.os, "replace", real_replace)
+    assert rc == 130 and (out / "final.pt").is_file() and not (out / "summary.json").exists()
+    with pytest.raises(DataError, match="interrupted run"):
+        check_complete(out)
+    rc, _, err = run_cli(capsys, "-q", "train", config, "--out", out, "--no-progress")
+    assert rc == 0, err
+    summary = json.loads((out / "summary.json").read_text())
+    weights = torch.load(out / "final.pt", weights_only=True)
+    assert summary["steps"] == weights["training"]["steps"] == 2
+    assert summary["rank_parameters_sha256"] == weights["training"]["rank_parameters_sha256"]
+    assert json.loads((out / ".lfbench-outputs.train.json").read_text()) == {"entries": ["final.pt", "summary.json"]}
+    (out / "summary.json").unlink()  # as a kill between the two writes of an earlier version left it
+    rc, _, err = run_cli(capsys, "-q", "train", config, "--out", out, "--no-progress")
+    assert rc == 0, err
+    assert json.loads((out / "summary.json").read_text())["steps"] == 2

@@ -186,6 +186,24 @@ def test_a_site_from_results_alone_shows_the_numbers_and_says_why_there_are_no_m
     assert not list(html.glob("img/boxes/*"))
 
 
+def test_a_copied_results_json_gives_a_site_with_the_scenes_and_says_there_are_no_maps(site, tmp_path):
+    """Issue 20.7: results.json copied elsewhere (its data root still there, its maps not beside it): the
+    report's site shows the scenes and the numbers and says why there are no maps; it used to fail in
+    jinja2 after the tables were written."""
+    there = tmp_path / "there"
+    there.mkdir()
+    shutil.copy(site / "results.json", there / "results.json")
+    rc, stdout, err = _run(["report", str(there / "results.json"), "--out", str(tmp_path / "rep"), "--html"])
+    assert rc == 0, err
+    html = tmp_path / "rep" / "html"
+    index = (html / "index.html").read_text(encoding="utf-8")
+    assert "No saved maps: scene pages show the scenes and the numbers, no method" in index
+    scene = (html / "scene-boxes.html").read_text(encoding="utf-8")
+    assert 'src="img/boxes/centre.png"' in scene and 'src="img/boxes/gt.png"' in scene
+    assert "disp.png" not in scene and "#1</span>" in scene  # no method's maps, the ranks
+    assert (tmp_path / "rep" / "table_average.md").is_file()
+
+
 def test_report_refuses_unknown_figure_formats_before_writing(site, tmp_path, capsys):
     rc = main(["report", str(site), "--out", str(tmp_path / "x"), "--figure-format", "gif"])
     assert rc == 2

@@ -113,6 +113,9 @@ def link_data(task: CellTask) -> None:
     data = task.path / "data"
     for category, folder in task.data_links.items():
         link = data / category
+        if link.is_symlink() and link.resolve() != Path(folder).resolve():
+            raise DataError("symbolic link to another folder than the ablation's generated scenes (not allowed)",
+                            link)
         if link.exists() or link.is_symlink():
             continue
         data.mkdir(parents=True, exist_ok=True)

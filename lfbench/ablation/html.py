@@ -11,24 +11,29 @@ from lfbench.ablation.spec import AblationSpec
 __all__ = ["write_site"]
 
 
-def write_site(spec: AblationSpec, out: str | Path) -> Path:
-    """Build OUT/html from the finished ablation in ``out``; returns the path of index.html."""
+def write_site(spec: AblationSpec, out: str | Path, *, results_dir: str | Path | None = None,
+               site: str | Path | None = None) -> Path:
+    """Build the site of the finished ablation in ``out`` from the results.json in ``results_dir``
+    (default ``out``) into ``site`` (default OUT/html); returns the path of index.html."""
     import logging
 
     from lfbench.ablation.cell import MAPS, load_scenes
     from lfbench.ablation.runner import prepare_evaluation
     from lfbench.reports.html import SITE_DIR, SiteInputs, build_site
+    from lfbench.runs.outputs import check_within
     from lfbench.runs.results import Results
     from lfbench.utils.names import file_name
 
     out = Path(out)
-    results = Results.read(out / "results.json")
+    results = Results.read(Path(results_dir if results_dir is not None else out))  # its results.json
     scenes = load_scenes(prepare_evaluation(spec, out, logging.getLogger(__name__).info))
     folders = {cell.id: out / "cells" / cell.id / MAPS for cell in spec.cells}
     folders |= {m.label: out / "methods" / file_name(m.label) / "maps" for m in spec.methods}
     maps = {label: folder for label, folder in folders.items() if (folder / "disp_maps").is_dir()}
+    for folder in maps.values():
+        check_within(folder, out, "the ablation folder")
     inputs = SiteInputs(results=results, scenes=scenes, maps=maps, title=spec.title,
                         notes=[f"Ablation {spec.source}: budget {spec.budget_label()}; one method per cell "
                                "(its id) and per extra method. Training curves: tensorboard --logdir "
                                f"{out / 'cells'}."])
-    return build_site(inputs, out / SITE_DIR)
+    return build_site(inputs, Path(site) if site is not None else out / SITE_DIR)

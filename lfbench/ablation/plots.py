@@ -92,17 +92,22 @@ def accuracy_vs_time(frame: pd.DataFrame, paper: pd.DataFrame | None, path: Path
     return save_figure(fig, path, dpi=110)
 
 
-def error_maps(scene_dirs: Sequence[str], maps: Mapping[str, Path], out: Path) -> list[Path]:
+def error_maps(scene_dirs: Sequence[str], maps: Mapping[str, Path], out: Path,
+               within: Path | None = None) -> list[Path]:
     """Per scene an overview with one row per variant (disparity, BadPix map, signed error, uncertainty)
-    and the BadPix(t) curves, from the maps the cells saved (lfbench.reports.figures.SceneFigureWriter)."""
+    and the BadPix(t) curves, from the maps the cells saved (lfbench.reports.figures.SceneFigureWriter).
+    ``within``: the ablation folder the maps must not lead out of (symbolic links)."""
     from lfbench.data.pfm import read_pfm
     from lfbench.data.scene import Scene
-    from lfbench.data.submission import disp_map_path, read_submission_map
+    from lfbench.data.submission import check_inside, disp_map_path, read_submission_map
     from lfbench.method.base import Prediction
     from lfbench.reports.figures import SceneFigureWriter
+    from lfbench.runs.outputs import check_within
 
     writer = SceneFigureWriter(out)
     present = {label: root for label, root in maps.items() if Path(root).is_dir()}  # a results/ copy has none
+    for root in present.values() if within is not None else ():
+        check_within(root, within, "the ablation folder")
     for folder in scene_dirs if present else []:
         scene = Scene(folder)
         for label, root in present.items():
@@ -110,6 +115,8 @@ def error_maps(scene_dirs: Sequence[str], maps: Mapping[str, Path], out: Path) -
                 continue
             disp, runtime = read_submission_map(root, scene.name, max_shape=scene.spatial_size)
             unc_path = Path(root) / "uncertainty" / f"{scene.name}.pfm"
+            if unc_path.is_file():
+                check_inside(root, unc_path)
             unc = (read_pfm(unc_path, max_shape=scene.spatial_size, what="uncertainty map")
                    if unc_path.is_file() else None)
             writer.add(label, scene, Prediction(disparity=disp, uncertainty=unc, runtime_s=runtime))

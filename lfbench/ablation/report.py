@@ -320,8 +320,9 @@ def load_paper_tables(paper: str | Path | None, log: Log):
 
 
 def write_report(spec: AblationSpec, out: str | Path, results: Results, markers: Sequence[dict[str, Any]], *,
-                 paper: str | Path | None = None, log: Log = _log.info) -> list[Path]:
-    """Every table and figure of the run into ``out``; returns the files written."""
+                 paper: str | Path | None = None, log: Log = _log.info, folder: str | Path | None = None) -> list[Path]:
+    """Every table and figure of the run into ``out``; returns the files written. ``folder``: the
+    ablation's folder, whose cells' and methods' saved maps the error maps are drawn from (default ``out``)."""
     from lfbench.reports.paper import average_with_paper, per_scene_with_paper
     from lfbench.reports.tables import average_table, per_scene_table
 
@@ -366,14 +367,15 @@ def write_report(spec: AblationSpec, out: str | Path, results: Results, markers:
                                    "table_per_scene_paper", caption)
             written += write_table(average_with_paper(average, paper_tables, results.scenes, methods), out,
                                    "table_average_paper", caption)
-    written += write_figures(spec, out, frame, results, paper_tables, log)
-    log(f"wrote {len(written)} files into {out} (results.json, table_*.md/.tex/.csv, figures/)")
+    written += write_figures(spec, out, frame, results, paper_tables, log, Path(folder) if folder is not None else out)
     return written
 
 
 # --------------------------------------------------------------------------- figures
 
-def write_figures(spec: AblationSpec, out: Path, frame: pd.DataFrame, results: Results, paper, log: Log) -> list[Path]:
+def write_figures(spec: AblationSpec, out: Path, frame: pd.DataFrame, results: Results, paper, log: Log,
+                  folder: Path | None = None) -> list[Path]:
+    """The figures into out/figures; the error maps from the maps saved under ``folder`` (default ``out``)."""
     from lfbench.ablation import plots
 
     fig_dir = out / "figures"
@@ -387,10 +389,11 @@ def write_figures(spec: AblationSpec, out: Path, frame: pd.DataFrame, results: R
         written.append(plots.accuracy_vs_time(frame, ref, fig_dir / "accuracy_vs_test_time.png", ours_label(spec),
                                               time_label(frame)))
     if spec.evaluation.error_maps:
-        maps = {cid: out / "cells" / cid / "maps" for cid in frame.index} if not frame.empty else {}
+        folder = folder if folder is not None else out
+        maps = {cid: folder / "cells" / cid / "maps" for cid in frame.index} if not frame.empty else {}
         from lfbench.utils.names import file_name
 
         for m in spec.methods:
-            maps[m.label] = out / "methods" / file_name(m.label) / "maps"
-        written += plots.error_maps(results.meta.get("scenes", []), maps, fig_dir / "error_maps")
+            maps[m.label] = folder / "methods" / file_name(m.label) / "maps"
+        written += plots.error_maps(results.meta.get("scenes", []), maps, fig_dir / "error_maps", folder)
     return written

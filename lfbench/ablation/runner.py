@@ -11,6 +11,11 @@ Layout of OUT::
     methods/<label>/           scores of the spec's extra [[methods]]
     results.json, results.csv  every cell's and method's records (method = cell id or label)
     table_*.md/.tex/.csv, figures/   see lfbench.ablation.report
+    html/                      the HTML report (``html``: lfbench.ablation.html)
+
+spec.toml, results.json, results.csv, the tables, figures and html/ are one output set
+(lfbench.runs.outputs): written into a staging folder and committed together, under OUT's
+results.json.lock, so that a kill or a full disk leaves the previous set or the new one.
 
 Re-running the same command skips finished cells (their marker is written last) and resumes an
 interrupted one from its training checkpoint.
@@ -35,6 +40,7 @@ from typing import Any
 from lfbench.ablation.cell import CellTask, is_done, read_marker, run_cell
 from lfbench.ablation.executor import ClusterOptions
 from lfbench.ablation.spec import AblationSpec, Cell, SyntheticEval, _sha
+from lfbench.runs.outputs import OutputSet, prepare_output_folder, read_manifest, recover, staged_outputs
 from lfbench.runs.results import Results
 from lfbench.utils.atomic import fresh_dir, write_text
 from lfbench.utils.errors import DataError, SpecError
@@ -128,6 +134,9 @@ def _shared_stage1(spec: AblationSpec, folder: Path, links: dict[str, str], thre
     write_text(path, dumps(cfg, f"The shared stage 1 of {spec.source}: written by lfbench ablate."))
     for category, target in links.items():
         link = folder / "data" / category
+        if link.is_symlink() and link.resolve() != Path(target).resolve():
+            raise DataError("symbolic link to another folder than the ablation's generated scenes (not allowed)",
+                            link)
         if not (link.exists() or link.is_symlink()):
             link.parent.mkdir(parents=True, exist_ok=True)
             with contextlib.suppress(OSError):
@@ -298,19 +307,20 @@ class AblationRun:
 
 def run_ablation(spec: AblationSpec, out: str | Path, *, jobs: int = 1, progress: bool | None = None,
                  paper: str | Path | None = None, log: Log = _log.info,
-                 cluster: ClusterOptions | None = None) -> AblationRun:
+                 cluster: ClusterOptions | None = None, html: bool = False) -> AblationRun:
     """Run (or resume) every cell and extra method of ``spec`` into ``out``; write the combined results,
-    tables and figures. ``paper``: the paper's tables folder (None: lfbench.reports.paper.find_paper_dir).
-    ``cluster``: run the cells as submitit jobs (see lfbench.ablation.executor). OUT/results.json is merged
-    under a file lock: runs of different cells (``--cells``, several processes or machines) add up."""
-    from lfbench.ablation.report import write_report
-
+    tables and figures (and, with ``html``, the HTML report) as one set. ``paper``: the paper's tables
+    folder (None: lfbench.reports.paper.find_paper_dir). ``cluster``: run the cells as submitit jobs (see
+    lfbench.ablation.executor). OUT/results.json is merged under a file lock: runs of different cells
+    (``--cells``, several processes or machines) add up."""
     if jobs < 1:
         raise SpecError(f"--jobs must be >= 1, got {jobs}")
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    if spec.text:
-        write_text(out / "spec.toml", spec.text)
+    prepare_output_folder(out)
+    with _set_lock(out):
+        recover(out)  # a cut commit of an earlier run is finished (or its journal refused) before any work
+        read_manifest(out)
+    check_folders(spec, out)
     cores = available_cores()
     threads = spec.budget.threads or max(1, cores // jobs)
     log(f"{spec.title}: {len(spec.cells)} cell(s), {len(spec.methods)} extra method(s), budget "
@@ -328,54 +338,104 @@ def run_ablation(spec: AblationSpec, out: str | Path, *, jobs: int = 1, progress
                                           "budget": spec.budget_label(), "shared_stage1": spec.shared_stage1,
                                           "cells": markers}})
     for t in tasks:
-        combined.extend(Results.read(Path(t.cell_dir) / "results.json"))
+        combined.extend(Results.read(Path(t.cell_dir)))  # the folder: its results.json may not lead out of it
     for res in run_methods(spec, out, scenes, log):
         combined.extend(res)
     combined.meta["scenes"] = [s for s, _ in scenes]
-    merged = merge_results(out, combined)
-    written = write_report(spec, out, combined, markers, paper=paper, log=log)
+    with _set_lock(out), staged_outputs(out) as outputs:
+        merged = merge_results(out, combined, outputs.stage)
+        if spec.text:
+            write_text(outputs.stage / "spec.toml", spec.text)
+        written = _write_set(spec, out, outputs, combined, markers, paper=paper, html=html, log=log)
     if len(merged.methods) > len(combined.methods):
         log(f"{out / 'results.json'}: {len(combined.methods)} of {len(merged.methods)} cells/methods from this run "
             "(the others from earlier runs); `lfbench ablate SPEC --report-only` tabulates them all")
     return AblationRun(out=out, results=combined, markers=markers, written=written)
 
 
-def merge_results(out: Path, new: Results) -> Results:
-    """OUT/results.json := its records of other cells/methods plus ``new`` (whose cells/methods replace
-    theirs), the ablation's cell markers merged by id; read-modify-write under OUT/results.json.lock so that
-    concurrent runs of different cells do not lose each other's results. Returns what was written."""
+def check_folders(spec: AblationSpec, out: Path) -> None:
+    """DataError when a folder the run trains, scores or generates into (stage1, cells/<id>, methods/<label>,
+    data, eval_data, submitit) leads out of OUT through a symbolic link: an ablation writes inside OUT only."""
+    from lfbench.runs.outputs import check_within
+
+    names = ["cells", "methods", "stage1", "data", "eval_data", "submitit"]
+    names += [f"cells/{c.id}" for c in spec.cells] + [f"methods/{file_name(m.label)}" for m in spec.methods]
+    for name in names:
+        if (out / name).is_symlink():
+            check_within(out / name, out, "the ablation folder")
+
+
+def _set_lock(out: Path):
+    """The lock under which OUT's set (results.json, tables, figures, html) is read, merged and committed."""
     from filelock import FileLock
 
+    return FileLock(out / "results.json.lock")
+
+
+def _write_set(spec: AblationSpec, out: Path, outputs: OutputSet, results: Results, markers: list[dict[str, Any]], *,
+               paper: str | Path | None, html: bool, log: Log, keep: tuple[str, ...] = ()) -> list[Path]:
+    """Tables, figures (and the site, drawn from the staged results.json) into the staging folder, then the
+    commit of the staged entries; returns their final paths."""
+    from lfbench.ablation.report import write_report
+
+    stage = outputs.stage
+    staged = write_report(spec, stage, results, markers, paper=paper, log=log, folder=out)
+    if html:
+        from lfbench.ablation.html import write_site
+        from lfbench.reports.html import SITE_DIR
+
+        staged.append(write_site(spec, out, results_dir=stage if (stage / "results.json").is_file() else out,
+                                 site=stage / SITE_DIR))
+    entries = {p.relative_to(stage).parts[0] for p in staged}
+    entries |= {name for name in ("results.json", "results.csv", "spec.toml") if (stage / name).is_file()}
+    outputs.commit(sorted(entries), keep=keep)
+    written = [outputs.final(p) for p in staged]
+    log(f"wrote {len(written)} files into {out} (results.json, table_*.md/.tex/.csv, figures/)")
+    return written
+
+
+def merge_results(out: Path, new: Results, dest: Path | None = None) -> Results:
+    """OUT/results.json's records of other cells/methods plus ``new`` (whose cells/methods replace theirs),
+    the ablation's cell markers merged by id, written into ``dest`` (default OUT). Called under OUT's
+    results.json.lock (``_set_lock``) so that concurrent runs of different cells do not lose each other's
+    results. Returns what was written."""
     path = out / "results.json"
-    with FileLock(out / "results.json.lock"):
-        if not path.is_file():
-            new.write(out)
-            return new
-        old = Results.read(path)
-        replaced = set(new.methods)
-        merged = Results(records=[r for r in old.records if r.method not in replaced] + list(new.records),
-                         runs=[r for r in old.runs if r.method not in replaced] + list(new.runs),
-                         meta=dict(new.meta))
-        new_cells = new.meta.get("ablation", {}).get("cells", [])
-        ids = {m.get("id") for m in new_cells}
-        old_cells = [m for m in old.meta.get("ablation", {}).get("cells", []) if m.get("id") not in ids]
-        if "ablation" in merged.meta:
-            merged.meta["ablation"] = {**merged.meta["ablation"], "cells": old_cells + list(new_cells)}
-        merged.meta["scenes"] = sorted(set(old.meta.get("scenes", [])) | set(new.meta.get("scenes", [])))
-        merged.write(out)
-        return merged
+    dest = out if dest is None else dest
+    if not path.is_file():
+        new.write(dest)
+        return new
+    old = Results.read(out)
+    replaced = set(new.methods)
+    merged = Results(records=[r for r in old.records if r.method not in replaced] + list(new.records),
+                     runs=[r for r in old.runs if r.method not in replaced] + list(new.runs),
+                     meta=dict(new.meta))
+    new_cells = new.meta.get("ablation", {}).get("cells", [])
+    ids = {m.get("id") for m in new_cells}
+    old_cells = [m for m in old.meta.get("ablation", {}).get("cells", []) if m.get("id") not in ids]
+    if "ablation" in merged.meta:
+        merged.meta["ablation"] = {**merged.meta["ablation"], "cells": old_cells + list(new_cells)}
+    merged.meta["scenes"] = sorted(set(old.meta.get("scenes", [])) | set(new.meta.get("scenes", [])))
+    merged.write(dest)
+    return merged
 
 
 def report_only(spec: AblationSpec, out: str | Path, *, paper: str | Path | None = None,
-                log: Log = _log.info) -> list[Path]:
-    """Rewrite the tables and figures from OUT/results.json and the cells' markers (nothing is run). A cell
-    whose folder is gone (e.g. a results/ copy that keeps only results.json) uses the marker that
-    results.json recorded for it, so the tables of a committed run can be rebuilt from its results.json."""
-    from lfbench.ablation.cell import TIMING
-    from lfbench.ablation.report import write_report
-
+                log: Log = _log.info, html: bool = False) -> list[Path]:
+    """Rewrite the tables and figures (and, with ``html``, the site) from OUT/results.json and the cells'
+    markers (nothing is run), as one set that keeps results.json. A cell whose folder is gone (e.g. a
+    results/ copy that keeps only results.json) uses the marker that results.json recorded for it, so the
+    tables of a committed run can be rebuilt from its results.json."""
     out = Path(out)
-    results = Results.read(out / "results.json")
+    with _set_lock(out) if out.is_dir() else contextlib.nullcontext():
+        return _report_only(spec, out, paper=paper, log=log, html=html)
+
+
+def _report_only(spec: AblationSpec, out: Path, *, paper: str | Path | None, log: Log, html: bool) -> list[Path]:
+    from lfbench.ablation.cell import TIMING
+
+    recover(out)  # a cut commit is finished (or a journal that is not lfbench's refused) before reading
+    read_manifest(out)
+    results = Results.read(out if out.is_dir() else out / "results.json")  # a folder: no link out of it
     recorded = {m.get("id"): m for m in results.meta.get("ablation", {}).get("cells", []) if isinstance(m, dict)}
     markers = []
     for c in spec.cells:
@@ -387,4 +447,24 @@ def report_only(spec: AblationSpec, out: str | Path, *, paper: str | Path | None
     missing = [c.id for c, m in zip(spec.cells, markers, strict=True) if "test_s" not in m]
     if missing:
         raise DataError(f"cell(s) not finished: {', '.join(missing)}; run `lfbench ablate` first", out)
-    return write_report(spec, out, results, markers, paper=paper, log=log)
+    results.meta["scenes"] = evaluation_scene_dirs(spec, out, results.meta.get("scenes", []))
+    with staged_outputs(out) as outputs:
+        return _write_set(spec, out, outputs, results, markers, paper=paper, html=html, log=log,
+                          keep=("results.json", "results.csv", "spec.toml"))
+
+
+def evaluation_scene_dirs(spec: AblationSpec, out: Path, recorded: list[Any]) -> list[str]:
+    """The scene folders a results.json records (``meta.scenes``) that are scenes of the spec's evaluation:
+    a path read back from a results file is used only when the spec names it (generated under
+    OUT/eval_data, or a scene of the evaluation's data root)."""
+    ev = spec.evaluation
+    roots = []
+    if ev.synthetic is not None:
+        roots.append((out / "eval_data" / ev.synthetic.folder_name).resolve())
+    if ev.data is not None:
+        roots.append(Path(ev.data).resolve())
+    kept = []
+    for item in recorded:
+        if isinstance(item, str) and any(Path(item).resolve().is_relative_to(r) for r in roots):
+            kept.append(item)
+    return kept

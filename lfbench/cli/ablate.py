@@ -87,7 +87,7 @@ def run(args: argparse.Namespace) -> int:
     if args.report_only:
         from lfbench.ablation.runner import report_only
 
-        report_only(spec, out, paper=args.paper)
+        report_only(spec, out, paper=args.paper, html=args.html)
     else:
         from lfbench.ablation.runner import run_ablation
 
@@ -98,9 +98,9 @@ def run(args: argparse.Namespace) -> int:
             cluster = ClusterOptions(args.executor, gpus_per_job=args.gpus_per_job, cpus_per_job=args.cpus_per_job,
                                      timeout_min=args.timeout_min, partition=args.partition,
                                      max_parallel=args.max_parallel)
-        run_ablation(spec, out, jobs=args.jobs, progress=progress, paper=args.paper, cluster=cluster)
+        run_ablation(spec, out, jobs=args.jobs, progress=progress, paper=args.paper, cluster=cluster, html=args.html)
     if args.html:
-        from lfbench.ablation.html import write_site
+        from lfbench.reports.html import SITE_DIR
 
-        print(f"HTML report: {write_site(spec, out)}")
+        print(f"HTML report: {out / SITE_DIR / 'index.html'}")
     return 0

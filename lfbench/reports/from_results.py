@@ -7,6 +7,10 @@ numbers in labelled columns/rows. The BadPix series come from saved maps (``maps
 overviews, exact curves and the toolkit's figure types), else from a saved curve CSV (``curves``,
 default RESULTS_DIR/figures/badpix_series.csv), else from the BadPix thresholds the results hold.
 With ``html``, OUT/html/index.html (lfbench.reports.html).
+
+The files appear together or not at all (lfbench.runs.outputs): they are written into a staging
+folder inside OUT and committed as one set that replaces the previous report there. OUT may not be
+the results' own folder nor hold another run's results: the report's set would replace that run's files.
 """
 
 from __future__ import annotations
@@ -19,6 +23,7 @@ from typing import Any
 import pandas as pd
 
 from lfbench.reports.tables import TABLE_FORMATS, average_table, per_scene_table, write_table
+from lfbench.runs.outputs import check_within, staged_outputs
 from lfbench.runs.results import Results
 from lfbench.scoring.rules import ScoringRules
 from lfbench.utils.errors import DataError
@@ -47,8 +52,6 @@ def report_from_results(results_path: str | Path, out: str | Path, *,
     results.json or its folder). ``paper``: the paper's tables (lfbench.reports.paper.load_paper) or
     None; ``data``: the scenes' data root for ``maps`` (default: the one the results record).
     Everything a wrong input can fail on is checked before the first file is written."""
-    from lfbench.reports import figures as fig
-
     results_path, out = Path(results_path), Path(out)
     results = Results.read(results_path)
     if not results.records:
@@ -60,6 +63,8 @@ def report_from_results(results_path: str | Path, out: str | Path, *,
     curves_path = Path(curves) if curves is not None else results_dir / "figures" / "badpix_series.csv"
     if curves is not None and not curves_path.is_file():
         raise DataError("curve file not found", curves_path)
+    if curves is None and curves_path.is_symlink():
+        check_within(curves_path, results_dir, "the results folder")
 
     per_scene, average = per_scene_table(results), average_table(results)
     tables = {"per_scene": per_scene, "average": average}
@@ -68,6 +73,39 @@ def report_from_results(results_path: str | Path, out: str | Path, *,
 
         tables["per_scene_paper"] = per_scene_with_paper(per_scene, paper, list(paper_methods))
         tables["average_paper"] = average_with_paper(average, paper, results.scenes, list(paper_methods))
+    check_report_folder(out, results_dir)
+    with staged_outputs(out) as outputs:  # OUT checked and its staging folder made before any work
+        outcome = _write_report(outputs.stage, results, results_path, results_dir, tables, formats=formats,
+                                paper=paper, paper_methods=paper_methods, curves_path=curves_path, maps=maps,
+                                data=data, figure_formats=figure_formats, html=html)
+        outputs.commit([p.relative_to(outputs.stage).parts[0] for p in outcome.written])
+    outcome.written = [outputs.final(p) for p in outcome.written]
+    outcome.figures = out / "figures"
+    if outcome.html_index is not None:
+        outcome.html_index = outputs.final(outcome.html_index)
+    return outcome
+
+
+def check_report_folder(out: Path, results_dir: Path) -> None:
+    """DataError when ``out`` is the results' own folder or holds another run's results: the report's
+    set would replace that run's files (results.json, maps, figures)."""
+    from lfbench.runs.outputs import read_manifest
+
+    if out.is_dir() and results_dir.is_dir() and out.resolve() == results_dir.resolve():
+        raise DataError("is the folder of the results being reported; a report there would replace the run's own "
+                        "files: choose another --out", out)
+    if out.is_dir() and "results.json" in read_manifest(out):
+        raise DataError("holds the results of a run (results.json); a report there would replace that run's files: "
+                        "choose another --out", out)
+
+
+def _write_report(out: Path, results: Results, results_path: Path, results_dir: Path,
+                  tables: dict[str, pd.DataFrame], *, formats: Sequence[tuple[str, str]], paper: Any,
+                  paper_methods: Sequence[str], curves_path: Path, maps: str | Path | None,
+                  data: str | Path | None, figure_formats: Sequence[str], html: bool) -> ReportOutcome:
+    """The files of :func:`report_from_results`, written into the staging folder ``out``."""
+    from lfbench.reports import figures as fig
+
     outcome = ReportOutcome(tables=tables, figures=out / "figures")
     for name, table in tables.items():
         outcome.written += write_table(table, out, f"table_{name}", formats=formats)

@@ -34,6 +34,7 @@ from lfbench.reports import figures as fig
 from lfbench.reports import toolkit_figures as tk
 from lfbench.reports.leaderboard import all_metric_ranks, metric_info, metric_table, overall_ranks
 from lfbench.reports.maps import MAPS_DIR, SceneMaps, load_scene_maps, map_folders
+from lfbench.runs.outputs import check_within
 from lfbench.runs.results import Results, check_names
 from lfbench.scoring.rules import ScoringRules
 from lfbench.utils.atomic import fresh_dir, replace_dir, write_text
@@ -239,7 +240,8 @@ def _scene_images(sm: SceneMaps, images: _Images, threshold: float, pair_thresho
     """Draw one scene's panels; returns what the scene page and method pages show."""
     d = f"img/{fig.safe_name(sm.name)}"
     out: dict[str, Any] = {"centre": images.rgb(f"{d}/centre.png", sm.centre), "gt": None, "methods": {},
-                           "pairs": [], "heatmaps": None, "size": f"{sm.centre.shape[1]}×{sm.centre.shape[0]}"}
+                           "pairs": [], "heatmaps": None, "series": None,
+                           "size": f"{sm.centre.shape[1]}×{sm.centre.shape[0]}"}
     if sm.gt is not None:
         out["gt"] = images.rgb(f"{d}/gt.png", fig.disparity_image(sm.gt, *sm.disp_range))
     labels = [m for m in order if m in sm.preds]
@@ -327,6 +329,12 @@ def build_site(inputs: SiteInputs, out: str | Path, *, threshold: float = fig.BA
     try:
         _write_site(inputs, tmp, threshold, pairwise_threshold, border)
         replace_dir(tmp, out)
+    except OSError as exc:  # named where the file would have landed, not in the temporary folder
+        shutil.rmtree(tmp, ignore_errors=True)
+        name = Path(exc.filename) if exc.filename else None
+        if name is None or not name.is_relative_to(tmp) or exc.errno is None:
+            raise
+        raise type(exc)(exc.errno, exc.strerror, str(out / name.relative_to(tmp))) from None
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
@@ -386,7 +394,7 @@ def _write_site(inputs: SiteInputs, root: Path, threshold: float, pair_threshold
             fig.plot_badpix_series(series, path, f"BadPix series, {name} ({res})")
             drawn[name]["series"] = f"img/{fig.safe_name(name)}/badpix_series.png"
         del sm
-    figures = {}
+    figures: dict[str, str | None] = {"series": None, "radar": None, "radar_metrics": None}
     if curves:
         avg = fig.average_curves(curves)
         series = {f"{m} ({k} scene{'s' if k != 1 else ''})": (t, v) for m, (t, v, k) in avg.items()}
@@ -526,9 +534,14 @@ def site_inputs(results: Results, folder: Path, *, data_root: str | Path | None 
     from lfbench.data.scene import Benchmark
     from lfbench.scoring.stats import read_ci_csv
 
-    ci = read_ci_csv(folder / "ci.csv") if (folder / "ci.csv").is_file() else None
+    ci = None
+    if (folder / "ci.csv").is_symlink():
+        check_within(folder / "ci.csv", folder, "the results folder")
+    if (folder / "ci.csv").is_file():
+        ci = read_ci_csv(folder / "ci.csv")
     maps_dir = Path(maps) if maps is not None else folder / MAPS_DIR
-    folders = map_folders(maps_dir, results.methods) if (maps is not None or maps_dir.is_dir()) else {}
+    folders = (map_folders(maps_dir, results.methods, within=None if maps is not None else folder)
+               if (maps is not None or maps_dir.is_dir()) else {})
     root = Path(data_root) if data_root is not None else (
         Path(results.meta["data_root"]) if results.meta.get("data_root") else None)
     notes = []
@@ -541,7 +554,9 @@ def site_inputs(results: Results, folder: Path, *, data_root: str | Path | None 
                      "(give --data ROOT).")
     scenes = scenes or []
     if not folders:
-        notes.append("No saved maps: scene pages show the numbers only (evaluate with --save-maps or --html).")
+        shown = "the scenes and the numbers" if scenes else "the numbers only"
+        notes.append(f"No saved maps: scene pages show {shown}, no method's maps (evaluate with --save-maps or "
+                     "--html).")
     return SiteInputs(results=results, scenes=scenes, maps=folders, scene_maps=dict(scene_maps or {}), ci=ci,
                       paper=paper, paper_methods=paper_methods, title=title or _default_title(results), notes=notes)
 

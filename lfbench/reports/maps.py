@@ -22,18 +22,24 @@ __all__ = ["MAPS_DIR", "SceneMaps", "load_scene_maps", "map_folders"]
 MAPS_DIR = "maps"  # beside results.json
 
 
-def map_folders(maps: str | Path, labels: Sequence[str]) -> dict[str, Path]:
+def map_folders(maps: str | Path, labels: Sequence[str], *, within: str | Path | None = None) -> dict[str, Path]:
     """Method label -> submission folder under ``maps`` (folder names as ``save_prediction`` writes
     them, matched back to ``labels``); ``maps`` itself when it is one submission folder. DataError
-    when it holds none."""
+    when it holds none, or when a folder leads out of ``maps`` (or ``maps`` out of ``within``, the
+    results folder it was found in) through a symbolic link."""
+    from lfbench.runs.outputs import check_within
     from lfbench.utils.names import file_names
 
     maps = Path(maps)
+    if within is not None and (maps.exists() or maps.is_symlink()):
+        check_within(maps, within, "the results folder")
     if (maps / "disp_maps").is_dir():
         return {maps.name: maps}
     folders = {p.name: p for p in sorted(maps.iterdir()) if (p / "disp_maps").is_dir()} if maps.is_dir() else {}
     if not folders:
         raise DataError("no saved maps found (expected <method>/disp_maps/<scene>.pfm)", maps)
+    for folder in folders.values():
+        check_within(folder, maps, "the maps folder")
     by_name = {name: label for label, name in file_names(labels, "method label").items()}
     return {by_name.get(name, name): path for name, path in folders.items()}
 

@@ -4,7 +4,8 @@ Generates synthetic light fields (lfbench.data.synth, HCI layout with exact grou
 OUT/data/, runs every registered method that can run offline on them, scores them as the benchmark
 does, and writes OUT/results.json, OUT/results.csv, the tables (table_per_scene.*, table_average.*),
 the figures (OUT/figures/), every method's disparity maps (OUT/maps/<method>/, submission layout) and
-the HTML report (OUT/html/index.html, rebuilt from those files by ``lfbench report OUT --html``).
+the HTML report (OUT/html/index.html; ``lfbench report OUT --out REP --html`` draws it again from those
+files). Results, tables, figures, maps and the report are one output set (lfbench.runs.outputs).
 
 Re-running into the same folder reuses the generated data when it was made with the same seed,
 size and number of scenes (OUT/data/demo.json records them) and refuses otherwise: data of two
@@ -74,6 +75,10 @@ def prepare_data(out: Path, seed: int, size: int, scenes: int, log: Log = _log.i
     root = out / DATA_DIR
     wanted = data_settings(seed, size, scenes)
     manifest = root / MANIFEST
+    if root.is_symlink():
+        from lfbench.runs.outputs import check_within
+
+        check_within(root, out, "the demo folder")
     if manifest.is_file():
         try:
             stored = read_json(manifest, "demo manifest")
@@ -83,8 +88,11 @@ def prepare_data(out: Path, seed: int, size: int, scenes: int, log: Log = _log.i
             got = stored.get("settings", {}) if isinstance(stored, dict) else {}
             raise DataError(f"holds demo data generated with {_describe(got)}, not {_describe(wanted)}; "
                             "choose another --out or remove this folder (data of two settings are never mixed)", out)
-        missing = [s for s in stored.get("scene_dirs", []) if not (root / s / "parameters.cfg").is_file()]
-        if missing or not stored.get("scene_dirs"):
+        scene_dirs = stored.get("scene_dirs")
+        if not isinstance(scene_dirs, list) or not all(_inside(root, s) for s in scene_dirs):
+            raise DataError("demo manifest: scene_dirs must list scene folders inside the data folder", manifest)
+        missing = [s for s in scene_dirs if not (root / s / "parameters.cfg").is_file()]
+        if missing or not scene_dirs:
             raise DataError(f"demo data are incomplete (missing {', '.join(missing) or 'scene list'}); "
                             "remove this folder or choose another --out", out)
         log(f"reusing the demo data in {root} ({_describe(wanted)})")
@@ -109,6 +117,15 @@ def prepare_data(out: Path, seed: int, size: int, scenes: int, log: Log = _log.i
         shutil.rmtree(tmp, ignore_errors=True)
         raise
     return root, False
+
+
+def _inside(root: Path, rel: object) -> bool:
+    """Whether ``rel`` (read from demo.json) names a folder inside ``root``: relative, no '..', and not
+    leading out through a symbolic link."""
+    if not isinstance(rel, str) or not rel or Path(rel).is_absolute() or ".." in Path(rel).parts:
+        return False
+    path = root / rel
+    return not path.exists() or path.resolve().is_relative_to(root.resolve())
 
 
 # --------------------------------------------------------------------------- methods
@@ -188,19 +205,24 @@ def run_demo(out: str | Path = "lfbench-demo", *, seed: int = DEFAULT_SEED, size
         raise SpecError(f"--scenes must be a positive integer, got {scenes}")
     out = Path(out)
     requested = [create_from_spec(s) for s in methods] if methods else None  # spec errors before any work
+    if out.is_dir():  # a cut commit is finished, or a journal or manifest that is not lfbench's refused, first
+        from lfbench.runs.outputs import read_manifest, recover
+
+        recover(out)
+        read_manifest(out)
     root, reused = prepare_data(out, seed, size, scenes, log)
     scene_list = [s for s in Benchmark.discover(root) if s.has_gt()]
     chosen, skipped = select_methods(requested, scene_list, log)
     results = evaluate_to_folder(chosen, scene_list, out, figures=figures, progress=progress, save_maps=True,
-                                 meta={"data_root": str(root), "demo": data_settings(seed, size, scenes),
-                                       "skipped_methods": skipped})
+                                 site=html, meta={"data_root": str(root), "demo": data_settings(seed, size, scenes),
+                                                  "skipped_methods": skipped})
     files: dict[str, Path] = {"results.json": out / "results.json", "results.csv": out / "results.csv",
                               "tables": out, "data": root, "maps": out / MAPS_DIR}
     if figures:
         files["figures"] = out / FIGURES_DIR
     if html:
-        from lfbench.reports.html import SITE_DIR, build_site_from_dir
+        from lfbench.reports.html import SITE_DIR
 
-        files["html"] = build_site_from_dir(out, out / SITE_DIR)
+        files["html"] = out / SITE_DIR / "index.html"
     return DemoOutcome(results=results, methods=[m.label for m in chosen], skipped=skipped, files=files,
                        reused_data=reused)

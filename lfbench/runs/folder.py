@@ -6,7 +6,8 @@ Files in OUT: results.json, results.csv (always); table_per_scene.{md,tex,csv} a
 table_average.{md,tex,csv} (``tables``); maps/<method>/ in the submission layout (``save_maps``);
 figures/ (``figures``: per-scene overviews and BadPix series); ci.csv and
 table_ci_per_scene.{md,tex,csv} (``ci``); uncertainty.csv, table_uncertainty.md and
-figures/sparsification_*.png (``uncertainty``, when a method predicts an uncertainty map).
+figures/sparsification_*.png (``uncertainty``, when a method predicts an uncertainty map); html/
+(``site``: the HTML report of lfbench.reports.html, drawn from the run's own files).
 
 The files of a run appear together or not at all (lfbench.runs.outputs): they are written into a
 staging folder inside OUT and committed as one set, which replaces the previous run's set (files of
@@ -56,8 +57,8 @@ def evaluate_to_folder(methods: Sequence[Method], scenes: Sequence[Scene], out: 
                        more: Sequence[tuple[Sequence[Method], Sequence[Scene]]] = (),
                        label: str | None = None, on_prediction: PredictionHook | None = None,
                        save_maps: bool = False, figures: bool = False, ci: CIOptions | None = None,
-                       uncertainty: bool = False, tables: bool = True, meta: Mapping[str, Any] | None = None,
-                       progress: bool = True) -> Results:
+                       uncertainty: bool = False, tables: bool = True, site: bool = False,
+                       meta: Mapping[str, Any] | None = None, progress: bool = True) -> Results:
     """Run every method on every scene, score and write the run into ``out``; returns the Results.
 
     metrics: the metrics of every scene (default the general ones); all_metrics: also the region and
@@ -78,6 +79,11 @@ def evaluate_to_folder(methods: Sequence[Method], scenes: Sequence[Scene], out: 
                                     all_metrics=all_metrics, more=more, label=label, on_prediction=on_prediction,
                                     save_maps=save_maps, figures=figures, ci=ci, uncertainty=uncertainty,
                                     tables=tables, meta=meta, progress=progress)
+        if site:  # drawn from the staged files, as `lfbench report --html` draws it from the committed ones
+            from lfbench.reports.html import SITE_DIR, build_site_from_dir
+
+            scored = [*scenes, *(s for _, group in more for s in group)]  # not searched again: the scenes scored
+            staged.append(build_site_from_dir(outputs.stage, outputs.stage / SITE_DIR, scenes=scored).parent)
         outputs.commit([p.relative_to(outputs.stage).parts[0] for p in staged])
     results.files = [outputs.final(p) for p in staged]
     return results

@@ -106,11 +106,13 @@ class Results:
 
         Every record needs string method/scene/metric and a numeric (or null) value; every run entry
         string method/scene and numeric fields; DataError naming the file otherwise."""
-        from lfbench.runs.outputs import check_complete
+        from lfbench.runs.outputs import check_complete, check_within
 
         path = Path(path)
         if path.is_dir():
             path = path / "results.json"
+            if path.is_symlink():
+                check_within(path, path.parent, "the results folder")
         check_complete(path.parent)  # a half-committed run may mix two runs' files
         data = read_json(path, "results file", allow_nonfinite=True)
         raw = data if isinstance(data, list) else data.get("records") if isinstance(data, dict) else None

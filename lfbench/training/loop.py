@@ -13,7 +13,8 @@ Files under OUT:
 - TensorBoard event files (``tensorboard --logdir OUT``) and ``learning_curve.png``, from the
   loggers of lfbench.training.curves that see every metrics.jsonl entry;
 - ``command.txt``: every command that ran on this folder; ``config.toml``: the config text;
-  ``summary.json``: the final numbers; ``data/<category>``: generated synthetic scenes.
+  ``summary.json``: the final numbers; ``data/<category>``: generated synthetic scenes. ``final.pt`` and
+  ``summary.json`` are one output set (lfbench.runs.outputs): they appear together, after a kill too.
 
 Samples are a pure function of (seed, stage, step, index) (lfbench.training.data), so a resumed
 run and an uninterrupted one see the same batches. On resume only the ``steps`` of the stage in
@@ -45,6 +46,7 @@ import torch
 
 from lfbench.data.scene import Benchmark, Scene, check_scene_names
 from lfbench.method.trainable import check_state_dict, get_trainable, to_channels_last
+from lfbench.runs.outputs import read_manifest, recover, staged_outputs
 from lfbench.training import checkpoint as ckpt
 from lfbench.training.config import TrainConfig, expand_path
 from lfbench.training.curves import MAX_LOG_BYTES, RunLogger, default_loggers, parse_log_line
@@ -67,6 +69,9 @@ RESUME_FREE_KEYS = (("out",), ("training", "threads"), ("training", "prefetch"),
                     ("training", "device"), ("training", "checkpoint_every"),
                     ("training", "channels_last"), ("training", "workers"), ("training", "pin_memory"),
                     ("training", "cudnn_benchmark"))
+
+
+EXPORTS = "train"  # the output set (lfbench.runs.outputs) of a run's final exports: final.pt and summary.json
 
 
 class TrainingInterrupted(Interrupted):
@@ -493,6 +498,9 @@ class Trainer:
             raise SpecError(f"training.batch_size {tc.batch_size} must split evenly over {ctx.world_size} "
                             f"process(es) x accumulate {tc.accumulate}", cfg.source)
         try:
+            if ctx.is_main:
+                recover(paths.out)  # an export cut short by a kill is finished first (a foreign journal refused)
+                read_manifest(paths.out, EXPORTS)
             state = self.load_checkpoint()
             position = None if state is None else (int(state["stage"]), int(state["step"]),
                                                    int(state["global_step"]))
@@ -502,7 +510,8 @@ class Trainer:
         if state is None and require_checkpoint:
             raise DataError("--resume given but there is no checkpoint to resume from", paths.checkpoint)
         init = load_init_weights(cfg) if state is None and cfg.init else None  # checked before any work
-        if state is not None and state["stage"] >= len(cfg.stages) and paths.final.is_file():
+        exported = paths.final.is_file() and paths.summary.is_file()
+        if state is not None and state["stage"] >= len(cfg.stages) and exported:
             self.log(f"{paths.out}: training already complete ({state['global_step']} steps); final weights in "
                      f"{paths.final}")
             return {"final": str(paths.final), "steps": state["global_step"], "resumed": True}
@@ -589,9 +598,11 @@ class Trainer:
         if ctx.is_main:
             info = self.training_info()
             info["rank_parameters_sha256"] = digests
-            self.export(paths.final, model, info)
             summary = {k: v for k, v in info.items() if k != "config"}
-            write_text(paths.summary, json_text(summary, indent=2, sort_keys=True) + "\n")
+            with staged_outputs(paths.out, EXPORTS) as outputs:  # final.pt and summary.json: one set
+                self.export(outputs.stage / paths.final.name, model, info)
+                write_text(outputs.stage / paths.summary.name, json_text(summary, indent=2, sort_keys=True) + "\n")
+                outputs.commit([paths.final.name, paths.summary.name])
             self.log(f"done: {self.global_step} steps in {self.elapsed():.1f} s; final weights {paths.final}")
         result["rank_parameters_sha256"] = digests
         return result

@@ -35,7 +35,10 @@ def atomic_open(path: str | Path, mode: str = "wb", *, file_mode: int | None = N
             file_mode = stat.S_IMODE(path.stat().st_mode)
         except OSError:
             file_mode = FILE_MODE
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    except OSError as exc:
+        raise _naming(exc, path, exc.filename) from None  # the temporary's name
     try:
         os.fchmod(fd, file_mode)  # mkstemp makes 0600
         with os.fdopen(fd, mode, **kwargs) as handle:
@@ -43,10 +46,22 @@ def atomic_open(path: str | Path, mode: str = "wb", *, file_mode: int | None = N
             handle.flush()
             os.fsync(handle.fileno())
         os.replace(tmp, path)
+    except OSError as exc:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+        raise _naming(exc, path, tmp) from None
     except BaseException:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
         raise
+
+
+def _naming(exc: OSError, path: Path, tmp: str | None) -> OSError:
+    """``exc`` naming ``path`` when it names no file or the temporary (a full disk fails a write(), which
+    names nothing): the error says which file could not be written."""
+    if exc.filename is not None and exc.filename not in (tmp, str(path.parent)):
+        return exc
+    return type(exc)(exc.errno, exc.strerror, str(path)) if exc.errno is not None else exc
 
 
 def write_bytes(path: str | Path, data: bytes) -> None:
