@@ -292,3 +292,188 @@ def test_non_finite_maps_are_scored_without_runtime_warnings():
                 median_angular_error(gt, pred, PARAMS, mask, toolkit=toolkit)
                 missed_dots(gt, pred, boxes, dots, toolkit=toolkit)
             angular_error_deg(np.full((1, 1, 3), np.nan), np.full((1, 1, 3), np.inf))
+
+
+# --------------------------------------------------------------------------- the metric definitions
+
+# The benchmark's metrics as results files name them (the toolkit's ids), with what decides their numbers:
+# id: (toolkit id, unit, evaluation mask, extra masks, resolution, category, needs scene, bootstrap statistic).
+# From the evaluation fact sheet (General / Region / Stratified metrics); units as the tables print them.
+_REGION, _STRAT = "region", "stratified"
+METRIC_TABLE = {
+    "badpix_0.01": ("badpix_0010", "%", None, (), "scene", "general", False, ("badpix", 0.01)),
+    "badpix_0.03": ("badpix_0030", "%", None, (), "scene", "general", False, ("badpix", 0.03)),
+    "badpix_0.07": ("badpix_0070", "%", None, (), "scene", "general", False, ("badpix", 0.07)),
+    "mse_x100": ("mse_100", "px^2 x 100", None, (), "scene", "general", False, ("mse", 0.0)),
+    "q25_x100": ("q_25_100", "px x 100", None, (), "scene", "general", False, ("quantile", 25.0)),
+    "discontinuities": ("discontinuities_0070", "%", "mask_discontinuities", (), "highres", _REGION, False, None),
+    "bumpiness_planes": ("bumpiness_planes_100_0050", "px/px^2 x 100", "mask_planes", (), "lowres", _REGION, False,
+                         None),
+    "bumpiness_contin_surfaces": ("bumpiness_contin_surfaces_100_0050", "px/px^2 x 100", "mask_smooth_surfaces", (),
+                                  "lowres", _REGION, False, None),
+    "mae_planes": ("mae_planes", "deg", "mask_planes", (), "lowres", _REGION, True, None),
+    "mae_contin_surfaces": ("mae_contin_surfaces", "deg", "mask_smooth_surfaces", (), "lowres", _REGION, True, None),
+    "fine_fattening": ("fine_fattening_0150", "%", "mask_fine_surrounding", (), "highres", _REGION, False, None),
+    "fine_thinning": ("fine_thinning_0150", "%", "mask_fine", (), "highres", _REGION, False, None),
+    "backgammon_fattening": ("backgammon_fattening_0070", "%", "mask_foreground_fattening", (), "highres", _STRAT,
+                             True, None),
+    "backgammon_thinning": ("backgammon_thinning_0070", "%", "mask_foreground_thinning", (), "highres", _STRAT, True,
+                            None),
+    "dots_background_mse": ("background_mse_100", "px^2 x 100", "mask_background", (), "highres", _STRAT, False,
+                            None),
+    "missed_dots": ("missed_dots_50_0400", "% of dots", None, ("mask_boxes", "mask_dots_by_size"), "highres", _STRAT,
+                    True, None),
+    "pyramids_bumpiness_slanted": ("bumpiness_slanted_100_0050", "px/px^2 x 100", None,
+                                   ("mask_sphere_in", "mask_sphere_out", "mask_pyramids"), "lowres", _STRAT, True,
+                                   None),
+    "pyramids_bumpiness_parallel": ("bumpiness_parallel_100_0050", "px/px^2 x 100", "mask_plane", (), "lowres",
+                                    _STRAT, False, None),
+    "stripes_low_texture": ("low_texture_0070", "%", "mask_low_texture", (), "highres", _STRAT, False, None),
+    "stripes_dark": ("dark_stripes_0070", "%", "mask_high_contrast", (), "highres", _STRAT, False, None),
+    "stripes_bright": ("bright_stripes_0070", "%", "mask_low_contrast", (), "highres", _STRAT, False, None),
+}
+
+
+def test_metric_definitions_are_the_benchmarks():
+    """Kills any change of what decides a metric's number or where it is recorded: its id and the toolkit's id,
+    unit, masks, resolution, category, scene context and bootstrap statistic (the metric definitions run at
+    import; results/mutation/README.md: checked in a fresh process)."""
+    from lfbench.scoring.metrics import get_metric, list_metrics
+
+    assert [m.id for m in list_metrics()] == list(METRIC_TABLE)
+    for m in list_metrics():
+        boot = None if m.bootstrap is None else (m.bootstrap.name, m.bootstrap.param)
+        assert (m.toolkit_id, m.unit, m.mask_name, m.extra_masks, m.resolution, m.category, m.needs_scene,
+                boot) == METRIC_TABLE[m.id], m.id
+        assert get_metric(m.toolkit_id) is m and not m.higher_is_better and m.scene_aggregate == "mean"
+    assert get_metric("badpix_0.04").toolkit_id == "badpix_0040"
+
+
+def test_region_badpix_and_mse_metrics_score_their_mask():
+    """Kills the region metrics built on BadPix(0.07) / MSE losing their mask, threshold or non-finite rule
+    (`_bad_pix_fn` closures; the stratified MSE)."""
+    from lfbench.scoring.metrics import get_metric
+
+    gt = np.zeros((1, 5), F32)
+    pred = np.array([[0.05, 0.1, np.nan, 0.5, 0.0]], F32)
+    mask = np.array([[True, True, True, False, True]])
+    for mid in ("discontinuities", "stripes_low_texture", "stripes_dark", "stripes_bright"):
+        metric = get_metric(mid)
+        assert metric(gt, pred, mask) == 50.0, mid  # 0.1 and NaN bad of 4
+        assert metric(gt, pred, mask, toolkit=True) == 25.0, mid  # the toolkit: NaN good
+    assert get_metric("dots_background_mse")(gt, pred, mask) == pytest.approx(100 * (0.05**2 + 0.1**2) / 3, rel=1e-6)
+
+
+def test_badpix_family_and_registry_lookups():
+    """Kills, in the `badpix_<t>` family: exponent thresholds refused (`"." in text or` -> `and`), negative or
+    infinite thresholds accepted, threshold 0 refused (`t >= 0` -> `t > 0`); and `in` / list_metrics /
+    aggregate changes."""
+    from lfbench.scoring.metrics import METRICS, find_metric, get_metric, list_metrics
+
+    assert find_metric("badpix_5e-2").id == "badpix_0.05"
+    assert find_metric("badpix_0").id == "badpix_0" and find_metric("badpix_0")(np.zeros((1, 2)), np.eye(1, 2)) == 50
+    for bad in ("badpix_-0.1", "badpix_inf", "badpix_nan", "badpix_x"):
+        assert find_metric(bad) is None, bad
+    assert "badpix_0.05" in METRICS and "mse_x100" in METRICS and "psnr" not in METRICS and 5 not in METRICS
+    assert [m.id for m in list_metrics("stratified")][:2] == ["backgammon_fattening", "backgammon_thinning"]
+    assert {m.category for m in list_metrics("region")} == {"region"}
+    mse = get_metric("mse_x100")
+    assert mse.aggregate([1.0, None, 3.0]) == 2.0  # a JSON null is a missing scene
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no "mean of empty slice"
+        assert np.isnan(mse.aggregate([np.nan, np.nan]))
+
+
+# --------------------------------------------------------------------------- every metric through score_scene
+
+def _write_labels(folder, name: str, labels: np.ndarray) -> None:
+    from PIL import Image
+
+    Image.fromarray(labels.astype(np.uint8)).save(folder / f"{name}.png")
+
+
+def _block(y0: int, x0: int, size: int = 4, n: int = 40) -> np.ndarray:
+    m = np.zeros((n, n), bool)
+    m[y0:y0 + size, x0:x0 + size] = True
+    return m
+
+
+@pytest.mark.parametrize("toolkit", [False, True])
+def test_every_region_metric_follows_the_scoring_rules_through_score_scene(tmp_path, toolkit):
+    """Kills a region metric's wrapper losing the caller's `toolkit` rule (None / omitted), its mask (MAE
+    scored everywhere), or, for the slanted pyramids, the union of its masks (`|=` -> `=`). One NaN
+    prediction per region: by default a bad pixel (the clip value, 180 degrees), for the toolkit good
+    (left out). Values by hand; each metric's mask is a 4 x 4 block inside the 15 px border."""
+    from helpers import write_scene
+
+    from lfbench.data.scene import Scene
+    from lfbench.scoring.region_metrics import applicable_metrics
+    from lfbench.scoring.rules import ScoringRules, score_scene
+
+    rules = ScoringRules(toolkit=toolkit)
+    region = _block(18, 18)  # rows / cols 18..21; the NaN at (20, 20) spoils 9 normals and all 16 Hessians
+    names = ("mask_discontinuities", "mask_fine", "mask_fine_surrounding", "mask_planes", "mask_smooth_surfaces")
+    folder = write_scene(tmp_path, "toy", size=40, views=False, gt=np.zeros((40, 40), F32),
+                         masks={f"{m}_lowres": region for m in names})
+    pred = np.zeros((40, 40), F32)
+    pred[20, 20] = np.nan
+    values = score_scene(Scene(folder), pred, applicable_metrics(Scene(folder)), rules).values
+    pct = 0.0 if toolkit else 100 / 16
+    for mid in ("discontinuities", "fine_fattening", "fine_thinning"):
+        assert values[mid] == pct, mid
+    assert values["badpix_0.07"] == (0.0 if toolkit else 1.0)  # 1 of the 10 x 10 pixels inside the border
+    for mid in ("bumpiness_planes", "bumpiness_contin_surfaces"):
+        assert np.isnan(values[mid]) if toolkit else values[mid] == pytest.approx(5.0), mid
+    for mid in ("mae_planes", "mae_contin_surfaces"):
+        assert values[mid] == (pytest.approx(0.0, abs=1e-6) if toolkit else 180.0), mid
+
+    # backgammon at low resolution: foreground column 14 (1.0; a decoy 3.0 at column 28), background column 29
+    gt = np.zeros((40, 40), F32)
+    gt[:, 14], gt[:, 28] = 1.0, 3.0
+    gt[20:24, 20:24] = 1.0  # a piece of the bar
+    folder = write_scene(tmp_path, "backgammon", "stratified", size=40, views=False, gt=gt,
+                         masks={"mask_foreground_fattening_lowres": _block(15, 15),
+                                "mask_foreground_thinning_lowres": _block(20, 20)})
+    pred = gt.copy()
+    pred[15, 15], pred[16, 16] = 0.6, np.nan  # fattening (> 0.5), NaN
+    pred[20, 20], pred[21, 21] = 0.4, np.nan  # thinning (< 0.5), NaN
+    values = score_scene(Scene(folder), pred, applicable_metrics(Scene(folder)), rules).values
+    assert values["backgammon_fattening"] == values["backgammon_thinning"] == (100 / 16 if toolkit else 200 / 16)
+
+    # dots: dot 1 half NaN (missed by default, detected by the toolkit), dot 2 right
+    folder = write_scene(tmp_path, "dots", "stratified", size=40, views=False, gt=np.zeros((40, 40), F32))
+    boxes, dots = np.zeros((40, 40)), np.zeros((40, 40))
+    boxes[16:24, 16:32] = 1
+    dots[17:19, 17:19], dots[17:19, 21:23] = 1, 2
+    _write_labels(folder, "mask_boxes_lowres", boxes)
+    _write_labels(folder, "mask_dots_by_size_lowres", dots)
+    pred = np.zeros((40, 40), F32)
+    pred[17, 17:19] = np.nan
+    values = score_scene(Scene(folder), pred, applicable_metrics(Scene(folder)), rules).values
+    assert values["missed_dots"] == (0.0 if toolkit else 50.0)
+
+    # pyramids: the slanted surfaces are the union of three masks; the NaN spoils all of mask_sphere_in
+    folder = write_scene(tmp_path, "pyramids", "stratified", size=40, views=False, gt=np.zeros((40, 40), F32),
+                         masks={"mask_sphere_in_lowres": _block(15, 15), "mask_sphere_out_lowres": _block(15, 21),
+                                "mask_pyramids_lowres": _block(21, 15)})
+    pred = np.zeros((40, 40), F32)
+    pred[16, 16] = np.nan
+    values = score_scene(Scene(folder), pred, applicable_metrics(Scene(folder)), rules).values
+    assert values["pyramids_bumpiness_slanted"] == (0.0 if toolkit else pytest.approx(100 * 16 * 0.05 / 48))
+
+
+def test_a_label_mask_of_the_wrong_size_names_its_file(tmp_path):
+    """Kills the size check of the dots' label masks weakened or its message / file lost."""
+    from helpers import write_scene
+
+    from lfbench.data.scene import Scene
+    from lfbench.scoring.metrics import get_metric
+    from lfbench.scoring.rules import score_scene
+    from lfbench.utils.errors import DataError
+
+    folder = write_scene(tmp_path, "dots", "stratified", size=40, views=False, gt=np.zeros((40, 40), F32))
+    _write_labels(folder, "mask_boxes_lowres", np.ones((40, 40)))
+    _write_labels(folder, "mask_dots_by_size_lowres", np.ones((30, 40)))
+    with pytest.raises(DataError, match="mask is 40x30, ground truth is 40x40") as info:
+        score_scene(Scene(folder), np.zeros((40, 40), F32), [get_metric("missed_dots")])
+    assert "mask_dots_by_size_lowres.png" in str(info.value)
