@@ -172,3 +172,38 @@ def test_read_golden_accepts_a_records_object_and_refuses_empty_names(tmp_path):
     with pytest.raises(DataError, match=r"golden record 1 \(planesweep/synth_0/q25_x100\): resolution must be one "
                                         r"of lowres, highres"):
         read_golden(path)
+
+
+@pytest.mark.parametrize(("text", "problem"), [
+    ('{"records": 5}', "expected a JSON list of golden records"),
+    ("[5]", "golden record 0 is malformed (needs method, scene, metric, value, tolerance, resolution): "
+            "not an object"),
+    ('[{"method": "m", "scene": "s", "metric": "mse_x100", "value": 1, "tolerance": "0.1", "resolution": "lowres"}]',
+     "tolerance must be a JSON number, got str '0.1'"),
+    ('[{"method": "m", "scene": "s", "metric": "mse_x100", "value": 1, "tolerance": 0, "resolution": "x"}]',
+     "golden record 0 (m/s/mse_x100): resolution must be one of lowres, highres"),
+    ("{", "golden file"),
+])
+def test_read_golden_errors_name_the_file_and_the_problem(tmp_path, text, problem):
+    """Kills read_golden's errors losing their file, their wording or the name of the bad field."""
+    from lfbench.utils.errors import DataError
+
+    path = tmp_path / "golden.json"
+    path.write_text(text, encoding="utf-8")
+    with pytest.raises(DataError) as e:
+        read_golden(path)
+    assert str(e.value).startswith(f"{path}: ") and problem in str(e.value)
+
+
+def test_make_golden_errors_name_the_golden_file(tmp_path):
+    """Kills make_golden's errors (a folder, an unknown metric) losing the golden file or their wording."""
+    from lfbench.utils.errors import DataError
+
+    with pytest.raises(DataError) as e:
+        make_golden(_results({"mse_x100": 1.0}), 0.0, tmp_path)
+    assert str(e.value) == f"{tmp_path}: golden file is a folder, expected a file"
+    path = tmp_path / "golden.json"
+    with pytest.raises(DataError) as e:
+        make_golden(_results({"my_metric": 1.0}), 0.0, path)
+    assert str(e.value) == (f"{path}: record {METHOD}/{SCENE}/my_metric: unknown metric 'my_metric', "
+                            "cannot make it golden")

@@ -264,20 +264,24 @@ def test_missed_dots_edge_cases():
 # --------------------------------------------------------------------------- no warnings on non-finite data
 
 def test_non_finite_maps_are_scored_without_runtime_warnings():
-    """Kills every dropped `np.errstate(...)`: NaN and inf predictions and ground truth, and a disparity
-    whose depth is infinite (the float32 denominator of disp2depth is exactly 0), are scored silently."""
+    """Kills every dropped `np.errstate(...)` that guards a reachable floating-point exception: inf - inf
+    (an infinite prediction on infinite ground truth), NaN and inf predictions, a disparity whose depth is
+    infinite (the float32 denominator of disp2depth is exactly 0), a dot without pixels (0 / 0), zero
+    normals, inf x 0 in a dot product, and the median of no angle: all scored silently."""
     d_inf = F32(-0.16523236)  # 1000 s d / q + 1 / F == 0 in float32 for these parameters
     with np.errstate(divide="ignore"):
         assert np.isinf(toolkit_depth(np.array([d_inf]), PARAMS)).all()
     gt = np.full((16, 16), 0.5, F32)
-    gt[2, 2] = np.nan
+    gt[2, 2], gt[3, 3] = np.nan, np.inf
     pred = gt + F32(0.01)
     pred[5, 5], pred[6, 6], pred[7, 7], pred[8, 8] = np.nan, np.inf, -np.inf, d_inf
+    pred[3, 3] = np.inf  # inf - inf
     mask = np.ones(gt.shape, bool)
     boxes = np.ones(gt.shape, np.int32)
+    boxes[:, 12:] = 2  # box 2 has no dot 1: an empty (box, label) pair
     dots = np.zeros(gt.shape, np.int32)
-    dots[4:9, 4:9] = 1
-    dots[10:12, 10:12] = 2
+    dots[2:9, 2:9] = 1
+    dots[10:12, 10:14] = 2
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         with np.errstate(all="warn"):
@@ -290,8 +294,52 @@ def test_non_finite_maps_are_scored_without_runtime_warnings():
                 backgammon_thinning(gt, pred, mask, bg_column=2, toolkit=toolkit)
                 bumpiness_x100(gt, pred, mask, toolkit=toolkit)
                 median_angular_error(gt, pred, PARAMS, mask, toolkit=toolkit)
+                assert np.isnan(median_angular_error(gt, pred, PARAMS, np.zeros(gt.shape, bool), toolkit=toolkit))
                 missed_dots(gt, pred, boxes, dots, toolkit=toolkit)
-            angular_error_deg(np.full((1, 1, 3), np.nan), np.full((1, 1, 3), np.inf))
+            assert np.isnan(depth_normals(np.zeros((5, 5)), 100.0, 35.0)).all()  # 0 / 0
+            inf_normal, zero_normal = np.array([[[np.inf, 0.0, 0.0]]]), np.zeros((1, 1, 3))
+            assert np.isnan(angular_error_deg(inf_normal, zero_normal)).all()  # inf x 0
+
+
+def test_missed_dots_toolkit_counts_only_present_boxes():
+    """Kills every box label up to the largest counted as a box (`bincount > 0` -> `>= 0`): with boxes 1
+    and 3 only, the toolkit rule has 2 boxes x 1 label, not 3 (an empty box would be a missed dot)."""
+    boxes = np.zeros((4, 8), np.int32)
+    boxes[:, :4], boxes[:, 4:] = 1, 3
+    dots = np.zeros_like(boxes)
+    dots[1:3, 1:3] = dots[1:3, 5:7] = 1
+    gt = np.zeros(boxes.shape, F32)
+    assert missed_dots(gt, gt, boxes, dots, toolkit=True) == 0.0
+    assert missed_dots(gt, gt, boxes, dots) == 0.0
+
+
+def test_read_label_mask_rules_and_errors(tmp_path):
+    """Kills read_label_mask comparing the alpha channel (an RGBA gray mask is a label mask), its errors
+    losing their message, file or wording ("label mask")."""
+    from PIL import Image
+
+    from lfbench.scoring.region_metrics import read_label_mask
+    from lfbench.utils.errors import DataError
+
+    arr = np.array([[0, 1, 2], [3, 0, 8]], dtype=np.uint8)
+    rgba = np.stack([arr, arr, arr, np.full_like(arr, 255)], axis=-1)
+    Image.fromarray(rgba, mode="RGBA").save(tmp_path / "rgba.png")
+    assert np.array_equal(read_label_mask(tmp_path / "rgba.png"), arr)
+    Image.fromarray(np.stack([arr, arr, arr + 1], axis=-1)).save(tmp_path / "colour.png")
+    with pytest.raises(DataError) as e:
+        read_label_mask(tmp_path / "colour.png")
+    assert str(e.value) == f"{tmp_path / 'colour.png'}: label mask must be gray (its colour channels differ)"
+    with pytest.raises(DataError, match="label mask") as e:
+        read_label_mask(tmp_path / "missing.png")
+    assert str(e.value).startswith(str(tmp_path / "missing.png"))
+
+
+def test_shape_errors_say_which_shapes():
+    """Kills _prepare's shape errors losing their message."""
+    with pytest.raises(ValueError, match=r"gt \(2, 2\) and pred \(2, 3\) differ in shape"):
+        bad_pix(np.zeros((2, 2)), np.zeros((2, 3)))
+    with pytest.raises(ValueError, match=r"mask \(3, 3\) and gt \(2, 2\) differ in shape"):
+        bad_pix(np.zeros((2, 2)), np.zeros((2, 2)), 0.07, np.ones((3, 3), bool))
 
 
 # --------------------------------------------------------------------------- the metric definitions
@@ -477,3 +525,23 @@ def test_a_label_mask_of_the_wrong_size_names_its_file(tmp_path):
     with pytest.raises(DataError, match="mask is 40x30, ground truth is 40x40") as info:
         score_scene(Scene(folder), np.zeros((40, 40), F32), [get_metric("missed_dots")])
     assert "mask_dots_by_size_lowres.png" in str(info.value)
+
+
+def test_slanted_bumpiness_keeps_the_border(tmp_path):
+    """Kills the slanted-surfaces metric scoring the union of its masks without the caller's mask (the
+    15 px border): mask_pyramids reaches into the border, where the prediction is curved."""
+    from helpers import write_scene
+
+    from lfbench.data.scene import Scene
+    from lfbench.scoring.metrics import get_metric
+    from lfbench.scoring.rules import score_scene
+
+    pyramids = np.zeros((40, 40), bool)
+    pyramids[2:19, 15:19] = True  # rows 2..14 in the border, 15..18 inside
+    folder = write_scene(tmp_path, "pyramids", "stratified", size=40, views=False, gt=np.zeros((40, 40), F32),
+                         masks={"mask_sphere_in_lowres": _block(20, 15), "mask_sphere_out_lowres": _block(20, 20),
+                                "mask_pyramids_lowres": pyramids})
+    y, _ = np.mgrid[0:40, 0:40].astype(np.float64)
+    pred = np.where(y < 12, 0.5 * 0.01 * (y - 6) ** 2, 0.0).astype(F32)  # curved on rows 0..11 only
+    score = score_scene(Scene(folder), pred, [get_metric("pyramids_bumpiness_slanted")])
+    assert score.values["pyramids_bumpiness_slanted"] == 0.0  # rows 15.. are 3 px from the curved part
