@@ -207,3 +207,31 @@ def test_make_golden_errors_name_the_golden_file(tmp_path):
         make_golden(_results({"my_metric": 1.0}), 0.0, path)
     assert str(e.value) == (f"{path}: record {METHOD}/{SCENE}/my_metric: unknown metric 'my_metric', "
                             "cannot make it golden")
+
+
+def test_gate_error_messages_word_for_word(tmp_path):
+    """Kills rewordings of the gate's user-facing errors (the whole line is the contract: one line naming
+    the file and the problem), the field name cut at a different length, and a tolerance error without
+    the bad value."""
+    from lfbench.runs.regress import check_tolerance
+    from lfbench.utils.errors import DataError, SpecError
+
+    path = tmp_path / "golden.json"
+    rec = {"method": "m", "scene": "s", "metric": "mse_x100", "value": 1, "tolerance": 0, "resolution": "lowres"}
+    malformed = "golden record 0 is malformed (needs method, scene, metric, value, tolerance, resolution): "
+    cases = [('{"records": 5}', "expected a JSON list of golden records"),
+             (json.dumps([{**rec, "method": ""}]), malformed + "method, scene, metric and resolution must be "
+                                                              "non-empty strings"),
+             (json.dumps([{**rec, "value": "x" * 300}]),
+              malformed + ("value must be a JSON number, got str '" + "x" * 300)[:120])]
+    for text, message in cases:
+        path.write_text(text, encoding="utf-8")
+        with pytest.raises(DataError) as e:
+            read_golden(path)
+        assert str(e.value) == f"{path}: {message}"
+    path.unlink()
+    with pytest.raises(DataError) as e:
+        read_golden(path)
+    assert str(e.value) == f"{path}: golden file not found"
+    with pytest.raises(SpecError, match="got -1.5"):
+        check_tolerance({"mse_x100": -1.5})

@@ -98,9 +98,17 @@ def test_missing_ground_truth_is_an_error_naming_the_scene(tmp_path):
     losing its message or folder."""
     folder = write_scene(tmp_path, "toy", size=40, views=False)
     (folder / "gt_disp_lowres.pfm").unlink()
-    with pytest.raises(DataError, match=r"no ground truth \(gt_disp_lowres\.pfm\) to score against") as e:
+    with pytest.raises(DataError) as e:
         score_scene(Scene(folder), np.zeros((40, 40), F32), GENERAL_METRICS)
-    assert str(e.value).startswith(str(folder))
+    assert str(e.value) == f"{folder}: no ground truth (gt_disp_lowres.pfm) to score against"
+
+
+def test_score_scene_names_the_prediction_by_default(tmp_path):
+    """Kills a change of score_scene's default source (the name its errors give a prediction)."""
+    folder = write_scene(tmp_path, "toy", size=40, views=False)
+    with pytest.raises(DataError) as e:
+        score_scene(Scene(folder), np.zeros((41, 40), F32), GENERAL_METRICS)
+    assert str(e.value).startswith("prediction: prediction is 40x41, scene is 40x40")
 
 
 def test_metrics_that_do_not_apply_are_skipped_without_stopping(tmp_path):
