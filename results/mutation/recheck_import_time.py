@@ -60,8 +60,8 @@ def survivors() -> list[str]:
     return names
 
 
-def killed_in_fresh_process(mutant: str) -> bool:
-    cmd = [sys.executable, "-P", "-m", "pytest", "-q", "-x", "-p", "no:cacheprovider", *TESTS,
+def killed_in_fresh_process(mutant: str, tests: tuple[str, ...] = TESTS) -> bool:
+    cmd = [sys.executable, "-P", "-m", "pytest", "-q", "-x", "-p", "no:cacheprovider", *tests,
            *(f"--deselect={d}" for d in DESELECT)]
     return subprocess.run(cmd, cwd=MUTANTS, env=_env(mutant), stdout=subprocess.DEVNULL,
                           stderr=subprocess.DEVNULL).returncode != 0
@@ -71,16 +71,18 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, required=True)
     parser.add_argument("--jobs", type=int, default=2, help="test processes at once")
+    parser.add_argument("--tests", nargs="+", default=list(TESTS), help="test files (default: %(default)s)")
     args = parser.parse_args()
     at_import = import_time_functions()
     todo = [m for m in survivors() if re.sub(r"__mutmut_\d+$", "", m) in at_import]
     print(f"{len(todo)} surviving mutants of {len(at_import)} functions that run at import", flush=True)
     verdicts = {}
     with ThreadPoolExecutor(args.jobs) as pool:
-        for i, (mutant, killed) in enumerate(zip(todo, pool.map(killed_in_fresh_process, todo), strict=True), 1):
+        results = pool.map(lambda m: killed_in_fresh_process(m, tuple(args.tests)), todo)
+        for i, (mutant, killed) in enumerate(zip(todo, results, strict=True), 1):
             verdicts[mutant] = "killed" if killed else "survived"
             print(f"[{i}/{len(todo)}] {verdicts[mutant]:8} {mutant}", flush=True)
-    report = {"import_time_functions": sorted(at_import), "tests": list(TESTS), "deselected": list(DESELECT),
+    report = {"import_time_functions": sorted(at_import), "tests": args.tests, "deselected": list(DESELECT),
               "verdicts": verdicts}
     args.out.write_text(json.dumps(report, indent=1) + "\n", encoding="utf-8")
     n_killed = sum(v == "killed" for v in verdicts.values())
