@@ -27,10 +27,11 @@ NO_TESTS = 33
 def _functions(source: str) -> dict[str, str]:
     """Top-level and class-level function name -> source text (mutmut's mangled names)."""
     tree = ast.parse(source)
+    lines = source.splitlines()
     out: dict[str, str] = {}
     for node in ast.walk(tree):
         if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef) and "__mutmut_" in node.name:
-            out[node.name] = ast.get_source_segment(source, node) or ""
+            out[node.name] = "\n".join(lines[node.lineno - 1:node.end_lineno])
     return out
 
 
