@@ -354,6 +354,9 @@ METRIC_TABLE = {
     "badpix_0.07": ("badpix_0070", "%", None, (), "scene", "general", False, ("badpix", 0.07)),
     "mse_x100": ("mse_100", "px^2 x 100", None, (), "scene", "general", False, ("mse", 0.0)),
     "q25_x100": ("q_25_100", "px x 100", None, (), "scene", "general", False, ("quantile", 25.0)),
+    # the toolkit's runtime metrics: read from the method's runtime, not computed from maps (no bootstrap)
+    "runtime": ("runtime", "s", None, (), "scene", "runtime", False, None),
+    "runtime_log": ("runtime_log", "log10 s", None, (), "scene", "runtime", False, None),
     "discontinuities": ("discontinuities_0070", "%", "mask_discontinuities", (), "highres", _REGION, False, None),
     "bumpiness_planes": ("bumpiness_planes_100_0050", "px/px^2 x 100", "mask_planes", (), "lowres", _REGION, False,
                          None),
@@ -560,5 +563,5 @@ def test_bad_metric_definitions_are_refused_with_a_reason():
         Metric(id="x", name="x", description="x", unit="%", fn=bad_pix, scene_aggregate="median")
     with pytest.raises(ValueError, match="^unknown pixel statistic 'median': badpix, mse or quantile$"):
         PixelStatistic("median")
-    with pytest.raises(TypeError, match="^register\\(\\) needs a lfbench Metric, got dict$"):
+    with pytest.raises(TypeError, match="^{} registered as metric '\\?' is not a Metric$"):
         METRICS.register({})
