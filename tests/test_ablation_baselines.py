@@ -19,9 +19,9 @@ from test_ablate import quiet, write_spec
 
 from lfbench.ablation import baselines, report
 from lfbench.ablation.baselines import baselines_table, summary_lines
-from lfbench.ablation.significance import cell_info
+from lfbench.ablation.facts import cell_info
 from lfbench.ablation.spec import load_spec
-from lfbench.runs.results import Record, Results
+from lfbench.results import Record, Results
 from lfbench.scoring.metrics import get_metric
 
 PLANE, ZERO = "Plane sweep", "Zero map"

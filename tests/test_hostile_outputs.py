@@ -12,9 +12,9 @@ from pathlib import Path
 import pytest
 from helpers import assert_one_error_line, run_cli, write_scene
 
-from lfbench.runs.outputs import JOURNAL, MANIFEST, recover
-from lfbench.runs.results import Results
+from lfbench.results import Results
 from lfbench.utils.errors import DataError
+from lfbench.utils.outputs import JOURNAL, MANIFEST, recover
 
 SIZE = 24
 
@@ -58,7 +58,7 @@ def test_a_commit_cut_short_is_refused_by_readers_and_rolled_forward(tmp_path, c
     instead of mixing two runs; the next run finishes the commit."""
     out = tmp_path / "out"
     assert evaluate(capsys, data, out)[0] == 0
-    import lfbench.runs.outputs as outputs
+    import lfbench.utils.outputs as outputs
 
     real_replace, calls = os.replace, []
 

@@ -24,7 +24,7 @@ from lfbench.reports.paper import (
     per_scene_with_paper,
 )
 from lfbench.reports.tables import average_table, per_scene_table
-from lfbench.runs.results import Record, Results
+from lfbench.results import Record, Results
 from lfbench.utils.errors import DataError, SpecError
 
 ROOT = Path(__file__).resolve().parent.parent

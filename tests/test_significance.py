@@ -11,9 +11,10 @@ import pytest
 from test_ablate import quiet, write_spec
 
 from lfbench.ablation import report
-from lfbench.ablation.significance import cell_info, comparisons, paired_t, seeds_table, significance_table, t_interval
+from lfbench.ablation.facts import cell_info
+from lfbench.ablation.significance import comparisons, paired_t, seeds_table, significance_table, t_interval
 from lfbench.ablation.spec import load_spec
-from lfbench.runs.results import Record, Results
+from lfbench.results import Record, Results
 from lfbench.utils.errors import SpecError
 
 T975_DF2 = 4.302652729911275  # Student t 0.975 quantile, 2 degrees of freedom (printed tables: 4.303)

@@ -98,7 +98,7 @@ def baselines_table(info: pd.DataFrame, scores: pd.DataFrame, baselines: Sequenc
     """One row per variant (``seeds``: the mean over its seeds, index 'variant') or cell (index 'cell'): per
     scene group and metric the cell's value (with seeds also its 95 % interval end that decides), each
     baseline's value, then one verdict column 'vs <baseline>' per baseline (:func:`verdict`).
-    ``info``: lfbench.ablation.significance.cell_info; ``baselines``: method labels in ``scores``."""
+    ``info``: lfbench.ablation.facts.cell_info; ``baselines``: method labels in ``scores``."""
     if info.empty:
         return pd.DataFrame()
     values = group_scores(scores, metrics)

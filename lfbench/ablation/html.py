@@ -20,9 +20,9 @@ def write_site(spec: AblationSpec, out: str | Path, *, results_dir: str | Path |
     from lfbench.ablation.cell import MAPS, load_scenes
     from lfbench.ablation.runner import prepare_evaluation
     from lfbench.reports.html import SITE_DIR, SiteInputs, build_site
-    from lfbench.runs.outputs import check_within
-    from lfbench.runs.results import Results
+    from lfbench.results import Results
     from lfbench.utils.names import file_name
+    from lfbench.utils.outputs import check_within
 
     out = Path(out)
     results = Results.read(Path(results_dir if results_dir is not None else out))  # its results.json

@@ -9,17 +9,15 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from lfbench.reports.figures import _pyplot, save_figure
+from lfbench.reports.plotting import INTERPOLATION_COLOURS, pyplot, save_figure
 from lfbench.utils.figure_text import plain_text
-
-INTERP_COLOURS = {"bilinear": "tab:blue", "nearest": "tab:orange", "phase": "tab:green"}
 
 
 @plain_text
 def beta_curve(frame: pd.DataFrame, records: pd.DataFrame, path: Path, ours: str) -> Path:
     """BadPix 0.07 (%) against the UAFL beta: the mean over scenes (line) and each scene (faint);
     the axis runs from beta = 1 down to 0.1 as in the paper's figure."""
-    plt = _pyplot()
+    plt = pyplot()
     cells = frame[frame["beta"].notna()].sort_values("beta")
     fig, ax = plt.subplots(figsize=(6.0, 4.0))
     bp = records[records["metric"] == "badpix_0.07"]
@@ -47,7 +45,7 @@ def _scatter(ax, xs: Sequence[float], ys: Sequence[float], intervals: Sequence[f
     for x, y, iv, ip in zip(xs, ys, intervals, interps, strict=True):
         if not (np.isfinite(x) and np.isfinite(y)):
             continue
-        colour = INTERP_COLOURS.get(ip, "tab:gray")
+        colour = INTERPOLATION_COLOURS.get(ip, "tab:gray")
         ax.scatter([x], [y], color=colour, s=40, label=ip if ip not in done else None, zorder=3)
         done.add(ip)
         ax.annotate(f"{iv:g}", (x, y), textcoords="offset points", xytext=(5, 4), fontsize=8)
@@ -55,7 +53,7 @@ def _scatter(ax, xs: Sequence[float], ys: Sequence[float], intervals: Sequence[f
     pts = sorted((x, y) for x, y, ip in zip(xs, ys, interps, strict=True) if ip == "bilinear" and np.isfinite(x)
                  and np.isfinite(y))
     if len(pts) > 1:
-        ax.plot(*zip(*pts, strict=True), color=INTERP_COLOURS["bilinear"], linewidth=1, alpha=0.5)
+        ax.plot(*zip(*pts, strict=True), color=INTERPOLATION_COLOURS["bilinear"], linewidth=1, alpha=0.5)
     finite = [x for x in xs if np.isfinite(x) and x > 0]
     if finite and max(finite) / min(finite) > 8:  # a log axis with plain labels (1, 2, 5, 10, ...)
         from matplotlib.ticker import FormatStrFormatter, LogLocator, NullFormatter
@@ -75,7 +73,7 @@ def _scatter(ax, xs: Sequence[float], ys: Sequence[float], intervals: Sequence[f
 @plain_text
 def accuracy_vs_time(frame: pd.DataFrame, paper: pd.DataFrame | None, path: Path, ours: str, time_label: str) -> Path:
     """BadPix 0.07 against test time for each interval and interpolation: ours and, beside, the paper's."""
-    plt = _pyplot()
+    plt = pyplot()
     panels = 2 if paper is not None else 1
     fig, axes = plt.subplots(1, panels, figsize=(6.0 * panels, 4.4), squeeze=False)
     _scatter(axes[0, 0], frame["test_s"].astype(float).tolist(), frame["badpix_0.07"].astype(float).tolist(),
@@ -102,7 +100,7 @@ def error_maps(scene_dirs: Sequence[str], maps: Mapping[str, Path], out: Path,
     from lfbench.data.submission import check_inside, disp_map_path, read_submission_map
     from lfbench.method.base import Prediction
     from lfbench.reports.figures import SceneFigureWriter
-    from lfbench.runs.outputs import check_within
+    from lfbench.utils.outputs import check_within
 
     writer = SceneFigureWriter(out)
     present = {label: root for label, root in maps.items() if Path(root).is_dir()}  # a results/ copy has none

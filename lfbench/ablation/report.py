@@ -35,9 +35,10 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from lfbench.ablation.facts import cell_info, last_stage_loss, loss_beta, model_value
 from lfbench.ablation.spec import AblationSpec
 from lfbench.reports.tables import write_table
-from lfbench.runs.results import Results
+from lfbench.results import Results
 from lfbench.utils.errors import DataError
 
 PAPER_LABEL = "paper (RTX 3090, full training)"
@@ -51,28 +52,7 @@ Log = Callable[[str], None]
 _log = logging.getLogger(__name__)
 
 
-# --------------------------------------------------------------------------- facts per cell
-
-def last_stage_loss(config: dict[str, Any]) -> tuple[str, dict[str, Any]]:
-    """(loss name, loss parameters) of a cell's last training stage."""
-    from lfbench.training.config import STAGE_KEYS
-
-    st = config["stages"][-1]
-    return st["loss"], {k: v for k, v in st.items() if k not in STAGE_KEYS}
-
-
-def uafl_beta(config: dict[str, Any]) -> float | None:
-    loss, params = last_stage_loss(config)
-    return float(params.get("beta", PAPER_UAFL_BETA)) if loss == "uafl" else None
-
-
-def _model_value(config: dict[str, Any], key: str, kind: type, missing: Any) -> Any:
-    """[model] ``key`` of a cell's config, else the network's default; ``missing`` if it has no such parameter."""
-    from lfbench.ablation.spec import network_default
-
-    value = config["model"].get(key, network_default(config, key))
-    return missing if value is None else kind(value)
-
+# --------------------------------------------------------------------------- the cells
 
 def cell_frame(spec: AblationSpec, results: Results, markers: Sequence[dict[str, Any]]) -> pd.DataFrame:
     """One row per cell (index: cell id): grid values, interval, interpolation, loss, beta, mean metrics
@@ -84,11 +64,11 @@ def cell_frame(spec: AblationSpec, results: Results, markers: Sequence[dict[str,
         m = by_id.get(cell.id, {})
         loss, params = last_stage_loss(cell.config)
         row: dict[str, Any] = {"cell": cell.id, **{f"grid:{k}": v for k, v in cell.values.items()},
-                               "interval": _model_value(cell.config, "interval", float, np.nan),
-                               "interpolation": _model_value(cell.config, "interpolation", str, ""),
+                               "interval": model_value(cell.config, "interval", float, np.nan),
+                               "interpolation": model_value(cell.config, "interpolation", str, ""),
                                "loss": loss + ("" if not params else "(" + ", ".join(f"{k}={v}" for k, v in
                                                                                        params.items()) + ")"),
-                               "beta": uafl_beta(cell.config)}
+                               "beta": loss_beta(cell.config)}
         sel = df[df["method"] == cell.id]
         for metric in METRICS:
             vals = sel[sel["metric"] == metric]["value"]
@@ -220,7 +200,6 @@ def seed_means(spec: AblationSpec, frame: pd.DataFrame) -> tuple[pd.DataFrame, d
     builders find its config) and the map from that cell id to the variant id; unchanged without seeds."""
     if not spec.seeds or frame.empty:
         return frame, {}
-    from lfbench.ablation.significance import cell_info
 
     info = cell_info(spec).reindex(frame.index)
     numeric = frame.select_dtypes(include="number").columns
@@ -238,7 +217,6 @@ def baseline_verdicts(spec: AblationSpec, results: Results) -> tuple[pd.DataFram
     """table_baselines (every cell or variant against the spec's [[methods]], see lfbench.ablation.baselines),
     its caption and the summary lines (one per baseline); empty without cells or [[methods]]."""
     from lfbench.ablation.baselines import baselines_caption, baselines_table, scene_groups, summary_lines
-    from lfbench.ablation.significance import cell_info
 
     scores = results.to_frame()
     if not spec.cells or not spec.methods or scores.empty:
@@ -256,7 +234,7 @@ def baseline_verdicts(spec: AblationSpec, results: Results) -> tuple[pd.DataFram
 def write_seed_tables(spec: AblationSpec, results: Results, out: Path) -> list[Path]:
     """table_seeds (mean and 95 % t-interval over seeds per variant) and table_significance (the paper's
     orderings as paired t-tests over seeds); see lfbench.ablation.significance."""
-    from lfbench.ablation.significance import ALPHA, cell_info, seeds_table, significance_table
+    from lfbench.ablation.significance import ALPHA, seeds_table, significance_table
 
     info, scores = cell_info(spec), results.to_frame()
     caption = caption_lines(spec, f"mean over seeds {', '.join(str(x) for x in spec.seeds)} and 95 % "

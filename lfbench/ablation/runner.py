@@ -14,7 +14,7 @@ Layout of OUT::
     html/                      the HTML report (``html``: lfbench.ablation.html)
 
 spec.toml, results.json, results.csv, the tables, figures and html/ are one output set
-(lfbench.runs.outputs): written into a staging folder and committed together, under OUT's
+(lfbench.utils.outputs): written into a staging folder and committed together, under OUT's
 results.json.lock, so that a kill or a full disk leaves the previous set or the new one.
 
 Re-running the same command skips finished cells (their marker is written last) and resumes an
@@ -41,14 +41,14 @@ from typing import Any
 from lfbench.ablation.cell import CellTask, is_done, read_marker, run_cell
 from lfbench.ablation.executor import ClusterOptions
 from lfbench.ablation.spec import AblationSpec, Cell, SyntheticEval, _sha
-from lfbench.runs.outputs import OutputSet, prepare_output_folder, read_manifest, recover, staged_outputs
-from lfbench.runs.results import Results
+from lfbench.results import Results
 from lfbench.utils.atomic import fresh_dir, write_text
 from lfbench.utils.errors import DataError, SpecError
 from lfbench.utils.hardware import available_cores
 from lfbench.utils.jsonfile import json_text, read_json
 from lfbench.utils.log import log_to_file
 from lfbench.utils.names import file_name
+from lfbench.utils.outputs import OutputSet, prepare_output_folder, read_manifest, recover, staged_outputs
 
 Log = Callable[[str], None]
 _log = logging.getLogger(__name__)
@@ -376,7 +376,7 @@ def run_ablation(spec: AblationSpec, out: str | Path, *, jobs: int = 1, progress
 def check_folders(spec: AblationSpec, out: Path) -> None:
     """DataError when a folder the run trains, scores or generates into (stage1, cells/<id>, methods/<label>,
     data, eval_data, submitit) leads out of OUT through a symbolic link: an ablation writes inside OUT only."""
-    from lfbench.runs.outputs import check_within
+    from lfbench.utils.outputs import check_within
 
     names = ["cells", "methods", "stage1", "data", "eval_data", "submitit"]
     names += [f"cells/{c.id}" for c in spec.cells] + [f"methods/{file_name(m.label)}" for m in spec.methods]

@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-__all__ = ["ALPHA", "Comparison", "cell_info", "comparisons", "paired_t", "scene_scores", "seeds_table",
+__all__ = ["ALPHA", "Comparison", "comparisons", "paired_t", "scene_scores", "seeds_table",
            "significance_table", "t_interval", "verdict"]
 
 ALPHA = 0.05
@@ -89,22 +89,6 @@ class Comparison:
     claim: str
     better: str
     worse: str
-
-
-def cell_info(spec) -> pd.DataFrame:
-    """One row per cell (index: cell id): variant id, seed, interval, interpolation, loss, beta."""
-    from lfbench.ablation.report import _model_value, last_stage_loss, uafl_beta
-    from lfbench.ablation.spec import cell_id, variant_values
-
-    rows = []
-    for cell in spec.cells:
-        loss, params = last_stage_loss(cell.config)
-        rows.append({"cell": cell.id, "variant": cell_id(variant_values(cell)),
-                     "seed": cell.values.get("seed", cell.config.get("seed")),
-                     "interval": _model_value(cell.config, "interval", float, np.nan),
-                     "interpolation": _model_value(cell.config, "interpolation", str, ""),
-                     "loss": loss, "loss_params": bool(params), "beta": uafl_beta(cell.config)})
-    return pd.DataFrame(rows).set_index("cell") if rows else pd.DataFrame()
 
 
 def comparisons(table: str, info: pd.DataFrame) -> list[Comparison]:

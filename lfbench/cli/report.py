@@ -68,7 +68,7 @@ def parse_formats(text: str) -> list[tuple[str, str]]:
 
 
 def parse_figure_formats(text: str) -> list[str]:
-    from lfbench.reports.figures import FIGURE_FORMATS
+    from lfbench.reports.plotting import FIGURE_FORMATS
     from lfbench.utils.errors import SpecError
 
     out = list(dict.fromkeys(s.strip().lower() for s in text.split(",") if s.strip()))

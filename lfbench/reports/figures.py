@@ -33,10 +33,10 @@ import numpy as np
 
 from lfbench.data.scene import LOWRES, LightField
 from lfbench.method.base import Prediction
+from lfbench.reports.plotting import add_colorbar, as_gray, colormap, pyplot, save_figure
 from lfbench.scoring.metrics import bad_pix_curve, find_metric
 from lfbench.scoring.rules import ScoringRules, align_prediction, evaluation_mask, upsample_nearest
 from lfbench.utils.atomic import write_bytes, write_text
-from lfbench.utils.errors import SpecError
 from lfbench.utils.figure_text import plain_text
 from lfbench.utils.names import FileNames, file_name, file_names
 
@@ -55,26 +55,10 @@ OUTSIDE_GREY = 0.45
 GOOD_LIGHT = (0.80, 0.20)  # good pixel grey = 0.80 + 0.20 * centre-view gray (0.92 without a view)
 DISPARITY_CMAP, ERROR_CMAP, UNCERTAINTY_CMAP = "viridis", "seismic", "magma"
 
-PANEL_IN, ROW_HEIGHT_IN, DPI = 3.2, 3.0, 90
+PANEL_IN, ROW_HEIGHT_IN = 3.2, 3.0
 
 
 # --------------------------------------------------------------------------- pure panel arrays
-
-def _as_gray(image: np.ndarray | None, shape: tuple[int, int]) -> np.ndarray | None:
-    """A centre view (H, W[, 3]) in [0, 1] as gray (H, W) float32, or None if absent or mis-shaped."""
-    if image is None:
-        return None
-    img = np.asarray(image, dtype=np.float32)
-    if img.ndim == 3:
-        img = img[..., :3] @ np.array([0.299, 0.587, 0.114], dtype=np.float32)
-    return np.clip(img, 0, 1) if img.shape == shape else None
-
-
-def _colormap(name: str):
-    import matplotlib
-
-    return matplotlib.colormaps[name]
-
 
 def badpix_codes(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = None,
                  threshold: float = BADPIX_THRESHOLD) -> np.ndarray:
@@ -91,7 +75,7 @@ def badpix_codes(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = Non
 def badpix_image(codes: np.ndarray, background: np.ndarray | None = None) -> np.ndarray:
     """The BadPix map drawn from :func:`badpix_codes`: (H, W, 3) float32 RGB; BAD pure red, GOOD light
     grey (a faint copy of ``background``, the centre view, when given), OUTSIDE dark grey."""
-    gray = _as_gray(background, codes.shape)
+    gray = as_gray(background, codes.shape)
     light = np.full(codes.shape, GOOD_LIGHT[0] + GOOD_LIGHT[1] * 0.6, np.float32) if gray is None \
         else GOOD_LIGHT[0] + GOOD_LIGHT[1] * gray
     level = np.where(codes == GOOD, light, OUTSIDE_GREY).astype(np.float32)
@@ -105,7 +89,7 @@ def disparity_image(disparity: np.ndarray, vmin: float, vmax: float, cmap: str =
     d = np.asarray(disparity, dtype=np.float32)
     finite = np.isfinite(d)
     t = np.clip((np.where(finite, d, vmin) - vmin) / max(vmax - vmin, 1e-12), 0, 1)
-    rgb = _colormap(cmap)(t)[..., :3].astype(np.float32)
+    rgb = colormap(cmap)(t)[..., :3].astype(np.float32)
     rgb[~finite] = NONFINITE_RGB
     return rgb
 
@@ -122,7 +106,7 @@ def signed_error_image(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None
     """(H, W, 3) float32 RGB of gt - pred in ``cmap`` over [-limit, +limit]; grey outside ``mask`` (and
     where gt is non-finite), black where the prediction is non-finite inside it."""
     err = signed_error(gt, pred)
-    rgb = _colormap(cmap)(np.clip((np.nan_to_num(err) + limit) / (2 * limit), 0, 1))[..., :3].astype(np.float32)
+    rgb = colormap(cmap)(np.clip((np.nan_to_num(err) + limit) / (2 * limit), 0, 1))[..., :3].astype(np.float32)
     scored = np.isfinite(np.asarray(gt, dtype=np.float32))
     if mask is not None:
         scored &= np.asarray(mask, dtype=bool)
@@ -216,83 +200,8 @@ def method_panels(label: str, lf: LightField, prediction: Prediction | np.ndarra
 
 # --------------------------------------------------------------------------- drawing
 
-def _pyplot():
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
-FIGURE_FORMATS = ("png", "pdf", "svg")
-# Metadata left out of each format: the files carry no link, so they can go into the offline HTML report.
-_NO_LINK_METADATA = {"png": {"Software": None}, "pdf": {"Producer": None, "Creator": None}, "svg": {"Creator": None}}
-
-
-def _figure_bytes(fig: Any, fmt: str, dpi: int) -> bytes:
-    buf = io.BytesIO()
-    fig.savefig(buf, format=fmt, dpi=dpi, metadata=_NO_LINK_METADATA[fmt])
-    return buf.getvalue()
-
-
-def save_figure(fig: Any, path: str | Path, dpi: int = DPI) -> Path:
-    """Write a matplotlib figure as PNG atomically and close it (no 'Software' metadata)."""
-    plt = _pyplot()
-    try:
-        data = _figure_bytes(fig, "png", dpi)
-    finally:
-        plt.close(fig)
-    write_bytes(path, data)
-    return Path(path)
-
-
-def save_formats(fig: Any, path: str | Path, formats: Sequence[str] = ("png",), dpi: int = 110) -> list[Path]:
-    """Write ``fig`` as path.<format> for each of png / pdf / svg (atomically) and close it. ``path`` is
-    the file name without its format (a trailing .png / .pdf / .svg is replaced; any other dot, as in
-    'pairwise_planesweep_interval=0.25', is part of the name). The files carry no metadata link (PNG
-    'Software', PDF 'Producer' and 'Creator' are left out)."""
-    plt = _pyplot()
-    unknown = [f for f in formats if f not in FIGURE_FORMATS]
-    if unknown or not formats:
-        plt.close(fig)
-        raise SpecError(f"unknown figure format {', '.join(unknown) or '(none)'}; use {', '.join(FIGURE_FORMATS)}")
-    path = Path(path)
-    stem = path.with_suffix("") if path.suffix.lstrip(".") in FIGURE_FORMATS else path
-    written = []
-    try:
-        for fmt in dict.fromkeys(formats):
-            target = stem.with_name(f"{stem.name}.{fmt}")
-            write_bytes(target, _figure_bytes(fig, fmt, dpi))
-            written.append(target)
-    finally:
-        plt.close(fig)
-    return written
-
-
-def write_image(path: str | Path, rgb: np.ndarray) -> Path:
-    """Write an (H, W, 3) float RGB array in [0, 1] as a PNG, one pixel per array element (atomic)."""
-    from PIL import Image
-
-    arr = np.round(np.clip(np.asarray(rgb, dtype=np.float64), 0, 1) * 255).astype(np.uint8)
-    buf = io.BytesIO()
-    Image.fromarray(arr, "RGB").save(buf, format="PNG")
-    write_bytes(path, buf.getvalue())
-    return Path(path)
-
-
-def _colorbar(fig: Any, ax: Any, cmap: str, vmin: float, vmax: float, label: str = "") -> None:
-    import matplotlib as mpl
-
-    sm = mpl.cm.ScalarMappable(norm=mpl.colors.Normalize(vmin=vmin, vmax=vmax), cmap=cmap)
-    cb = fig.colorbar(sm, ax=ax, fraction=0.046, pad=0.03)
-    cb.ax.tick_params(labelsize=7)
-    if label:
-        cb.set_label(label, fontsize=7)
-
-
 def _row_figure(title: str):
-    plt = _pyplot()
+    plt = pyplot()
     fig, axes = plt.subplots(1, 4, figsize=(4 * PANEL_IN, ROW_HEIGHT_IN))
     fig.subplots_adjust(left=0.01, right=0.95, top=0.83, bottom=0.03, wspace=0.28)
     fig.suptitle(title, fontsize=9, x=0.01, ha="left")
@@ -314,20 +223,20 @@ def draw_method_row(panels: MethodPanels, path: str | Path, resolution_note: str
     lo, hi = panels.disparity_range
     axes[0].imshow(panels.disparity, interpolation="nearest")
     axes[0].set_title("disparity (px)", fontsize=8)
-    _colorbar(fig, axes[0], DISPARITY_CMAP, lo, hi)
+    add_colorbar(fig, axes[0], DISPARITY_CMAP, lo, hi)
     if panels.badpix is not None:
         axes[1].imshow(panels.badpix, interpolation="nearest")
         axes[1].set_title(f"BadPix({panels.threshold:g}) = {panels.badpix_percent:.2f}% (red = bad)", fontsize=8)
         axes[2].imshow(panels.error, interpolation="nearest")
         axes[2].set_title("gt - pred (px)", fontsize=8)
-        _colorbar(fig, axes[2], ERROR_CMAP, -ERROR_LIMIT, ERROR_LIMIT)
+        add_colorbar(fig, axes[2], ERROR_CMAP, -ERROR_LIMIT, ERROR_LIMIT)
     else:
         _blank(axes[1], "no ground truth")
         _blank(axes[2], "no ground truth")
     if panels.uncertainty is not None and panels.uncertainty_range is not None:
         axes[3].imshow(panels.uncertainty, interpolation="nearest")
         axes[3].set_title("uncertainty", fontsize=8)
-        _colorbar(fig, axes[3], UNCERTAINTY_CMAP, *panels.uncertainty_range)
+        add_colorbar(fig, axes[3], UNCERTAINTY_CMAP, *panels.uncertainty_range)
     else:
         _blank(axes[3], "no uncertainty map")
     return save_figure(fig, path)
@@ -345,7 +254,7 @@ def draw_scene_header(lf: LightField, path: str | Path, gt: np.ndarray | None,
     if gt is not None:
         axes[1].imshow(disparity_image(gt, *disp_range), interpolation="nearest")
         axes[1].set_title("ground truth (px)", fontsize=8)
-        _colorbar(fig, axes[1], DISPARITY_CMAP, *disp_range)
+        add_colorbar(fig, axes[1], DISPARITY_CMAP, *disp_range)
     else:
         _blank(axes[1], "no ground truth")
     ax = axes[2]
@@ -356,7 +265,7 @@ def draw_scene_header(lf: LightField, path: str | Path, gt: np.ndarray | None,
               (NONFINITE_RGB, "non-finite prediction (maps)"))
     for i, (colour, text) in enumerate(legend):
         y = 0.85 - 0.2 * i
-        ax.add_patch(_pyplot().Rectangle((0.0, y - 0.05), 0.1, 0.1, color=colour, transform=ax.transAxes))
+        ax.add_patch(pyplot().Rectangle((0.0, y - 0.05), 0.1, 0.1, color=colour, transform=ax.transAxes))
         ax.text(0.14, y, text, va="center", fontsize=7, transform=ax.transAxes)
     ax.set_title("BadPix map colours", fontsize=8)
     h, w = (gt.shape if gt is not None else center.shape[:2])
@@ -433,7 +342,7 @@ def average_curves(curves: Sequence[Curve]) -> dict[str, tuple[np.ndarray, np.nd
 def plot_badpix_series(series: Mapping[str, tuple[np.ndarray, np.ndarray]], path: str | Path, title: str,
                        markers: bool = False) -> Path:
     """BadPix(t) (%) against t (px), one line per method; dotted lines mark 0.01, 0.03 and 0.07."""
-    plt = _pyplot()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(6.4, 4.2))
     for label, (t, v) in series.items():
         ax.plot(t, v, marker="o" if markers else None, markersize=4, linewidth=1.5, label=label)

@@ -8,7 +8,7 @@ overviews, exact curves and the toolkit's figure types), else from a saved curve
 default RESULTS_DIR/figures/badpix_series.csv), else from the BadPix thresholds the results hold.
 With ``html``, OUT/html/index.html (lfbench.reports.html).
 
-The files appear together or not at all (lfbench.runs.outputs): they are written into a staging
+The files appear together or not at all (lfbench.utils.outputs): they are written into a staging
 folder inside OUT and committed as one set that replaces the previous report there. OUT may not be
 the results' own folder nor hold another run's results: the report's set would replace that run's files.
 """
@@ -23,10 +23,10 @@ from typing import Any
 import pandas as pd
 
 from lfbench.reports.tables import TABLE_FORMATS, average_table, per_scene_table, write_table
-from lfbench.runs.outputs import check_within, staged_outputs
-from lfbench.runs.results import Results
+from lfbench.results import Results
 from lfbench.scoring.rules import ScoringRules
 from lfbench.utils.errors import DataError
+from lfbench.utils.outputs import check_within, staged_outputs
 
 __all__ = ["ReportOutcome", "report_from_results"]
 
@@ -89,7 +89,7 @@ def report_from_results(results_path: str | Path, out: str | Path, *,
 def check_report_folder(out: Path, results_dir: Path) -> None:
     """DataError when ``out`` is the results' own folder or holds another run's results: the report's
     set would replace that run's files (results.json, maps, figures)."""
-    from lfbench.runs.outputs import read_manifest
+    from lfbench.utils.outputs import read_manifest
 
     if out.is_dir() and results_dir.is_dir() and out.resolve() == results_dir.resolve():
         raise DataError("is the folder of the results being reported; a report there would replace the run's own "

@@ -34,11 +34,12 @@ from lfbench.reports import figures as fig
 from lfbench.reports import toolkit_figures as tk
 from lfbench.reports.leaderboard import all_metric_ranks, metric_info, metric_table, overall_ranks
 from lfbench.reports.maps import MAPS_DIR, SceneMaps, load_scene_maps, map_folders
-from lfbench.runs.outputs import check_within
-from lfbench.runs.results import Results, check_names
+from lfbench.reports.plotting import write_image
+from lfbench.results import Results, check_names
 from lfbench.scoring.rules import ScoringRules
 from lfbench.utils.atomic import fresh_dir, replace_dir, write_text
 from lfbench.utils.errors import DataError
+from lfbench.utils.outputs import check_within
 
 __all__ = ["SITE_DIR", "SiteInputs", "build_site", "build_site_from_dir", "check_site_dir", "site_inputs",
            "site_inputs_from_dir"]
@@ -209,7 +210,7 @@ class _Images:
         self.root = root
 
     def rgb(self, rel: str, rgb: np.ndarray) -> str:
-        fig.write_image(self.root / rel, rgb)
+        write_image(self.root / rel, rgb)
         return rel
 
     def colorbar(self, cmap: str) -> str:
@@ -218,7 +219,7 @@ class _Images:
             import matplotlib
 
             row = matplotlib.colormaps[cmap](np.linspace(0, 1, 256))[None, :, :3]
-            fig.write_image(self.root / rel, np.repeat(row, 12, axis=0))
+            write_image(self.root / rel, np.repeat(row, 12, axis=0))
         return rel
 
 

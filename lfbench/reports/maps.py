@@ -27,8 +27,8 @@ def map_folders(maps: str | Path, labels: Sequence[str], *, within: str | Path |
     them, matched back to ``labels``); ``maps`` itself when it is one submission folder. DataError
     when it holds none, or when a folder leads out of ``maps`` (or ``maps`` out of ``within``, the
     results folder it was found in) through a symbolic link."""
-    from lfbench.runs.outputs import check_within
     from lfbench.utils.names import file_names
+    from lfbench.utils.outputs import check_within
 
     maps = Path(maps)
     if within is not None and (maps.exists() or maps.is_symlink()):

@@ -12,7 +12,7 @@ import numpy as np
 import pandas as pd
 
 from lfbench.reports import latex
-from lfbench.runs.results import Results
+from lfbench.results import Results
 from lfbench.scoring.metrics import find_metric, list_metrics
 from lfbench.utils.atomic import write_text
 

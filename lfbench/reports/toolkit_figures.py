@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from lfbench.reports.figures import _as_gray, _colorbar, _colormap, _pyplot, save_formats
+from lfbench.reports.plotting import add_colorbar, as_gray, colormap, pyplot, save_formats
 from lfbench.utils.errors import SpecError
 from lfbench.utils.figure_text import plain_text
 
@@ -107,8 +107,8 @@ def pairwise_image(gt: np.ndarray, a: np.ndarray, b: np.ndarray, mask: np.ndarra
     diff = pairwise_difference(gt, a, b)
     codes = pairwise_classes(gt, a, b, mask, threshold)
     t = np.clip((np.nan_to_num(diff, nan=0.0, posinf=limit, neginf=-limit) + limit) / (2 * limit), 0, 1)
-    rgb = _colormap(PAIRWISE_CMAP)(t)[..., :3].astype(np.float32)
-    gray = _as_gray(background, codes.shape)
+    rgb = colormap(PAIRWISE_CMAP)(t)[..., :3].astype(np.float32)
+    gray = as_gray(background, codes.shape)
     tie = np.full(codes.shape, TIE_LIGHT, np.float32) if gray is None else 0.80 + 0.15 * gray
     rgb[codes == TIE] = np.repeat(tie[..., None], 3, axis=2)[codes == TIE]
     rgb[codes == OUTSIDE] = OUTSIDE_GREY
@@ -142,7 +142,7 @@ def heatmap_image(values: np.ndarray, vmin: float, vmax: float, cmap: str = HEAT
     v = np.asarray(values, dtype=np.float64)
     nan = np.isnan(v)
     t = np.clip((np.nan_to_num(v, nan=vmin, posinf=vmax) - vmin) / max(vmax - vmin, 1e-12), 0, 1)
-    rgb = _colormap(cmap)(t)[..., :3].astype(np.float32)
+    rgb = colormap(cmap)(t)[..., :3].astype(np.float32)
     rgb[nan] = OUTSIDE_GREY
     return rgb
 
@@ -198,7 +198,7 @@ def plot_pairwise(gt_by_scene: Mapping[str, np.ndarray], a_by_scene: Mapping[str
     scenes = [s for s in gt_by_scene if s in a_by_scene and s in b_by_scene]
     if not scenes:
         raise SpecError(f"{labels[0]} and {labels[1]} share no scene with ground truth")
-    plt = _pyplot()
+    plt = pyplot()
     cols = min(per_row, len(scenes))
     rows = -(-len(scenes) // cols)
     fig, axes = plt.subplots(rows, cols, figsize=(3.4 * cols, 3.3 * rows + 0.7), squeeze=False)
@@ -211,7 +211,7 @@ def plot_pairwise(gt_by_scene: Mapping[str, np.ndarray], a_by_scene: Mapping[str
         ax.imshow(pairwise_image(gt, a, b, mask, threshold, background=bg), interpolation="nearest")
         share = pairwise_shares(pairwise_classes(gt, a, b, mask, threshold))
         ax.set_title(f"{scene}\nA better {share['a_better']:.1f}%, B better {share['b_better']:.1f}%", fontsize=8)
-    _colorbar(fig, list(axes.flat), PAIRWISE_CMAP, -PAIRWISE_LIMIT, PAIRWISE_LIMIT, "|A - gt| - |B - gt| (px)")
+    add_colorbar(fig, list(axes.flat), PAIRWISE_CMAP, -PAIRWISE_LIMIT, PAIRWISE_LIMIT, "|A - gt| - |B - gt| (px)")
     fig.suptitle(f"A = {labels[0]}  vs  B = {labels[1]}: blue = A better, red = B better by > {threshold:g} px, "
                  "grey = tie (low resolution)", fontsize=9)
     return save_formats(fig, path, formats)
@@ -226,7 +226,7 @@ def plot_error_heatmaps(gt_by_scene: Mapping[str, np.ndarray], preds_by_scene: M
     scenes = [s for s in gt_by_scene if preds_by_scene.get(s)]
     if not scenes:
         raise SpecError("no scene has both ground truth and maps for the error heatmaps")
-    plt = _pyplot()
+    plt = pyplot()
     fig, axes = plt.subplots(len(scenes), 2, figsize=(7.4, 3.2 * len(scenes) + 0.6), squeeze=False)
     for row, scene in zip(axes, scenes, strict=True):
         mask = None if masks is None else masks.get(scene)
@@ -237,8 +237,8 @@ def plot_error_heatmaps(gt_by_scene: Mapping[str, np.ndarray], preds_by_scene: M
         row[0].set_title(f"{scene}: median |gt - pred| over {len(preds)} methods", fontsize=8)
         row[1].imshow(heatmap_image(frac, 0.0, 100.0), interpolation="nearest")
         row[1].set_title(f"{scene}: % of methods with |gt - pred| > {threshold:g} px", fontsize=8)
-        _colorbar(fig, row[0], HEATMAP_CMAP, 0.0, MEDIAN_ERROR_LIMIT, "px")
-        _colorbar(fig, row[1], HEATMAP_CMAP, 0.0, 100.0, "%")
+        add_colorbar(fig, row[0], HEATMAP_CMAP, 0.0, MEDIAN_ERROR_LIMIT, "px")
+        add_colorbar(fig, row[1], HEATMAP_CMAP, 0.0, 100.0, "%")
         for ax in row:
             ax.set_xticks([])
             ax.set_yticks([])
@@ -256,7 +256,7 @@ def plot_radar(scores: pd.DataFrame, path: str | Path, *, title: str = "", highl
     method drawn thicker (the others thinner). Needs at least 3 metrics."""
     if len(scores.index) < 3:
         raise SpecError(f"a radar chart needs at least 3 metrics, got {len(scores.index)}")
-    plt = _pyplot()
+    plt = pyplot()
     radii = radar_radii(scores)
     n = len(scores.index)
     angles = (np.pi / 2 + np.arange(n) * 2 * np.pi / n) % (2 * np.pi)

@@ -1,21 +1,9 @@
-"""Runs: methods run on scenes and scored (runner) into a folder (folder: :func:`evaluate_to_folder`),
-their records (results), golden regression checks (regress), the offline demo (demo) and
-speed/memory benchmarks (bench)."""
+"""Runs: methods run on scenes and scored (runner) into a folder with the chosen output writers
+(folder: :func:`evaluate_to_folder`), golden regression checks (regress), the offline demo (demo) and
+speed/memory benchmarks (bench). The results data model is :mod:`lfbench.results` (also importable as
+``lfbench.runs.results``)."""
 
-from __future__ import annotations
-
-from typing import Any
+from lfbench.results import Results
+from lfbench.runs.folder import CIOptions, evaluate_to_folder
 
 __all__ = ["CIOptions", "Results", "evaluate_to_folder"]
-
-
-def __getattr__(name: str) -> Any:  # imported on first use: ``import lfbench.runs.results`` stays light
-    if name in ("CIOptions", "evaluate_to_folder"):
-        from lfbench.runs import folder
-
-        return getattr(folder, name)
-    if name == "Results":
-        from lfbench.runs.results import Results
-
-        return Results
-    raise AttributeError(f"module 'lfbench.runs' has no attribute {name!r}")

@@ -5,7 +5,7 @@ OUT/data/, runs every registered method that can run offline on them, scores the
 does, and writes OUT/results.json, OUT/results.csv, the tables (table_per_scene.*, table_average.*),
 the figures (OUT/figures/), every method's disparity maps (OUT/maps/<method>/, submission layout) and
 the HTML report (OUT/html/index.html; ``lfbench report OUT --out REP --html`` draws it again from those
-files). Results, tables, figures, maps and the report are one output set (lfbench.runs.outputs).
+files). Results, tables, figures, maps and the report are one output set (lfbench.utils.outputs).
 
 Re-running into the same folder reuses the generated data when it was made with the same seed,
 size and number of scenes (OUT/data/demo.json records them) and refuses otherwise: data of two
@@ -76,7 +76,7 @@ def prepare_data(out: Path, seed: int, size: int, scenes: int, log: Log = _log.i
     wanted = data_settings(seed, size, scenes)
     manifest = root / MANIFEST
     if root.is_symlink():
-        from lfbench.runs.outputs import check_within
+        from lfbench.utils.outputs import check_within
 
         check_within(root, out, "the demo folder")
     if manifest.is_file():
@@ -206,7 +206,7 @@ def run_demo(out: str | Path = "lfbench-demo", *, seed: int = DEFAULT_SEED, size
     out = Path(out)
     requested = [create_from_spec(s) for s in methods] if methods else None  # spec errors before any work
     if out.is_dir():  # a cut commit is finished, or a journal or manifest that is not lfbench's refused, first
-        from lfbench.runs.outputs import read_manifest, recover
+        from lfbench.utils.outputs import read_manifest, recover
 
         recover(out)
         read_manifest(out)

@@ -9,7 +9,7 @@ table_ci_per_scene.{md,tex,csv} (``ci``); uncertainty.csv, table_uncertainty.md 
 figures/sparsification_*.png (``uncertainty``, when a method predicts an uncertainty map); html/
 (``site``: the HTML report of lfbench.reports.html, drawn from the run's own files).
 
-The files of a run appear together or not at all (lfbench.runs.outputs): they are written into a
+The files of a run appear together or not at all (lfbench.utils.outputs): they are written into a
 staging folder inside OUT and committed as one set, which replaces the previous run's set (files of
 an earlier run that this one does not write are dropped; other files in OUT are left alone).
 """
@@ -26,11 +26,11 @@ from typing import Any
 from lfbench.data.scene import Scene
 from lfbench.method.base import Method
 from lfbench.reports.maps import MAPS_DIR
-from lfbench.runs.outputs import staged_outputs
-from lfbench.runs.results import Results
+from lfbench.results import Results
 from lfbench.runs.runner import PredictionHook, check_names, evaluate, save_prediction
 from lfbench.scoring.metrics import GENERAL_METRICS, RUNTIME_METRICS, Metric
 from lfbench.scoring.rules import ScoringRules
+from lfbench.utils.outputs import staged_outputs
 
 __all__ = ["CIOptions", "evaluate_to_folder"]
 

@@ -12,7 +12,7 @@ from tqdm import tqdm
 
 from lfbench.data.scene import Scene
 from lfbench.method.base import Method, Prediction
-from lfbench.runs.results import Record, Results, RunInfo
+from lfbench.results import Record, Results, RunInfo
 from lfbench.scoring.metrics import GENERAL_METRICS, Metric
 from lfbench.scoring.rules import ScoringRules, score_scene
 from lfbench.utils.errors import DataError
