@@ -54,7 +54,7 @@ def warm() -> None:
     list_methods()
     for name in ("lfbench.runs.folder", "lfbench.runs.demo", "lfbench.reports.html", "lfbench.reports.from_results",
                  "lfbench.reports.toolkit_figures", "lfbench.scoring.stats", "lfbench.scoring.region_metrics",
-                 "lfbench.ablation.runner", "lfbench.ablation.report", "lfbench.ablation.html", "jinja2", "filelock"):
+                 "lfbench.ablation.runner", "lfbench.ablation.report", "jinja2", "filelock"):
         importlib.import_module(name)
     from lfbench.reports.plotting import pyplot
 

@@ -24,7 +24,7 @@ from collections.abc import Sequence
 
 import pandas as pd
 
-from lfbench.ablation.significance import LEVEL, scene_scores, t_interval
+from lfbench.ablation.significance import LEVEL, scene_scores, t_interval, within_range
 from lfbench.reports.sweep_table import SYNTH_PREFIX, scene_group
 from lfbench.scoring.metrics import get_metric
 
@@ -115,6 +115,7 @@ def baselines_table(info: pd.DataFrame, scores: pd.DataFrame, baselines: Sequenc
             for metric in metrics:
                 vals = [float(values.loc[(c, group), metric]) for c in cells.index if (c, group) in values.index]
                 mean, low, high = t_interval(vals)
+                low, high, _ = within_range(metric, low, high)  # the cell's interval within the metric's range
                 bound = (high if get_metric(metric).lower_is_better else low) if seeds else math.nan
                 mine[(metric, group)] = (mean, bound)
                 name = get_metric(metric).name

@@ -12,10 +12,16 @@ import numpy as np
 import pandas as pd
 
 from lfbench.ablation.spec import AblationSpec, cell_id, network_default, variant_values
+from lfbench.method.trainable import DEFAULT_TRAINABLE
 from lfbench.training.config import STAGE_KEYS
 from lfbench.training.losses import LOSSES
 
-__all__ = ["cell_info", "last_stage_loss", "loss_beta", "model_value"]
+__all__ = ["cell_info", "last_stage_loss", "loss_beta", "model_value", "network_of"]
+
+
+def network_of(spec: AblationSpec) -> str:
+    """The registered trainable network the spec's cells train (the default network without cells)."""
+    return spec.cells[0].config.get("method", DEFAULT_TRAINABLE) if spec.cells else DEFAULT_TRAINABLE
 
 
 def last_stage_loss(config: dict[str, Any]) -> tuple[str, dict[str, Any]]:

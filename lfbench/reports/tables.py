@@ -128,11 +128,3 @@ def write_table(table: pd.DataFrame, out_dir: str | Path, stem: str, caption: Se
         write_text(path, render_with_caption(table, fmt, caption))
         written.append(path)
     return written
-
-
-def write_tables(results: Results, out_dir: str | Path, stem: str = "table") -> list[Path]:
-    """Write per-scene and average tables as .md, .tex and .csv into out_dir; returns the paths."""
-    written = []
-    for name, table in (("per_scene", per_scene_table(results)), ("average", average_table(results))):
-        written += write_table(table, out_dir, f"{stem}_{name}")
-    return written

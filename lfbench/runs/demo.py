@@ -28,12 +28,14 @@ from lfbench.utils.errors import DataError, LFBenchError, SpecError
 from lfbench.utils.jsonfile import read_json
 
 MANIFEST = "demo.json"
-DATA_DIR = "data"  # the other folders are named by their owners (runs.folder, reports.maps, reports.html)
+DATA_DIR = "data"  # the other folders are named by their writers (lfbench.reports.writers, maps, html)
 CATEGORY = "synthetic"
 DEFAULT_SEED, DEFAULT_SIZE, DEFAULT_SCENES = 0, 128, 4
 
 Log = Callable[[str], None]
 _log = logging.getLogger(__name__)
+# The layers above (data generation, methods, scoring, writers) are imported where they are used: `lfbench`
+# builds every command's parser at start-up, and the demo's reads this module's defaults.
 
 
 @dataclass
@@ -192,37 +194,37 @@ def select_methods(requested: Sequence | None, scenes: Sequence, log: Log = _log
 def run_demo(out: str | Path = "lfbench-demo", *, seed: int = DEFAULT_SEED, size: int = DEFAULT_SIZE,
              scenes: int = DEFAULT_SCENES, methods: Sequence[str] | None = None, figures: bool = True,
              html: bool = True, progress: bool = True, log: Log = _log.info) -> DemoOutcome:
-    """Generate (or reuse) the demo data under ``out``, run and score the methods, write results,
-    tables and figures (lfbench.runs.folder.evaluate_to_folder), every method's maps (OUT/maps,
-    replacing an earlier run's as a whole) and, with ``html``, the HTML report (OUT/html).
+    """Generate (or reuse) the demo data under ``out``, run and score the methods and write results,
+    tables, figures, every method's maps (OUT/maps) and, with ``html``, the HTML report (OUT/html), as one
+    set (lfbench.runs.folder.evaluate_to_folder with the writers of lfbench.reports.writers).
     Returns a :class:`DemoOutcome`."""
     from lfbench.data.scene import Benchmark
     from lfbench.method.registry import create_from_spec
+    from lfbench.reports.html import SITE_DIR
     from lfbench.reports.maps import MAPS_DIR
-    from lfbench.runs.folder import FIGURES_DIR, evaluate_to_folder
+    from lfbench.reports.writers import FIGURES_DIR, Maps, SceneFigures, Site, Tables
+    from lfbench.runs.folder import evaluate_to_folder
+    from lfbench.utils.outputs import read_manifest, recover
 
     if int(scenes) != scenes or scenes < 1:
         raise SpecError(f"--scenes must be a positive integer, got {scenes}")
     out = Path(out)
     requested = [create_from_spec(s) for s in methods] if methods else None  # spec errors before any work
     if out.is_dir():  # a cut commit is finished, or a journal or manifest that is not lfbench's refused, first
-        from lfbench.utils.outputs import read_manifest, recover
-
         recover(out)
         read_manifest(out)
     root, reused = prepare_data(out, seed, size, scenes, log)
     scene_list = [s for s in Benchmark.discover(root) if s.has_gt()]
     chosen, skipped = select_methods(requested, scene_list, log)
-    results = evaluate_to_folder(chosen, scene_list, out, figures=figures, progress=progress, save_maps=True,
-                                 site=html, meta={"data_root": str(root), "demo": data_settings(seed, size, scenes),
-                                                  "skipped_methods": skipped})
+    writers = [*([SceneFigures()] if figures else []), Maps(), Tables(), *([Site()] if html else [])]
+    results = evaluate_to_folder(chosen, scene_list, out, writers=writers, progress=progress,
+                                 meta={"data_root": str(root), "demo": data_settings(seed, size, scenes),
+                                       "skipped_methods": skipped})
     files: dict[str, Path] = {"results.json": out / "results.json", "results.csv": out / "results.csv",
                               "tables": out, "data": root, "maps": out / MAPS_DIR}
     if figures:
         files["figures"] = out / FIGURES_DIR
     if html:
-        from lfbench.reports.html import SITE_DIR
-
         files["html"] = out / SITE_DIR / "index.html"
     return DemoOutcome(results=results, methods=[m.label for m in chosen], skipped=skipped, files=files,
                        reused_data=reused)
