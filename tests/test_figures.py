@@ -186,8 +186,8 @@ def test_curves_from_records_average_the_stored_thresholds():
               ("b", "badpix_0.01", 10.0), ("b", "mse_x100", 1.0))
     r = Results(records=[Record("m", s, k, v, "lowres") for s, k, v in values])
     series = fig.curves_from_records(r)
-    (label, (t, v)), = series.items()
-    assert label == "m (2 scenes)"
+    (method, (t, v, scenes)), = series.items()
+    assert method == "m" and scenes == 2
     np.testing.assert_allclose(t, [0.01, 0.07])
     np.testing.assert_allclose(v, [9.0, 3.0])
 

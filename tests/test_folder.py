@@ -11,8 +11,8 @@ from helpers import write_scene, write_submission
 from lfbench.data.scene import Benchmark
 from lfbench.method.registry import create
 from lfbench.reports.tables import TABLE_FORMATS, render, render_with_caption, write_table
-from lfbench.results import Results
 from lfbench.reports.writers import BootstrapCIs, SceneFigures, Tables
+from lfbench.results import Results
 from lfbench.runs import CIOptions, evaluate_to_folder
 
 SIZE = 40  # 10 x 10 scored pixels inside the 15 px border

@@ -33,7 +33,7 @@ import numpy as np
 
 from lfbench.data.scene import LOWRES, LightField
 from lfbench.method.base import Prediction
-from lfbench.reports.plotting import add_colorbar, as_gray, colormap, pyplot, save_figure
+from lfbench.reports.plotting import add_colorbar, as_gray, colormap, legend_label, method_colours, pyplot, save_figure
 from lfbench.scoring.metrics import bad_pix_curve, find_metric
 from lfbench.scoring.rules import ScoringRules, align_prediction, evaluation_mask, upsample_nearest
 from lfbench.utils.atomic import write_bytes, write_text
@@ -338,14 +338,26 @@ def average_curves(curves: Sequence[Curve]) -> dict[str, tuple[np.ndarray, np.nd
     return {m: (cs[0].thresholds, np.mean([c.values for c in cs], axis=0), len(cs)) for m, cs in out.items()}
 
 
+def plot_mean_series(averaged: Mapping[str, tuple[np.ndarray, np.ndarray, int]], path: str | Path, title: str, *,
+                     markers: bool = False, colours: Mapping[str, str] | None = None) -> Path:
+    """:func:`plot_badpix_series` of series averaged over scenes (method -> (t, values, number of scenes), as
+    :func:`average_curves` and :func:`curves_from_records` give them), each labelled with its scene count."""
+    return plot_badpix_series({m: (t, v) for m, (t, v, _) in averaged.items()}, path, title, markers=markers,
+                              colours=colours, scenes={m: k for m, (_, _, k) in averaged.items()})
+
+
 @plain_text
-def plot_badpix_series(series: Mapping[str, tuple[np.ndarray, np.ndarray]], path: str | Path, title: str,
-                       markers: bool = False) -> Path:
-    """BadPix(t) (%) against t (px), one line per method; dotted lines mark 0.01, 0.03 and 0.07."""
+def badpix_series_figure(series: Mapping[str, tuple[np.ndarray, np.ndarray]], title: str, *, markers: bool = False,
+                         colours: Mapping[str, str] | None = None, scenes: Mapping[str, int] | None = None) -> Any:
+    """The figure of :func:`plot_badpix_series` (not saved): the legend beside the axes, never over the
+    curves, its labels wrapped (plotting.legend_label)."""
     plt = pyplot()
-    fig, ax = plt.subplots(figsize=(6.4, 4.2))
-    for label, (t, v) in series.items():
-        ax.plot(t, v, marker="o" if markers else None, markersize=4, linewidth=1.5, label=label)
+    colours = colours if colours is not None else method_colours(list(series))
+    fig, ax = plt.subplots(figsize=(8.4, 4.2))
+    for method, (t, v) in series.items():
+        label = method if scenes is None else f"{method} ({scenes[method]} scene{'s' if scenes[method] != 1 else ''})"
+        ax.plot(t, v, marker="o" if markers else None, markersize=4, linewidth=1.5, label=legend_label(label),
+                color=colours.get(method))
     for t in MARKED_THRESHOLDS:
         ax.axvline(t, color="0.7", linestyle=":", linewidth=1)
     ax.set_xlim(0, 0.1)
@@ -355,8 +367,19 @@ def plot_badpix_series(series: Mapping[str, tuple[np.ndarray, np.ndarray]], path
     ax.set_title(title, fontsize=9)
     ax.grid(alpha=0.3)
     if series:
-        ax.legend(fontsize=7, loc="upper right")
+        ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0, frameon=False)
     fig.tight_layout()
+    return fig
+
+
+@plain_text
+def plot_badpix_series(series: Mapping[str, tuple[np.ndarray, np.ndarray]], path: str | Path, title: str, *,
+                       markers: bool = False, colours: Mapping[str, str] | None = None,
+                       scenes: Mapping[str, int] | None = None) -> Path:
+    """BadPix(t) (%) against t (px), one line per method (``series``: method -> (t, values)); dotted lines
+    mark 0.01, 0.03 and 0.07. ``colours``: method -> colour (default: plotting.method_colours in the
+    series' order); ``scenes``: method -> number of scenes averaged, added to its label."""
+    fig = badpix_series_figure(series, title, markers=markers, colours=colours, scenes=scenes)
     return save_figure(fig, path, dpi=110)
 
 
@@ -399,8 +422,10 @@ def read_curves_csv(path: str | Path) -> list[Curve]:
     return out
 
 
-def draw_badpix_curves(curves: Sequence[Curve], out_dir: str | Path) -> list[Path]:
-    """badpix_series.png (mean over scenes per method) in out_dir and <scene>/badpix_series.png per scene."""
+def draw_badpix_curves(curves: Sequence[Curve], out_dir: str | Path,
+                       colours: Mapping[str, str] | None = None) -> list[Path]:
+    """badpix_series.png (mean over scenes per method) in out_dir and <scene>/badpix_series.png per scene;
+    ``colours``: method -> colour (default: by first appearance in ``curves``)."""
     out = Path(out_dir)
     written = []
     by_scene: dict[str, dict[str, tuple[np.ndarray, np.ndarray]]] = {}
@@ -409,19 +434,20 @@ def draw_badpix_curves(curves: Sequence[Curve], out_dir: str | Path) -> list[Pat
         by_scene.setdefault(c.scene, {})[c.method] = (c.thresholds, c.values)
         res_of.setdefault(c.scene, set()).add(c.resolution)
     folders = file_names(by_scene, "scene", reserved=RESERVED_SCENE_NAMES)
+    colours = colours if colours is not None else method_colours([c.method for c in curves])
     for scene, series in by_scene.items():
         written.append(plot_badpix_series(series, out / folders[scene] / "badpix_series.png",
-                                          f"BadPix series, {scene} ({'/'.join(sorted(res_of[scene]))})"))
-    avg = average_curves(curves)
-    n = {m: k for m, (_, _, k) in avg.items()}
-    series = {f"{m} ({n[m]} scene{'s' if n[m] != 1 else ''})": (t, v) for m, (t, v, _) in avg.items()}
-    written.append(plot_badpix_series(series, out / "badpix_series.png", "BadPix series, mean over scenes"))
+                                          f"BadPix series, {scene} ({'/'.join(sorted(res_of[scene]))})",
+                                          colours=colours))
+    written.append(plot_mean_series(average_curves(curves), out / "badpix_series.png",
+                                    "BadPix series, mean over scenes", colours=colours))
     return written
 
 
 def curves_from_records(results: Any) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """Mean BadPix at the thresholds a results file holds (badpix_<t>), per method: the coarse series
-    available without the maps. Only scenes where the method has every threshold are averaged."""
+    available without the maps, method -> (thresholds, values, number of scenes) as :func:`average_curves`
+    gives them. Only scenes where the method has every threshold are averaged."""
     df = results.to_frame()
     thresholds = {}
     for metric_id in dict.fromkeys(df["metric"]):
@@ -436,8 +462,7 @@ def curves_from_records(results: Any) -> dict[str, tuple[np.ndarray, np.ndarray]
     for method, g in df.groupby("method", sort=False):
         table = g.pivot_table(index="scene", columns="t", values="value", aggfunc="first").dropna()
         if not table.empty:
-            out[f"{method} ({len(table)} scene{'s' if len(table) != 1 else ''})"] = (
-                table.columns.to_numpy(dtype=float), table.mean(axis=0).to_numpy(dtype=float))
+            out[method] = (table.columns.to_numpy(dtype=float), table.mean(axis=0).to_numpy(dtype=float), len(table))
     return out
 
 
@@ -461,11 +486,12 @@ class SceneFigureWriter:
     and, when ``curves`` is set, ``badpix_series.csv``, ``badpix_series.png`` (mean over scenes) and
     ``<scene>/badpix_series.png``. Only the row file names and the curves are kept in memory. Scene and
     method names are file names by lfbench.utils.names: two that would share a file are refused
-    (DataError) before anything of the second is drawn.
+    (DataError) before anything of the second is drawn. Each method keeps one colour on every series
+    chart (plotting.method_colours, by its place in ``methods``, else by arrival).
     """
 
     def __init__(self, out_dir: str | Path, rules: ScoringRules = ScoringRules(),
-                 threshold: float = BADPIX_THRESHOLD, curves: bool = True) -> None:
+                 threshold: float = BADPIX_THRESHOLD, curves: bool = True, methods: Sequence[str] = ()) -> None:
         self.out = Path(out_dir)
         self.rules = rules
         self.threshold = threshold
@@ -476,6 +502,7 @@ class SceneFigureWriter:
         self._scene_names = FileNames("scene", reserved=RESERVED_SCENE_NAMES)
         self._method_names = FileNames("method label", reserved=RESERVED_ROW_NAMES)
         self.written: set[Path] = set()
+        self._methods = list(methods)  # the order colours are given in; methods not named follow as they arrive
 
     def __call__(self, method: Any, scene: LightField, prediction: Prediction) -> None:
         self.add(method.label, scene, prediction)
@@ -488,6 +515,8 @@ class SceneFigureWriter:
         """Draw one prediction's row, re-assemble the scene's overview and update the curves."""
         pred = prediction if isinstance(prediction, Prediction) else Prediction(disparity=np.asarray(prediction))
         scene_name, method_name = self._scene_names(scene.name), self._method_names(label)
+        if label not in self._methods:
+            self._methods.append(label)
         scene_dir = self.out / scene_name
         gt = scene.gt_disparity()
         written = []
@@ -515,14 +544,12 @@ class SceneFigureWriter:
             if curve is not None:
                 self._curves[(label, scene.name)] = curve
                 written.append(write_curves_csv(self.curves, self.out / "badpix_series.csv"))
-                scene_curves = [c for c in self.curves if c.scene == scene.name]
-                series = {c.method: (c.thresholds, c.values) for c in scene_curves}
+                colours = method_colours(self._methods)
+                series = {c.method: (c.thresholds, c.values) for c in self.curves if c.scene == scene.name}
                 written.append(plot_badpix_series(series, scene_dir / "badpix_series.png",
-                                                  f"BadPix series, {scene.name} ({curve.resolution})"))
-                avg = average_curves(self.curves)
-                written.append(plot_badpix_series(
-                    {f"{m} ({k} scene{'s' if k != 1 else ''})": (t, v) for m, (t, v, k) in avg.items()},
-                    self.out / "badpix_series.png", "BadPix series, mean over scenes"))
+                                                  f"BadPix series, {scene.name} ({curve.resolution})", colours=colours))
+                written.append(plot_mean_series(average_curves(self.curves), self.out / "badpix_series.png",
+                                                "BadPix series, mean over scenes", colours=colours))
         self.written.update(written)
         return written
 

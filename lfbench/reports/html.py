@@ -40,7 +40,7 @@ from lfbench.reports import toolkit_figures as tk
 from lfbench.reports.leaderboard import all_metric_ranks, metric_info, metric_table, overall_ranks
 from lfbench.reports.maps import MAPS_DIR, SceneMaps, load_scene_maps, map_folders
 from lfbench.reports.paper import PAPER_RESOLUTION_COLUMN, average_with_paper, paper_column, per_scene_with_paper
-from lfbench.reports.plotting import colormap, write_image
+from lfbench.reports.plotting import colormap, method_colours, write_image
 from lfbench.reports.tables import average_table, per_scene_table
 from lfbench.results import Results, check_names
 from lfbench.scoring.rules import ScoringRules
@@ -398,6 +398,7 @@ def _write_site(inputs: SiteInputs, root: Path, threshold: float, pair_threshold
     # maps, drawn scene by scene (one scene's arrays in memory at a time unless the caller loaded them all)
     drawn: dict[str, dict[str, Any]] = {}
     curves: list[fig.Curve] = []
+    colours = method_colours(methods)  # one colour per method on every chart of the site
     rules = _rules(results)
     for name in scene_names:
         scene = scenes_by_name.get(name)
@@ -418,25 +419,25 @@ def _write_site(inputs: SiteInputs, root: Path, threshold: float, pair_threshold
             series = {c.method: (c.thresholds, c.values) for c in curves if c.scene == name}
             res = "/".join(sorted({c.resolution for c in curves if c.scene == name}))
             path = root / "img" / fig.safe_name(name) / "badpix_series.png"
-            fig.plot_badpix_series(series, path, f"BadPix series, {name} ({res})")
+            fig.plot_badpix_series(series, path, f"BadPix series, {name} ({res})", colours=colours)
             drawn[name]["series"] = f"img/{fig.safe_name(name)}/badpix_series.png"
         del sm
     figures: dict[str, str | None] = {"series": None, "radar": None, "radar_metrics": None}
     if curves:
-        avg = fig.average_curves(curves)
-        series = {f"{m} ({k} scene{'s' if k != 1 else ''})": (t, v) for m, (t, v, k) in avg.items()}
-        fig.plot_badpix_series(series, root / "img" / "badpix_series.png", "BadPix series, mean over scenes")
+        fig.plot_mean_series(fig.average_curves(curves), root / "img" / "badpix_series.png",
+                             "BadPix series, mean over scenes", colours=colours)
         figures["series"] = "img/badpix_series.png"
     else:
-        series = fig.curves_from_records(results)
-        if series:
-            fig.plot_badpix_series(series, root / "img" / "badpix_series.png",
-                                   "BadPix at the thresholds in the results, mean over scenes", markers=True)
+        averaged = fig.curves_from_records(results)
+        if averaged:
+            fig.plot_mean_series(averaged, root / "img" / "badpix_series.png",
+                                 "BadPix at the thresholds in the results, mean over scenes", markers=True,
+                                 colours=colours)
             figures["series"] = "img/badpix_series.png"
     radar = tk.radar_scores(results)
     radar_ok = len(radar.index) >= 3
     if radar_ok:
-        tk.plot_radar(radar, root / "img" / "radar.png")
+        tk.plot_radar(radar, root / "img" / "radar.png", colours=colours)
         figures["radar"] = "img/radar.png"
         figures["radar_metrics"] = ", ".join(metric_info(m).name for m in radar.index)
 
@@ -460,7 +461,8 @@ def _write_site(inputs: SiteInputs, root: Path, threshold: float, pair_threshold
         radar_src = None
         if radar_ok and m in radar.columns:
             rel = f"img/radar_{fig.safe_name(m)}.png"
-            tk.plot_radar(radar, root / rel, highlight=m, title=f"{m} against the other methods (median over scenes)")
+            tk.plot_radar(radar, root / rel, highlight=m, title=f"{m} against the other methods (median over scenes)",
+                          colours=colours)
             radar_src = rel
         write_text(root / method_pages[m], env.get_template("method.html").render(
             **common, page="method", method=m, method_table=_method_table(results, m, scene_pages, ci, ranks),

@@ -12,6 +12,7 @@ matplotlib is imported on first use: commands that draw nothing do not pay its s
 from __future__ import annotations
 
 import io
+import textwrap
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -22,14 +23,33 @@ from PIL import Image
 from lfbench.utils.atomic import write_bytes
 from lfbench.utils.errors import SpecError
 
-__all__ = ["DPI", "FIGURE_FORMATS", "INTERPOLATION_COLOURS", "add_colorbar", "as_gray", "colormap", "pyplot",
-           "save_figure", "save_formats", "write_image"]
+__all__ = ["DPI", "FIGURE_FORMATS", "INTERPOLATION_COLOURS", "LEGEND_WIDTH", "add_colorbar", "as_gray", "colormap",
+           "legend_label", "method_colours", "pyplot", "save_figure", "save_formats", "write_image"]
 
 DPI = 90  # of the figures drawn by save_figure unless a caller says otherwise
 FIGURE_FORMATS = ("png", "pdf", "svg")
 _NO_LINK_METADATA = {"png": {"Software": None}, "pdf": {"Producer": None, "Creator": None}, "svg": {"Creator": None}}
 #: The colour of each disparity interpolation on the Table IV figures (plane sweep and ablation plots).
 INTERPOLATION_COLOURS = {"bilinear": "tab:blue", "nearest": "tab:orange", "phase": "tab:green"}
+#: matplotlib's ten default line colours (tab10, its default cycle), then tab20b's twenty: method colours.
+_METHOD_PALETTE = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f",
+                   "#bcbd22", "#17becf",
+                   "#393b79", "#5254a3", "#6b6ecf", "#9c9ede", "#637939", "#8ca252", "#b5cf6b", "#cedb9c",
+                   "#8c6d31", "#bd9e39", "#e7ba52", "#e7cb94", "#843c39", "#ad494a", "#d6616b", "#e7969c",
+                   "#7b4173", "#a55194", "#ce6dbd", "#de9ed6")
+LEGEND_WIDTH = 30  # characters per legend line: longer labels wrap instead of running off the figure
+
+
+def method_colours(labels: Sequence[str]) -> dict[str, str]:
+    """One colour per method, by its position in ``labels`` (e.g. the results' methods): matplotlib's ten
+    default colours, then tab20b's twenty, then again from the start. Every chart of a report draws a
+    method in this colour, so a method is the same colour on the radar and on the BadPix series."""
+    return {label: _METHOD_PALETTE[i % len(_METHOD_PALETTE)] for i, label in enumerate(dict.fromkeys(labels))}
+
+
+def legend_label(label: str, width: int = LEGEND_WIDTH) -> str:
+    """``label`` wrapped to lines of at most ``width`` characters (long words broken), for a legend."""
+    return "\n".join(textwrap.wrap(label, width, break_on_hyphens=False)) or label
 
 
 def pyplot():

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from lfbench.reports.plotting import add_colorbar, as_gray, colormap, pyplot, save_formats
+from lfbench.reports.plotting import add_colorbar, as_gray, colormap, legend_label, method_colours, pyplot, save_formats
 from lfbench.utils.errors import SpecError
 from lfbench.utils.figure_text import plain_text
 
@@ -36,8 +36,8 @@ __all__ = [
     "A_BETTER", "B_BETTER", "HEATMAP_CMAP", "OUTSIDE", "PAIRWISE_LIMIT", "PAIRWISE_THRESHOLD", "TIE",
     "absolute_error", "bad_fraction_map", "heatmap_image", "median_error_map", "pairwise_classes",
     "pairwise_difference", "pairwise_image", "pairwise_shares", "plot_error_heatmaps", "plot_pairwise",
-    "plot_radar", "radar_metric_ids", "radar_radii", "radar_scores", "save_formats", "toolkit_figures_from_scene_maps",
-    "write_toolkit_figures",
+    "plot_radar", "radar_figure", "radar_metric_ids", "radar_radii", "radar_scores", "save_formats",
+    "toolkit_figures_from_scene_maps", "write_toolkit_figures",
 ]
 
 PAIRWISE_LIMIT = 0.1  # px, colour range of the pairwise maps (the toolkit's)
@@ -249,19 +249,19 @@ def plot_error_heatmaps(gt_by_scene: Mapping[str, np.ndarray], preds_by_scene: M
 
 
 @plain_text
-def plot_radar(scores: pd.DataFrame, path: str | Path, *, title: str = "", highlight: str | None = None,
-               labels: Mapping[str, str] | None = None, formats: Sequence[str] = ("png",)) -> list[Path]:
-    """A radar chart of :func:`radar_scores` (rows metrics, columns methods): one closed line per
-    method, axes scaled by :func:`radar_radii`, ring values printed on each axis. ``highlight``: a
-    method drawn thicker (the others thinner). Needs at least 3 metrics."""
+def radar_figure(scores: pd.DataFrame, *, title: str = "", highlight: str | None = None,
+                 labels: Mapping[str, str] | None = None, colours: Mapping[str, str] | None = None) -> Any:
+    """The figure of :func:`plot_radar` (not saved): the chart at the left, the legend beside it with
+    labels wrapped to fit the figure (plotting.legend_label)."""
     if len(scores.index) < 3:
         raise SpecError(f"a radar chart needs at least 3 metrics, got {len(scores.index)}")
     plt = pyplot()
+    colours = colours if colours is not None else method_colours(list(scores.columns))
     radii = radar_radii(scores)
     n = len(scores.index)
     angles = (np.pi / 2 + np.arange(n) * 2 * np.pi / n) % (2 * np.pi)
-    fig = plt.figure(figsize=(6.6, 5.6))
-    ax = fig.add_axes((0.1, 0.08, 0.58, 0.78), projection="polar")
+    fig = plt.figure(figsize=(7.8, 5.6))
+    ax = fig.add_axes((0.085, 0.08, 0.49, 0.78), projection="polar")
     ax.set_ylim(0, 1)
     ax.set_yticks([0.2, 0.4, 0.6, 0.8, 1.0])
     ax.set_yticklabels([])
@@ -279,12 +279,24 @@ def plot_radar(scores: pd.DataFrame, path: str | Path, *, title: str = "", highl
     for method in scores.columns:
         r = radii[method].to_numpy(dtype=float)
         width = 2.6 if method == highlight else (1.0 if highlight else 1.8)
-        ax.plot(closed, np.r_[r, r[:1]], linewidth=width, label=method, alpha=1.0 if method == highlight or
-                not highlight else 0.7)
+        ax.plot(closed, np.r_[r, r[:1]], linewidth=width, label=legend_label(method), color=colours.get(method),
+                alpha=1.0 if method == highlight or not highlight else 0.7)
     ax.legend(loc="upper left", bbox_to_anchor=(1.12, 1.05), fontsize=8, frameon=False)
     fig.suptitle(title or "Median over scenes (outer ring = 1.2 x the largest value per axis; lower is better)",
                  fontsize=9)
-    return save_formats(fig, path, formats)
+    return fig
+
+
+@plain_text
+def plot_radar(scores: pd.DataFrame, path: str | Path, *, title: str = "", highlight: str | None = None,
+               labels: Mapping[str, str] | None = None, colours: Mapping[str, str] | None = None,
+               formats: Sequence[str] = ("png",)) -> list[Path]:
+    """A radar chart of :func:`radar_scores` (rows metrics, columns methods): one closed line per
+    method, axes scaled by :func:`radar_radii`, ring values printed on each axis. ``highlight``: a
+    method drawn thicker (the others thinner); ``colours``: method -> colour (default:
+    plotting.method_colours in the columns' order). Needs at least 3 metrics."""
+    return save_formats(radar_figure(scores, title=title, highlight=highlight, labels=labels, colours=colours),
+                        path, formats)
 
 
 def _metric_name(metric_id: str) -> str:
@@ -317,7 +329,7 @@ def toolkit_figures_from_scene_maps(results: Any, scene_maps: Iterable[Any], out
     written: list[Path] = []
     scores = radar_scores(results)
     if len(scores.index) >= 3:
-        written += plot_radar(scores, out / "radar", formats=formats)
+        written += plot_radar(scores, out / "radar", formats=formats, colours=method_colours(results.methods))
     gts, masks, centres, preds = {}, {}, {}, {}
     for sm in scene_maps:
         if sm.gt is None or not sm.preds:

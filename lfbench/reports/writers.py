@@ -43,12 +43,13 @@ from lfbench.reports.figures import (
     SceneFigureWriter,
     curves_from_records,
     draw_badpix_curves,
-    plot_badpix_series,
+    plot_mean_series,
     read_curves_csv,
 )
 from lfbench.reports.html import SITE_DIR, SiteInputs, SiteSection, build_site, site_inputs
 from lfbench.reports.maps import MAPS_DIR, MapSaver, SceneMaps
 from lfbench.reports.paper import PaperTables, average_with_paper, per_scene_with_paper
+from lfbench.reports.plotting import method_colours
 from lfbench.reports.tables import TABLE_FORMATS, average_table, per_scene_table, write_table
 from lfbench.reports.toolkit_figures import toolkit_figures_from_scene_maps
 from lfbench.results import Results
@@ -194,7 +195,8 @@ class SceneFigures(OutputWriter):
         self.writer: SceneFigureWriter | None = None
 
     def start(self, run: RunOutputs) -> None:
-        self.writer = SceneFigureWriter(run.stage / self.folder, rules=run.rules)
+        methods = run.results.methods if run.results is not None else ()  # colours in the results' order
+        self.writer = SceneFigureWriter(run.stage / self.folder, rules=run.rules, methods=methods)
         if not self.files:
             (run.stage / self.folder).mkdir(parents=True, exist_ok=True)
 
@@ -216,12 +218,14 @@ class CurveFigures(OutputWriter):
 
     def write(self, run: RunOutputs) -> list[Path]:
         out = run.stage / self.folder
+        colours = method_colours(run.results.methods)
         if self.curves is not None and self.curves.is_file():
             self.source = str(self.curves)
-            return draw_badpix_curves(read_curves_csv(self.curves), out)
+            return draw_badpix_curves(read_curves_csv(self.curves), out, colours)
         self.source = "the BadPix thresholds in the results (no curves saved: run evaluate --figures for full curves)"
-        return [plot_badpix_series(curves_from_records(run.results), out / "badpix_series.png",
-                                   "BadPix at the thresholds in the results, mean over scenes", markers=True)]
+        return [plot_mean_series(curves_from_records(run.results), out / "badpix_series.png",
+                                 "BadPix at the thresholds in the results, mean over scenes", markers=True,
+                                 colours=colours)]
 
 
 class ToolkitFigures(OutputWriter):
