@@ -225,9 +225,9 @@ def _section_table(section: SiteSection) -> dict[str, Any]:
     header += [{"label": str(c), "kind": "num" if num else "text"} for c, num in zip(table.columns, numeric,
                                                                                       strict=True)]
     rows = []
-    for key, r in table.iterrows():
+    for key, *values in table.itertuples(name=None):  # not iterrows: a row of mixed numbers would turn all float
         cells = [_cell(v) | {"num": True} if num else {"text": _fmt(v), "v": str(v), "num": False}
-                 for v, num in zip(r.tolist(), numeric, strict=True)]
+                 for v, num in zip(values, numeric, strict=True)]
         rows.append({"key": str(key), "cells": cells})
     return {"id": section.id, "title": section.title, "caption": list(section.caption), "header": header,
             "rows": rows}
