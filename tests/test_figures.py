@@ -145,7 +145,7 @@ def test_hook_writes_overviews_rows_and_curves(tmp_path):
     for k in range(2):
         gt = rng.uniform(-1.5, 1.5, (h, w)).astype(np.float32)
         scenes.append(ArrayLightField(views=rng.random((3, 3, h, w)).astype(np.float32), name=f"toy{k}", gt=gt))
-    hook = fig.scene_figure_hook(tmp_path / "figs")
+    hook = fig.SceneFigureWriter(tmp_path / "figs")
     preds = {}
     for label, sigma in (("oracle", 0.0), ("noisy", 0.05)):
         for lf in scenes:

@@ -13,10 +13,10 @@ Conventions of the benchmark's toolkit (docs/benchmark-rules.md, Outputs):
 Every panel is first computed as an RGB array by a pure function (``badpix_image``,
 ``signed_error_image``, ...), so tests can check exactly what is drawn. Files are written atomically.
 
-:class:`SceneFigureWriter` is the prediction hook of ``lfbench evaluate --figures``: each prediction is
-drawn into its own row PNG as it arrives, and the scene overview is re-assembled from the row PNGs
-on disk, so memory does not grow with the number of methods or scenes (only the BadPix curves,
-101 numbers per run, are kept).
+:class:`SceneFigureWriter` draws the figures of ``lfbench evaluate --figures``
+(lfbench.reports.writers.SceneFigures) and of a report's saved maps: each prediction is drawn into its own
+row PNG as it arrives, and the scene overview is re-assembled from the row PNGs on disk, so memory does
+not grow with the number of methods or scenes (only the BadPix curves, 101 numbers per run, are kept).
 """
 
 from __future__ import annotations
@@ -30,15 +30,19 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from PIL import Image
 
 from lfbench.data.scene import LOWRES, LightField
+from lfbench.data.submission import disp_map_path, read_submission_map
 from lfbench.method.base import Prediction
 from lfbench.reports.plotting import add_colorbar, as_gray, colormap, legend_label, method_colours, pyplot, save_figure
 from lfbench.scoring.metrics import bad_pix_curve, find_metric
 from lfbench.scoring.rules import ScoringRules, align_prediction, evaluation_mask, upsample_nearest
 from lfbench.utils.atomic import write_bytes, write_text
+from lfbench.utils.errors import DataError
 from lfbench.utils.figure_text import plain_text
 from lfbench.utils.names import FileNames, file_name, file_names
+from lfbench.utils.readfile import check_regular_file, read_text
 
 _log = logging.getLogger(__name__)
 
@@ -278,10 +282,6 @@ def draw_scene_header(lf: LightField, path: str | Path, gt: np.ndarray | None,
 
 def stack_rows(row_paths: Sequence[str | Path], path: str | Path) -> Path:
     """Stack row PNGs (equal widths, as drawn by this module) vertically into one PNG (atomic)."""
-    from PIL import Image
-
-    from lfbench.utils.readfile import check_regular_file
-
     images = []
     for p in row_paths:
         check_regular_file(p, "figure row")
@@ -400,12 +400,8 @@ def write_curves_csv(curves: Sequence[Curve], path: str | Path) -> Path:
 
 def read_curves_csv(path: str | Path) -> list[Curve]:
     """Curves written by :func:`write_curves_csv`; DataError naming the file when malformed."""
-    from lfbench.utils.errors import DataError
-
     path = Path(path)
     rows: dict[tuple[str, str, str], list[tuple[float, float]]] = {}
-    from lfbench.utils.readfile import read_text
-
     reader = csv.DictReader(io.StringIO(read_text(path, "curve file"), newline=""))
     if tuple(reader.fieldnames or ()) != CURVE_CSV_COLUMNS:
         raise DataError(f"expected columns {', '.join(CURVE_CSV_COLUMNS)}", path)
@@ -554,21 +550,12 @@ class SceneFigureWriter:
         return written
 
 
-def scene_figure_hook(out_dir: str | Path, rules: ScoringRules = ScoringRules(),
-                      threshold: float = BADPIX_THRESHOLD, curves: bool = True) -> SceneFigureWriter:
-    """The ``--figures`` hook of ``lfbench evaluate``: a callable (method, scene, prediction) -> None
-    that writes the per-scene overviews and BadPix-series curves into ``out_dir``."""
-    return SceneFigureWriter(out_dir, rules=rules, threshold=threshold, curves=curves)
-
-
 def figures_from_maps(scenes: Sequence[LightField], maps: Mapping[str, str | Path], out_dir: str | Path,
                       rules: ScoringRules = ScoringRules(), progress: bool = False) -> SceneFigureWriter:
     """Figures from saved maps: ``maps`` maps a method label to a submission folder
     (disp_maps/<scene>.pfm, as written by ``evaluate --save-maps`` or a published submission).
     Scenes without a map for a method are left out for that method. Returns the writer (its
     ``written`` files and ``curves``)."""
-    from lfbench.data.submission import disp_map_path, read_submission_map
-
     writer = SceneFigureWriter(out_dir, rules=rules)
     for scene in scenes:
         for label, folder in maps.items():

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from tabulate import tabulate
 
 from lfbench.reports import latex
 from lfbench.results import Results
@@ -95,8 +96,6 @@ def render(table: pd.DataFrame, fmt: str = "markdown", floatfmt: str = ".3f") ->
     rows = [[cell(v) for v in row] for row in flat.itertuples(index=False)]
     if fmt == "latex":
         return latex.tabular(headers, rows)  # every cell and header escaped (lfbench.reports.latex)
-    from tabulate import tabulate
-
     return tabulate(rows, headers=headers, tablefmt="github" if fmt == "markdown" else "simple",
                     disable_numparse=True) + "\n"
 

@@ -28,9 +28,12 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from lfbench.reports.maps import load_scene_maps
 from lfbench.reports.plotting import add_colorbar, as_gray, colormap, legend_label, method_colours, pyplot, save_formats
+from lfbench.scoring.metrics import find_metric
 from lfbench.utils.errors import SpecError
 from lfbench.utils.figure_text import plain_text
+from lfbench.utils.names import FileNames, file_names
 
 __all__ = [
     "A_BETTER", "B_BETTER", "HEATMAP_CMAP", "OUTSIDE", "PAIRWISE_LIMIT", "PAIRWISE_THRESHOLD", "TIE",
@@ -153,7 +156,6 @@ def radar_metric_ids(results: Any) -> list[str]:
     """The metrics a radar chart shows: the region and stratified metrics the results hold, else the
     general ones (in the tables' order)."""
     from lfbench.reports.tables import _metric_order
-    from lfbench.scoring.metrics import find_metric
 
     held = list(dict.fromkeys(r.metric for r in results.records))
     region = [m for m in held if getattr(find_metric(m), "category", "general") in ("region", "stratified")]
@@ -300,8 +302,6 @@ def plot_radar(scores: pd.DataFrame, path: str | Path, *, title: str = "", highl
 
 
 def _metric_name(metric_id: str) -> str:
-    from lfbench.scoring.metrics import find_metric
-
     found = find_metric(metric_id)
     return found.name if found is not None else metric_id
 
@@ -312,8 +312,6 @@ def write_toolkit_figures(results: Any, scenes: Sequence[Any], maps: Mapping[str
     """The toolkit's figures for papers into ``out_dir``: ``radar`` (from the results), and from the saved
     ``maps`` (method label -> submission folder) on ``scenes``: ``error_heatmaps`` and
     ``pairwise_<A>_vs_<B>`` for every pair of methods, each in ``formats``."""
-    from lfbench.reports.maps import load_scene_maps
-
     return toolkit_figures_from_scene_maps(results, (load_scene_maps(scene, maps, border_px) for scene in scenes),
                                            out_dir, formats=formats, threshold=threshold)
 
@@ -323,8 +321,6 @@ def toolkit_figures_from_scene_maps(results: Any, scene_maps: Iterable[Any], out
                                     threshold: float = PAIRWISE_THRESHOLD) -> list[Path]:
     """:func:`write_toolkit_figures` from maps already loaded (lfbench.reports.maps.SceneMaps, one per
     scene)."""
-    from lfbench.utils.names import FileNames, file_names
-
     out = Path(out_dir)
     written: list[Path] = []
     scores = radar_scores(results)
