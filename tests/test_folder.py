@@ -1,4 +1,4 @@
-"""lfbench.runs.evaluate_to_folder: the one orchestration behind evaluate, demo, golden.py and the ablation."""
+"""lfbench.runs.folder.evaluate_to_folder: the one orchestration behind evaluate, demo, golden.py and the ablation."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ from lfbench.method.registry import create
 from lfbench.reports.tables import TABLE_FORMATS, render, render_with_caption, write_table
 from lfbench.reports.writers import BootstrapCIs, SceneFigures, Tables
 from lfbench.results import Results
-from lfbench.runs import CIOptions, evaluate_to_folder
+from lfbench.runs.folder import CIOptions, evaluate_to_folder
 
 SIZE = 40  # 10 x 10 scored pixels inside the 15 px border
 
