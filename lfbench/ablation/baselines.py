@@ -161,7 +161,7 @@ def baselines_caption(metrics: Sequence[str] = VERDICT_METRICS, *, seeds: bool) 
     rule = (f"'{BEATS}' = better than the baseline on each of {how} on every scene group (synthetic: the mean over its "
             "scenes)")
     if seeds:
-        rule += (f"; with seeds, on each, the cell's {round(LEVEL * 100)} % t-interval over seeds must lie wholly on "
-                 f"the better side of the baseline's value (the baseline is deterministic); '{NOT_RESOLVED}' when "
-                 "the mean is better but the interval reaches the baseline")
+        rule += (f"; with seeds, on each, the cell's {round(LEVEL * 100)} % t-interval over seeds (within the metric's "
+                 "range) must lie wholly on the better side of the baseline's value (the baseline is deterministic); "
+                 f"'{NOT_RESOLVED}' when the mean is better but the interval reaches the baseline")
     return rule

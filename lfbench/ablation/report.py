@@ -69,8 +69,8 @@ from lfbench.utils.errors import DataError
 from lfbench.utils.names import file_name
 from lfbench.utils.outputs import check_within
 
-__all__ = ["AblationFigures", "AblationSite", "AblationTables", "cell_frame", "load_paper_tables", "saved_map_folders",
-           "report_writers", "spec_reference", "write_report"]
+__all__ = ["AblationFigures", "AblationSite", "AblationTables", "cell_frame", "load_paper_tables", "report_writers",
+           "run_writers", "saved_map_folders", "spec_reference", "write_report"]
 
 METRICS = ("badpix_0.07", "badpix_0.03", "badpix_0.01", "mse_x100")
 METRIC_NAMES = {"badpix_0.07": "BadPix 0.07 (%)", "badpix_0.03": "BadPix 0.03 (%)", "badpix_0.01": "BadPix 0.01 (%)",
