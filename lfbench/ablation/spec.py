@@ -6,7 +6,8 @@ Layout (paths are relative to the spec file's folder; ``~`` and ``${VARS}`` are 
 
     title = "Table IV: disparity interval x interpolation"
     table = "table4"            # paper table beside ours: table4 | table5 | beta | tables12 | none
-                                # (Tables I/II, per scene and average, are written for every spec)
+                                # (Tables I/II, per scene and average, are written for every spec;
+                                # with "none" no paper numbers unless [report] or --paper asks)
     base = "../configs/subfocal_cpu_small.toml"   # the training config every cell starts from,
                                 # or an inline [base] table in the training-config layout
     out = "runs/ablate/table4"  # default output folder (relative to the current directory)
@@ -53,8 +54,10 @@ Layout (paths are relative to the spec file's folder; ``~`` and ``${VARS}`` are 
     label = "SubFocal (published maps)"
     spec = "published:path=${LFBENCH_HCI_ROOT}/../published/subfocal"
 
-    [report]
-    paper_methods = ["SubFocal"]  # paper methods beside ours in Tables I/II
+    [report]                    # which paper stands beside ours (lfbench.reports.reference)
+    reference = "subfocal-tci2023"  # a registered reference, or "none" (default: the network's own
+                                # when the spec asks for a paper table or paper methods or --paper is given)
+    paper_methods = ["SubFocal"]  # its methods beside ours in Tables I/II (default: the reference's own)
 
 Grid axes: the network's own parameters (the base config's ``method``, a registered trainable:
 SubFocal's interval, interpolation, width, attention, d_min, d_max; ``Trainable.axes``), written into
@@ -184,7 +187,8 @@ class AblationSpec:
     shared_stage1: bool
     evaluation: Evaluation
     methods: tuple[ExtraMethod, ...] = ()
-    paper_methods: tuple[str, ...] = ("SubFocal",)
+    paper_methods: tuple[str, ...] | None = None  # None: the reference's own
+    reference: str | None = None  # a registered reference's name, "none", or None: the network's when asked
     out: str | None = None
     text: str = field(default="", repr=False)
     seeds: tuple[int, ...] = ()  # training seeds every cell runs (empty: the base config's seed, once)
@@ -253,7 +257,8 @@ def parse_spec(raw: dict[str, Any], source: Path, text: str = "") -> AblationSpe
     evaluation = _parse_evaluation(top.table("evaluation"), source)
     methods = _parse_methods(top.get("methods", list, []), source)
     report_t = top.table("report")
-    paper_methods = report_t.strings("paper_methods", ("SubFocal",))
+    paper_methods = report_t.strings("paper_methods") if "paper_methods" in report_t.raw else None
+    reference = report_t.get("reference", str, None)
     report_t.done()
     top.done()
 
@@ -283,7 +288,7 @@ def parse_spec(raw: dict[str, Any], source: Path, text: str = "") -> AblationSpe
         raise SpecError("evaluation: give synthetic = {seed, size, scenes} and/or data = ROOT with scenes", source)
     return AblationSpec(source=source, title=title, table=table, base_source=base_source, budget=budget,
                         cells=cells, shared_stage1=shared, evaluation=evaluation, methods=methods,
-                        paper_methods=paper_methods, out=out, text=text, seeds=seeds)
+                        paper_methods=paper_methods, reference=reference, out=out, text=text, seeds=seeds)
 
 
 def _parse_seeds(top: _Table) -> tuple[int, ...]:
