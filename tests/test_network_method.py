@@ -242,7 +242,7 @@ def test_results_are_keyed_by_the_weights_content_not_their_path(nets, tmp_path,
     for tag, spec in (("rel", "stack:weights=stack.pt"), ("abs", f"stack:weights={nets['stack']}"),
                       ("moved", f"stack:weights={moved}")):
         method = create_from_spec(spec)
-        runs[tag] = evaluate_to_folder([method], [scene], tmp_path / tag, tables=False, progress=False,
+        runs[tag] = evaluate_to_folder([method], [scene], tmp_path / tag, writers=(), progress=False,
                                        meta={"methods": {method.label: method.provenance()}})
     labels = {tag: set(r.methods) for tag, r in runs.items()}
     digest = __import__("hashlib").sha256(nets["stack"].read_bytes()).hexdigest()
