@@ -127,7 +127,7 @@ def test_table4_grid_expands_to_six_cells_with_the_budget(tmp_path):
 [budget]
 steps = [7, 3]
 batch = 2
-width = 4
+model = { width = 4 }
 patch = 24
 threads = 1
 [set]
@@ -203,6 +203,15 @@ def test_bad_budget_and_missing_base(tmp_path, capsys):
     path.write_text(path.read_text().replace("[budget]\nthreads = 1\n", "[budget]\nsteps = [5]\n"))
     code, err = run_main(["ablate", str(path), "--list"], capsys)
     assert code == 2 and "budget.steps: expected 2 numbers" in err and str(path) in err
+    # [budget.model] holds the network's own parameters, of their types; the old budget.width says where it went
+    for budget, problem in (("model = { width = 2.5 }", "budget.model: width: expected int, got float"),
+                            ("model = { widht = 4 }", "budget.model: unknown key(s): widht (accepted: angular, "
+                                                      "attention, d_max, d_min, interpolation, interval, width)"),
+                            ("width = 4", "budget.width: is now [budget.model] width")):
+        path.write_text(write_spec(tmp_path, "").read_text().replace("[budget]\nthreads = 1\n",
+                                                                     f"[budget]\n{budget}\n"))
+        code, err = run_main(["ablate", str(path), "--list"], capsys)
+        assert code == 2 and err.count("\n") == 1 and problem in err and str(path) in err, err
     other = tmp_path / "nobase.toml"
     other.write_text("base = \"missing.toml\"\n[evaluation]\nsynthetic = {seed = 1, size = 48, scenes = 1}\n")
     code, err = run_main(["ablate", str(other)], capsys)
@@ -298,7 +307,7 @@ def test_shared_stage1_is_trained_once_and_bit_identical(shared_run, tmp_path):
 def test_table5_has_the_paper_value_beside_ours(shared_run):
     _, out, _, run = shared_run
     t5 = pd.read_csv(out / "table5.csv").set_index("cell")
-    ours = [c for c in t5.columns if c.startswith("BadPix 0.07 (%), ours (width 2, batch 1, patch 16, 2+1 steps")]
+    ours = [c for c in t5.columns if c.startswith("BadPix 0.07 (%), ours (batch 1, patch 16, 2+1 steps")]
     theirs = "BadPix 0.07 (%), paper (RTX 3090, full training)"
     assert len(ours) == 1 and list(t5.columns).index(theirs) == list(t5.columns).index(ours[0]) + 1
     for cid, paper_value in (("loss=l1", 12.5), ("loss=uafl", 7.25)):
@@ -313,7 +322,7 @@ def test_table5_has_the_paper_value_beside_ours(shared_run):
     test_time = cells.loc["loss=uafl", "test time (s), ours (9x9x16x16, cpu, 1 thread)"]
     assert test_time == float("%.6g" % timing["test_s"])
     md = (out / "table5.md").read_text()
-    assert "paper (RTX 3090, full training)" in md and "ours (width 2" in md and "12.500" in md
+    assert "paper (RTX 3090, full training)" in md and "ours (batch 1" in md and "12.500" in md
     combined = Results.read(out / "results.json")
     assert set(combined.methods) == {"loss=l1", "loss=uafl"} and combined.meta["ablation"]["shared_stage1"]
     for stem in ("table5", "table_cells", "table_per_scene", "table_average"):

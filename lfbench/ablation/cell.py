@@ -94,8 +94,7 @@ def is_done(task: CellTask) -> bool:
 
 def write_train_config(task: CellTask) -> Path:
     """Write CELL/train.toml (unchanged if present with the same config; SpecError if it differs)."""
-    from lfbench.training.config import TrainConfig
-    from lfbench.training.loop import comparable
+    from lfbench.training.config import TrainConfig, comparable
 
     path = task.path / TRAIN_CONFIG
     header = (f"Ablation cell {task.cell_id}: written by lfbench ablate.\n"

@@ -40,7 +40,7 @@ from typing import Any
 
 from lfbench.ablation.cell import CellTask, is_done, read_marker, run_cell
 from lfbench.ablation.executor import ClusterOptions
-from lfbench.ablation.spec import AblationSpec, Cell, SyntheticEval, _sha
+from lfbench.ablation.spec import AblationSpec, Cell, SyntheticEval, sha256_of
 from lfbench.runs.outputs import OutputSet, prepare_output_folder, read_manifest, recover, staged_outputs
 from lfbench.runs.results import Results
 from lfbench.utils.atomic import fresh_dir, write_text
@@ -124,8 +124,8 @@ def _shared_stage1(spec: AblationSpec, folder: Path, links: dict[str, str], thre
                    log: Log) -> Path:
     from lfbench.ablation.cell import LOG, TRAIN_CONFIG
     from lfbench.ablation.toml_text import dumps
-    from lfbench.training.config import TrainConfig
-    from lfbench.training.loop import comparable, train
+    from lfbench.training.config import TrainConfig, comparable
+    from lfbench.training.loop import train
 
     cfg = spec.stage1_config()
     cfg["training"]["threads"] = threads
@@ -164,7 +164,7 @@ def make_tasks(spec: AblationSpec, out: Path, links: dict[str, dict[str, str]], 
         config["training"]["threads"] = threads
         tasks.append(CellTask(
             cell_id=cell.id, values=cell.values, config=config, fingerprint=cell.fingerprint,
-            eval_fingerprint=_sha([spec.evaluation.fingerprint(), [s for s, _ in scenes]]),
+            eval_fingerprint=sha256_of([spec.evaluation.fingerprint(), [s for s, _ in scenes]]),
             cell_dir=str(out / "cells" / cell.id), data_links=links[cell.id],
             stage1_dir=str(stage1) if stage1 is not None else None, scenes=scenes, evaluation=spec.evaluation,
             threads=threads, progress=progress))
@@ -293,7 +293,7 @@ def run_methods(spec: AblationSpec, out: Path, scenes: tuple[tuple[str, str], ..
     out_list = []
     for m in spec.methods:
         folder = out / "methods" / file_name(m.label)
-        key = _sha([m.spec, ev.fingerprint(), [s for s, _ in scenes]])
+        key = sha256_of([m.spec, ev.fingerprint(), [s for s, _ in scenes]])
         marker = folder / "method.json"
         done = read_json(marker, "method marker") if marker.is_file() else None
         if isinstance(done, dict) and done.get("key") == key:

@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import contextlib
 import functools
-import json
 import logging
 import os
 import shutil
@@ -48,7 +47,7 @@ from lfbench.data.scene import Benchmark, Scene, check_scene_names
 from lfbench.method.trainable import check_state_dict, get_trainable
 from lfbench.runs.outputs import read_manifest, recover, staged_outputs
 from lfbench.training import checkpoint as ckpt
-from lfbench.training.config import TrainConfig, expand_path
+from lfbench.training.config import TrainConfig, expand_path, resume_view
 from lfbench.training.curves import MAX_LOG_BYTES, RunLogger, default_loggers, parse_log_line
 from lfbench.training.data import PatchSampler, ValidationScene, load_scene_data, load_validation_scene
 from lfbench.training.distributed import DistContext, agree_on_resume, setup
@@ -63,13 +62,6 @@ from lfbench.utils.names import file_name
 from lfbench.utils.readfile import read_text
 from lfbench.utils.threads import torch_threads
 from lfbench.utils.tomlfile import MAX_TOML_BYTES
-
-# Settings that may change between a run and its resumption (they do not change the result).
-RESUME_FREE_KEYS = (("out",), ("training", "threads"), ("training", "prefetch"), ("training", "log_every"),
-                    ("training", "device"), ("training", "checkpoint_every"),
-                    ("training", "channels_last"), ("training", "workers"), ("training", "pin_memory"),
-                    ("training", "cudnn_benchmark"))
-
 
 EXPORTS = "train"  # the output set (lfbench.runs.outputs) of a run's final exports: final.pt and summary.json
 
@@ -126,17 +118,6 @@ def stage_weights_name(index: int, name: str) -> str:
     return f"stage{index + 1}_{file_name(name)}.pt"
 
 
-def resume_view(config: dict[str, Any], stages: int, in_progress: int | None = None) -> dict[str, Any]:
-    """:func:`comparable` with only the first ``stages`` stages: what a resumed run must keep. The stage
-    ``in_progress`` (index) is compared without its ``steps``: the learning rate is constant within a
-    stage, so cutting or extending the stage in progress gives the run the new config describes."""
-    d = comparable(config)
-    d["stages"] = [dict(s) for s in list(d.get("stages", []))[:stages]]
-    if in_progress is not None and in_progress < len(d["stages"]):
-        d["stages"][in_progress].pop("steps", None)
-    return d
-
-
 _STATE_TYPES: dict[str, tuple[type, ...]] = {
     "config": (dict,), "stage": (int,), "step": (int,), "global_step": (int,), "model": (dict,),
     "optimizer": (dict, type(None)), "rng": (dict,), "elapsed_s": (int, float), "best_badpix": (int, float),
@@ -160,17 +141,6 @@ def check_resume_state(state: dict[str, Any], path: Path) -> None:
     if state["stage"] > len(state["config"]["stages"]):
         raise DataError(f"training checkpoint is at stage {state['stage'] + 1}, beyond its config's "
                         f"{len(state['config']['stages'])} stage(s)", path)
-
-
-def comparable(config: dict[str, Any]) -> dict[str, Any]:
-    """The config without the settings that may change on resume."""
-    d = json.loads(json.dumps(config))
-    for keys in RESUME_FREE_KEYS:
-        node = d
-        for k in keys[:-1]:
-            node = node.get(k, {})
-        node.pop(keys[-1], None)
-    return d
 
 
 # --------------------------------------------------------------------------- data preparation
