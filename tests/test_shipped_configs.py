@@ -109,6 +109,31 @@ def test_shipped_files_parse_to_the_recorded_values(kind):
         assert json.dumps(now[path], sort_keys=True) == json.dumps(recorded[path], sort_keys=True), path
 
 
+def without_none(x: Any) -> Any:
+    if isinstance(x, dict):
+        return {k: without_none(v) for k, v in x.items() if v is not None}
+    if isinstance(x, list):
+        return [without_none(v) for v in x if v is not None]
+    return x
+
+
+def test_the_train_toml_of_every_shipped_cell_reads_back_as_its_config():
+    """What ``lfbench ablate`` writes as CELL/train.toml (tomli-w) is the cell's config: the same TOML values
+    (None entries left out) and the same parsed TrainConfig."""
+    import tomllib
+
+    from lfbench.utils.tomlfile import toml_text
+
+    with example_plugin_registered():
+        for path in shipped(SPECS):
+            for cell in load_spec(REPO / path).cells:
+                text = toml_text(cell.config, f"cell {cell.id}\nsecond line")
+                assert text.startswith(f"# cell {cell.id}\n# second line\n")
+                back = tomllib.loads(text)
+                assert json.dumps(back, sort_keys=True) == json.dumps(without_none(cell.config), sort_keys=True)
+                assert TrainConfig.from_dict(back) == cell.train_config(), (path, cell.id)
+
+
 if __name__ == "__main__":
     os.environ.setdefault("LFBENCH_HCI_ROOT", HCI_ROOT)
     data = snapshot()  # one line per file: a change shows as the files it touches

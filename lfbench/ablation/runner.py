@@ -49,6 +49,7 @@ from lfbench.utils.hardware import available_cores
 from lfbench.utils.jsonfile import json_text, read_json
 from lfbench.utils.log import log_to_file
 from lfbench.utils.names import file_name
+from lfbench.utils.tomlfile import toml_text
 
 Log = Callable[[str], None]
 _log = logging.getLogger(__name__)
@@ -123,7 +124,6 @@ def run_shared_stage1(spec: AblationSpec, out: Path, links: dict[str, str], thre
 def _shared_stage1(spec: AblationSpec, folder: Path, links: dict[str, str], threads: int, progress: bool | None,
                    log: Log) -> Path:
     from lfbench.ablation.cell import LOG, TRAIN_CONFIG
-    from lfbench.ablation.toml_text import dumps
     from lfbench.training.config import TrainConfig, comparable
     from lfbench.training.loop import train
 
@@ -132,7 +132,7 @@ def _shared_stage1(spec: AblationSpec, folder: Path, links: dict[str, str], thre
     path = folder / TRAIN_CONFIG
     if path.is_file() and comparable(TrainConfig.from_toml(path).to_dict()) != comparable(cfg):
         raise SpecError(f"{path} holds another stage-1 config; use another --out folder")
-    write_text(path, dumps(cfg, f"The shared stage 1 of {spec.source}: written by lfbench ablate."))
+    write_text(path, toml_text(cfg, f"The shared stage 1 of {spec.source}: written by lfbench ablate."))
     for category, target in links.items():
         link = folder / "data" / category
         if link.is_symlink() and link.resolve() != Path(target).resolve():

@@ -74,12 +74,12 @@ def run(args: argparse.Namespace) -> int:
         spec = dataclasses.replace(spec, cells=tuple(known[c] for c in wanted))
     out = args.out or (Path(spec.out) if spec.out else Path("runs") / "ablate" / args.spec.stem)
     if args.list:
-        from lfbench.ablation.toml_text import dumps
+        from lfbench.utils.tomlfile import toml_text
 
         print(f"{spec.title}: {len(spec.cells)} cell(s), budget {spec.budget_label()}"
               f"{', shared stage 1' if spec.shared_stage1 else ''}; output {out}")
         for cell in spec.cells:
-            print(f"\n## cell {cell.id}\n{dumps(cell.config)}", end="")
+            print(f"\n## cell {cell.id}\n{toml_text(cell.config)}", end="")
         for m in spec.methods:
             print(f"\n## method {m.label}: {m.spec}")
         return 0
