@@ -150,6 +150,21 @@ data.scene_weights = { synth_1_0 = 2.0 }
                                                                            ("model.attention=false", False)]
 
 
+def test_only_the_synthetic_sets_the_cells_read_are_generated(tmp_path):
+    """A base config's validation set that [set] "data.validation" = [] leaves unused is not generated."""
+    from lfbench.ablation.runner import prepare_training_data
+
+    sets = ('"data.synthetic" = [{category = "synthetic", seed = 1, size = 16, scenes = 1}, '
+            '{category = "synthetic_val", seed = 2, size = 16, scenes = 1}]\n')
+    for validation, generated in (("[]", ["synthetic_s1_16px_1"]),
+                                  ('["synthetic_val"]', ["synthetic_s1_16px_1", "synthetic_val_s2_16px_1"])):
+        out = tmp_path / validation.strip('[]"') / "out"
+        spec = load_spec(write_spec(out.parent, "", f'[set]\n{sets}"data.validation" = {validation}\n'))
+        links = prepare_training_data(spec.cells, out, quiet)
+        assert sorted(p.name for p in (out / "data").iterdir()) == generated
+        assert sorted(links["base"]) == sorted(n.split("_s")[0] for n in generated)
+
+
 def test_loss_and_beta_axes(tmp_path):
     spec = load_spec(write_spec(tmp_path, """
 table = "table5"

@@ -75,15 +75,16 @@ def _generate(target: Path, seed: int, size: int, scenes: int, category: str, lo
 
 
 def prepare_training_data(cells: tuple[Cell, ...], out: Path, log: Log) -> dict[str, dict[str, str]]:
-    """Generate every [[data.synthetic]] set of the cells once into OUT/data/; returns, per cell id,
-    category -> folder (linked into the cell as CELL/data/<category>)."""
+    """Generate every [[data.synthetic]] set the cells read (DataConfig.synthetic_in_use: not a validation set
+    that data.validation = [] leaves unused) once into OUT/data/; returns, per cell id, category -> folder
+    (linked into the cell as CELL/data/<category>)."""
     links: dict[str, dict[str, str]] = {}
     for cell in cells:
         links[cell.id] = {}
-        for syn in cell.config["data"].get("synthetic", []):
-            name = f"{syn['category']}_s{syn['seed']}_{syn['size']}px_{syn['scenes']}"
-            folder = _generate(out / "data" / name, syn["seed"], syn["size"], syn["scenes"], syn["category"], log)
-            links[cell.id][syn["category"]] = str(folder)
+        for syn in cell.train_config().data.synthetic_in_use():
+            name = f"{syn.category}_s{syn.seed}_{syn.size}px_{syn.scenes}"
+            folder = _generate(out / "data" / name, syn.seed, syn.size, syn.scenes, syn.category, log)
+            links[cell.id][syn.category] = str(folder)
     return links
 
 

@@ -10,6 +10,8 @@ that runs its checkpoints), and says:
   class docstring, are the ``[model]`` keys and the ablation axes (:attr:`Trainable.axes`);
 - what the network returns (the contract below) and whether it has a distribution over disparities
   (:attr:`Trainable.distribution`; the distribution losses js, kl, l1+js, l1+kl, uafl need one);
+- optionally, how a stage is optimised: :meth:`Trainable.configure_optimizers` (default: Adam with the
+  stage's lr, betas and eps, a constant rate);
 - how a trained checkpoint becomes a runnable method: :attr:`Trainable.method` (the registered
   method that takes ``weights=PATH``, default the same name) and :meth:`Trainable.runner`;
 - what ``lfbench bench`` times: :meth:`Trainable.infer` (one whole light field), :meth:`Trainable.flops`
@@ -46,6 +48,7 @@ if TYPE_CHECKING:  # torch is imported where a network is built, not by `lfbench
     import torch
 
     from lfbench.method.base import Method
+    from lfbench.training.config import StageConfig
 
 DEFAULT_TRAINABLE = "subfocal"  # what a training config without ``method = ...`` trains
 #: The most a network may hold in parameters and buffers (SubFocal at the paper's width: 19 MiB; at its
@@ -148,6 +151,20 @@ class Trainable:
         """What a checkpoint stores as ``config``: ``net.config()`` when the network has one, else ``params``."""
         config = getattr(net, "config", None)
         return dict(config()) if callable(config) else dict(params)
+
+    # -- training --------------------------------------------------------------------------------
+
+    def configure_optimizers(self, net: torch.nn.Module, stage: StageConfig
+                             ) -> torch.optim.Optimizer | tuple[torch.optim.Optimizer, Any]:
+        """The optimizer of one training stage (``lfbench train`` makes a fresh one per stage) and, optionally,
+        its learning-rate schedule (a ``torch.optim.lr_scheduler`` stepped after every optimizer step; its
+        state is kept in checkpoints): an optimizer, or ``(optimizer, schedule or None)``. ``stage`` holds
+        the stage's options (``lr``, ``betas``, ``eps``, ``steps``, ``name``). Default: Adam with the stage's
+        lr, betas and eps (1e-7, Keras's), at a constant rate (so the steps of the stage in progress may
+        change on resume)."""
+        import torch
+
+        return torch.optim.Adam(net.parameters(), lr=stage.lr, betas=stage.betas, eps=stage.eps)
 
     # -- checkpoints -----------------------------------------------------------------------------
 

@@ -62,7 +62,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from lfbench.data.synth import MAX_SYNTH_SIZE
+from lfbench.data.scene import SPLITS
+from lfbench.data.synth import MAX_SYNTH_SIZE, scene_name
 from lfbench.method.trainable import DEFAULT_TRAINABLE, Trainable, get_trainable
 from lfbench.training.losses import NEEDS_DISTRIBUTION, make_loss
 from lfbench.utils.envvars import expand_vars
@@ -115,7 +116,7 @@ class SyntheticSpec:
     scenes: int = option(8, low=1, high=MAX_SCENES, help="number of scenes")
 
     def scene_names(self) -> tuple[str, ...]:
-        return tuple(f"synth_{self.seed}_{i}" for i in range(self.scenes))
+        return tuple(scene_name(self.seed, i) for i in range(self.scenes))
 
 
 def _stride_weights(values: dict[str, Any], index: int | None) -> tuple[float, ...]:
@@ -127,8 +128,8 @@ def _stride_weights(values: dict[str, Any], index: int | None) -> tuple[float, .
 class DataConfig:
     roots: tuple[str, ...] = option((), single=True, help="HCI-layout data roots (ROOT/<category>/<scene>)")
     synthetic: tuple[SyntheticSpec, ...] = option(
-        (), single=True, help="synthetic scene sets generated into OUT/data/<category> (only those that train or "
-                              "validation select, when train names scenes)")
+        (), single=True, help="synthetic scene sets generated into OUT/data/<category> (when train names scenes: "
+                              "only the sets that train or validation select)")
     train: tuple[str, ...] = option((), single=True, help="training scenes: names, categories or splits "
                                                             "(empty: every scene with gt but the validation ones)")
     validation: tuple[str, ...] = option((), single=True, help="scenes scored during training (need gt)")
@@ -149,6 +150,17 @@ class DataConfig:
         if len(self.strides) != len(self.stride_weights):
             raise SpecError(f"data.stride_weights needs one weight per stride: {list(self.strides)} vs "
                             f"{list(self.stride_weights)}")
+
+    def synthetic_in_use(self) -> tuple[SyntheticSpec, ...]:
+        """The [[data.synthetic]] sets a run reads (and so generates): all of them when ``train`` is empty
+        (every scene with gt trains), else those that ``train`` or ``validation`` select by category, scene
+        name or split."""
+        if not self.train:
+            return self.synthetic
+        names = {*self.train, *self.validation}
+        split_categories = {c for n in names if n in SPLITS for c in SPLITS[n]}
+        return tuple(s for s in self.synthetic if s.category in names | split_categories
+                     or names.intersection(s.scene_names()))
 
     @staticmethod
     def check_options(values: dict[str, Any], t: Table) -> None:

@@ -179,7 +179,7 @@ def coerce(value: Any, kind: Any) -> Any:
         if len(items) == 2 and items[1] is Ellipsis:
             items = (items[0],) * len(value)
         elif len(value) != len(items):
-            raise TypeMismatch(type_name(kind), f"{len(value)} entries")
+            raise TypeMismatch(type_name(kind), f"list of {len(value)}")
         try:
             return tuple(coerce(v, k) for v, k in zip(value, items, strict=True))
         except TypeMismatch:
