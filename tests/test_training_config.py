@@ -158,6 +158,7 @@ def test_a_table_given_where_an_array_of_tables_is_declared_is_one_entry():
                                                                                   {"a": 1.0}),
     (7, Annotated[int, "help text"], 7), ({"x": [1]}, dict[str, Any], {"x": [1]}), ("x", Any, "x"),
     (5, "int", 5),  # an annotation that is not a type (unresolved): not checked here
+    ("a/b", Path | None, Path("a/b")),
 ])
 def test_coerce_accepts_values_of_the_declared_type(value, kind, expected):
     got = coerce(value, kind)
@@ -173,6 +174,7 @@ def test_coerce_accepts_values_of_the_declared_type(value, kind, expected):
     (1, tuple[str, ...], "expected list of str, got int"),
     ({"a": "x"}, dict[str, float], "expected table of float, got a table with list of str"),
     ("16", Annotated[int, "channels"], "expected int, got str"),
+    (5, str | None, "expected str, got int"), (5, Path | None, "expected str (a path), got int"),
 ])
 def test_coerce_names_both_types_and_never_the_value(value, kind, message):
     with pytest.raises(TypeMismatch) as info:

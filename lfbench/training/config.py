@@ -180,11 +180,11 @@ class DataConfig:
 class AugmentConfig:
     enabled: bool = option(True, help="augment at all (the authors' order: gamma, flip, rotate, noise, clip)")
     gamma: tuple[float, float] = option((0.8, 1.2), low=0.0, low_open=True,
-                                        help="[low, high] range of the random gamma (low <= high)")
-    flip: float = option(0.5, low=0.0, high=1.0, help="probability of a flip")
-    rotate: bool = option(True, help="random rotation by a multiple of 90 degrees")
-    noise: float = option(1.0 / 12.0, low=0.0, high=1.0, help="probability of added Gaussian noise")
-    noise_std: float = option(0.2 ** 0.5, low=0.0, help="scale of the noise: std = noise_std * U(0, 1)^2 ...")
+                                        help="[low, high]: every patch x becomes x^g, g ~ U(low, high)")
+    flip: float = option(0.5, low=0.0, high=1.0, help="probability of flipping the rows (and the angular rows)")
+    rotate: bool = option(True, help="rotate by k x 90 degrees, k uniform in 0..3 (views and angular grid)")
+    noise: float = option(1.0 / 12.0, low=0.0, high=1.0, help="probability of additive Gaussian noise")
+    noise_std: float = option(0.2 ** 0.5, low=0.0, help="the noise's std is U(0, 1) x noise_std")
 
     @staticmethod
     def check_options(values: dict[str, Any], t: Table) -> None:

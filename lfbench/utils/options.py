@@ -25,12 +25,13 @@ import types
 import typing
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
+from pathlib import PurePath
 from typing import Any
 
 from lfbench.utils.errors import SpecError
 
 __all__ = ["Option", "option", "option_fields", "is_section", "Table", "parse_section", "plain_dict", "coerce",
-           "TypeMismatch", "type_name", "option_paths", "reference_markdown", "bounds_text"]
+           "TypeMismatch", "type_name", "option_paths", "reference_markdown", "markdown_table", "bounds_text"]
 
 _KEY = "lfbench.option"
 
@@ -142,14 +143,16 @@ def type_name(kind: Any) -> str:
     if origin is tuple:
         items = typing.get_args(kind)
         if len(items) == 2 and items[1] is Ellipsis:
-            inner = items[0]
-            return "list of tables" if is_section(inner) else f"list of {type_name(inner)}"
+            inner = type_name(items[0])
+            return "list of tables" if inner == "table" else f"list of {inner}"
         return f"list of {len(items)} {type_name(items[0])}"
     if origin is dict:
         value = typing.get_args(kind)[1]
         return "table" if _strip(value) is Any else f"table of {type_name(value)}"
     if is_section(kind):
         return "table"
+    if isinstance(kind, type) and issubclass(kind, PurePath):
+        return "str (a path)"
     return getattr(kind, "__name__", str(kind))
 
 
@@ -157,8 +160,12 @@ def coerce(value: Any, kind: Any) -> Any:
     """``value`` as the declared type ``kind`` (an int becomes a float where a float is declared, a list a
     tuple); TypeMismatch naming both types otherwise. Unknown kinds (and ``Any``) accept anything."""
     kind = _strip(kind)
-    if kind is Any or kind is dataclasses.MISSING or kind is type(None):
+    if kind is Any or kind is dataclasses.MISSING:
         return value
+    if kind is type(None):
+        if value is None:
+            return value
+        raise TypeMismatch("none", _value_name(value))
     args = _union_args(kind)
     if args is not None:
         for a in args:
@@ -197,6 +204,9 @@ def coerce(value: Any, kind: Any) -> Any:
     if kind is float:
         if isinstance(value, (int, float)) and not isinstance(value, bool):
             return float(value)
+    elif issubclass(kind, PurePath):
+        if isinstance(value, (str, PurePath)):
+            return kind(value)
     elif kind is int:
         if isinstance(value, int) and not isinstance(value, bool):
             return value
@@ -429,9 +439,11 @@ def option_paths(cls: type, where: Callable[[Option], bool],
 
 # --------------------------------------------------------------------------- reference
 
-def _default_text(f: dataclasses.Field, opt: Option) -> str:
+def _default_text(f: dataclasses.Field, opt: Option, kind: Any) -> str:
     if opt.default_text is not None:
         return opt.default_text
+    if is_section(_optional(kind)) and _default(f) is not None:
+        return "see below"
     default = _default(f)
     if default is dataclasses.MISSING:
         return "required"
@@ -469,7 +481,7 @@ def reference_markdown(cls: type, heading: str = "", level: int = 2, free: dict[
         if opt.rest:
             rows.append(("*(any other key)*", "any", "", "", False, opt.help))
             continue
-        rows.append((f"`{f.name}`", type_name(kind), _default_text(f, opt), bounds_text(opt), opt.resume_free,
+        rows.append((f"`{f.name}`", type_name(kind), _default_text(f, opt, kind), bounds_text(opt), opt.resume_free,
                      opt.help))
         name = f"{heading.strip('[]')}.{f.name}" if heading else f.name
         if is_section(base):
@@ -479,20 +491,23 @@ def reference_markdown(cls: type, heading: str = "", level: int = 2, free: dict[
         elif typing.get_origin(_strip(base)) is dict and _strip(typing.get_args(_strip(base))[1]) is Any:
             nested.append((f"[{name}]", None, opt))
     head = ["key", "type", "default", "bounds"] + (["resume"] if resumable else []) + ["meaning"]
-    lines = []
-    if heading:
-        lines += [f"{'#' * level} `{heading}`", ""]
-    lines += ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
-    for key, typ, default, bounds, free_resume, meaning in rows:
-        cells = [key, typ, default, bounds] + (["may change" if free_resume else ""] if resumable else []) + [meaning]
-        lines.append("| " + " | ".join(_cell(c) for c in cells) + " |")
-    text = "\n".join(lines) + "\n"
+    table = markdown_table(head, [[key, typ, default, bounds] + (["may change" if free_resume else ""] if resumable
+                                                                 else []) + [meaning]
+                                  for key, typ, default, bounds, free_resume, meaning in rows])
+    text = (f"{'#' * level} `{heading}`\n\n" if heading else "") + table
     for sub_heading, sub, opt in nested:
         if sub is None:
             text += f"\n{'#' * level} `{sub_heading}`\n\n{_cell(opt.free_text or opt.help)}\n"
         else:
             text += "\n" + reference_markdown(sub, sub_heading, level)
     return text
+
+
+def markdown_table(head: list[str], rows: list[list[str]]) -> str:
+    """A Markdown table; cells on one line, ``|`` escaped."""
+    lines = ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
+    lines += ["| " + " | ".join(_cell(c) for c in row) + " |" for row in rows]
+    return "\n".join(lines) + "\n"
 
 
 def _all_options(cls: type) -> Iterator[tuple[dataclasses.Field, Option, Any]]:
