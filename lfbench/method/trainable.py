@@ -39,7 +39,7 @@ import dataclasses
 import inspect
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 
 from lfbench.method.registry import ENTRY_POINT_GROUP, Param, PluginRegistry, _decorator, signature_params
 from lfbench.utils.errors import DataError
@@ -48,7 +48,6 @@ if TYPE_CHECKING:  # torch is imported where a network is built, not by `lfbench
     import torch
 
     from lfbench.method.base import Method
-    from lfbench.training.config import StageConfig
 
 DEFAULT_TRAINABLE = "subfocal"  # what a training config without ``method = ...`` trains
 #: The most a network may hold in parameters and buffers (SubFocal at the paper's width: 19 MiB; at its
@@ -81,6 +80,16 @@ def check_network_size(build: Callable[..., torch.nn.Module], params: dict[str, 
         raise ValueError(f"the network would hold {size / 1024**3:.3g} GiB of parameters and buffers, more than "
                          f"lfbench builds ({MAX_NETWORK_BYTES / 1024**3:g} GiB)")
     return size
+
+
+class StageOptions(Protocol):
+    """What :meth:`Trainable.configure_optimizers` reads of a training stage (lfbench.training.config.StageConfig)."""
+
+    name: str
+    lr: float
+    steps: int
+    eps: float
+    betas: tuple[float, float]
 
 
 class Trainable:
@@ -154,7 +163,7 @@ class Trainable:
 
     # -- training --------------------------------------------------------------------------------
 
-    def configure_optimizers(self, net: torch.nn.Module, stage: StageConfig
+    def configure_optimizers(self, net: torch.nn.Module, stage: StageOptions
                              ) -> torch.optim.Optimizer | tuple[torch.optim.Optimizer, Any]:
         """The optimizer of one training stage (``lfbench train`` makes a fresh one per stage) and, optionally,
         its learning-rate schedule (a ``torch.optim.lr_scheduler`` stepped after every optimizer step; its
@@ -294,6 +303,6 @@ def list_trainables() -> list[str]:
     return TRAINABLES.names()
 
 
-__all__ = ["Trainable", "TrainableRegistry", "network_from_state", "network_bytes", "check_network_size",
-           "MAX_NETWORK_BYTES", "TRAINABLES", "DEFAULT_TRAINABLE",
+__all__ = ["Trainable", "StageOptions", "TrainableRegistry", "network_from_state", "network_bytes",
+           "check_network_size", "MAX_NETWORK_BYTES", "TRAINABLES", "DEFAULT_TRAINABLE",
            "register_trainable", "get_trainable", "list_trainables"]
