@@ -1,9 +1,10 @@
-"""nox sessions: tests, lint, regress, bench. `nox --no-venv -s NAME` runs one in the current environment
+"""nox sessions: tests, lint, regress, bench, mutation. `nox --no-venv -s NAME` runs one in the current environment
 (CI does that for speed: the project is already installed there)."""
 
 from __future__ import annotations
 
 import os
+import shutil
 from pathlib import Path
 
 import nox
@@ -51,3 +52,26 @@ def bench(session: nox.Session) -> None:
     """Speed and memory benchmarks (not part of the tests)."""
     _install(session)
     session.run("lfbench", "bench", *session.posargs)
+
+
+@nox.session
+def mutation(session: nox.Session) -> None:
+    """Mutation testing of the scoring core and the regression gate with mutmut (configured in pyproject.toml,
+    [tool.mutmut]); long (~35 min on 2 cores), so not a default session. Starts from scratch, re-checks in
+    fresh processes the mutants of code that runs at import, writes the survivors to results/mutation/
+    (README.md there) and fails if one has no reason. ``nox -s mutation -- --max-children 2`` passes
+    options to ``mutmut run``."""
+    if not isinstance(session.virtualenv, nox.virtualenv.PassthroughEnv):
+        session.install("-e", ".[test,mutation]")
+    shutil.rmtree(ROOT / "mutants", ignore_errors=True)  # cached verdicts would hide changed tests
+    out = ROOT / "results" / "mutation"
+    session.run("mutmut", "run", *(session.posargs or ["--max-children", "1"]))
+    session.run("python", str(out / "recheck_import_time.py"), "--out", str(out / "recheck_import_time.json"))
+    with open(out / "mutmut_results.txt", "w", encoding="utf-8") as f:
+        session.run("mutmut", "results", stdout=f, stderr=None)
+    with open(out / "survivors.txt", "w", encoding="utf-8") as f:
+        session.run("python", str(out / "survivors.py"), "--recheck", str(out / "recheck_import_time.json"),
+                    stdout=f, stderr=None)
+    # fails when a survivor has no reason: a test is missing, or classify.py must say why it is equivalent
+    session.run("python", str(out / "classify.py"), "--recheck", str(out / "recheck_import_time.json"),
+                "--out", str(out / "survivors_classified.md"))

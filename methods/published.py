@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Annotated
 
 from lfbench.data.scene import LightField
 from lfbench.data.submission import check_inside, disp_map_path, read_submission_map
@@ -20,12 +21,10 @@ def _scene_shape(lf: LightField) -> tuple[int, int] | None:
 
 @register_method("published")
 class PublishedResults(Method):
-    """Precomputed results in the benchmark's submission layout (disp_maps/, runtimes/).
+    """Precomputed results in the benchmark's submission layout (disp_maps/, runtimes/)."""
 
-    path: the submission folder (holding disp_maps/<scene>.pfm and runtimes/<scene>.txt)
-    """
-
-    def __init__(self, path: Path) -> None:
+    def __init__(self, path: Annotated[Path, "the submission folder (holding disp_maps/<scene>.pfm and "
+                                             "runtimes/<scene>.txt)"]) -> None:
         super().__init__(path=path)
         self.path = Path(path)
         if not (self.path / "disp_maps").is_dir():

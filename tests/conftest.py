@@ -19,6 +19,16 @@ def _hci_root() -> Path | None:
     return Path(value) if value and Path(value).is_dir() else None
 
 
+def pytest_sessionstart(session) -> None:
+    """Load every plugin installed in this environment into the process-wide registries before any test
+    puts a plugin of its own on sys.path (helpers.isolate_registries copies them as they are then)."""
+    from lfbench.method.registry import REGISTRY
+    from lfbench.method.trainable import TRAINABLES
+
+    REGISTRY.names()
+    TRAINABLES.names()
+
+
 def pytest_collection_modifyitems(config, items) -> None:
     for item in items:
         if "hci_root" in getattr(item, "fixturenames", ()):

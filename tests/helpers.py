@@ -173,22 +173,32 @@ def write_fake_plugin(root: Path, tag: str) -> dict[str, str]:
     return names
 
 
-def install_fake_plugin(site: Path, monkeypatch) -> dict[str, str]:
-    """Write a fake plugin distribution into ``site``, put it on sys.path and swap in a fresh
-    ``lfbench.method.registry.REGISTRY`` (undone by ``monkeypatch``; the caller drops the module from
-    sys.modules afterwards: see :func:`forget_module`)."""
-    import uuid
-
+def isolate_registries(monkeypatch) -> None:
+    """Let the process-wide method and trainable registries take what a test registers (and load entry
+    points added since they were filled: the installed plugins were loaded when the session started, see
+    conftest.pytest_sessionstart), and forget it afterwards (undone by ``monkeypatch``)."""
     import lfbench.method.registry as registry
+    import lfbench.method.trainable as trainable
+
+    for reg in (registry.REGISTRY, trainable.TRAINABLES):
+        for attr in ("_objects", "_entries", "_aliases", "load_errors"):
+            monkeypatch.setattr(reg, attr, dict(getattr(reg, attr)))
+        monkeypatch.setattr(reg, "_loaded", False)
+
+
+def install_fake_plugin(site: Path, monkeypatch) -> dict[str, str]:
+    """Write a fake plugin distribution into ``site``, put it on sys.path and isolate the registries
+    (:func:`isolate_registries`; the caller drops the module from sys.modules afterwards: see
+    :func:`forget_module`)."""
+    import uuid
 
     names = write_fake_plugin(site, uuid.uuid4().hex[:10])
     monkeypatch.syspath_prepend(str(site))
-    monkeypatch.setattr(registry, "REGISTRY", registry.MethodRegistry())
+    isolate_registries(monkeypatch)
     return names
 
 
 def forget_module(name: str) -> None:
-    import sys
 
     sys.modules.pop(name, None)
 
@@ -216,6 +226,29 @@ def assert_one_error_line(rc: int, err: str, *fragments: str) -> str:
     return lines[0]
 
 
+def install_package(src: Path, site: Path) -> None:
+    """``pip install SRC --target SITE`` (no network: --no-index, --no-deps, no build isolation); where
+    setuptools is absent (venvs of Python >= 3.12), the same distribution written by hand: the packages
+    the pyproject lists and a dist-info with its entry points."""
+    import shutil
+    import sys
+
+    if importlib.util.find_spec("setuptools") is not None:
+        subprocess.run([sys.executable, "-m", "pip", "install", "-q", "--no-deps", "--no-build-isolation",
+                        "--no-index", "--target", str(site), str(src)], check=True, capture_output=True)
+        return
+    pyproject = tomllib.loads((src / "pyproject.toml").read_text())
+    project = pyproject["project"]
+    for package in pyproject["tool"]["setuptools"]["packages"]:
+        shutil.copytree(src / package, site / package)
+    dist = site / f"{project['name'].replace('-', '_')}-{project['version']}.dist-info"
+    dist.mkdir(parents=True)
+    (dist / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {project['name']}\nVersion: {project['version']}\n")
+    lines = [f"[{group}]\n" + "".join(f"{k} = {v}\n" for k, v in eps.items())
+             for group, eps in project["entry-points"].items()]
+    (dist / "entry_points.txt").write_text("\n".join(lines))
+
+
 def example_grid() -> str:
     """The example plugin's ablation (examples/tiny_plugin/ablate_channels.toml: channels 4 and 8, 20 + 5 steps,
     1 thread) with every cell once per seed 1 and 2: 4 cells of seconds each (base: train_tiny.toml beside it)."""
@@ -232,19 +265,7 @@ def install_example_plugin(tmp: Path) -> tuple[Path, Path, dict[str, str]]:
     entry points). Returns (src, site, an environment whose PYTHONPATH holds site, one OpenMP thread)."""
     src, site = tmp / "src", tmp / "site"
     shutil.copytree(EXAMPLE_PLUGIN, src, ignore=shutil.ignore_patterns("build", "*.egg-info", "__pycache__"))
-    if importlib.util.find_spec("setuptools") is not None:
-        subprocess.run([sys.executable, "-m", "pip", "install", "-q", "--no-deps", "--no-build-isolation",
-                        "--no-index", "--target", str(site), str(src)], check=True, capture_output=True)
-    else:
-        project = tomllib.loads((src / "pyproject.toml").read_text())["project"]
-        shutil.copytree(src / "lfbench_tiny", site / "lfbench_tiny")
-        dist = site / f"{project['name'].replace('-', '_')}-{project['version']}.dist-info"
-        dist.mkdir(parents=True)
-        (dist / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {project['name']}\n"
-                                       f"Version: {project['version']}\n")
-        lines = [f"[{group}]\n" + "".join(f"{k} = {v}\n" for k, v in eps.items())
-                 for group, eps in project["entry-points"].items()]
-        (dist / "entry_points.txt").write_text("\n".join(lines))
+    install_package(src, site)
     assert (site / "lfbench_tiny" / "plugin.py").is_file()
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in (str(site), os.environ.get("PYTHONPATH")) if p),
            "OMP_NUM_THREADS": "1"}

@@ -305,7 +305,7 @@ def _wide_trainable():
     import torch
     from torch import nn
 
-    from lfbench.method.trainable import Trainable, TrainableRegistry, register_trainable
+    from lfbench.method.trainable import Trainable, register_trainable, trainable_registry
 
     class Wide(nn.Module):
         def __init__(self, channels: int = 8, angular: int = 9) -> None:
@@ -326,7 +326,7 @@ def _wide_trainable():
 
         network = Wide
 
-    return register_trainable("wide", TrainableRegistry("lfbench.tests.none"))(WideTrainable)()
+    return register_trainable("wide", trainable_registry(None))(WideTrainable)()
 
 
 def test_a_checkpoint_config_too_large_for_any_trainable_is_refused_before_building(tmp_path):

@@ -238,7 +238,7 @@ def test_cfg_without_a_required_key(data, capsys):
 
 
 @pytest.mark.parametrize("spec, fragment", [
-    ("nope", "unknown method 'nope'; available: "),
+    ("nope", "Unknown method 'nope'. Available: "),
     ("gt:foo=1", "method 'gt' has no parameter 'foo'"),
     ("published:path=/definitely/not/here", "not a submission folder"),
     ("published", "method 'published' needs parameter path"),
@@ -325,7 +325,7 @@ def test_usage_errors_are_one_line(capsys, tmp_path):
     rc, _, err = run_cli(capsys, "frobnicate")
     assert_one_error_line(rc, err, "invalid choice")
     rc, _, err = run_cli(capsys, "info", "nope")
-    assert_one_error_line(rc, err, "unknown method 'nope'")
+    assert_one_error_line(rc, err, "Unknown method 'nope'")
 
 
 # --------------------------------------------------------------------------- real processes
@@ -366,7 +366,7 @@ def test_process_zip_escape_and_unknown_method(data, tmp_path):
     assert_one_error_line(proc.returncode, proc.stderr, "absolute path")
     proc = _run([_script(), "predict", "--method", "nope:x=1", "--input", str(data["root"] / "training" / "alpha"),
                  "--out", str(tmp_path / "o.pfm")])
-    assert_one_error_line(proc.returncode, proc.stderr, "unknown method 'nope'")
+    assert_one_error_line(proc.returncode, proc.stderr, "Unknown method 'nope'")
 
 
 def test_process_plugin_discovered_through_entry_points(tmp_path):
@@ -434,18 +434,31 @@ def test_plugin_commands_come_from_entry_points(tmp_path, monkeypatch, capsys):
         f"empty-{tag} = lfbench_cmd_{tag}_empty\n"  # no add_arguments / run
         f"broken-{tag} = lfbench_cmd_{tag}_missing\n", encoding="utf-8")
     monkeypatch.syspath_prepend(str(site))
+    import sys
+
     try:
+        # `lfbench --help` lists a plugin command with its HELP, read from the source: nothing is imported
+        with pytest.raises(SystemExit) as exited:
+            main(["--help"])
+        out, err = capsys.readouterr()
+        assert exited.value.code == 0 and f"echo-{tag}" in out and "echo WORD times N" in out
+        assert f"lfbench_cmd_{tag}" not in sys.modules and f"lfbench_cmd_{tag}_empty" not in sys.modules
+        assert f"plugin command 'broken-{tag}'" in err and "its HELP could not be read" in err
+        # running one imports that command only
         assert main([f"echo-{tag}", "hi", "--times", "2"]) == 3
         out, err = capsys.readouterr()
-        assert out == "hi hi\n"
+        assert out == "hi hi\n" and f"lfbench_cmd_{tag}" in sys.modules
+        assert f"lfbench_cmd_{tag}_empty" not in sys.modules
         assert "plugin command 'evaluate'" in err and "would replace a built-in command" in err
+        assert main([f"empty-{tag}"]) == 2
+        err = capsys.readouterr().err
         assert f"plugin command 'empty-{tag}' failed to load (TypeError" in err and "add_arguments, run" in err
-        assert f"plugin command 'broken-{tag}' failed to load (ModuleNotFoundError" in err
+        assert main([f"broken-{tag}"]) == 2
+        assert f"plugin command 'broken-{tag}' failed to load (ModuleNotFoundError" in capsys.readouterr().err
         assert "lfbench.cli.evaluate" in main.__globals__["COMMANDS"].values()  # the built-in stays
     finally:
-        import sys
-
-        sys.modules.pop(f"lfbench_cmd_{tag}", None)
+        for name in (f"lfbench_cmd_{tag}", f"lfbench_cmd_{tag}_empty"):
+            sys.modules.pop(name, None)
 
 
 def test_convert_keras_is_the_subfocal_plugin_command():
@@ -454,3 +467,24 @@ def test_convert_keras_is_the_subfocal_plugin_command():
     eps = {ep.name: ep.value for ep in metadata.entry_points(group="lfbench.commands")}
     assert eps.get("convert-keras") == "lfbench_methods.subfocal.cli"
     assert "convert-keras" not in main.__globals__["COMMANDS"]
+
+
+def test_a_stop_on_sigint_is_reported_as_a_stop_not_an_error(tmp_path, monkeypatch, capsys):
+    """Issue 22.10: a resumable stop (SIGINT/SIGTERM during lfbench train) exits 130 with one line that
+    says it stopped and how to resume, not 'error:'."""
+    import types
+
+    import lfbench.training.config as config
+    import lfbench.training.loop as loop
+
+    def stop(cfg, out, **kwargs):
+        raise loop.TrainingInterrupted(f"stopped at stage 1 step 3; checkpoint written to {out}/checkpoint.pt; "
+                                       "run the same command to resume")
+
+    monkeypatch.setattr(config.TrainConfig, "from_toml", staticmethod(lambda path: types.SimpleNamespace(out=None)))
+    monkeypatch.setattr(loop, "train", stop)
+    rc, _, err = run_cli(capsys, "train", tmp_path / "c.toml", "--out", tmp_path / "run")
+    assert rc == 130 and err.strip().splitlines() == [
+        f"lfbench train: stopped at stage 1 step 3; checkpoint written to {tmp_path / 'run'}/checkpoint.pt; "
+        "run the same command to resume"]
+    assert "error" not in err

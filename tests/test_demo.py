@@ -98,7 +98,7 @@ def test_demo_refuses_a_foreign_folder_and_bad_specs_before_any_work(tmp_path, c
     assert "holds no lfbench demo" in capsys.readouterr().err
     assert sorted(p.name for p in (tmp_path / "mine").iterdir()) == ["notes.txt"]
     assert main(["demo", "--out", str(tmp_path / "new"), "--methods", "no_such_method"]) == 2
-    assert "unknown method" in capsys.readouterr().err
+    assert "Unknown method" in capsys.readouterr().err
     assert not (tmp_path / "new").exists()
 
 

@@ -1,12 +1,16 @@
-"""The example plugin (examples/tiny_plugin) installed the way a user installs it, then trained,
-evaluated, ablated and timed with lfbench's own commands (each in a fresh process, as on the command
-line): the trainable-network seam end to end, without lfbench knowing the plugin."""
+"""The example plugin (examples/tiny_plugin: one class, @register_trainable only) installed the way a
+user installs it, then listed, trained, evaluated, ablated and timed with lfbench's own commands (each in
+a fresh process, as on the command line): the trainable-network seam end to end, without lfbench knowing
+the plugin. The two-class style (a Method of its own beside the Trainable): test_network_method."""
 
 from __future__ import annotations
 
+import hashlib
 import json
+import shutil
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -15,6 +19,8 @@ import torch
 from helpers import install_example_plugin
 
 from lfbench.data.scene import Benchmark
+
+ROOT = Path(__file__).resolve().parent.parent
 
 pytestmark = pytest.mark.slow
 
@@ -49,14 +55,12 @@ def trained(plugin, tmp_path_factory):
 
 
 def _tiny_net(config: dict):
-    """TinyNet of the installed plugin (on sys.path through the fixture), imported with throw-away
-    registries so that this process's method and trainable registries stay as they were."""
-    import lfbench.method.registry as registry
-    import lfbench.method.trainable as trainable
+    """TinyNet of the installed plugin (on sys.path through the fixture), imported with isolated registries
+    so that this process's method and trainable registries stay as they were."""
+    from helpers import isolate_registries
 
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(registry, "REGISTRY", registry.MethodRegistry(group=None))
-        mp.setattr(trainable, "TRAINABLES", trainable.TrainableRegistry(group=None))
+        isolate_registries(mp)
         from lfbench_tiny.plugin import TinyNet
     return TinyNet(**config)
 
@@ -64,8 +68,14 @@ def _tiny_net(config: dict):
 def test_the_plugin_is_listed_with_its_parameters(plugin):
     _, env, _ = plugin
     out = _ok(lfbench(env, "methods"))
-    assert "tinycnn: A tiny CNN trained with lfbench train" in out
-    assert "weights (Path, required): checkpoint .pt written by lfbench train (OUT/final.pt)" in out
+    assert "tinycnn: A tiny CNN over the stacked views (lfbench's example plugin)." in out
+    assert "weights (Path | None, default None): weights file of this network" in out
+    # the network's own parameters, with their help (issue 22.2)
+    assert "channels (int, default 8, 1 to 1024): channels of the hidden 3x3 convolutions" in out
+    assert "interval (float, default 1.0, 0.01 to 8): step of the candidate disparities in px" in out
+    info = _ok(lfbench(env, "info", "tinycnn"))
+    assert info.count("channels of the hidden 3x3 convolutions") == 1  # each help line once
+    assert "no weights: give tinycnn:weights=FILE.pt" in info
 
 
 def test_lfbench_train_trains_the_plugin_network(plugin, trained):
@@ -93,8 +103,10 @@ def test_evaluate_runs_the_trained_weights(plugin, trained, tmp_path):
     _ok(lfbench(env, "synth", "--out", data, "--seed", "100", "--size", "64", "--scenes", "1", "--no-progress"))
     spec = f"tinycnn:weights={trained / 'final.pt'}"
     _ok(lfbench(env, "evaluate", "--data", data, "--method", spec, "--out", tmp_path / "eval"))
-    records = json.loads((tmp_path / "eval" / "results.json").read_text())["records"]
-    mse = {r["scene"]: r["value"] for r in records if r["method"] == spec and r["metric"] == "mse_x100"}
+    saved = json.loads((tmp_path / "eval" / "results.json").read_text())
+    label = f"tinycnn:weights=sha256:{hashlib.sha256((trained / 'final.pt').read_bytes()).hexdigest()[:12]}"
+    assert saved["meta"]["methods"][label]["weights"]["path"] == str(trained / "final.pt")  # provenance
+    mse = {r["scene"]: r["value"] for r in saved["records"] if r["method"] == label and r["metric"] == "mse_x100"}
     scene = Benchmark.discover(data).scenes[0]
     assert set(mse) == {scene.name}
 
@@ -112,6 +124,48 @@ def test_evaluate_runs_the_trained_weights(plugin, trained, tmp_path):
     assert mse[scene.name] == pytest.approx(reference, rel=1e-4)
     assert np.abs(trained_pred - untrained_pred).max() > 0.05  # the trained weights are the ones used
     assert reference < 100 * float(np.mean(np.square(gt - untrained_pred)))  # and they predict better
+
+
+def test_golden_records_of_a_relative_and_an_absolute_weights_path_compare_equal(plugin, trained, tmp_path):
+    """Issue 22.5: the same weights named relative to the working folder and by an absolute path (as in CI
+    and on a laptop) give records with the same keys: regress passes instead of 'MISSING' and 'NEW'."""
+    _, env, _ = plugin
+    data = tmp_path / "data"
+    _ok(lfbench(env, "synth", "--out", data, "--seed", "101", "--size", "48", "--scenes", "1", "--no-progress"))
+    shutil.copy(trained / "final.pt", tmp_path / "weights.pt")
+    rel = subprocess.run([sys.executable, "-m", "lfbench", "evaluate", "--data", "data", "--method",
+                          "tinycnn:weights=weights.pt", "--out", "rel"], env=env, capture_output=True, text=True,
+                         timeout=600, cwd=tmp_path)
+    _ok(rel)
+    _ok(lfbench(env, "evaluate", "--data", data, "--method", f"tinycnn:weights={tmp_path / 'weights.pt'}",
+                "--out", tmp_path / "abs"))
+    _ok(lfbench(env, "regress", tmp_path / "golden.json", tmp_path / "rel" / "results.json", "--update"))
+    out = _ok(lfbench(env, "regress", tmp_path / "golden.json", tmp_path / "abs" / "results.json", "--fail-on-new"))
+    assert "OK: 5 compared, 0 regressions" in out and "MISSING" not in out and "NEW" not in out
+    # a user-given label names them too
+    _ok(lfbench(env, "evaluate", "--data", data, "--method", f"tinycnn:weights={tmp_path / 'weights.pt'}",
+                "--label", "tiny-v1", "--out", tmp_path / "named"))
+    methods = {r["method"] for r in json.loads((tmp_path / "named" / "results.json").read_text())["records"]}
+    assert methods == {"tiny-v1"}
+
+
+def test_foreign_weights_and_bad_parameters_are_one_line(plugin, trained, tmp_path):
+    _, env, _ = plugin
+    data = tmp_path / "data"
+    _ok(lfbench(env, "synth", "--out", data, "--seed", "102", "--size", "48", "--scenes", "1", "--no-progress"))
+    shipped = ROOT / "methods" / "weights" / "subfocal_small.pt"
+    (tmp_path / "w.json").write_text('{"state_dict": {}}')
+    for spec, message in ((f"tinycnn:weights={shipped}", "a subfocal checkpoint, not tinycnn (run it as subfocal:"),
+                          (f"tinycnn:weights={tmp_path / 'w.json'}", "w.json: a JSON file, not a torch checkpoint"),
+                          (f"tinycnn:weights={trained / 'checkpoint.pt'}", "a training checkpoint"),
+                          (f"tinycnn:weights={trained / 'final.pt'},channels=4",
+                           "channels=4 (checkpoint: 8) conflicts with the weights"),
+                          (f"tinycnn:weights={trained / 'final.pt'},channels=0", "tinycnn:channels must be 1 to 1024"),
+                          (f"subfocal:weights={trained / 'final.pt'}", "a tinycnn checkpoint, not subfocal")):
+        proc = lfbench(env, "evaluate", "--data", data, "--method", spec, "--out", tmp_path / "never")
+        assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1, proc.stderr
+        assert message in proc.stderr and "weights_only" not in proc.stderr, proc.stderr
+        assert not (tmp_path / "never").exists()
 
 
 def test_ablate_over_a_plugin_parameter(plugin, tmp_path):
@@ -153,8 +207,25 @@ def test_bench_times_the_plugin_network(plugin, tmp_path):
                 "--steps", "1", "--threads", "1", "--json", tmp_path / "train.json"))
     (rec,) = json.loads((tmp_path / "train.json").read_text())
     assert rec["model"] == "tinycnn" and rec["channels"] == 4 and rec["steps_per_s"] > 0
-    proc = lfbench(env, "bench", "inference", "--model", "tinycnn", "--width", "3")
-    assert proc.returncode == 2 and "network 'tinycnn' has no parameter 'width'" in proc.stderr
+    out = _ok(lfbench(env, "bench", "train", "--model", "tinycnn", "--channels", "2", "4", "--batch", "1",
+                      "--patch", "16", "--steps", "1", "--threads", "1"))  # its own parameter as a flag
+    lines = [line for line in out.splitlines() if line.startswith("[train]")]
+    assert len(lines) == 2 and "channels 2" in lines[0] and "channels 4" in lines[1]
+    assert "path" not in out and "weight_grad" not in out  # SubFocal's training options are SubFocal's
+    # refused in one line before any case process starts (issue 22.9)
+    shipped = ROOT / "methods" / "weights" / "subfocal_small.pt"
+    for args, message in ((["inference", "--model", "tinycnn", "--width", "3"], "unrecognized arguments: --width"),
+                          (["inference", "--model", "tinycnn:channels=0"], "channels must be 1 to 1024, got 0"),
+                          (["inference", "--model", "tinycnn", "--channels", "0"], "channels must be 1 to 1024"),
+                          (["inference", "--model", "tinycnn", "--weights", str(shipped)],
+                           "a subfocal checkpoint, not tinycnn"),
+                          (["train", "--model", "tinycnn", "--path", "reference"], "unrecognized arguments: --path")):
+        proc = lfbench(env, "bench", *args, "--size", "16", "--threads", "1") if args[0] == "inference" else \
+            lfbench(env, "bench", *args)
+        assert proc.returncode == 2 and message in proc.stderr, (args, proc.stderr)
+        assert len(proc.stderr.strip().splitlines()) == 1 and "cases, each in a fresh process" not in proc.stdout
+    help_text = _ok(lfbench(env, "bench", "--help"))
+    assert "\n  lfbench bench train --width 150 16 --batch 2\n" in help_text  # the examples stay lines
 
 
 def test_ddp_trains_the_plugin_network_in_two_processes(plugin, tmp_path):

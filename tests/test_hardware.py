@@ -168,7 +168,7 @@ def test_the_gpu_budget_is_its_free_memory_plus_torchs_unused_cache(monkeypatch)
 def test_planesweep_makes_every_tensor_on_the_views_device():
     """Every tensor factory call in the sweep names a device (or copies one with *_like): on a GPU nothing is
     allocated on the CPU behind the views' back."""
-    from lfbench_methods.planesweep import estimate
+    from lfbench_methods.planesweep.estimator import estimate
     from torch.overrides import TorchFunctionMode
 
     from lfbench.data.shift import angular_offsets, disparity_grid

@@ -185,7 +185,8 @@ def test_convert_keras_cli_round_trip(tmp_path: Path):
     out = tmp_path / "w" / "lfattnet.pt"
     assert main(["convert-keras", str(src), str(out), "--interval", "1"]) == 0
     raw = torch.load(out, weights_only=True)
-    assert set(raw) == {"state_dict", "config", "source"} and raw["source"] == "keras:lfattnet.hdf5"
+    assert set(raw) == {"format", "method", "state_dict", "config", "source"} and raw["source"] == "keras:lfattnet.hdf5"
+    assert raw["method"] == "subfocal" and raw["format"] == "lfbench.weights"  # it names the network it holds
     assert raw["config"]["interval"] == 1.0 and raw["config"]["width"] == 2
     rebuilt = build_from_checkpoint(out)
     for key, value in net.state_dict().items():
@@ -208,7 +209,7 @@ def test_torch_checkpoint_save_load_round_trip_and_refusals(tmp_path: Path):
         load_checkpoint(junk)
     listed = tmp_path / "list.pt"
     torch.save([1, 2, 3], listed)
-    with pytest.raises(DataError, match="not a SubFocal checkpoint"):
+    with pytest.raises(DataError, match="list.pt: a torch file holding a list, not an lfbench weights file"):
         load_checkpoint(listed)
     wrong = tmp_path / "wrong.pt"
     torch.save({"state_dict": state, "config": {**config, "width": 3}}, wrong)

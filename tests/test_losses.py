@@ -185,7 +185,7 @@ def test_uafl_gradient_flows_through_u():
 
 
 def test_make_loss_errors():
-    with pytest.raises(SpecError, match="unknown loss"):
+    with pytest.raises(SpecError, match="Unknown loss"):
         make_loss("huber")
     with pytest.raises(SpecError, match="no parameter"):
         make_loss("l1", beta=0.1)

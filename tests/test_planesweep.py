@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
-from lfbench_methods import planesweep as ps
+from lfbench_methods.planesweep import estimator as ps
 
 from lfbench.data.scene import ArrayLightField, Benchmark
 from lfbench.data.shift import angular_offsets, shift_views

@@ -16,7 +16,7 @@ from lfbench.data.params import SceneParameters
 from lfbench.data.pfm import write_pfm
 from lfbench.data.scene import Scene
 from lfbench.data.synth import generate_scene, write_scene
-from lfbench.method.base import Method
+from lfbench.method.base import Method, content_id
 from lfbench.method.registry import create, create_from_spec, format_spec, list_methods, offline_variants
 from lfbench.runs.runner import evaluate
 from lfbench.scoring.metrics import GENERAL_METRICS, get_metric, list_metrics
@@ -82,9 +82,10 @@ def test_every_registered_method_predicts_a_float32_map_of_the_scene(name, synth
         assert method.name == name and isinstance(method, Method)
         if name == "published":  # names its records after the submission folder
             assert method.label == "published:submission"
-        else:  # the label is the canonical spec, and it creates the same method again
-            assert method.label == format_spec(name, method.params)
-            assert create_from_spec(method.label).label == method.label
+        else:  # the label is the canonical spec (a file named by its content), and the spec creates it again
+            assert method.label == format_spec(name, {k: content_id(v) if k in method.content_params else v
+                                                      for k, v in method.params.items()})
+            assert create_from_spec(method.spec).label == method.label
         pred = preds[method.label]
         assert pred.disparity.shape == (h, w) == (SIZE, SIZE) and pred.disparity.dtype == np.float32
         assert np.isfinite(pred.disparity).all()

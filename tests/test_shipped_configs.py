@@ -72,12 +72,10 @@ def spec_view(spec: AblationSpec) -> dict[str, Any]:
 @contextlib.contextmanager
 def example_plugin_registered() -> Iterator[None]:
     """The example plugin's network and method registered in throw-away registries (as if installed)."""
-    import lfbench.method.registry as registry
-    import lfbench.method.trainable as trainable
+    from helpers import isolate_registries
 
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(registry, "REGISTRY", registry.MethodRegistry())
-        mp.setattr(trainable, "TRAINABLES", trainable.TrainableRegistry())
+        isolate_registries(mp)
         mp.setenv("LFBENCH_HCI_ROOT", HCI_ROOT)
         mp.syspath_prepend(str(REPO / "examples" / "tiny_plugin"))
         try:

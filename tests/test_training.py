@@ -261,7 +261,7 @@ def test_config_errors(tmp_path):
     base = '[data]\nroots = ["r"]\n'
     with pytest.raises(SpecError, match="stages"):
         parse(base)
-    with pytest.raises(SpecError, match="unknown loss"):
+    with pytest.raises(SpecError, match="Unknown loss"):
         parse(base + '[[stages]]\nloss = "huber"\nlr = 1e-3\nsteps = 1\n')
     with pytest.raises(SpecError, match="no parameter"):
         parse(base + '[[stages]]\nloss = "l1"\nbeta = 0.1\nlr = 1e-3\nsteps = 1\n')

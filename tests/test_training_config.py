@@ -53,9 +53,9 @@ def write_config(path: Path, cfg: dict) -> Path:
     ({"augment": {"gamma": [1.2]}}, "augment.gamma: expected list of 2 float, got list of 1"),
     ({"augment": {"gamma": [1.2, 0.8]}}, "augment.gamma: expected [low, high] with 0 < low <= high"),
     ({"augment": {"flip": float("nan")}}, "augment.flip: must be a finite number, got nan"),
-    ({"model": {"width": "16"}}, "[model] width: expected int, got str"),
-    ({"model": {"width": 16.5}}, "[model] width: expected int, got float"),
-    ({"model": {"interval": True}}, "[model] interval: expected float, got bool"),
+    ({"model": {"width": "16"}}, "[model] width expects int, got str '16'"),
+    ({"model": {"width": 16.5}}, "[model] width expects int, got float 16.5"),
+    ({"model": {"interval": True}}, "[model] interval expects float, got bool True"),
     ({"model": {"widht": 16}}, "[model] unknown key(s): widht (accepted: angular, attention, d_max, d_min, "
                                "interpolation, interval, width)"),
     # the network's own check of a value, before the data is generated or anything is written
@@ -187,19 +187,19 @@ def test_coerce_names_both_types_and_never_the_value(value, kind, message):
 @pytest.fixture()
 def sgd_network(monkeypatch):
     """'subfocal_sgd': SubFocal optimised with SGD and a learning rate halved after every step (a schedule
-    with a state), registered in a throw-away registry."""
+    with a state), registered for this test only."""
+    from helpers import isolate_registries
     from lfbench_methods.subfocal.trainable import SubFocalTrainable
 
-    import lfbench.method.trainable as trainable
+    from lfbench.method.trainable import register_trainable
 
     class SGDSubFocal(SubFocalTrainable):
         def configure_optimizers(self, net, stage):
             optimizer = torch.optim.SGD(net.parameters(), lr=stage.lr, momentum=0.9)
             return optimizer, torch.optim.lr_scheduler.StepLR(optimizer, step_size=1, gamma=0.5)
 
-    registry = trainable.TrainableRegistry()
-    monkeypatch.setattr(trainable, "TRAINABLES", registry)
-    registry.register("subfocal_sgd", SGDSubFocal)
+    isolate_registries(monkeypatch)
+    register_trainable("subfocal_sgd")(SGDSubFocal)
     return "subfocal_sgd"
 
 

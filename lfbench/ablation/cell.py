@@ -1,6 +1,6 @@
 """One ablation cell: train it (``lfbench train`` in-process, resuming from its own checkpoint), score
 its final weights on the evaluation scenes with the method that runs the network's checkpoints
-(``Trainable.runner``; ``subfocal`` for SubFocal), and write the marker
+(``lfbench.method.registry.network_runner``; ``subfocal`` for SubFocal), and write the marker
 ``cell.json`` last (atomically): a cell with a marker of the same config is finished and is not run
 again. The test time (one whole-scene prediction) is measured afterwards by :func:`time_cell`, one
 cell at a time, so that parallel cells do not slow each other's timings.
@@ -168,12 +168,12 @@ def resolve_device(name: str) -> str:
 
 
 def make_method(weights: Path, ev: Evaluation, threads: int, network: str = DEFAULT_TRAINABLE):
-    """The method running these weights of the trainable ``network`` (its ``Trainable.runner``), on the
-    evaluation device, with the evaluation's threads, tile, memory budget and precision where it has them."""
-    from lfbench.method.trainable import get_trainable
+    """The method running these weights of the trainable ``network`` (lfbench.method.registry.network_runner),
+    on the evaluation device, with the evaluation's threads, tile, memory budget and precision where it has them."""
+    from lfbench.method.registry import network_runner
 
-    return get_trainable(network).runner(weights, device=resolve_device(ev.device), threads=threads, tile=ev.tile,
-                                         max_memory_gb=ev.max_memory_gb, precision=ev.precision)
+    return network_runner(network, weights, device=resolve_device(ev.device), threads=threads, tile=ev.tile,
+                          max_memory_gb=ev.max_memory_gb, precision=ev.precision)
 
 
 def time_whole_scene(method, size: int, repeats: int, warmup: int, seed: int = 0) -> list[float]:

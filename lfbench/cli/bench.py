@@ -1,7 +1,13 @@
-"""Speed and memory benchmarks (not part of the tests): inference per interval and precision, training
-steps, the metric engine, and what the network contributes (SubFocal: the cost volume alone and the conv3d
-peak the others are judged against). ``--model NAME[:key=value,...]`` times any registered trainable
-network (default ``subfocal``; ``--interval`` and ``--width`` set those parameters when it has them).
+"""Speed and memory benchmarks (not part of the tests): inference per network parameter and precision,
+training steps, the metric engine, and what a network contributes of its own (SubFocal: the cost volume
+alone and the conv3d peak the others are judged against). ``--model NAME[:key=value,...]`` times any
+registered trainable network (default ``subfocal``).
+
+The network's own parameters are flags of ``inference``, ``train`` and ``suite``, each taking one or
+more values to time (``--interval 1 0.5`` for SubFocal, ``--channels 4 8`` for a plugin's network;
+``lfbench bench inference --model NAME --help`` lists them), and so are the options a network adds to
+the training bench (SubFocal: ``--path``, ``--weight-grad``). The network is checked before any case
+runs: bad parameters or weights of another network are one error line (exit 2).
 
 Every case runs in a fresh Python process; peak_memory_gb is that process's peak RSS. Records (JSON
 list) carry the machine (CPU, cores, torch threads and version, load average). Without a subcommand
@@ -17,6 +23,7 @@ Examples:
   lfbench bench train --width 16 --batch 4 --path reference fast --rounds 2   # the training speed-up
   lfbench bench suite --quick --json quick.json
   lfbench bench inference --device cuda --interval 0.5 0.1 --precision fp32 bf16
+  lfbench bench inference --model tinycnn:layers=3 --channels 4 8 --size 128   # a plugin's network
 
 --device (auto, cpu, cuda, cuda:K; default auto) places the peak, inference and training cases: on CUDA
 the clocks are read after torch.cuda.synchronize, peak_memory_gb is torch.cuda.max_memory_allocated and
@@ -27,9 +34,12 @@ fp32 is IEEE fp32 (TF32 off). A bf16 case on a CPU without bf16 instructions is 
 from __future__ import annotations
 
 import argparse
+import itertools
 from pathlib import Path
+from typing import Any
 
 from lfbench.cli.argtypes import float_range, int_range
+from lfbench.method.trainable import DEFAULT_TRAINABLE
 
 HELP = "speed and memory benchmarks (inference, cost volume, training, metrics, conv peak)"
 
@@ -40,10 +50,76 @@ MAX_BATCH = 4096  # as a training config's batch_size
 MAX_PATCH = 1024  # px, as a training config's patch
 MAX_COUNT = 10**6  # steps, repeats, rounds, scenes, methods
 MAX_THREADS = 4096
+DEFAULT_MODEL = DEFAULT_TRAINABLE  # the network a bench times without --model
 _SIZE = int_range(8, MAX_SIZE)
 _COUNT = int_range(1, MAX_COUNT)
-_WIDTH = int_range(1, 1 << 16)  # the network bounds it further (its own check and MAX_NETWORK_BYTES)
 _POSITIVE = float_range(0.0, 1e12, low_open=True)
+_NETWORK_BENCHES = ("inference", "train", "suite")  # the benches whose parsers take the network's own flags
+
+
+class _NetworkParser(argparse.ArgumentParser):
+    """A bench's parser: before parsing, it adds the flags of the network ``--model`` names (its parameters,
+    and for the training bench its options), so that ``--help`` lists them and they parse with its types."""
+
+    def error(self, message: str):  # type: ignore[override]
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+    def parse_known_args(self, args=None, namespace=None):  # type: ignore[override]
+        if getattr(self, "_bench", None) in _NETWORK_BENCHES and not getattr(self, "_network_flags", False):
+            self._network_flags = True
+            from lfbench.utils.errors import LFBenchError
+
+            try:
+                _add_network_flags(self, self._bench, _model_in(list(args or [])))
+            except LFBenchError as exc:
+                self.error(f"--model: {exc}")
+        return super().parse_known_args(args, namespace)
+
+
+def _model_in(args: list[str]) -> str:
+    """The value of ``--model`` in ``args`` (the default network when absent)."""
+    for i, arg in enumerate(args):
+        if arg == "--model" and i + 1 < len(args):
+            return args[i + 1]
+        if arg.startswith("--model="):
+            return arg.split("=", 1)[1]
+    return DEFAULT_MODEL
+
+
+def _add_network_flags(p: argparse.ArgumentParser, bench: str, model: str) -> None:
+    """``--PARAM V [V ...]`` for every parameter of the network (one case per value; a parameter whose flag
+    the bench has already is set through ``--model NAME:key=value``) and, for the training bench, the
+    options the network adds (:attr:`Trainable.train_bench_options`)."""
+    from lfbench.method.params import coerce, parse_spec
+    from lfbench.method.trainable import get_trainable
+
+    name, _ = parse_spec(model)
+    trainable = get_trainable(name)
+    taken = {s for action in p._actions for s in action.option_strings}
+    group = p.add_argument_group(f"parameters of the network {name!r} (several values: one case each)")
+    for key, param in trainable.parameters().items():
+        flag = "--" + key.replace("_", "-")
+        if flag in taken:
+            continue
+
+        def parse(text: str, param=param) -> Any:
+            from lfbench.utils.errors import SpecError
+
+            try:
+                return coerce(text, param)
+            except SpecError as exc:
+                raise argparse.ArgumentTypeError(str(exc)) from None
+
+        parse.__name__ = param.type_name
+        timed = trainable.train_bench_defaults.get(key) if bench in ("train", "suite") else None
+        default = " ".join(map(str, timed)) + " (training)" if timed else repr(param.default)
+        group.add_argument(flag, dest=f"net_{key}", nargs="+", type=parse, metavar=key.upper(),
+                           help=f"{param.help or key} (default: {default})")
+    if bench == "train":
+        for option in trainable.train_bench_options:
+            if option.flag not in taken:
+                group.add_argument(option.flag, dest=f"opt_{option.name}", nargs="+", choices=option.choices,
+                                   help=option.help)
 
 
 def _common(p: argparse.ArgumentParser) -> None:
@@ -51,8 +127,8 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--table", type=Path, metavar="OUT.md", help="also write the table (Markdown) here")
     p.add_argument("--threads", type=int_range(0, MAX_THREADS), default=0, help="torch threads (0 = all cores)")
     p.add_argument("--timeout", type=_POSITIVE, default=None, metavar="S", help="give up a case after S seconds")
-    p.add_argument("--model", default="subfocal", metavar="NAME[:key=value,...]",
-                   help="trainable network to time, with parameters (default subfocal; see lfbench.method.trainable)")
+    p.add_argument("--model", default=DEFAULT_MODEL, metavar="NAME[:key=value,...]",
+                   help=f"trainable network to time, with parameters (default {DEFAULT_MODEL}; see lfbench methods)")
 
 
 def _device_option(p: argparse.ArgumentParser) -> None:
@@ -61,71 +137,67 @@ def _device_option(p: argparse.ArgumentParser) -> None:
     p.add_argument("--device", default="auto", help=f"where peak, inference and training cases run: {DEVICE_HELP}")
 
 
-def _inference_options(p: argparse.ArgumentParser, size: int, intervals: list[float] | None) -> None:
+def _inference_options(p: argparse.ArgumentParser, size: int) -> None:
     p.add_argument("--size", type=_SIZE, default=size, help=f"image size in px (a size x size scene, 81 views; "
                                                             f"8 to {MAX_SIZE})")
-    p.add_argument("--interval", type=_POSITIVE, nargs="+", default=intervals,
-                   help="disparity intervals (px; default: the network's, SubFocal 0.5)")
     p.add_argument("--precision", nargs="+", default=["fp32", "bf16"], choices=["fp32", "bf16"])
-    p.add_argument("--width", type=_WIDTH, default=None,
-                   help="aggregation width (default: the network's, SubFocal 150)")
-    p.add_argument("--weights", help="checkpoint .pt (default: random weights)")
+    p.add_argument("--weights", help="weights file of the network (default: random weights)")
     p.add_argument("--max-memory", type=_POSITIVE, default=None, metavar="GB",
                    help="memory budget of inference (default: 4 on the CPU, the GPU's free memory on CUDA)")
     p.add_argument("--tile", type=int_range(0, MAX_SIZE), default=0,
-                   help="core tile size in px (0 = from --max-memory)")
+                   help="core tile size in px (0 = the network's choice: SubFocal's from --max-memory)")
     p.add_argument("--repeat", type=_COUNT, default=1, help="runs per case (the best is kept)")
     p.add_argument("--no-peak", action="store_true", help="do not measure the conv3d peak around each case")
     _device_option(p)
 
 
+def _bench_parser(sub, name: str, **kwargs) -> argparse.ArgumentParser:
+    p = sub.add_parser(name, formatter_class=argparse.RawDescriptionHelpFormatter, **kwargs)
+    p._bench = name
+    return p
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    sub = p.add_subparsers(dest="which", metavar="BENCH")
-    s = sub.add_parser("suite", help="all benches (default)", description="All benches; see lfbench bench --help.")
-    _inference_options(s, 512, None)
+    sub = p.add_subparsers(dest="which", metavar="BENCH", parser_class=_NetworkParser)
+    s = _bench_parser(sub, "suite", help="all benches (default)", description="All benches; see lfbench bench --help.")
+    _inference_options(s, 512)
     s.add_argument("--quick", action="store_true", help="64x64 scene, tiny training and metric cases (seconds)")
     s.add_argument("--skip", nargs="+", default=[], choices=["peak", "inference", "volume", "train", "metrics"])
     s.add_argument("--train-batch", type=int_range(1, MAX_BATCH), default=2)
     s.add_argument("--train-steps", type=_COUNT, default=2)
-    s.add_argument("--small-width", type=_WIDTH, default=16, help="the small width of the training bench")
     _common(s)
-    i = sub.add_parser("inference", help="one scene per interval x precision (seconds, peak memory, GFLOP/s)")
-    _inference_options(i, 512, None)
+    i = _bench_parser(sub, "inference", help="one scene per network parameter x precision (seconds, peak memory, "
+                                             "GFLOP/s)")
+    _inference_options(i, 512)
     _common(i)
-    v = sub.add_parser("volume", help="the cost volume alone (GB/s)")
+    v = _bench_parser(sub, "volume", help="the cost volume alone (GB/s; SubFocal's own bench)")
     v.add_argument("--size", type=_SIZE, default=512)
     v.add_argument("--interval", type=_POSITIVE, nargs="+", default=[0.5])
     v.add_argument("--precision", nargs="+", default=["fp32", "bf16"], choices=["fp32", "bf16"])
     v.add_argument("--method", nargs="+", default=["gather", "grid_sample"], choices=["gather", "grid_sample"])
     v.add_argument("--repeat", type=_COUNT, default=1)
     _common(v)
-    t = sub.add_parser("train", help="training steps per second (Adam + L1 on random patches)")
-    t.add_argument("--width", type=_WIDTH, nargs="+", default=None, help="widths (default SubFocal: 150 16)")
+    t = _bench_parser(sub, "train", help="training steps per second (Adam + L1 on random patches)")
     t.add_argument("--batch", type=int_range(1, MAX_BATCH), default=2, help=f"patches per step (1 to {MAX_BATCH})")
     t.add_argument("--patch", type=int_range(8, MAX_PATCH), default=32, help=f"patch size in px (8 to {MAX_PATCH})")
     t.add_argument("--steps", type=_COUNT, default=2)
     t.add_argument("--warmup", type=int_range(0, MAX_COUNT), default=1,
                    help="untimed steps first (one-time costs: kernel setup, caches, the heap growing to its size)")
-    t.add_argument("--interval", type=_POSITIVE, default=None)
     t.add_argument("--no-channels-last", action="store_true")
-    t.add_argument("--path", nargs="+", default=["fast"], choices=["fast", "reference"],
-                   help="training path(s): fast (what lfbench train runs) and/or reference (the original ops)")
     t.add_argument("--precision", nargs="+", default=["fp32"], choices=["fp32", "bf16"],
                    help="fp32 and/or bf16 (autocast of the forward pass, as [training] precision = 'bf16')")
-    t.add_argument("--weight-grad", nargs="+", default=None, choices=["auto", "gemm", "native"],
-                   help="fast path: convolution weight gradients as matrix products where they pay (auto, the "
-                        "default), on every layer they apply to (gemm), or PyTorch's own (native)")
     t.add_argument("--rounds", type=_COUNT, default=1,
-                   help="run the width x path cases this many times, interleaved (before/after under the same load)")
+                   help="run the cases this many times, interleaved (before/after under the same load)")
     _device_option(t)
     _common(t)
-    m = sub.add_parser("metrics", help="the metric engine over synthetic scenes x methods")
+    m = _bench_parser(sub, "metrics", help="the metric engine over synthetic scenes x methods")
     m.add_argument("--scenes", type=int_range(1, 1000), default=12)
     m.add_argument("--methods", type=int_range(1, 1000), default=5)
     m.add_argument("--size", type=_SIZE, default=512)
     m.add_argument("--repeat", type=_COUNT, default=1)
     _common(m)
-    k = sub.add_parser("peak", help="the conv3d peak (GFLOP/s) of the paper's 3D convolution")
+    k = _bench_parser(sub, "peak", help="the conv3d peak (GFLOP/s) of the paper's 3D convolution (SubFocal's own "
+                                        "bench)")
     k.add_argument("--precision", nargs="+", default=["fp32", "bf16"], choices=["fp32", "bf16"])
     k.add_argument("--repeat", type=_COUNT, default=3)
     _device_option(k)
@@ -134,7 +206,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def _model(args: argparse.Namespace) -> tuple[str, dict, object]:
     """(network name, its parameters from --model, the trainable); SpecError for an unknown one."""
-    from lfbench.method.registry import coerce_params, parse_spec
+    from lfbench.method.params import coerce_params, parse_spec
     from lfbench.method.trainable import get_trainable
 
     name, raw = parse_spec(args.model)
@@ -142,20 +214,17 @@ def _model(args: argparse.Namespace) -> tuple[str, dict, object]:
     return name, coerce_params(raw, trainable.parameters(), name, "network"), trainable
 
 
-def _given(trainable, key: str, values: list) -> list:
-    """``values`` of a flag that sets the network parameter ``key`` ([None] when not given). SpecError when
-    it is given and the network has no such parameter."""
-    from lfbench.utils.errors import SpecError
-
-    if values is None:
-        return [None]
-    if key not in trainable.parameters():
-        raise SpecError(f"--{key}: network {trainable.name!r} has no parameter {key!r}")
-    return list(values)
-
-
-def _with(params: dict, **values) -> dict:
-    return {**params, **{k: v for k, v in values.items() if v is not None}}
+def _sweep(args: argparse.Namespace, trainable, base: dict, defaults: dict | None = None) -> list[dict]:
+    """The network parameters of each case: ``base`` (from --model) with every combination of the values given
+    to the network's flags (or ``defaults``, e.g. SubFocal's training widths, for flags not given)."""
+    values = {}
+    for key in trainable.parameters():
+        given = getattr(args, f"net_{key}", None)
+        if given is None and defaults and key in defaults and key not in base:
+            given = list(defaults[key])
+        if given is not None:
+            values[key] = given
+    return [{**base, **dict(zip(values, combo, strict=True))} for combo in itertools.product(*values.values())]
 
 
 def _cases(args: argparse.Namespace) -> list[tuple[str, dict]]:
@@ -166,23 +235,20 @@ def _cases(args: argparse.Namespace) -> list[tuple[str, dict]]:
     if getattr(args, "device", None) is not None:  # cases that run on a device (resolved by run())
         th["device"] = args.device
     model, model_params, trainable = _model(args)
-    net = {"model": model, **model_params}
     has = trainable.benches  # the network's own benches (SubFocal: peak, volume)
     cases: list[tuple[str, dict]] = []
     if which in ("inference", "suite"):
         skip = set(getattr(args, "skip", []))
         size = 64 if getattr(args, "quick", False) else args.size
-        width = _given(trainable, "width", None if args.width is None else [args.width])[0]
         if which == "inference" or "inference" not in skip:
             peaks = "peak" in has and not args.no_peak and not (which == "suite" and "peak" in skip)
-            for interval in _given(trainable, "interval", args.interval):
+            for net in _sweep(args, trainable, model_params):
                 for precision in args.precision:
                     if peaks:
                         cases.append(("peak", {"model": model, "precision": precision, **th}))
-                    cases.append(("inference", {**_with(net, interval=interval, width=width), "size": size,
-                                                "precision": precision, "weights": args.weights,
-                                                "max_memory_gb": args.max_memory, "tile": args.tile,
-                                                "repeat": args.repeat, **th}))
+                    cases.append(("inference", {"model": model, **net, "size": size, "precision": precision,
+                                                "weights": args.weights, "max_memory_gb": args.max_memory,
+                                                "tile": args.tile, "repeat": args.repeat, **th}))
             if peaks:  # the peak again after the last case: each case sits between two peak measurements
                 cases += [("peak", {"model": model, "precision": p, **th}) for p in args.precision]
         elif "peak" not in skip and "peak" in has:  # the suite without inference: peaks beside the training bench
@@ -195,9 +261,8 @@ def _cases(args: argparse.Namespace) -> list[tuple[str, dict]]:
                 cases.append(("volume", {"model": model, "size": size, "interval": 0.5, "precision": "fp32",
                                          "method": "grid_sample", **cpu}))
             if "train" not in skip:
-                widths = [150, args.small_width] if "width" in trainable.parameters() else [None]
-                for w in widths:
-                    cases.append(("train", {**_with(net, width=w), "batch": 1 if quick else args.train_batch,
+                for net in _sweep(args, trainable, model_params, trainable.train_bench_defaults):
+                    cases.append(("train", {"model": model, **net, "batch": 1 if quick else args.train_batch,
                                             "patch": 16 if quick else 32, "steps": 1 if quick else args.train_steps,
                                             **th}))
             if "metrics" not in skip:
@@ -209,16 +274,13 @@ def _cases(args: argparse.Namespace) -> list[tuple[str, dict]]:
                     cases.append(("volume", {"model": model, "size": args.size, "interval": interval,
                                              "precision": precision, "method": method, "repeat": args.repeat, **th}))
     elif which == "train":
-        widths = args.width if args.width is not None else ([150, 16] if "width" in trainable.parameters()
-                                                             else None)
-        interval = _given(trainable, "interval", None if args.interval is None else [args.interval])[0]
-        grads = args.weight_grad or [None]
-        cases = [("train", {**_with(net, width=w, interval=interval), "batch": args.batch, "patch": args.patch,
-                            "steps": args.steps, "warmup": args.warmup, "channels_last": not args.no_channels_last,
-                            "path": path, "precision": precision, **th,
-                            **({"weight_grad": grad} if grad is not None else {})})
-                 for _ in range(max(1, args.rounds)) for w in _given(trainable, "width", widths)
-                 for path in args.path for grad in (grads if path == "fast" else [None])
+        chosen = {o.name: getattr(args, f"opt_{o.name}", None) for o in trainable.train_bench_options}
+        variants = trainable.train_variants(chosen)
+        nets = _sweep(args, trainable, model_params, trainable.train_bench_defaults)
+        cases = [("train", {"model": model, **net, "batch": args.batch, "patch": args.patch, "steps": args.steps,
+                            "warmup": args.warmup, "channels_last": not args.no_channels_last, **variant,
+                            "precision": precision, **th})
+                 for _ in range(max(1, args.rounds)) for net in nets for variant in variants
                  for precision in args.precision]
     elif which == "metrics":
         cases = [("metrics", {"scenes": args.scenes, "methods": args.methods, "size": args.size,
@@ -229,22 +291,31 @@ def _cases(args: argparse.Namespace) -> list[tuple[str, dict]]:
 
 
 def _check_networks(args: argparse.Namespace, cases: list[tuple[str, dict]]) -> None:
-    """SpecError naming --model when a case would build a network its trainable refuses (bad values, or
-    more than MAX_NETWORK_BYTES of parameters: checked on the meta device), before any case runs."""
+    """SpecError (or the DataError of the weights file) naming --model, before any case runs, when a case
+    would build a network its trainable refuses: unknown or ill-typed parameters, values out of bounds, more
+    than MAX_NETWORK_BYTES of parameters (checked on the meta device), weights of another network or that do
+    not fit; and, for a network that has no check of its own, when it fails one forward pass on a small
+    light field (lfbench.method.trainable.Trainable.check_forward)."""
+    from lfbench.method.trainable import Trainable
     from lfbench.utils.errors import SpecError
 
     _, _, trainable = _model(args)
     accepted = trainable.parameters()
-    checked: list[dict] = []
+    trusted = type(trainable).check is not Trainable.check  # a network that checks its parameters itself
+    checked: list[tuple[dict, str | None]] = []
     for bench, params in cases:
-        net = {k: v for k, v in params.items() if k in accepted and k != "model"}
-        if bench not in ("inference", "train") or net in checked:
+        net = {k: v for k, v in params.items() if k in accepted}
+        weights = params.get("weights") if bench == "inference" else None
+        if bench not in ("inference", "train") or (net, weights) in checked:
             continue
-        checked.append(net)
+        checked.append((net, weights))
         try:
             trainable.check_params(net)
+            built = trainable.load(Path(weights), **net) if weights else None  # DataError: not its weights
+            if not trusted:
+                trainable.check_forward(built if built is not None else trainable.build(**net))
         except (TypeError, ValueError) as exc:
-            raise SpecError(f"--model {args.model}: {' '.join(str(exc).split())[:200]}") from None
+            raise SpecError(f"--model {args.model}: {' '.join(str(exc).split())[:240]}") from None
 
 
 def _line(record: dict) -> str:
@@ -254,11 +325,13 @@ def _line(record: dict) -> str:
         return f"[{record.get('bench')}] error: {record['error']}"
     if "skipped" in record:
         return f"[{record.get('bench')}] {record.get('precision', '')} skipped: {record['skipped']}"
-    keys = [k for k in ("size", "interval", "precision", "method", "width", "batch", "path", "seconds",
+    network = list(record.get("network_params", []))
+    keys = [k for k in ("size", *network, "precision", "method", "batch", *record.get("variant", []), "seconds",
                         "peak_memory_gb", "gflops_per_s", "gb_per_s", "steps_per_s", "cpu_seconds", "scores_per_s")
             if k in record]
     load = (record.get("machine") or {}).get("load_average")
-    return f"[{record['bench']}] " + ", ".join(f"{k} {_fmt(record[k])}" for k in keys) + f" (load {load})"
+    return f"[{record['bench']}] " + ", ".join(f"{k} {_fmt(record[k])}" for k in dict.fromkeys(keys)) + \
+        f" (load {load})"
 
 
 def _output(args: argparse.Namespace, records: list[dict]) -> list[dict]:

@@ -18,7 +18,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--data", required=True, type=Path, metavar="ROOT",
                    help="data root laid out as ROOT/<category>/<scene>/ (HCI layout)")
     p.add_argument("--method", required=True, action="append", metavar="SPEC",
-                   help="method spec name[:key=value,...]; repeat for several (see `lfbench methods`)")
+                   help="method spec name[:key=value,...]; repeat for several (see `lfbench methods`). Results "
+                        "name it by its spec, a weights file by its content (weights=sha256:...), so that they "
+                        "compare equal wherever the file lies (results.json keeps the path)")
+    p.add_argument("--label", action="append", metavar="NAME",
+                   help="name the results of the --method in the same position NAME instead (give one per --method)")
     p.add_argument("--scenes", default="", help="comma-separated scene, category or split names (default: all)")
     p.add_argument("--out", required=True, type=Path, metavar="DIR", help="output folder")
     p.add_argument("--toolkit-nonfinite", action="store_true",
@@ -57,9 +61,15 @@ def run(args: argparse.Namespace) -> int:
     from lfbench.reports.tables import per_scene_table, render
     from lfbench.runs.folder import CIOptions, evaluate_to_folder
     from lfbench.scoring.rules import ScoringRules
-    from lfbench.utils.errors import DataError
+    from lfbench.utils.errors import DataError, SpecError
 
     methods = [create_from_spec(spec, {"device": args.device}) for spec in args.method]  # errors before any work
+    if args.label is not None:
+        if len(args.label) != len(methods):
+            raise SpecError(f"--label: {len(args.label)} label(s) for {len(methods)} --method(s); give one per method")
+        if not all(label.strip() for label in args.label):
+            raise SpecError("--label: a label must not be empty")
+        methods = [m.with_label(label) for m, label in zip(methods, args.label, strict=True)]
     if args.html:
         from lfbench.reports.html import SITE_DIR, check_site_dir
 
@@ -73,8 +83,8 @@ def run(args: argparse.Namespace) -> int:
         methods, scenes, args.out, rules=rules, all_metrics=args.all_metrics, save_maps=args.save_maps or args.html,
         figures=args.figures,
         ci=CIOptions(resamples=args.ci_resamples, block=args.ci_block) if args.ci else None,
-        uncertainty=args.uncertainty, site=args.html, meta={"data_root": str(args.data)},
-        progress=not args.no_progress)
+        uncertainty=args.uncertainty, site=args.html, progress=not args.no_progress,
+        meta={"data_root": str(args.data), "methods": {m.label: m.provenance() for m in methods}})
     if args.out / "table_uncertainty.md" in results.files:
         print((args.out / "table_uncertainty.md").read_text(encoding="utf-8"))
     print(render(per_scene_table(results), "markdown"), end="")

@@ -1,4 +1,5 @@
-"""List the registered methods (built-in and plugins) with their parameters."""
+"""List the registered methods (built-in and plugins; a registered network is a method of its own name) with
+their parameters, a network's own with them, and the plugins that failed to load."""
 
 from __future__ import annotations
 

@@ -4,11 +4,14 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import Any
+from pathlib import Path
+from typing import Any, ClassVar
 
 import numpy as np
 
 from lfbench.data.scene import LightField
+from lfbench.method.params import format_spec
+from lfbench.utils.readfile import file_sha256
 
 
 @dataclass
@@ -32,16 +35,24 @@ class Method:
 
     A method turns a light field into a :class:`Prediction`. Subclasses implement :meth:`predict`
     and may override the other hooks below; each has a default that fits a method without it.
-    Parameters are keyword arguments of ``__init__`` (types from its annotations, help from
-    ``name: text`` lines of the class docstring; see ``lfbench methods``).
+    Parameters are keyword arguments of ``__init__``, typed and documented with ``typing.Annotated``
+    (``radius: Annotated[int, "aggregation radius in px"] = 3``; see lfbench.method.params and
+    ``lfbench methods``).
 
     The registry creates methods (``create``, ``create_from_spec``) and sets :attr:`name` and
     :attr:`params` once, after ``__init__``; they are read-only afterwards.
     """
 
+    #: Parameters naming a file whose content, not location, identifies the method (e.g. ``weights``): the
+    #: label carries ``sha256:<first 12 hex digits>`` of the file instead of its path, so that results keep
+    #: their keys when the file moves (the path is kept in :meth:`provenance`).
+    content_params: ClassVar[tuple[str, ...]] = ()
+
     _name: str = ""
     _params: dict[str, Any] = {}  # replaced, never mutated
     _bound: bool = False
+    _label: str | None = None  # a label the user gave (--label), or the computed one, cached
+    _given_label: bool = False
 
     def __init__(self, **params: Any) -> None:
         """``params``: the parameters this instance was configured with, used as :attr:`params` of a
@@ -65,13 +76,41 @@ class Method:
         if self._bound:
             raise RuntimeError(f"method {self.label!r} is already registered; name and params are set once")
         self._name, self._params, self._bound = name, dict(params), True
+        if not self._given_label:
+            self._label = None
 
     @property
     def label(self) -> str:
-        """How results name this method: the canonical spec ``name:key=value,...``."""
-        from lfbench.method.registry import format_spec
+        """How results name this method: the canonical spec ``name:key=value,...``, with the content hash of
+        each file named by a :attr:`content_params` parameter in place of its path; or the label the user
+        gave (:meth:`with_label`)."""
+        if self._label is None:
+            self._label = format_spec(self.name, {k: content_id(v) if k in self.content_params else v
+                                                  for k, v in self.params.items()})
+        return self._label
 
+    @property
+    def spec(self) -> str:
+        """The spec this method was made from, as given (paths as written)."""
         return format_spec(self.name, self.params)
+
+    def with_label(self, label: str) -> Method:
+        """Name this method's results ``label`` instead of its computed label (e.g. ``--label``); set once."""
+        if self._given_label:
+            raise RuntimeError(f"method {self.label!r} has a label already; it is set once")
+        self._label, self._given_label = str(label), True
+        return self
+
+    def provenance(self) -> dict[str, Any]:
+        """Where the method came from, beside its label in results: the spec as given and, for each file of
+        :attr:`content_params`, its absolute path and SHA-256."""
+        out: dict[str, Any] = {"spec": self.spec}
+        for key in self.content_params:
+            value = self.params.get(key, getattr(self, key, None))
+            if isinstance(value, str | Path) and Path(value).expanduser().is_file():
+                path = Path(value).expanduser().resolve()
+                out[key] = {"path": str(path), "sha256": file_sha256(path, key)}
+        return out
 
     # -- hooks -----------------------------------------------------------------------------------
 
@@ -116,6 +155,13 @@ class Method:
         return pred
 
 
+def content_id(value: Any) -> Any:
+    """``sha256:<12 hex digits>`` of the file ``value`` names, when it names a regular file; else ``value``."""
+    if isinstance(value, str | Path) and Path(value).expanduser().is_file():
+        return "sha256:" + file_sha256(Path(value).expanduser(), "file")[:12]
+    return value
+
+
 HOOKS = ("predict", "available_for", "describe_variant", "offline_variants", "to")
 
 
@@ -124,4 +170,4 @@ def overrides(cls: type, hook: str) -> bool:
     return getattr(cls, hook, None) is not getattr(Method, hook)
 
 
-__all__ = ["Method", "Prediction", "HOOKS", "overrides"]
+__all__ = ["Method", "Prediction", "HOOKS", "overrides", "content_id"]

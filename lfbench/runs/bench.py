@@ -16,8 +16,9 @@ Benches (each returns one record, a dict). lfbench's own time the network of any
 - ``inference``: one H x W scene through ``Trainable.infer`` (random weights unless a checkpoint is given;
   SubFocal: the paper network, width 150, tiles from ``max_memory_gb``): seconds, peak memory, achieved
   GFLOP/s when the trainable counts its FLOPs (halos not counted), the phases it reports;
-- ``train``: optimizer steps per second (Adam + L1 on random patches, training mode, channels-last), on the
-  fast training path or the ``reference`` one (the original ops: the before/after of the speed-up);
+- ``train``: optimizer steps per second (Adam + L1 on random patches, training mode, channels-last), in the
+  training variant the network's own options select (``Trainable.train_bench_options``; SubFocal: its fast
+  training path or the ``reference`` one, the before/after of the speed-up);
 - ``metrics``: the metric engine (``lfbench.scoring.rules.score_scene``, general metrics) over synthetic scenes
   x methods written in the HCI layout.
 
@@ -49,13 +50,14 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+from lfbench.method.trainable import DEFAULT_TRAINABLE
 from lfbench.utils.errors import SpecError
 from lfbench.utils.jsonfile import json_text
 from lfbench.utils.subprocesses import safe_path_env
 
 PRECISIONS = ("fp32", "bf16")
 BENCHES = ("peak", "inference", "volume", "train", "metrics")  # the order of the tables
-DEFAULT_MODEL = "subfocal"
+DEFAULT_MODEL = DEFAULT_TRAINABLE  # the network a bench times without --model
 
 
 # --------------------------------------------------------------------------- machine and memory
@@ -255,8 +257,8 @@ def bench_inference(size: int = 512, precision: str = "fp32", *, model: str = DE
     phases: dict = {}
     seconds, cpu = timed(lambda: trainable.infer(net, views, precision=precision, max_memory_gb=max_memory_gb,
                                                  tile=tile, timings=phases), repeat, dev)
-    record = {"bench": "inference", "model": model, "size": size, **params, "precision": precision,
-              "seconds": seconds, **memory_fields(dev, baseline),
+    record = {"bench": "inference", "model": model, "size": size, **params, "network_params": list(params),
+              "precision": precision, "seconds": seconds, **memory_fields(dev, baseline),
               "cpu_seconds": cpu, "weights": weights or "random", "max_memory_gb": max_memory_gb}
     flops = trainable.flops(net, size, size)
     if flops:
@@ -272,31 +274,30 @@ def bench_inference(size: int = 512, precision: str = "fp32", *, model: str = DE
 
 
 def bench_train(batch: int = 2, patch: int = 32, steps: int = 2, channels_last: bool = True, threads: int = 0,
-                seed: int = 0, *, model: str = DEFAULT_MODEL, device: str = "cpu", path: str = "fast",
-                precision: str = "fp32", warmup: int = 1, weight_grad: str | None = None, **params: Any) -> dict:
+                seed: int = 0, *, model: str = DEFAULT_MODEL, device: str = "cpu", precision: str = "fp32",
+                warmup: int = 1, **params: Any) -> dict:
     """Training steps per second: the network (``params`` over its defaults) in training mode, Adam (lr 1e-3,
     eps 1e-7) on an L1 loss of its disparity for random (batch, N, patch, patch) views against random
-    disparities in [-4, 4); ``warmup`` untimed steps (at least 1), then ``steps``. ``path``: ``fast`` (what
-    ``lfbench train`` runs) or ``reference`` (a network's original training ops,
-    ``set_training_path("reference")``, with glibc's default heap: the "before" of the training speed-up).
-    ``precision`` bf16: the forward pass under bf16 autocast, as ``[training] precision = "bf16"`` trains.
-    ``weight_grad`` (fast path of SubFocal-style networks): auto, gemm or native convolution weight gradients
-    (methods/subfocal/weight_grad.py); None: the network's default."""
+    disparities in [-4, 4); ``warmup`` untimed steps (at least 1), then ``steps``. ``params`` may also hold
+    the options the network adds to this bench (``Trainable.train_bench_options``, e.g. SubFocal's ``path``:
+    ``fast`` or ``reference``, and ``weight_grad``): the training variant ``Trainable.prepare_training``
+    switches to; a variant that is not what ``lfbench train`` runs keeps glibc's default heap (the "before").
+    ``precision`` bf16: the forward pass under bf16 autocast, as ``[training] precision = "bf16"`` trains."""
     import torch
 
-    from lfbench.training.loop import to_channels_last
+    from lfbench.method.trainable import get_trainable, to_channels_last
     from lfbench.utils.malloc import retain_freed_memory
 
     set_threads(threads)
     dev = case_device(device)
+    options = {o.name for o in get_trainable(model).train_bench_options}
+    variant = {k: params.pop(k) for k in list(params) if k in options}
     trainable, net = _network(model, params, None, seed)
-    if path != "fast" and not hasattr(net, "set_training_path"):
-        raise SpecError(f"{model} has no {path!r} training path; only SubFocal-style networks have one")
-    if weight_grad is not None and (path != "fast" or not hasattr(net, "set_training_path")):
-        raise SpecError("weight_grad applies to the fast training path of SubFocal-style networks only")
-    if hasattr(net, "set_training_path"):
-        net.set_training_path(path, **({} if weight_grad is None else {"weight_grad": weight_grad}))
-    if path == "fast":
+    try:
+        as_trained = trainable.prepare_training(net, **variant)
+    except (TypeError, ValueError) as exc:
+        raise SpecError(f"network {model!r}: {exc}") from None
+    if as_trained:
         retain_freed_memory()  # as lfbench train does
     net = net.to(dev).train()
     if channels_last:
@@ -327,10 +328,11 @@ def bench_train(batch: int = 2, patch: int = 32, steps: int = 2, channels_last: 
     sync(dev)
     seconds = (time.perf_counter() - t) / max(1, steps)
     cpu = (cpu_seconds() - cpu0) / max(1, steps)
-    record = {"bench": "train", "model": model, **params, "batch": batch, "patch": patch, "path": path,
-              "channels_last": channels_last, "steps": max(1, steps), "warmup": max(1, warmup), "seconds": seconds,
-              "seconds_per_step": seconds, "steps_per_s": 1.0 / seconds, "cpu_seconds": cpu,
-              **memory_fields(dev, baseline), "precision": precision, "weight_grad": weight_grad}
+    record = {"bench": "train", "model": model, **params, "network_params": list(params), "batch": batch,
+              "patch": patch, **variant, "variant": list(variant), "channels_last": channels_last,
+              "steps": max(1, steps), "warmup": max(1, warmup), "seconds": seconds, "seconds_per_step": seconds,
+              "steps_per_s": 1.0 / seconds, "cpu_seconds": cpu, **memory_fields(dev, baseline),
+              "precision": precision}
     flops = trainable.flops(net, patch, patch)
     if flops:
         forward = flops["total"] * batch
@@ -479,10 +481,10 @@ def attach_peaks(records: Sequence[dict]) -> list[dict]:
 
 _COLUMNS = {
     "peak": ["precision", "shape", "seconds", "gflops_per_s", "gflops_per_cpu_s"],
-    "inference": ["size", "interval", "precision", "seconds", "peak_memory_gb", "gflops_per_s", "fraction_of_peak",
+    "inference": ["size", "<network>", "precision", "seconds", "peak_memory_gb", "gflops_per_s", "fraction_of_peak",
                   "fraction_of_peak_cpu", "floor_s", "ratio_to_floor", "tile", "tiles", "phases_s"],
     "volume": ["size", "interval", "precision", "method", "seconds", "volume_gb", "gb_per_s", "peak_memory_gb"],
-    "train": ["width", "batch", "patch", "path", "weight_grad", "precision", "seconds_per_step", "steps_per_s",
+    "train": ["<network>", "batch", "patch", "<variant>", "precision", "seconds_per_step", "steps_per_s",
               "cpu_seconds", "gflops_per_s", "fraction_of_peak", "fraction_of_peak_cpu", "peak_memory_gb"],
     "metrics": ["scenes", "methods", "size", "seconds", "scores_per_s", "mpixels_per_s", "peak_memory_gb"],
 }
@@ -498,6 +500,19 @@ def _fmt(value) -> str:
     return "" if value is None else str(value)
 
 
+def _columns(bench: str, rows: Sequence[dict]) -> list[str]:
+    """A bench's table columns: ``<network>`` stands for the network parameters the cases set (e.g. SubFocal's
+    interval, a plugin's channels), ``<variant>`` for the training options they chose (SubFocal's path)."""
+    cols: list[str] = []
+    for col in _COLUMNS[bench]:
+        if col in ("<network>", "<variant>"):
+            key = "network_params" if col == "<network>" else "variant"
+            cols += [k for k in dict.fromkeys(k for r in rows for k in r.get(key, [])) if k not in cols]
+        else:
+            cols.append(col)
+    return cols
+
+
 def table(records: Sequence[dict]) -> str:
     """Markdown tables, one per bench, plus the machine line(s) and the load average of every row."""
     from tabulate import tabulate
@@ -507,12 +522,13 @@ def table(records: Sequence[dict]) -> str:
         rows = [r for r in records if r.get("bench") == bench]
         if not rows:
             continue
-        cols = _COLUMNS[bench]
+        cols = _columns(bench, rows)
         body = [[_fmt(r.get(c)) for c in cols] + [_fmt((r.get("machine") or {}).get("load_average")),
                                                   r.get("error", "") or (f"skipped: {r['skipped']}" if "skipped" in r
                                                                          else "")] for r in rows]
-        parts.append(f"## {bench}\n\n" + tabulate(body, headers=[*cols, "load", "error"], tablefmt="github",
-                                                  disable_numparse=True))
+        models = ", ".join(dict.fromkeys(str(r["model"]) for r in rows if r.get("model")))
+        parts.append(f"## {bench}{f' ({models})' if models and bench in ('inference', 'train') else ''}\n\n"
+                     + tabulate(body, headers=[*cols, "load", "error"], tablefmt="github", disable_numparse=True))
     machines = {json.dumps({k: v for k, v in (r.get("machine") or {}).items() if "load" not in k}, sort_keys=True)
                 for r in records if r.get("machine")}
     for m in sorted(machines):

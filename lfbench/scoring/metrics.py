@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from lfbench.utils.errors import SpecError
+from lfbench.utils.registry import Registry
 
 __all__ = [
     "bad_pix",
@@ -264,29 +264,21 @@ class Metric:
         return self.fn(gt, pred, mask, toolkit=toolkit, **context)
 
 
-class MetricRegistry:
-    """Every metric by id (and by the toolkit's id), plus parametrised families such as ``badpix_<t>``.
+class MetricRegistry(Registry[Metric]):
+    """Every metric by id (and by the toolkit's id), plus parametrised families such as ``badpix_<t>``: the
+    generic :class:`~lfbench.utils.registry.Registry` of :class:`Metric`.
 
     ``register`` refuses anything but a :class:`Metric` and a second metric under a taken id;
     ``get`` raises :class:`~lfbench.utils.errors.SpecError` "Unknown metric X. Available: ...".
     """
 
     def __init__(self) -> None:
-        self._metrics: dict[str, Metric] = {}
-        self._aliases: dict[str, str] = {}
+        super().__init__("metric", Metric)
         self._families: list[tuple[str, Callable[[str], Metric | None]]] = []
 
     def register(self, metric: Metric) -> Metric:
-        if not isinstance(metric, Metric):
-            raise TypeError(f"register() needs a lfbench Metric, got {type(metric).__name__}")
-        for key in (metric.id, metric.toolkit_id):
-            owner = self._aliases.get(key) if key else None
-            if owner is not None and self._metrics[owner] != metric:
-                raise ValueError(f"metric id {key!r} is already registered (by {owner!r})")
-        self._metrics[metric.id] = metric
-        self._aliases[metric.id] = metric.id
-        if metric.toolkit_id:
-            self._aliases.setdefault(metric.toolkit_id, metric.id)
+        self.check(str(getattr(metric, "id", "?")), metric)
+        self.add(metric.id, metric, aliases=(metric.toolkit_id,) if metric.toolkit_id else ())
         return metric
 
     def register_family(self, pattern: str, make: Callable[[str], Metric | None]) -> None:
@@ -296,9 +288,9 @@ class MetricRegistry:
 
     def find(self, metric_id: str) -> Metric | None:
         """The metric with this id or toolkit id (or from a family), or None."""
-        key = self._aliases.get(str(metric_id))
-        if key is not None:
-            return self._metrics[key]
+        metric = super().find(str(metric_id))
+        if metric is not None:
+            return metric
         for _, make in self._families:
             metric = make(str(metric_id))
             if metric is not None:
@@ -308,16 +300,12 @@ class MetricRegistry:
     def get(self, metric_id: str) -> Metric:
         metric = self.find(metric_id)
         if metric is None:
-            available = ", ".join([*self._metrics, *(p for p, _ in self._families)])
-            raise SpecError(f"Unknown metric {metric_id!r}. Available: {available}")
+            raise self.unknown(metric_id, [*self.registered(), *(p for p, _ in self._families)])
         return metric
 
     def all(self, category: str | None = None) -> tuple[Metric, ...]:
         """The registered metrics (families excluded), in registration order, optionally of one category."""
-        return tuple(m for m in self._metrics.values() if category is None or m.category == category)
-
-    def __contains__(self, metric_id: object) -> bool:
-        return isinstance(metric_id, str) and self.find(metric_id) is not None
+        return tuple(m for m in map(self.get, self.registered()) if category is None or m.category == category)
 
 
 def _bad_pix_metric(t: float) -> Metric:

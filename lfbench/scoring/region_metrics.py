@@ -30,7 +30,6 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from scipy import ndimage
 
 from lfbench.data.params import SceneParameters
 from lfbench.data.scene import Scene, read_png
@@ -106,6 +105,8 @@ def scharr_derivative(image: np.ndarray, axis: int, mode: str = "reflect", zero_
     a non-zero weight, never inf * 0). ``zero_border`` sets the outermost 1 px ring to 0, as the
     scikit-image of the toolkit's era did (only pixels within 2 px of the edge are affected).
     """
+    from scipy import ndimage  # scipy comes when a region metric is computed, not when one is looked up
+
     kernel = _SCHARR_H if axis == 0 else _SCHARR_H.T
     out = ndimage.convolve(np.asarray(image, dtype=np.float64), kernel, mode=mode)
     if zero_border:
@@ -118,6 +119,8 @@ def _scharr_separable(image: np.ndarray, axis: int) -> np.ndarray:
     """Scharr derivative with periodic borders as two 1-D passes (every weight multiplies, so a
     non-finite value spreads NaN over its 3x3 neighbourhood, like the toolkit's
     ``scipy.signal.convolve2d`` used for surface normals)."""
+    from scipy import ndimage
+
     out = ndimage.correlate1d(np.asarray(image, dtype=np.float64), _DIFF, axis=axis, mode="wrap")
     return ndimage.correlate1d(out, _SMOOTH, axis=1 - axis, mode="wrap")
 

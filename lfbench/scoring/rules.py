@@ -19,7 +19,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy import ndimage
 
 from lfbench.data.scene import HIGHRES, LOWRES, Scene
 from lfbench.scoring.metrics import GENERAL_METRICS, Metric, nonfinite_count
@@ -109,6 +108,8 @@ def align_prediction(pred: np.ndarray, shape: tuple[int, int], source: str = "pr
 
 def upsample_nearest(pred: np.ndarray, factor: int) -> np.ndarray:
     """Nearest-neighbour upsampling exactly as the toolkit: scipy.ndimage.zoom(pred, factor, order=0)."""
+    from scipy import ndimage  # imported when a prediction is scored, not by lfbench regress's start-up
+
     return ndimage.zoom(pred, factor, order=0)
 
 

@@ -1,5 +1,6 @@
-"""Training checkpoints and exported weights: written atomically with torch.save, read with
-``torch.load(weights_only=True)`` (so every value is a tensor, number, string, list or dict).
+"""Training checkpoints and exported weights: written atomically with torch.save, read by the method
+layer's one reader (:func:`lfbench.method.checkpoint.read_checkpoint`: ``torch.load(weights_only=True)``,
+so every value is a tensor, number, string, list or dict).
 
 A training checkpoint holds the model and optimizer state, the stage index and the number of
 steps done in it, the RNG states of python, numpy and torch, and the resolved config. Exported
@@ -16,12 +17,10 @@ from typing import Any
 import numpy as np
 import torch
 
+from lfbench.method.checkpoint import CHECKPOINT_FORMAT, WEIGHTS_FORMAT, read_checkpoint
 from lfbench.utils.atomic import atomic_open
 from lfbench.utils.errors import DataError, LFBenchError
-from lfbench.utils.readfile import check_regular_file
 
-CHECKPOINT_FORMAT = "lfbench.train.checkpoint"
-WEIGHTS_FORMAT = "lfbench.subfocal.weights"  # the name weights files have carried since SubFocal was the only network
 VERSION = 1
 
 
@@ -62,19 +61,9 @@ def save(path: str | Path, payload: dict[str, Any]) -> None:
 
 
 def load(path: str | Path, expected_format: str | None = None) -> dict[str, Any]:
-    """torch.load(weights_only=True) on CPU; DataError naming the file if unreadable or of another format."""
-    path = Path(path)
-    if path.exists():  # torch.load would block on a FIFO and read a device forever
-        check_regular_file(path, "checkpoint")
-    try:
-        payload = torch.load(path, map_location="cpu", weights_only=True)
-    except FileNotFoundError:
-        raise DataError("file not found", path) from None
-    except Exception as exc:  # noqa: BLE001 - torch raises many kinds for a corrupt file
-        raise DataError(f"cannot load checkpoint: {str(exc).splitlines()[0] if str(exc) else type(exc).__name__}",
-                        path) from None
-    if not isinstance(payload, dict):
-        raise DataError("not an lfbench checkpoint (expected a dict)", path)
+    """The payload of a checkpoint (:func:`~lfbench.method.checkpoint.read_checkpoint`); DataError naming the
+    file if it is unreadable, not a torch checkpoint or, with ``expected_format``, of another format."""
+    payload = read_checkpoint(path)
     if expected_format is not None and payload.get("format") != expected_format:
         raise DataError(f"not a {expected_format} file (format {payload.get('format')!r})", path)
     return payload
@@ -95,7 +84,7 @@ def parameters_sha256(module: torch.nn.Module) -> str:
 
 
 def export_weights(path: str | Path, model: torch.nn.Module, training: dict[str, Any] | None = None,
-                   method: str = "subfocal", config: dict[str, Any] | None = None) -> None:
+                   method: str = "", config: dict[str, Any] | None = None) -> None:
     """Write the inference format ``{"format", "method", "state_dict", "config", "training"}`` atomically:
     ``method`` runs it as ``method:weights=PATH``; ``config`` (default ``model.config()``) rebuilds the network."""
     if config is None:
@@ -103,3 +92,7 @@ def export_weights(path: str | Path, model: torch.nn.Module, training: dict[str,
     save(path, {"format": WEIGHTS_FORMAT, "version": VERSION, "method": method,
                 "state_dict": {k: v.detach().cpu().contiguous() for k, v in model.state_dict().items()},
                 "config": config, "training": training or {}})
+
+
+__all__ = ["CHECKPOINT_FORMAT", "WEIGHTS_FORMAT", "VERSION", "rng_state", "set_rng_state", "save", "load",
+           "state_sha256", "parameters_sha256", "export_weights"]

@@ -64,6 +64,7 @@ from typing import Any, Literal
 
 from lfbench.data.scene import SPLITS
 from lfbench.data.synth import MAX_SYNTH_SIZE, scene_name
+from lfbench.method.params import value_problem
 from lfbench.method.trainable import DEFAULT_TRAINABLE, Trainable, get_trainable
 from lfbench.training.losses import NEEDS_DISTRIBUTION, make_loss
 from lfbench.utils.envvars import expand_vars
@@ -72,8 +73,6 @@ from lfbench.utils.hardware import parse_device
 from lfbench.utils.names import file_names
 from lfbench.utils.options import (
     Table,
-    TypeMismatch,
-    coerce,
     option,
     option_fields,
     option_paths,
@@ -314,18 +313,18 @@ class TrainConfig:
 
 
 def model_problem(trainable: Trainable, params: dict[str, Any]) -> str | None:
-    """Why ``params`` cannot be the ``[model]`` table of ``trainable`` (a key the network does not take, naming
-    the ones it does, or a value not of the type its constructor annotates: "channels: expected int, got
-    str"); None when they fit. The values themselves are the network's to check (Trainable.check_params)."""
+    """Why ``params`` cannot be the ``[model]`` table of ``trainable``: a key the network does not take (naming
+    the ones it does), or a value that does not fit the type and bounds its constructor annotates
+    (lfbench.method.params.value_problem: "channels expects int, got str '16'"); None when they fit. What
+    the network checks itself (Trainable.check) is checked before a run builds it."""
     accepted = trainable.parameters()
     unknown = sorted(set(params) - set(accepted))
     if unknown:
         return f"unknown key(s): {', '.join(unknown)} (accepted: {', '.join(sorted(accepted))})"
     for key, value in params.items():
-        try:
-            coerce(value, accepted[key].kind)
-        except TypeMismatch as exc:
-            return f"{key}: {exc}"
+        problem = value_problem(accepted[key], value)
+        if problem:
+            return f"{key} {problem}"
     return None
 
 

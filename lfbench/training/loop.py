@@ -46,7 +46,7 @@ from tqdm import tqdm
 
 from lfbench.data.scene import Benchmark, Scene, check_scene_names
 from lfbench.data.synth import write_benchmark
-from lfbench.method.trainable import check_state_dict, get_trainable
+from lfbench.method.trainable import check_state_dict, get_trainable, to_channels_last
 from lfbench.runs.outputs import read_manifest, recover, staged_outputs
 from lfbench.training import checkpoint as ckpt
 from lfbench.training.config import TrainConfig, expand_path, resume_view
@@ -56,7 +56,7 @@ from lfbench.training.distributed import DistContext, agree_on_resume, setup
 from lfbench.training.losses import make_loss
 from lfbench.training.validate import check_validation_area, validate
 from lfbench.utils.atomic import fresh_dir, write_text
-from lfbench.utils.errors import DataError, LFBenchError, SpecError
+from lfbench.utils.errors import DataError, Interrupted, LFBenchError, SpecError
 from lfbench.utils.hardware import available_cores, require_bf16, set_fp32_numerics
 from lfbench.utils.jsonfile import json_text
 from lfbench.utils.malloc import retain_freed_memory
@@ -68,10 +68,8 @@ from lfbench.utils.tomlfile import MAX_TOML_BYTES
 EXPORTS = "train"  # the output set (lfbench.runs.outputs) of a run's final exports: final.pt and summary.json
 
 
-class TrainingInterrupted(LFBenchError):
-    """Training stopped on SIGINT/SIGTERM after writing a checkpoint."""
-
-    exit_code = 130
+class TrainingInterrupted(Interrupted):
+    """Training stopped on SIGINT/SIGTERM after writing a checkpoint (resumable: a stop, exit 130)."""
 
 
 @dataclass(frozen=True)
@@ -353,17 +351,6 @@ class StopFlag:
             for sig, old in self._old.items():
                 signal.signal(sig, old)
             self._old.clear()
-
-
-def to_channels_last(model: torch.nn.Module) -> torch.nn.Module:
-    """Conv2d weights channels-last and Conv3d weights channels-last-3d (in place): oneDNN then
-    runs the convolutions in that layout, 2-3x faster on CPU for SubFocal's few-channel convs."""
-    for m in model.modules():
-        if isinstance(m, torch.nn.Conv2d):
-            m.to(memory_format=torch.channels_last)
-        elif isinstance(m, torch.nn.Conv3d):
-            m.to(memory_format=torch.channels_last_3d)
-    return model
 
 
 def load_init_weights(cfg: TrainConfig) -> tuple[Path, dict[str, torch.Tensor]]:

@@ -28,6 +28,7 @@ from collections.abc import Callable
 import torch
 
 from lfbench.utils.errors import SpecError
+from lfbench.utils.registry import Registry
 
 EPSILON = 1e-7  # Keras backend epsilon: the clipping bound of probabilities and of U
 
@@ -138,15 +139,11 @@ def uafl_loss(disparity: torch.Tensor, prob: torch.Tensor, target: torch.Tensor,
     return (u.pow(beta) * (disparity - target).abs()).mean()
 
 
-LOSSES: dict[str, LossFn] = {
-    "l1": l1_loss,
-    "mse": mse_loss,
-    "js": js_loss,
-    "kl": kl_loss,
-    "l1+js": l1_js_loss,
-    "l1+kl": l1_kl_loss,
-    "uafl": uafl_loss,
-}
+#: Every loss by name (the generic registry: "Unknown loss 'x'. Available: ..." for another name).
+LOSSES: Registry[LossFn] = Registry("loss")
+for _name, _fn in (("l1", l1_loss), ("mse", mse_loss), ("js", js_loss), ("kl", kl_loss), ("l1+js", l1_js_loss),
+                   ("l1+kl", l1_kl_loss), ("uafl", uafl_loss)):
+    LOSSES.add(_name, _fn)
 
 # Losses that need the probability volume (the others use the disparity alone).
 NEEDS_DISTRIBUTION = frozenset({"js", "kl", "l1+js", "l1+kl", "uafl"})
@@ -158,9 +155,7 @@ def make_loss(name: str, **params) -> LossFn:
     SpecError for an unknown name or parameter.
     """
     key = name.strip().lower()
-    if key not in LOSSES:
-        raise SpecError(f"unknown loss {name!r}; choose from {', '.join(LOSSES)}")
-    fn = LOSSES[key]
+    fn = LOSSES.get(key)
     accepted = set(list(inspect.signature(fn).parameters)[4:])
     unknown = set(params) - accepted
     if unknown:

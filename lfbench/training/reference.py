@@ -33,7 +33,8 @@ progress.
 def losses_markdown() -> str:
     """The losses a stage may name, with their parameters (the other keys of a [[stages]] entry)."""
     rows = []
-    for name, fn in LOSSES.items():
+    for name in LOSSES.registered():  # in the order they are declared
+        fn = LOSSES.get(name)
         params = list(inspect.signature(fn).parameters.values())[4:]
         given = ", ".join(f"`{p.name} = {p.default}`" for p in params) or "—"
         doc = inspect.getdoc(fn) or ""

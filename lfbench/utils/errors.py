@@ -30,6 +30,13 @@ def _visible(text: str) -> str:
                    else ch for ch in text)
 
 
+class Interrupted(LFBenchError):
+    """Work stopped on request (SIGINT/SIGTERM) after saving what it had done: a stop, not an error; the
+    same command resumes it. The CLI prints its message (``stopped at ...``) without ``error:``, exit code 130."""
+
+    exit_code = 130
+
+
 class DataError(LFBenchError):
     """A data file or folder is missing, malformed or inconsistent."""
 

@@ -15,7 +15,7 @@ from pathlib import Path
 
 from lfbench.utils.errors import DataError, LFBenchError
 
-__all__ = ["MAX_TEXT_BYTES", "check_regular_file", "read_bytes", "read_csv", "read_text"]
+__all__ = ["MAX_TEXT_BYTES", "check_regular_file", "file_sha256", "read_bytes", "read_csv", "read_text"]
 
 #: The default cap of a text file lfbench reads (configs, specs, CSVs, golden files are far smaller).
 MAX_TEXT_BYTES = 64 * 1024**2
@@ -72,6 +72,24 @@ def read_bytes(path: str | Path, what: str = "file", max_bytes: int = MAX_TEXT_B
     if total > max_bytes:
         raise error(f"{what} is larger than {_size(max_bytes)}, more than lfbench reads", path)
     return b"".join(chunks)
+
+
+def file_sha256(path: str | Path, what: str = "file", *, error: type[LFBenchError] = DataError) -> str:
+    """SHA-256 (hex) of the bytes of the regular file ``path``, read in 1 MiB pieces (any size: nothing is
+    held); ``error`` naming the file when it is missing, not a regular file or unreadable."""
+    import hashlib
+
+    path = Path(path)
+    fd = _open(path, what, error)
+    digest = hashlib.sha256()
+    try:
+        while chunk := os.read(fd, 1 << 20):
+            digest.update(chunk)
+    except OSError as exc:
+        raise error(f"cannot read {what}: {exc.strerror or exc}", path) from None
+    finally:
+        os.close(fd)
+    return digest.hexdigest()
 
 
 def read_text(path: str | Path, what: str = "file", max_bytes: int = MAX_TEXT_BYTES, *,

@@ -1,6 +1,3 @@
-"""SubFocal (Chao et al., TCI 2023) and its baseline LFattNet: network, Keras checkpoint import,
-whole-image and exactly tiled inference, and the registered methods ``subfocal`` / ``lfattnet``."""
-
-from lfbench_methods.subfocal.network import SubFocalNet, count_trainable
-
-__all__ = ["SubFocalNet", "count_trainable"]
+"""SubFocal (Chao et al., TCI 2023) and its baseline LFattNet: network (network.py), Keras checkpoint
+import, whole-image and exactly tiled inference, the trainable networks and the registered methods
+``subfocal`` / ``lfattnet``. Light at import: torch comes with network.py."""

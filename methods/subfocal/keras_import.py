@@ -259,34 +259,31 @@ def _build_keras(top: list[tuple[str, dict]], nested: list[tuple[str, dict]], pa
 
 
 def save_checkpoint(net: SubFocalNet, out: str | Path, source: str) -> None:
-    """Write ``{"state_dict", "config", "source"}`` atomically with torch.save."""
+    """Write ``{"format", "method", "state_dict", "config", "source"}`` atomically with torch.save."""
+    from lfbench.method.checkpoint import WEIGHTS_FORMAT
+
     buf = io.BytesIO()
-    torch.save({"state_dict": net.state_dict(), "config": net.config(), "source": source}, buf)
+    torch.save({"format": WEIGHTS_FORMAT, "method": "subfocal", "state_dict": net.state_dict(),
+                "config": net.config(), "source": source}, buf)
     write_bytes(out, buf.getvalue())
 
 
-def load_checkpoint(path: str | Path) -> tuple[dict, dict, str]:
-    """(state_dict, config, source) of a checkpoint written by :func:`save_checkpoint` or training
-    (``torch.load(weights_only=True)``); DataError naming the file otherwise."""
-    path = Path(path)
-    check_regular_file(path, "checkpoint")  # not found, a folder, a device or a FIFO: one line
-    try:
-        ckpt = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as exc:  # pickle, zip and format errors all mean: not our checkpoint
-        first = (str(exc).splitlines() or [type(exc).__name__])[0]
-        raise DataError(f"not a torch checkpoint ({type(exc).__name__}: {first[:160]})", path) from None
-    if not isinstance(ckpt, dict) or not isinstance(ckpt.get("state_dict"), dict) \
-            or not isinstance(ckpt.get("config"), dict):
-        raise DataError("not a SubFocal checkpoint (expected a dict with 'state_dict' and 'config')", path)
-    return ckpt["state_dict"], ckpt["config"], str(ckpt.get("source", ""))
+def load_checkpoint(path: str | Path, network: str | None = None) -> tuple[dict, dict, str]:
+    """(state_dict, config, source) of a weights file written by :func:`save_checkpoint` or training, read by
+    lfbench's one checkpoint reader (``torch.load(weights_only=True)``); DataError naming the file otherwise,
+    also for the weights of another network than ``network`` (``a tinycnn checkpoint, not subfocal``)."""
+    from lfbench.method.checkpoint import read_weights
+
+    payload = read_weights(path, network, tuple(n for n in ("subfocal", "lfattnet") if n != network))
+    return payload["state_dict"], payload["config"], str(payload.get("source", ""))
 
 
-def build_from_checkpoint(path: str | Path, **overrides) -> SubFocalNet:
-    """A SubFocalNet (eval mode) from a torch checkpoint; ``overrides`` replace config entries that
-    do not change the weights' shapes (the caller checks conflicts)."""
+def build_from_checkpoint(path: str | Path, network: str | None = None, **overrides) -> SubFocalNet:
+    """A SubFocalNet (eval mode) from a weights file; ``overrides`` replace config entries that do not change
+    the weights' shapes (the caller checks conflicts); ``network``: as in :func:`load_checkpoint`."""
     from lfbench.method.trainable import network_from_state
 
-    state, config, _ = load_checkpoint(path)
+    state, config, _ = load_checkpoint(path, network)
     return network_from_state(SubFocalNet, state, {**config, **overrides}, path)
 
 

@@ -1,79 +1,93 @@
 """Registered methods ``subfocal`` (Chao et al., TCI 2023) and its variant ``lfattnet`` (the baseline:
 the same class registered with interval 1 as its default).
 
+SubFocal runs on lfbench's generic network method (lfbench.method.network_method: weights, device,
+precision, the weights' content in its label) and adds what is its own: the shipped weights, tiles
+planned from a memory budget, TF32 on request, and ``lfbench info`` facts.
+
 Weights come from a checkpoint (``{"state_dict", "config", ...}``, e.g. from ``lfbench train`` or
 ``lfbench convert-keras``); its stored config decides the architecture, and an explicitly given
 parameter that contradicts it is a SpecError. Without ``weights``, the variant's parameters decide
 the architecture (default: the paper's, 5,055,329 trainable parameters) and the shipped checkpoint
 (methods/weights/<variant>_small.pt, trained on CPU by lfbench itself) is used when it has exactly that
 architecture, e.g. ``subfocal:width=16``; otherwise the method is unavailable (never random weights).
+
+Light at import: torch and the network are imported when a method is made.
 """
 
 from __future__ import annotations
 
 import inspect
 from pathlib import Path
-from typing import Literal
+from typing import Annotated, Literal
 
-import numpy as np
-import torch
-from lfbench_methods.subfocal.network import MAX_WIDTH, check_config
 from lfbench_methods.subfocal.trainable import LFAttNetTrainable, SubFocalTrainable  # noqa: F401 (registers them)
 
 from lfbench.data.scene import LightField
 from lfbench.method.base import Method, Prediction
+from lfbench.method.network_method import NetworkMethod
+from lfbench.method.params import Range
 from lfbench.method.registry import method_info, register_method
+from lfbench.method.trainable import get_trainable
 from lfbench.utils.errors import DataError, SpecError
-from lfbench.utils.hardware import require_bf16, resolve_device, set_fp32_numerics
-from lfbench.utils.threads import torch_threads
+from lfbench.utils.hardware import DEVICE_HELP
 
 WEIGHTS_DIR = Path(__file__).resolve().parent.parent / "weights"
 PAPER_WIDTH = 150
 _ARCH_KEYS = ("d_min", "d_max", "interval", "interpolation", "width", "attention")
 
-LFATTNET_DOC = """LFattNet (Tsai et al., AAAI 2020), SubFocal's baseline: the same network at integer disparities.
+LFATTNET_DOC = "LFattNet (Tsai et al., AAAI 2020), SubFocal's baseline: the same network at integer disparities."
+LFATTNET_HELP = {
+    "weights": "checkpoint .pt (lfbench train / convert-keras --interval 1); default: a shipped checkpoint of the "
+               "configured architecture, if any",
+    "interval": "disparity step of the cost volume in px (LFattNet 1)",
+}
 
-weights: checkpoint .pt (lfbench train / convert-keras --interval 1); default: a shipped checkpoint
-    of the configured architecture, if any
-interval: disparity step of the cost volume in px (LFattNet 1)
-"""
 
-
-@register_method("lfattnet", defaults={"interval": 1.0}, doc=LFATTNET_DOC)
+@register_method("lfattnet", defaults={"interval": 1.0}, doc=LFATTNET_DOC, help=LFATTNET_HELP)
 @register_method("subfocal")
-class SubFocal(Method):
+class SubFocal(NetworkMethod):
     """SubFocal (Chao et al., TCI 2023): sub-pixel cost volume, channel attention, 3D aggregation.
 
     The uncertainty output is the standard deviation (px) of the predicted disparity distribution.
-    weights: checkpoint .pt (lfbench train / convert-keras); default: the shipped CPU-trained checkpoint
-        when the configured architecture is its own (see `lfbench info subfocal`)
-    interval: disparity step of the cost volume in px (paper 0.5; 1, 0.25, 0.1 or any)
-    interpolation: sub-pixel shift of the features: nearest, bilinear (paper) or phase (Fourier)
-    d_min: smallest candidate disparity in px
-    d_max: largest candidate disparity in px
-    width: channels of the 3D aggregation (paper 150; with weights=..., the checkpoint's)
-    attention: channel attention over the views on/off
-    tile: inference tile size in px (0 = from max_memory_gb; exact, with a 9 px halo)
-    precision: fp32, or bf16 autocast for the 3D aggregation
-    threads: torch CPU threads (0 = all cores)
-    max_memory_gb: memory budget of inference in GB (decides the tile size when tile=0); on CUDA at most the
-        GPU's free memory, which is the budget when this is not given
-    device: auto (CUDA when available, else CPU), cpu, cuda or cuda:K
-    tf32: allow TF32 in CUDA fp32 convolutions and matmuls (default off: IEEE fp32)
     """
 
+    network = "subfocal"
     WEIGHTS_DIR: Path = WEIGHTS_DIR  # the shipped checkpoints: <variant>_small.pt
 
-    def __init__(self, weights: Path | None = None, interval: float = 0.5,
-                 interpolation: Literal["nearest", "bilinear", "phase"] = "bilinear", d_min: float = -4.0,
-                 d_max: float = 4.0, width: int | None = None, attention: bool = True, tile: int = 0,
-                 precision: Literal["fp32", "bf16"] = "fp32", threads: int = 0, max_memory_gb: float = 4.0,
-                 device: str = "auto", tf32: bool = False) -> None:
+    def __init__(
+        self,
+        weights: Annotated[Path | None, "checkpoint .pt (lfbench train / convert-keras); default: the shipped "
+                                        "CPU-trained checkpoint when the configured architecture is its own (see "
+                                        "`lfbench info subfocal`)"] = None,
+        interval: Annotated[float, "disparity step of the cost volume in px (paper 0.5; 1, 0.25, 0.1 or any)"] = 0.5,
+        interpolation: Annotated[Literal["nearest", "bilinear", "phase"],
+                                 "sub-pixel shift of the features: nearest, bilinear (paper) or phase (Fourier)"]
+        = "bilinear",
+        d_min: Annotated[float, "smallest candidate disparity in px"] = -4.0,
+        d_max: Annotated[float, "largest candidate disparity in px"] = 4.0,
+        width: Annotated[int | None, "channels of the 3D aggregation (paper 150; with weights=..., the "
+                                     "checkpoint's)"] = None,
+        attention: Annotated[bool, "channel attention over the views on/off"] = True,
+        tile: Annotated[int, "inference tile size in px (0 = from max_memory_gb; exact, with a 9 px halo)",
+                        Range(0)] = 0,
+        precision: Annotated[Literal["fp32", "bf16"], "fp32, or bf16 autocast for the 3D aggregation"] = "fp32",
+        threads: Annotated[int, "torch CPU threads (0 = all cores)", Range(0)] = 0,
+        max_memory_gb: Annotated[float, "memory budget of inference in GB (decides the tile size when tile=0); on "
+                                        "CUDA at most the GPU's free memory, which is the budget when this is not "
+                                        "given"] = 4.0,
+        device: Annotated[str, DEVICE_HELP] = "auto",
+        tf32: Annotated[bool, "allow TF32 in CUDA fp32 convolutions and matmuls (default off: IEEE fp32)"] = False,
+    ) -> None:
+        from lfbench_methods.subfocal.network import MAX_WIDTH, check_config
+
+        from lfbench.utils.hardware import require_bf16, resolve_device
+
         values = {"weights": weights, "interval": interval, "interpolation": interpolation, "d_min": d_min,
                   "d_max": d_max, "width": width, "attention": attention, "tile": tile, "precision": precision,
                   "threads": threads, "max_memory_gb": max_memory_gb, "device": device, "tf32": tf32}
         defaults = _signature_defaults()
-        super().__init__(**{k: v for k, v in values.items() if v != defaults[k]})
+        Method.__init__(self, **{k: v for k, v in values.items() if v != defaults[k]})
         check_config(d_min, d_max, interval, interpolation)  # the network's checks (width: ours, None allowed)
         if precision not in ("fp32", "bf16"):
             raise ValueError(f"precision must be fp32 or bf16, got {precision!r}")
@@ -81,9 +95,12 @@ class SubFocal(Method):
             raise ValueError(f"width must be from 1 to {MAX_WIDTH}, got {width}")
         if tile < 0 or threads < 0 or not 0 < max_memory_gb < float("inf"):
             raise ValueError("tile and threads must be >= 0 and max_memory_gb a finite number > 0")
+        self.trainable = get_trainable("subfocal")
+        self.weights = None if weights is None else Path(weights).expanduser()
         self.device = resolve_device(device)  # SpecError for a device this machine lacks
         if precision == "bf16":
             require_bf16(self.device)  # one line, before any work (an AVX2-only CPU cannot run it)
+        self.precision, self.threads, self.tile = precision, threads, tile
         self.values = values
         self._net = None
 
@@ -103,15 +120,14 @@ class SubFocal(Method):
     def weights_path(self) -> Path | None:
         """The checkpoint to load: the one given, else the shipped one if it has this variant's
         architecture, else None."""
-        w = self.values["weights"]
-        if w is not None:
-            return Path(w).expanduser()
+        if self.weights is not None:
+            return self.weights
         shipped = self.shipped_weights
         if shipped.is_file() and not self._differences(self._configured(), _stored_config(shipped)):
             return shipped
         return None
 
-    def _explicit(self) -> dict:
+    def explicit_arch(self) -> dict:
         """Parameters the user gave (the registry records them in ``params``)."""
         return {k: self.values[k] for k in self.params if k in _ARCH_KEYS}
 
@@ -136,9 +152,9 @@ class SubFocal(Method):
                 out.append(f"{key}={value} (checkpoint: {stored})")
         return out
 
-    def _checkpoint_config(self, config: dict) -> dict:
+    def check_config(self, config: dict) -> dict:
         """The checkpoint's config, after checking explicit parameters against it (SpecError)."""
-        conflicts = self._differences(self._explicit(), config)
+        conflicts = self._differences(self.explicit_arch(), config)
         if conflicts:
             raise SpecError(f"{self.variant}: {', '.join(conflicts)} conflicts with the checkpoint "
                             f"{self.weights_path}; leave it out to use the checkpoint's")
@@ -161,7 +177,7 @@ class SubFocal(Method):
         except SpecError:
             return _signature_defaults()
 
-    def _missing_reason(self) -> str | None:
+    def missing_reason(self) -> str | None:
         p = self.weights_path
         if p is None:
             hint = ""
@@ -171,28 +187,7 @@ class SubFocal(Method):
                 hint = f", or run the shipped CPU-trained model: {self.variant}:{spec}"
             return ("no weights for this configuration: give weights=CHECKPOINT.pt (lfbench train or "
                     f"lfbench convert-keras){hint}")
-        if p.is_file():
-            return None
-        return f"weights file {p} is not a regular file" if p.exists() else f"weights file {p} not found"
-
-    def load_network(self):
-        """The SubFocalNet with the checkpoint's weights (eval mode), loaded once."""
-        if self._net is None:
-            from lfbench_methods.subfocal.keras_import import build_from_checkpoint
-
-            reason = self._missing_reason()
-            if reason:
-                raise DataError(reason)
-            net = build_from_checkpoint(self.weights_path)
-            self._checkpoint_config(net.config())
-            self._net = net.to(self.device)
-        return self._net
-
-    def to(self, device: str) -> SubFocal:
-        """Load the network (once) and move it to ``device`` (where predict then runs)."""
-        self.device = resolve_device(device)
-        self.load_network().to(self.device)
-        return self
+        return super().missing_reason()
 
     def describe_variant(self) -> dict:
         """Facts about the configured variant: trainable parameters, disparity grid, weights."""
@@ -207,8 +202,8 @@ class SubFocal(Method):
             weights = f"{path} (missing)"
         else:
             _, stored, source = load_checkpoint(path)
-            config = self._checkpoint_config(stored)
-            kind = "given" if self.values["weights"] is not None else "shipped"
+            config = self.check_config(stored)
+            kind = "given" if self.weights is not None else "shipped"
             weights = f"{path} ({kind}{'; source ' + source if source else ''})"
         net = SubFocalNet(**config)
         d = net.disparities
@@ -220,7 +215,7 @@ class SubFocal(Method):
     # -- prediction -------------------------------------------------------------------------
 
     def available_for(self, lf: LightField) -> str | None:
-        reason = self._missing_reason()
+        reason = self.missing_reason()
         if reason:
             return reason
         v, u = lf.angular_size
@@ -229,7 +224,12 @@ class SubFocal(Method):
         return None
 
     def predict(self, lf: LightField) -> Prediction:
+        import numpy as np
+        import torch
         from lfbench_methods.subfocal.inference import infer
+
+        from lfbench.utils.hardware import set_fp32_numerics
+        from lfbench.utils.threads import torch_threads
 
         v, u = lf.angular_size
         if (v, u) != (9, 9):

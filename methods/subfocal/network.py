@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import math
 import numbers
+from typing import Annotated
 
 import torch
 import torch.nn.functional as F
@@ -417,14 +418,17 @@ def check_config(d_min: float, d_max: float, interval: float, interpolation: str
 class SubFocalNet(nn.Module):
     """SubFocal / LFattNet: views (B, N, H, W) -> (disparity (B, H, W), probability (B, D, H, W)).
 
-    d_min, d_max, interval: the disparity grid (px per view step); interpolation: how features
-    are shifted by sub-pixel amounts (nearest, bilinear, phase); width: channels of the 3D
-    aggregation (150 in the paper); attention: the channel attention on/off; angular: views per
-    angular row (N = angular^2).
+    The parameters are those of the ``subfocal`` trainable network (``[model]`` keys, ablation axes).
     """
 
-    def __init__(self, d_min: float = -4.0, d_max: float = 4.0, interval: float = 0.5,
-                 interpolation: str = "bilinear", width: int = 150, attention: bool = True, angular: int = 9) -> None:
+    def __init__(self, d_min: Annotated[float, "smallest candidate disparity in px"] = -4.0,
+                 d_max: Annotated[float, "largest candidate disparity in px"] = 4.0,
+                 interval: Annotated[float, "disparity step of the cost volume in px (paper 0.5)"] = 0.5,
+                 interpolation: Annotated[str, "sub-pixel shift of the features: nearest, bilinear (paper) or "
+                                               "phase (Fourier)"] = "bilinear",
+                 width: Annotated[int, "channels of the 3D aggregation (paper 150)"] = 150,
+                 attention: Annotated[bool, "channel attention over the views on/off"] = True,
+                 angular: Annotated[int, "views per angular row (9 for the HCI scenes)"] = 9) -> None:
         super().__init__()
         check_config(d_min, d_max, interval, interpolation, width, attention, angular)  # before any allocation
         self._config = {"d_min": float(d_min), "d_max": float(d_max), "interval": float(interval),

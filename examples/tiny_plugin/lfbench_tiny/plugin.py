@@ -1,38 +1,44 @@
-"""The ``tinycnn`` plugin: a network lfbench can train, ablate and time, and the method that runs it.
+"""The ``tinycnn`` plugin: one network, registered once.
 
-- :class:`TinyNet`: 3x3 convolutions over the stacked views minus the centre view (the differences carry
-  the parallax), a softmax over candidate disparities and their expectation (so the distribution losses
-  js, kl, uafl apply as well as l1);
-- :class:`TinyCNN` (``@register_trainable``): tells lfbench how to build it from a training config's
-  ``[model]`` table; its parameters are the ablation axes;
-- :class:`TinyCNNMethod` (``@register_method``): runs a checkpoint written by ``lfbench train`` as
-  ``tinycnn:weights=OUT/final.pt``.
+:class:`TinyNet` is a ``torch.nn.Module``: 3x3 convolutions over the stacked views minus the centre view (the
+differences carry the parallax), a softmax over candidate disparities and their expectation. Its constructor's
+parameters, typed and documented with ``Annotated``, are everything lfbench needs to know about them.
+
+:class:`TinyCNN` registers it (``@register_trainable``). With that alone:
+
+- ``lfbench evaluate --method tinycnn:weights=OUT/final.pt`` runs trained weights (lfbench's generic network
+  method: device, precision, exact tiles, the network's parameters as spec parameters);
+- ``lfbench train`` trains it (``method = "tinycnn"``; distribution losses too: ``distribution = True``);
+- ``lfbench ablate`` varies its parameters; ``lfbench bench`` times it (GFLOP/s from :meth:`TinyCNN.flops`);
+- ``lfbench methods`` / ``lfbench info tinycnn`` list its parameters with their help.
 """
 
 from __future__ import annotations
 
-from pathlib import Path
+from typing import Annotated
 
-import numpy as np
 import torch
 from torch import nn
 
-from lfbench import DataError, Method, Prediction, Trainable, register_method, register_trainable
-from lfbench.method.trainable import get_trainable
+from lfbench import Range, Trainable, register_trainable
 
 
 class TinyNet(nn.Module):
     """views (B, N, H, W) in [0, 1] -> (disparity (B, H, W) px, probability (B, D, H, W) over ``disparities``)."""
 
-    def __init__(self, channels: int = 8, layers: int = 2, d_min: float = -4.0, d_max: float = 4.0,
-                 interval: float = 1.0, angular: int = 9) -> None:
+    def __init__(self, channels: Annotated[int, "channels of the hidden 3x3 convolutions", Range(1, 1024)] = 8,
+                 layers: Annotated[int, "number of hidden 3x3 convolutions", Range(1, 32)] = 2,
+                 d_min: Annotated[float, "smallest candidate disparity in px"] = -4.0,
+                 d_max: Annotated[float, "largest candidate disparity in px"] = 4.0,
+                 interval: Annotated[float, "step of the candidate disparities in px", Range(0.01, 8)] = 1.0,
+                 angular: Annotated[int, "views per angular row (9 for the HCI scenes)", Range(1, 15)] = 9) -> None:
         super().__init__()
-        if channels < 1 or layers < 1 or interval <= 0 or d_max <= d_min:
-            raise ValueError(f"need channels, layers >= 1 and d_min < d_max, interval > 0; got channels={channels}, "
-                             f"layers={layers}, d_min={d_min}, d_max={d_max}, interval={interval}")
+        if d_max <= d_min:
+            raise ValueError(f"d_min must be below d_max, got d_min={d_min}, d_max={d_max}")
         self._config = {"channels": channels, "layers": layers, "d_min": float(d_min), "d_max": float(d_max),
                         "interval": float(interval), "angular": angular}
         self.angular = angular
+        self.receptive_radius = layers + 1  # px: one per 3x3 convolution, so inference may run in exact tiles
         grid = torch.arange(d_min, d_max + interval / 2, interval, dtype=torch.float32)
         self.register_buffer("disparities", grid, persistent=False)
         body: list[nn.Module] = []
@@ -44,7 +50,7 @@ class TinyNet(nn.Module):
         self.body = nn.Sequential(*body)
 
     def config(self) -> dict:
-        """The constructor arguments (stored in checkpoints by lfbench train)."""
+        """The constructor arguments (stored in the weights files lfbench train writes)."""
         return dict(self._config)
 
     def forward(self, views: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -55,15 +61,7 @@ class TinyNet(nn.Module):
 
 @register_trainable("tinycnn")
 class TinyCNN(Trainable):
-    """A tiny CNN over the stacked views (lfbench's example plugin).
-
-    channels: channels of the hidden 3x3 convolutions
-    layers: number of hidden 3x3 convolutions
-    d_min: smallest candidate disparity in px
-    d_max: largest candidate disparity in px
-    interval: step of the candidate disparities in px
-    angular: views per angular row (9 for the HCI scenes)
-    """
+    """A tiny CNN over the stacked views (lfbench's example plugin)."""
 
     network = TinyNet
     distribution = True  # forward returns a probability over net.disparities
@@ -73,44 +71,3 @@ class TinyCNN(Trainable):
         convs = [m for m in net.modules() if isinstance(m, nn.Conv2d)]
         total = sum(2.0 * m.in_channels * m.out_channels * m.kernel_size[0] * m.kernel_size[1] for m in convs)
         return {"total": total * height * width}
-
-
-@register_method("tinycnn")
-class TinyCNNMethod(Method):
-    """A tiny CNN trained with lfbench train (lfbench's example plugin).
-
-    weights: checkpoint .pt written by lfbench train (OUT/final.pt)
-    """
-
-    def __init__(self, weights: Path) -> None:
-        super().__init__()
-        self.weights = Path(weights)
-        self._net: TinyNet | None = None
-
-    def available_for(self, lf) -> str | None:
-        return None if self.weights.is_file() else f"weights file {self.weights} not found"
-
-    def network(self) -> TinyNet:
-        """The checkpoint's network (eval mode), loaded once."""
-        if self._net is None:
-            if not self.weights.is_file():
-                raise DataError("weights file not found", self.weights)
-            self._net = get_trainable("tinycnn").load(self.weights)
-        return self._net
-
-    def to(self, device: str) -> TinyCNNMethod:
-        self.network().to(device)
-        return self
-
-    def predict(self, lf) -> Prediction:
-        net = self.network()
-        v, u = lf.angular_size
-        if (v, u) != (net.angular, net.angular):
-            raise DataError(f"{self.label}: needs a {net.angular}x{net.angular} light field, got {v}x{u} ({lf.name})")
-        views = lf.gray_views()  # (V, U, H, W) float32 in [0, 1]
-        x = torch.from_numpy(np.ascontiguousarray(views.reshape(1, v * u, *views.shape[2:]), dtype=np.float32))
-        device = net.disparities.device
-        with torch.inference_mode():
-            disp, prob = net(x.to(device))
-        return Prediction(disparity=disp[0].cpu().numpy(), distribution=prob[0].cpu().numpy(),
-                          disparity_values=net.disparities.cpu().numpy())

@@ -1,4 +1,5 @@
-"""``planesweep``: a training-free disparity estimator (plane sweep over SubFocal's disparity grid).
+"""The estimator of ``planesweep`` (methods/planesweep/method.py): a training-free plane sweep over
+SubFocal's disparity grid.
 
 Pipeline, all batched torch on the chosen device (``device``: auto, cpu, cuda or cuda:K; every tensor lives
 there, the outputs come back to the CPU):
@@ -35,90 +36,13 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 import torch
 import torch.nn.functional as F
-
-from lfbench.data.scene import LightField
-from lfbench.data.shift import INTERPOLATIONS, angular_offsets, disparity_grid
-from lfbench.method.base import Method, Prediction
-from lfbench.method.registry import register_method
-from lfbench.utils.errors import DataError
-from lfbench.utils.hardware import resolve_device
 
 VIEW_SETS = ("star", "all")
 OCCLUSION_MODES = ("subsets", "none")
 SUBPIXEL_FITS = ("equiangular", "parabola", "none")
 _CHUNK_ELEMENTS = 8 * 1024 * 1024  # floats per shifted-view chunk (32 MB)
-
-
-MAX_RADIUS_PX = 256  # norm_radius and arm_length: windows wider than this only cost time and memory
-
-
-@register_method("planesweep")
-class PlaneSweep(Method):
-    """Training-free plane sweep with occlusion-aware view subsets, edge-aware aggregation and sub-pixel fit.
-
-    d_min: smallest candidate disparity, px per view step (SubFocal: -4)
-    d_max: largest candidate disparity, px per view step (SubFocal: 4)
-    interval: spacing of the candidate disparities in px (SubFocal: 0.5; 0.25 is finer and more accurate)
-    interpolation: how views are shifted onto the centre: nearest, bilinear or phase (Fourier shift)
-    views: star (centre row, column and both diagonals: 33 of 81 views, about as accurate) or all
-    occlusion: subsets (best of all/half-aperture/centre-row/centre-column view subsets per pixel) or none
-    norm_radius: radius in px of the local contrast normalisation of the views (0: raw gray levels)
-    arm_length: longest arm in px of the cross-shaped aggregation windows (0: no aggregation)
-    arm_tau: gray-level tolerance (0..1) under which the aggregation arms keep growing
-    subpixel: fit through the cost minimum: equiangular (suits the L1 cost), parabola or none
-    temperature: softmax temperature of the returned distribution, in units of each pixel's mean cost
-    device: where the sweep runs: auto (CUDA when available, else CPU), cpu, cuda or cuda:K
-    """
-
-    def __init__(self, d_min: float = -4.0, d_max: float = 4.0, interval: float = 0.25,
-                 interpolation: str = "bilinear", views: str = "star", occlusion: str = "subsets",
-                 norm_radius: int = 2, arm_length: int = 16, arm_tau: float = 0.02,
-                 subpixel: str = "equiangular", temperature: float = 0.05, device: str = "auto") -> None:
-        super().__init__(d_min=d_min, d_max=d_max, interval=interval, interpolation=interpolation, views=views,
-                         occlusion=occlusion, norm_radius=norm_radius, arm_length=arm_length, arm_tau=arm_tau,
-                         subpixel=subpixel, temperature=temperature, device=device)
-        self.disparities = disparity_grid(d_min, d_max, interval)  # ValueError on a bad grid
-        for name, value, allowed in (("interpolation", interpolation, INTERPOLATIONS), ("views", views, VIEW_SETS),
-                                     ("occlusion", occlusion, OCCLUSION_MODES), ("subpixel", subpixel, SUBPIXEL_FITS)):
-            if value not in allowed:
-                raise ValueError(f"{name} must be one of {', '.join(allowed)}, got {value!r}")
-        if not (0 <= norm_radius <= MAX_RADIUS_PX and 0 <= arm_length <= MAX_RADIUS_PX):
-            raise ValueError(f"norm_radius and arm_length must be from 0 to {MAX_RADIUS_PX} px, "
-                             f"got {norm_radius}, {arm_length}")
-        if not (0 < arm_tau < math.inf and 0 < temperature < math.inf):
-            raise ValueError(f"arm_tau and temperature must be finite numbers > 0, got {arm_tau}, {temperature}")
-        self.interval = float(interval)
-        self.interpolation = interpolation
-        self.views = views
-        self.device = resolve_device(device)  # SpecError before any work for a device this machine lacks
-        self.occlusion = occlusion
-        self.norm_radius = int(norm_radius)
-        self.arm_length = int(arm_length)
-        self.arm_tau = float(arm_tau)
-        self.subpixel = subpixel
-        self.temperature = float(temperature)
-
-    def predict(self, lf: LightField) -> Prediction:
-        rows, cols = lf.angular_size
-        if rows * cols < 2:
-            raise DataError(f"planesweep: {lf.name!r} has a single view; a plane sweep needs parallax")
-        gray = np.asarray(lf.gray_views(), dtype=np.float32)
-        if gray.ndim != 4 or gray.shape[:2] != (rows, cols):
-            raise DataError(f"planesweep: {lf.name!r} views have shape {gray.shape}, expected ({rows}, {cols}, H, W)")
-        if not np.isfinite(gray).all():
-            raise DataError(f"planesweep: {lf.name!r} views contain NaN or infinite values")
-        with torch.inference_mode():
-            views = torch.from_numpy(gray).reshape(rows * cols, *gray.shape[2:]).to(self.device)
-            _, disp, dist, unc = estimate(views, angular_offsets(rows, cols), self.disparities, self.interval,
-                                          interpolation=self.interpolation, view_set=self.views,
-                                          occlusion=self.occlusion, norm_radius=self.norm_radius,
-                                          arm_length=self.arm_length, arm_tau=self.arm_tau,
-                                          subpixel=self.subpixel, temperature=self.temperature)
-        return Prediction(disparity=disp.cpu().numpy().astype(np.float32), distribution=dist.cpu().numpy(),
-                          disparity_values=self.disparities.numpy(), uncertainty=unc.cpu().numpy())
 
 
 # --------------------------------------------------------------------------- the estimator

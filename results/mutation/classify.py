@@ -1,0 +1,174 @@
+"""Give every surviving mutant of `nox -s mutation` its reason, and fail if one has none.
+
+Reads mutmut's survivors (mutants/, as survivors.py does) and the fresh-process re-check
+(recheck_import_time.json); writes a Markdown table, one row per survivor: mutant, change, reason.
+Three reasons are recognised from the change itself (the same rule for every mutant it matches); the
+others are listed by mutant name below, each with why the change cannot alter a score, a results
+record or a gate decision. A survivor with no reason is printed as UNEXPLAINED and the exit code is 1:
+either a test is missing or the reason must be written here.
+
+    python results/mutation/classify.py --recheck results/mutation/recheck_import_time.json \\
+        --out results/mutation/survivors_classified.md
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).parent))
+from survivors import ROOT, SURVIVED, survivors  # noqa: E402
+
+PRESENTATION = ("presentation only: a metric's display name, description or colour-map setting (figure labels "
+                "and colour ranges; never a score, a results record or a gate decision)")
+COPY = ("equivalent: `astype`'s `copy` flag; no caller writes into the arrays, so a copy or a view gives the "
+        "same numbers")
+NAN = 'equivalent: `float("NAN")` is `float("nan")`'
+
+_SEEN_AT = "lfbench."
+REASONS: dict[str, tuple[str, ...]] = {
+    "equivalent: NumPy comparisons raise no floating-point exception (NaN compares False silently), so "
+    "ignoring `invalid` around a comparison changes nothing": (
+        "scoring.metrics.x_bad_pix__mutmut_16", "scoring.metrics.x_bad_pix__mutmut_33",
+        "scoring.region_metrics.x_backgammon_fattening__mutmut_14",
+        "scoring.region_metrics.x_backgammon_thinning__mutmut_14"),
+    "equivalent: the floating-point exception this `errstate` entry silences cannot occur there: `divide` "
+    "needs x / 0 with x != 0 (a normal is 0 only when all its components are; n_bad <= n); `over` needs "
+    "1 / d with 0 < |d| < 3e-39 in disp2depth, whose float32 denominator is 0 or >= ~1e-9; the gt-finiteness "
+    "map is 0 or NaN, whose filtering raises nothing": (
+        "scoring.region_metrics.x_depth_normals__mutmut_63", "scoring.region_metrics.x_depth_normals__mutmut_65",
+        "scoring.region_metrics.x_missed_dots__mutmut_89", "scoring.region_metrics.x_missed_dots__mutmut_91",
+        "scoring.region_metrics.x_median_angular_error__mutmut_11",
+        "scoring.region_metrics.x_median_angular_error__mutmut_14",
+        "scoring.region_metrics.x_bumpiness_x100__mutmut_19"),
+    "equivalent: a default that is never used: every metric is called through Metric.__call__, which always "
+    "passes `toolkit=`; mse_x100 ignores `toolkit` (MSE has one rule)": (
+        "scoring.metrics.x_mse_x100__mutmut_1", "scoring.metrics.x__bad_pix_metric__mutmut_1",
+        "scoring.region_metrics.x__bad_pix_fn__mutmut_1", "scoring.region_metrics.x__bump_fn__mutmut_1",
+        "scoring.region_metrics.x__mae_fn__mutmut_1", "scoring.region_metrics.x__fine_fat_fn__mutmut_1",
+        "scoring.region_metrics.x__fine_thin_fn__mutmut_1", "scoring.region_metrics.x__bg_fat_fn__mutmut_1",
+        "scoring.region_metrics.x__bg_thin_fn__mutmut_1", "scoring.region_metrics.x__missed_dots_fn__mutmut_1",
+        "scoring.region_metrics.x__slanted_fn__mutmut_1"),
+    "equivalent: the dtype is already the one named (astype(None) and np.asarray without dtype give float64 / "
+    "intp here; _scharr_separable's inputs are float64; depth_normals' depth reaches the filters only through "
+    "_scharr_separable, which casts it to float64 exactly); np.full(..., None, float32) is NaN; a float "
+    "zeros(1) behaves as False": (
+        "scoring.region_metrics.x_bumpiness_map__mutmut_11", "scoring.region_metrics.x__halfway_to_column__mutmut_4",
+        "scoring.region_metrics.x__scharr_separable__mutmut_11",
+        "scoring.region_metrics.x__scharr_separable__mutmut_13",
+        "scoring.region_metrics.x_depth_normals__mutmut_3", "scoring.region_metrics.x_depth_normals__mutmut_5",
+        "scoring.region_metrics.x__first_labels__mutmut_13", "scoring.region_metrics.x__first_labels__mutmut_16",
+        "scoring.region_metrics.x__label_lut__mutmut_13", "scoring.region_metrics.x__label_lut__mutmut_15",
+        "scoring.rules.x_align_prediction__mutmut_53"),
+    "equivalent: scharr_derivative treats every axis other than 0 as 1 (axis=None or 2 is the `else` branch)": (
+        "scoring.region_metrics.x__hessian_norm__mutmut_3", "scoring.region_metrics.x__hessian_norm__mutmut_6",
+        "scoring.region_metrics.x__hessian_norm__mutmut_15", "scoring.region_metrics.x__hessian_norm__mutmut_18",
+        "scoring.region_metrics.x__hessian_norm__mutmut_30", "scoring.region_metrics.x__hessian_norm__mutmut_33"),
+    "equivalent: a lookup table only needs one entry per label value and -1 (any negative) elsewhere: a longer "
+    "table, a -2 fill, an empty-label table of 2 entries or `present[:lowest] = None` (False) change no "
+    "lookup; `highest` is None for the only caller (boxes), so its branch never runs": (
+        "scoring.region_metrics.x__first_labels__mutmut_25", "scoring.region_metrics.x__first_labels__mutmut_26",
+        "scoring.region_metrics.x__first_labels__mutmut_27", "scoring.region_metrics.x__first_labels__mutmut_28",
+        "scoring.region_metrics.x__first_labels__mutmut_30", "scoring.region_metrics.x__label_lut__mutmut_16",
+        "scoring.region_metrics.x__label_lut__mutmut_17", "scoring.region_metrics.x__label_lut__mutmut_20",
+        "scoring.region_metrics.x__label_lut__mutmut_21", "scoring.region_metrics.x__label_lut__mutmut_22",
+        "scoring.region_metrics.x__label_lut__mutmut_23"),
+    "equivalent: the same numbers by arithmetic: norms are >= 0 (clip's lower bound), a constant map has a zero "
+    "Hessian, np.where(..., None) is cast to NaN, NaN >= 50 is False when n == 0, int(14 * 10.0) == 140, "
+    "zoom by 10.0 == zoom by 10, zoom by 1 is the identity, an even crop halves exactly (odd ones were "
+    "refused), the channels are equal after the gray check, the condition reduces to `not text.isdigit()`, "
+    "records are finite before json.dumps (allow_nan never matters), a metric id has no '/' so no "
+    "METHOD/METRIC pattern can match it, an empty error list returns before the thresholds are used, "
+    "reading mask names when none is needed changes nothing, ndimage.convolve's default mode is the "
+    "default 'reflect'": (
+        "scoring.region_metrics.x_bumpiness_map__mutmut_14", "scoring.region_metrics.x_bumpiness_x100__mutmut_27",
+        "scoring.region_metrics.x_bumpiness_x100__mutmut_32", "scoring.region_metrics.x_missed_dots__mutmut_102",
+        "scoring.region_metrics.x__scale__mutmut_6", "scoring.rules.x_score_scene__mutmut_60",
+        "scoring.rules.x_score_scene__mutmut_64", "scoring.rules.x_align_prediction__mutmut_34",
+        "scoring.region_metrics.x_read_label_mask__mutmut_24", "scoring.metrics.x__badpix_family__mutmut_19",
+        "runs.regress.x_make_golden__mutmut_52", "runs.regress.x_make_golden__mutmut_55",
+        "runs.regress.x_make_golden__mutmut_57", "runs.regress.x_tolerance_for__mutmut_14",
+        "scoring.metrics.x_bad_pix_curve__mutmut_29", "scoring.rules.x_metric_resolution__mutmut_8",
+        "scoring.region_metrics.x_scharr_derivative__mutmut_15"),
+    "equivalent for every valid id: `badpix_<t>` ids have one '_'; the split differs only for malformed ids "
+    "with a second one": (
+        "scoring.metrics.x__badpix_family__mutmut_9", "scoring.metrics.x__badpix_family__mutmut_10",
+        "scoring.metrics.x__badpix_family__mutmut_12"),
+    "unreachable (defensive) code: Scene.mask reads a mask with its expected size and refuses any other "
+    "(lfbench.data.scene.read_mask) before this check; "
+    "metric_resolution returns high resolution only when the high-res gt exists and a pyramids metric only "
+    "at low resolution (the default of Scene.mask)": (
+        *(f"scoring.rules.x_score_scene__mutmut_{i}" for i in (52, 97, 98, 99, 100, 101, 102, 103, 104, 105, 106)),
+        *(f"scoring.region_metrics.x__scene_mask__mutmut_{i}" for i in range(5, 16) if i != 6),
+    ),
+    "equivalent: MetricRegistry.register looks up `key` even when it is None; no alias is None, so the "
+    "owner is None either way": ("scoring.metrics.xǁMetricRegistryǁregister__mutmut_6",),
+    "equivalent while SCENE_AGGREGATES has one entry ('mean'): the separator of a one-item join never "
+    "appears in the message": ("scoring.metrics.xǁMetricǁ__post_init____mutmut_4",),
+}
+
+_FIELDS = re.compile(r"\b(name|description|vmin|vmax|cmap)=(f?\"[^\"]*\"|[^,)\n]*)\s*,?")
+
+
+def _changed(diff: str) -> tuple[str, str]:
+    minus = " ".join(line[1:] for line in diff.splitlines() if line.startswith("-"))
+    plus = " ".join(line[1:] for line in diff.splitlines() if line.startswith("+"))
+    return minus, plus
+
+
+def _squash(text: str) -> str:
+    return re.sub(r"\s+", "", text)
+
+
+def reason_of(name: str, diff: str) -> str | None:
+    short = name.removeprefix(_SEEN_AT)
+    for reason, names in REASONS.items():
+        if short in names:
+            return reason
+    minus, plus = _changed(diff)
+    if minus and _squash(_FIELDS.sub("", minus)) == _squash(_FIELDS.sub("", plus)):
+        return PRESENTATION
+    if minus and _squash(re.sub(r"copy=\w+,?", "", minus)) == _squash(re.sub(r"copy=\w+,?", "", plus)):
+        return COPY
+    if minus and plus.replace('"NAN"', '"nan"') == minus:
+        return NAN
+    return None
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--mutants", type=Path, default=ROOT / "mutants")
+    parser.add_argument("--recheck", type=Path, required=True)
+    parser.add_argument("--out", type=Path, required=True)
+    args = parser.parse_args()
+    verdicts = json.loads(args.recheck.read_text(encoding="utf-8"))["verdicts"]
+    rows, unexplained = [], []
+    for name, _, diff in survivors(args.mutants, (SURVIVED,)):
+        if verdicts.get(name) == "killed":
+            continue
+        reason = reason_of(name, diff)
+        if reason is None:
+            unexplained.append(name)
+        minus, plus = _changed(diff)
+        change = f"`{' '.join(minus.split())[:90]}` -> `{' '.join(plus.split())[:90]}`".replace("|", "\\|")
+        rows.append(f"| {name.removeprefix(_SEEN_AT)} | {change} | {reason or 'UNEXPLAINED'} |")
+    counts: dict[str, int] = {}
+    for row in rows:
+        reason = row.rsplit(" | ", 1)[1].rstrip(" |")
+        counts[reason] = counts.get(reason, 0) + 1
+    summary = "\n".join(f"- {n}: {reason}" for reason, n in sorted(counts.items(), key=lambda kv: -kv[1]))
+    text = (f"# Surviving mutants and why ({len(rows)})\n\nWritten by `python results/mutation/classify.py` "
+            f"(see README.md).\n\n{summary}\n\n| mutant | change | reason |\n| --- | --- | --- |\n"
+            + "\n".join(rows) + "\n")
+    args.out.write_text(text, encoding="utf-8")
+    for name in unexplained:
+        print(f"UNEXPLAINED {name}")
+    print(f"{len(rows)} survivors, {len(unexplained)} unexplained")
+    return 1 if unexplained else 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

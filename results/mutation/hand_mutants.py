@@ -1,0 +1,169 @@
+"""Re-run issue 25's hand-written mutations of the scoring core and the gate against the tests.
+
+Each mutation is one textual change of one source file (the kind a refactor introduces). For each, the
+package is copied to a temporary folder, the change applied there (the working tree is never touched),
+and the given test files run against the copy (PYTHONPATH puts it before the editable install). A
+mutation is killed when the tests fail. ``--tests`` chooses the test files: ``new`` (the issue-25 tests
+named per mutation, default) or ``old`` (the files that covered scoring before them: the survivors
+the issue reported). Writes a JSON report.
+
+    python results/mutation/hand_mutants.py --tests new --out results/mutation/hand_mutants_new.json
+    python results/mutation/hand_mutants.py --tests old --out results/mutation/hand_mutants_old.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+OLD_TESTS = ("tests/test_metrics.py", "tests/test_region_metrics.py", "tests/test_toolkit_fidelity.py",
+             "tests/test_regress.py")
+S, G = "tests/test_scoring_mutants.py", "tests/test_gate_mutants.py"
+METRICS, RULES, REGION, REGRESS = ("lfbench/scoring/metrics.py", "lfbench/scoring/rules.py",
+                                   "lfbench/scoring/region_metrics.py", "lfbench/runs/regress.py")
+
+
+@dataclass(frozen=True)
+class Mutation:
+    id: str
+    issue_class: str  # the issue's class (1-8)
+    file: str
+    old: str  # must occur exactly once in the file
+    new: str
+    tests: tuple[str, ...]  # the new tests meant to kill it
+
+
+MUTATIONS = (
+    Mutation("badpix_toolkit_ge", "1", METRICS, "bad = err > threshold  # NaN", "bad = err >= threshold  # NaN",
+             (f"{S}::test_bad_pix_error_equal_to_the_threshold_is_good",)),
+    Mutation("badpix_default_ge", "1", METRICS, "bad = (err > threshold) |", "bad = (err >= threshold) |",
+             (f"{S}::test_bad_pix_error_equal_to_the_threshold_is_good",)),
+    Mutation("badpix_curve_left", "1", METRICS, 'side="right"', 'side="left"',
+             (f"{S}::test_bad_pix_curve_counts_a_tie_as_good",)),
+    Mutation("badpix_default_07", "1", METRICS, "threshold: float = 0.07,", "threshold: float = 0.7,",
+             (f"{S}::test_public_bad_pix_default_threshold_is_007",)),
+    Mutation("fine_thinning_ge", "1", REGION, "bad = (gt - pred) > threshold", "bad = (gt - pred) >= threshold",
+             (f"{S}::test_fine_thinning_tie_is_good",)),
+    Mutation("fine_fattening_le", "1", REGION, "bad = (gt - pred) < -threshold", "bad = (gt - pred) <= -threshold",
+             (f"{S}::test_fine_fattening_tie_is_good",)),
+    Mutation("dots_badpix_ge", "1/5", REGION, "bad = np.abs(gt - pred) > threshold",
+             "bad = np.abs(gt - pred) >= threshold", (f"{S}::test_missed_dots_threshold_is_04_and_strict",)),
+    Mutation("bg_fattening_ge", "1", REGION, "bad = pred > half", "bad = pred >= half",
+             (f"{S}::test_backgammon_prediction_exactly_half_way_is_neither_fattening_nor_thinning",)),
+    Mutation("bg_thinning_le", "1", REGION, "bad = pred < half", "bad = pred <= half",
+             (f"{S}::test_backgammon_prediction_exactly_half_way_is_neither_fattening_nor_thinning",)),
+    Mutation("score_scene_float64", "2", RULES, "pred = pred.astype(np.float32, copy=False)",
+             "pred = pred.astype(np.float64, copy=False)", (f"{S}::test_score_scene_scores_in_float32",)),
+    Mutation("score_scene_no_cast", "2", RULES, "pred = pred.astype(np.float32, copy=False)", "pred = pred",
+             (f"{S}::test_score_scene_scores_in_float32",)),
+    Mutation("bumpiness_diff_float64", "2", REGION, "diff = (pred - gt).astype(np.float64)",
+             "diff = pred.astype(np.float64) - gt.astype(np.float64)",
+             (f"{S}::test_bumpiness_takes_the_difference_in_float32",)),
+    Mutation("region_replaces_mask", "3", RULES, "mask &= region", "mask = region",
+             (f"{S}::test_region_mask_is_combined_with_the_border_and_the_valid_mask",)),
+    Mutation("valid_mask_dropped", "3", RULES, "mask &= valid", "pass",
+             (f"{S}::test_region_mask_is_combined_with_the_border_and_the_valid_mask",)),
+    Mutation("border_not_scaled", "4", RULES, "border_mask(gt.shape, rules.border_px * scale)",
+             "border_mask(gt.shape, rules.border_px)", (f"{S}::test_backgammon_metrics_at_high_resolution",)),
+    Mutation("bg_fg_column_unscaled", "4", REGION, "fg_column=int(BACKGAMMON_FG_COLUMN * _scale(scene, gt))",
+             "fg_column=BACKGAMMON_FG_COLUMN", (f"{S}::test_backgammon_metrics_at_high_resolution",)),
+    Mutation("bg_fg_column_rows", "4", REGION, "return max(1, gt.shape[1] // scene.spatial_size[1])",
+             "return max(1, gt.shape[1] // scene.spatial_size[1] - 1)",
+             (f"{S}::test_backgammon_metrics_at_high_resolution",)),
+    Mutation("bg_bg_column_scaled", "4", REGION, "bg_column=gt.shape[1] - BACKGAMMON_BG_FROM_RIGHT,",
+             "bg_column=gt.shape[1] - BACKGAMMON_BG_FROM_RIGHT * _scale(scene, gt),",
+             (f"{S}::test_backgammon_metrics_at_high_resolution",)),
+    Mutation("bg_bg_column_lowres_width", "4", REGION, "bg_column=gt.shape[1] - BACKGAMMON_BG_FROM_RIGHT,",
+             "bg_column=scene.spatial_size[1] - BACKGAMMON_BG_FROM_RIGHT,",
+             (f"{S}::test_backgammon_metrics_at_high_resolution",)),
+    Mutation("dots_threshold_03", "5", REGION, "DOT_THRESHOLD = 0.4", "DOT_THRESHOLD = 0.3",
+             (f"{S}::test_missed_dots_threshold_is_04_and_strict",)),
+    Mutation("percent_bad_nonfinite_gt", "6", REGION, "scored = mask & np.isfinite(reference)", "scored = mask",
+             (f"{S}::test_region_metrics_leave_out_nonfinite_ground_truth",)),
+    Mutation("dots_nonfinite_gt", "6", REGION, "scored = in_dot & np.isfinite(gt)", "scored = in_dot",
+             (f"{S}::test_missed_dots_leave_out_nonfinite_ground_truth",)),
+    Mutation("mae_nonfinite_gt", "6", REGION, "scored = mask & np.isfinite(n_gt).all(axis=-1)", "scored = mask",
+             (f"{S}::test_mae_and_bumpiness_leave_out_nonfinite_ground_truth",)),
+    Mutation("bumpiness_nonfinite_gt", "6", REGION, "scored = mask & gt_ok", "scored = mask",
+             (f"{S}::test_mae_and_bumpiness_leave_out_nonfinite_ground_truth",)),
+    Mutation("gate_worse_ge", "7", REGRESS, "if change > g.tolerance:", "if change >= g.tolerance:",
+             (f"{G}::test_unmatched_metric_gets_tolerance_zero_and_identical_results_pass",)),
+    Mutation("gate_better_le", "7", REGRESS, "elif change < -g.tolerance:", "elif change <= -g.tolerance:",
+             (f"{G}::test_unmatched_metric_gets_tolerance_zero_and_identical_results_pass",)),
+    Mutation("gate_default_tolerance", "7", REGRESS, "            return float(value)\n    return 0.0",
+             "            return float(value)\n    return 0.01",
+             (f"{G}::test_unmatched_metric_gets_tolerance_zero_and_identical_results_pass",)),
+    Mutation("gate_no_sort", "7", REGRESS, "findings.sort(key=lambda f: not f.failed)", "pass",
+             (f"{G}::test_findings_list_failures_first_in_golden_order",)),
+    Mutation("gate_sort_reversed", "7", REGRESS, "findings.sort(key=lambda f: not f.failed)",
+             "findings.sort(key=lambda f: f.failed)", (f"{G}::test_findings_list_failures_first_in_golden_order",)),
+    Mutation("make_golden_keeps_nan", "7", REGRESS, "for r in results.records if math.isfinite(r.value)]",
+             "for r in results.records]", (f"{G}::test_make_golden_leaves_out_nonfinite_values",)),
+    Mutation("make_golden_allow_nan", "7", REGRESS, "for r in results.records if math.isfinite(r.value)]",
+             "for r in results.records]\n    records = json.loads(json.dumps(records))  # NaN kept",
+             (f"{G}::test_make_golden_leaves_out_nonfinite_values",)),
+    Mutation("fine_fattening_sign_swap", "8", REGION, "bad = (gt - pred) < -threshold",
+             "bad = (pred - gt) < -threshold", (f"{S}::test_fine_fattening_is_not_symmetric_with_thinning",)),
+    Mutation("fine_fattening_abs", "8", REGION, "bad = (gt - pred) < -threshold",
+             "bad = np.abs(gt - pred) > threshold", (f"{S}::test_fine_fattening_is_not_symmetric_with_thinning",)),
+)
+
+
+def run_tests(package_root: Path, tests: list[str]) -> int:
+    env = {**os.environ, "PYTHONPATH": str(package_root)}
+    # -P: no current folder on sys.path (it would put the unmutated package first)
+    cmd = [sys.executable, "-P", "-m", "pytest", "-q", "-x", "-p", "no:cacheprovider", *tests]
+    return subprocess.run(cmd, cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL).returncode
+
+
+def check_mutation(m: Mutation, tests: list[str]) -> bool:
+    """True when ``tests`` fail with ``m`` applied (killed)."""
+    with tempfile.TemporaryDirectory(prefix="lfbench-mutant-") as tmp:
+        copy = Path(tmp) / "lfbench"
+        shutil.copytree(ROOT / "lfbench", copy, ignore=shutil.ignore_patterns("__pycache__"))
+        path = Path(tmp) / m.file
+        text = path.read_text(encoding="utf-8")
+        if text.count(m.old) != 1:
+            raise SystemExit(f"{m.id}: {m.old!r} occurs {text.count(m.old)} times in {m.file}, expected once")
+        path.write_text(text.replace(m.old, m.new), encoding="utf-8")
+        return run_tests(Path(tmp), tests) != 0
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--tests", choices=("new", "old"), default="new")
+    parser.add_argument("--only", nargs="*", help="mutation ids (default: all)")
+    parser.add_argument("--out", type=Path, required=True)
+    args = parser.parse_args()
+    chosen = [m for m in MUTATIONS if not args.only or m.id in args.only]
+    with tempfile.TemporaryDirectory(prefix="lfbench-clean-") as tmp:  # the clean copy must pass
+        shutil.copytree(ROOT / "lfbench", Path(tmp) / "lfbench", ignore=shutil.ignore_patterns("__pycache__"))
+        where = subprocess.run([sys.executable, "-P", "-c", "import lfbench; print(lfbench.__file__)"], cwd=ROOT,
+                               env={**os.environ, "PYTHONPATH": tmp}, capture_output=True, text=True).stdout
+        if not where.startswith(tmp):
+            raise SystemExit(f"the tests would not import the copy under {tmp}: lfbench is {where.strip()}")
+        clean_tests = list(OLD_TESTS) if args.tests == "old" else [S, G]
+        if run_tests(Path(tmp), clean_tests) != 0:
+            raise SystemExit("the tests fail without any mutation")
+    rows = []
+    for m in chosen:
+        tests = list(OLD_TESTS) if args.tests == "old" else list(m.tests)
+        killed = check_mutation(m, tests)
+        rows.append({**asdict(m), "tests_run": tests, "killed": killed})
+        print(f"{'killed  ' if killed else 'SURVIVED'} {m.id}", flush=True)
+    args.out.write_text(json.dumps(rows, indent=1) + "\n", encoding="utf-8")
+    n_killed = sum(r["killed"] for r in rows)
+    print(f"{n_killed} of {len(rows)} killed ({args.tests} tests)")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

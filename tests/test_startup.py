@@ -1,0 +1,69 @@
+"""Start-up stays light (issue 23.3): `lfbench --help`, `methods`, `regress` and `validate-submission`
+import neither torch nor a plugin command's module (with the bundled plugins installed, which register
+networks and a command), checked in a fresh interpreter through sys.modules. Not a timed test: the time
+it saves is measured in the report (python -X importtime)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+
+PROBE = """
+import json, sys
+from lfbench.cli import main
+try:
+    code = main(sys.argv[1:])
+except SystemExit as exc:
+    code = exc.code
+print(json.dumps({"code": code, "modules": sorted(m for m in sys.modules
+                  if m.split(".")[0] in ("torch", "scipy", "lfbench_methods"))}), file=sys.stderr)
+"""
+
+
+def _imports(*args: str, cwd: Path) -> tuple[int, list[str]]:
+    proc = subprocess.run([sys.executable, "-c", PROBE, *args], capture_output=True, text=True, timeout=300,
+                          cwd=cwd)
+    report = json.loads(proc.stderr.strip().splitlines()[-1])
+    return report["code"], report["modules"]
+
+
+def _golden_as_results(tmp_path: Path) -> Path:
+    records = json.loads((ROOT / "results" / "golden.json").read_text())
+    path = tmp_path / "results.json"
+    path.write_text(json.dumps({"records": [{k: r[k] for k in ("method", "scene", "metric", "value", "resolution")}
+                                            for r in records]}))
+    return path
+
+
+def _submission(tmp_path: Path) -> Path:
+    from helpers import write_submission
+
+    return write_submission(tmp_path / "sub", {"boxes": __import__("numpy").zeros((512, 512), "float32")},
+                            {"boxes": "1.0\n"})
+
+
+@pytest.mark.parametrize("command", ["--help", "methods", "regress", "validate-submission"])
+def test_light_commands_import_neither_torch_nor_plugin_commands(command, tmp_path):
+    args = {"--help": ["--help"], "methods": ["methods"],
+            "regress": ["regress", str(ROOT / "results" / "golden.json"), str(_golden_as_results(tmp_path))],
+            "validate-submission": ["validate-submission", str(_submission(tmp_path)), "--scenes", "boxes"]}[command]
+    code, modules = _imports(*args, cwd=tmp_path)
+    assert code == 0, (command, code)
+    assert not [m for m in modules if m.split(".")[0] == "torch"], f"lfbench {command} imported torch"
+    assert "lfbench_methods.subfocal.cli" not in modules  # the plugin command convert-keras: not imported
+    if command != "methods":  # listing methods imports the modules that register them (light ones)
+        assert not [m for m in modules if m.startswith("lfbench_methods")], modules
+    if command in ("--help", "regress"):
+        assert not [m for m in modules if m.split(".")[0] == "scipy"], modules
+
+
+def test_a_command_that_needs_torch_still_gets_it(tmp_path):
+    """The light start-up does not hide a network from the commands that run one."""
+    code, modules = _imports("info", "subfocal", cwd=tmp_path)
+    assert code == 0 and "torch" in modules and "lfbench_methods.subfocal.network" in modules
