@@ -33,6 +33,7 @@ import os
 import shutil
 import signal
 import sys
+import threading
 import time
 from collections.abc import Iterator, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -42,6 +43,8 @@ from typing import Any
 
 import numpy as np
 import torch
+from filelock import FileLock, Timeout
+from torch.nn.parallel import DistributedDataParallel
 from tqdm import tqdm
 
 from lfbench.data.scene import Benchmark, Scene, check_scene_names
@@ -340,8 +343,6 @@ class StopFlag:
 
     @contextlib.contextmanager
     def installed(self) -> Iterator[StopFlag]:
-        import threading
-
         if threading.current_thread() is threading.main_thread():
             for sig in (signal.SIGINT, signal.SIGTERM):
                 self._old[sig] = signal.signal(sig, self._handler)
@@ -718,8 +719,6 @@ class Trainer:
         """The module the steps call: DistributedDataParallel over the processes, else the model itself."""
         if not self.ctx.enabled:
             return model
-        from torch.nn.parallel import DistributedDataParallel
-
         device = self.ctx.device
         return DistributedDataParallel(model, device_ids=[device.index] if device.type == "cuda" else None)
 
@@ -890,8 +889,6 @@ def run_folder_lock(out: Path) -> Iterator[None]:
     """Hold an exclusive lock on the run folder ``out`` (created if needed): a second ``lfbench train``
     into the same folder is refused at once (DataError) instead of interleaving logs and checkpoints.
     The lock is an OS file lock (filelock): it goes away with the process, even after kill -9."""
-    from filelock import FileLock, Timeout
-
     if out.exists() and not out.is_dir():
         raise DataError("output folder is a file", out)
     try:
