@@ -165,6 +165,13 @@ def test_only_the_synthetic_sets_the_cells_read_are_generated(tmp_path):
         assert sorted(links["base"]) == sorted(n.split("_s")[0] for n in generated)
 
 
+def test_a_cell_data_name_that_selects_nothing_is_refused_before_anything_is_written(tmp_path):
+    spec = load_spec(write_spec(tmp_path, "", '[set]\n"data.validation" = ["nosuch"]\n'))
+    with pytest.raises(SpecError, match=r"spec.toml: \[data\] no scene 'nosuch'; available: synth_1_0"):
+        run_ablation(spec, tmp_path / "out", progress=False, log=quiet)
+    assert not (tmp_path / "out").exists()
+
+
 def test_loss_and_beta_axes(tmp_path):
     spec = load_spec(write_spec(tmp_path, """
 table = "table5"

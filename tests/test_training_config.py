@@ -49,7 +49,7 @@ def write_config(path: Path, cfg: dict) -> Path:
     ({"data": {"patch": 4}}, "data.patch: must be >= 8, got 4"),
     ({"data": {"roots": ["a", 1]}}, "data.roots: expected list of str, got list of int and str"),
     ({"data": {"stride_weights": [1, -1], "strides": [1, 2]}},
-     "data.stride_weights: expected numbers in >= 0, got [1.0, -1.0]"),
+     "data.stride_weights: expected numbers >= 0, got [1.0, -1.0]"),
     ({"augment": {"gamma": [1.2]}}, "augment.gamma: expected list of 2 float, got list of 1"),
     ({"augment": {"gamma": [1.2, 0.8]}}, "augment.gamma: expected [low, high] with 0 < low <= high"),
     ({"augment": {"flip": float("nan")}}, "augment.flip: must be a finite number, got nan"),

@@ -43,6 +43,7 @@ from lfbench.ablation.executor import ClusterOptions
 from lfbench.ablation.spec import AblationSpec, Cell, SyntheticEval, sha256_of
 from lfbench.runs.outputs import OutputSet, prepare_output_folder, read_manifest, recover, staged_outputs
 from lfbench.runs.results import Results
+from lfbench.training.loop import check_data
 from lfbench.utils.atomic import fresh_dir, write_text
 from lfbench.utils.errors import DataError, SpecError
 from lfbench.utils.hardware import available_cores
@@ -86,6 +87,17 @@ def prepare_training_data(cells: tuple[Cell, ...], out: Path, log: Log) -> dict[
             folder = _generate(out / "data" / name, syn.seed, syn.size, syn.scenes, syn.category, log)
             links[cell.id][syn.category] = str(folder)
     return links
+
+
+def check_training_data(spec: AblationSpec, out: Path) -> None:
+    """Every cell's data names (roots, train / validation scenes, validation border) checked before anything
+    is generated or written (lfbench.training.loop.check_data; cells with the same data checked once)."""
+    seen = set()
+    for cell in spec.cells:
+        key = json.dumps([cell.config["data"], cell.config["validation"]], sort_keys=True)
+        if key not in seen:
+            seen.add(key)
+            check_data(cell.train_config(spec.source), out / "cells" / cell.id / "data")
 
 
 def prepare_evaluation(spec: AblationSpec, out: Path, log: Log) -> tuple[tuple[str, str], ...]:
@@ -336,6 +348,7 @@ def run_ablation(spec: AblationSpec, out: str | Path, *, jobs: int = 1, progress
 
         check_executor(cluster)  # before any work: no data generated, nothing submitted
     out = Path(out)
+    check_training_data(spec, out)
     prepare_output_folder(out)
     with _set_lock(out):
         recover(out)  # a cut commit of an earlier run is finished (or its journal refused) before any work

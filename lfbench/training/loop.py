@@ -422,6 +422,7 @@ class Trainer:
         self.global_step = 0
         self.init_info: dict | None = None  # {"path", "sha256"} of cfg.init once loaded (also kept on resume)
         self.schedule_state: dict | None = None  # a resumed learning-rate schedule's state
+        self.schedule = None  # the learning-rate schedule of the stage in progress (None: a constant rate)
 
     # -- output ------------------------------------------------------------------------------
 
@@ -463,7 +464,7 @@ class Trainer:
 
     # -- state -------------------------------------------------------------------------------
 
-    def _checkpoint_payload(self, model, optimizer, stage: int, step: int, schedule=None) -> dict:
+    def _checkpoint_payload(self, model, optimizer, stage: int, step: int) -> dict:
         payload = {
             "format": ckpt.CHECKPOINT_FORMAT, "version": ckpt.VERSION,
             "config": self.cfg.to_dict(), "stage": stage, "step": step, "global_step": self.global_step,
@@ -472,13 +473,13 @@ class Trainer:
             "rng": ckpt.rng_state(), "elapsed_s": self.elapsed(), "world_size": self.ctx.world_size,
             "best_badpix": self.best_badpix, "last_validation": self.last_validation, "init": self.init_info,
         }
-        if schedule is not None:  # only a trainable's own learning-rate schedule has a state
-            payload["schedule"] = schedule.state_dict()
+        if optimizer is not None and self.schedule is not None:  # a trainable's own schedule, within a stage
+            payload["schedule"] = self.schedule.state_dict()
         return payload
 
-    def save_checkpoint(self, model, optimizer, stage: int, step: int, schedule=None) -> None:
+    def save_checkpoint(self, model, optimizer, stage: int, step: int) -> None:
         if self.ctx.is_main:
-            ckpt.save(self.paths.checkpoint, self._checkpoint_payload(model, optimizer, stage, step, schedule))
+            ckpt.save(self.paths.checkpoint, self._checkpoint_payload(model, optimizer, stage, step))
 
     def load_checkpoint(self) -> dict | None:
         """The checkpoint to resume from (type-checked), or None. Only what the finished stages and the
@@ -736,6 +737,7 @@ class Trainer:
         st, tc = cfg.stages[si], cfg.training
         loss_fn = make_loss(st.loss, **st.loss_params)
         optimizer, schedule = self._optimizer(model, si, opt_state)
+        self.schedule = schedule
         net = self._parallel(model)
         micro = local_batch // tc.accumulate
         label = f"stage {si + 1}/{len(cfg.stages)} {st.name}"
@@ -762,7 +764,7 @@ class Trainer:
                 bar.update(1)
                 if step % tc.log_every == 0 or step == st.steps:
                     self._log_window(window, bar, si, step, lr, label)
-                self._after_step(model, optimizer, schedule, validation, si, step)
+                self._after_step(model, optimizer, validation, si, step)
         finally:
             bar.close()
             batches.close()
@@ -809,7 +811,7 @@ class Trainer:
                  f"{self.elapsed():.0f} s)")
         window.reset()
 
-    def _after_step(self, model, optimizer, schedule, validation: list[ValidationScene], si: int, step: int) -> None:
+    def _after_step(self, model, optimizer, validation: list[ValidationScene], si: int, step: int) -> None:
         """Validation every validation.every steps, a checkpoint every training.checkpoint_every steps and on a
         stop signal (then TrainingInterrupted); the stage's end is :meth:`_finish_stage`'s."""
         cfg = self.cfg
@@ -818,7 +820,7 @@ class Trainer:
             self.run_validation(model, validation, si, step)
         stop = self.ctx.any(self.stop.set)
         if step < steps and (step % cfg.training.checkpoint_every == 0 or stop):
-            self.save_checkpoint(model, optimizer, si, step, schedule)
+            self.save_checkpoint(model, optimizer, si, step)
             if stop:
                 self._interrupted(si, step)
 

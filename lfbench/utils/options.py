@@ -8,8 +8,8 @@ default, bounds, help text and whether a resumed run may change it). From that o
 - :func:`option_paths`, e.g. the keys a resumed training run may change;
 - :func:`reference_markdown`, the reference tables of every key (type, default, bounds, meaning).
 
-:func:`coerce` is the one type check, also used for values declared elsewhere (a network's ``[model]``
-parameters, checked against its constructor's annotations).
+:func:`coerce` is the type check of every declared option (a network's ``[model]`` parameters are declared
+by its constructor and checked by lfbench.method.params.value_problem).
 
 Types understood: ``bool``, ``int``, ``float`` (an int is taken as a float), ``str``, ``Literal[...]``,
 ``X | None`` (None = absent: TOML has no null), ``tuple[X, ...]`` and ``tuple[X, X]`` (TOML arrays),
@@ -20,6 +20,7 @@ Types understood: ``bool``, ``int``, ``float`` (an int is taken as a float), ``s
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import types
 import typing
@@ -49,7 +50,7 @@ class Option:
     resume_free: bool = False  # a resumed run may change it (it does not change the result)
     omit_default: bool = False  # left out of plain_dict() at its default (added after fingerprints were written)
     single: bool = False  # a list also given as one value (a string, or a table for an array of tables)
-    rest: bool = False  # a free table holding every key of the section that no option names
+    rest: bool = False  # a free table holding every key that no option names (declare it last)
     check: Callable[[Any], str | None] | None = None  # further check: a problem ("must be ...") or None
     convert: Callable[[Any], Any] | None = None  # applied to the checked value (e.g. str.lower)
     default_from: Callable[[dict[str, Any], int | None], Any] | None = None  # default from the options before it
@@ -72,13 +73,11 @@ def option(default: Any = dataclasses.MISSING, *, help: str, factory: Callable[[
     return dataclasses.field(default=default, metadata=meta)
 
 
-def option_fields(cls: type) -> Iterator[tuple[dataclasses.Field, Option, Any]]:
+@functools.cache
+def option_fields(cls: type) -> tuple[tuple[dataclasses.Field, Option, Any], ...]:
     """(field, its Option, its resolved type) of every declared option of the section ``cls``, in order."""
     hints = typing.get_type_hints(cls)
-    for f in dataclasses.fields(cls):
-        opt = f.metadata.get(_KEY)
-        if opt is not None:
-            yield f, opt, hints[f.name]
+    return tuple((f, f.metadata[_KEY], hints[f.name]) for f in dataclasses.fields(cls) if _KEY in f.metadata)
 
 
 def is_section(kind: Any) -> bool:
@@ -270,18 +269,6 @@ class Table:
     def has(self, key: str) -> bool:
         return self.raw.get(key) is not None  # None only comes from plain_dict(): TOML has no null
 
-    def get(self, key: str, kind: Any, default: Any = None, required: bool = False) -> Any:
-        """The value of ``key`` as ``kind`` (see :func:`coerce`), ``default`` when absent."""
-        self.used.add(key)
-        if not self.has(key):
-            if required:
-                self.fail(key, "is required")
-            return default
-        try:
-            return coerce(self.raw[key], kind)
-        except TypeMismatch as exc:
-            self.fail(key, str(exc))
-
     def table(self, key: str) -> Table:
         self.used.add(key)
         where = f"{self.where}.{key}" if self.where else key
@@ -376,7 +363,8 @@ def _check_bounds(t: Table, key: str, value: Any, opt: Option) -> None:
     elif any(_bound_problem(v, opt) for v in _numbers(value)):
         shown = list(value.values()) if isinstance(value, dict) else list(value)
         bounds = bounds_text(opt)
-        t.fail(key, f"expected {'numbers in ' + bounds if bounds else 'finite numbers'}, got {shown}")
+        within = f"in {bounds}" if opt.low is not None and opt.high is not None else bounds
+        t.fail(key, f"expected {'numbers ' + within if bounds else 'finite numbers'}, got {shown}")
 
 
 def parse_section(cls: type, table: Table, index: int | None = None) -> Any:
