@@ -1,10 +1,15 @@
-"""The training loop behind ``lfbench train``: stages, Adam, validation, checkpoints, resume, DDP.
+"""The training loop behind ``lfbench train``: stages, validation, checkpoints, resume, DDP.
+
+:func:`train` checks the config's network parameters and data first (nothing is generated or written for
+a bad config), then :class:`Trainer` runs setup, resume, build, fit and export. Each stage gets a fresh
+optimizer (and optional learning-rate schedule) from the network's ``Trainable.configure_optimizers``
+(default: Adam with the stage's lr, betas, eps, at a constant rate).
 
 Files under OUT:
 
 - ``checkpoint.pt``: the last training checkpoint (atomic; model, optimizer, stage, step, RNG
   states, config). Re-running the same command resumes from it; a stage boundary is stored as
-  (next stage, step 0, no optimizer), so the next stage starts with a fresh Adam.
+  (next stage, step 0, no optimizer), so the next stage starts with a fresh optimizer.
 - ``stage<k>_<name>.pt``: the weights at the end of stage k; ``final.pt``: the weights at the
   end (inference format ``{"state_dict", "config": net.config(), "training": {...}}``);
   ``best.pt``: the weights with the lowest pooled validation BadPix so far.
@@ -19,7 +24,7 @@ Files under OUT:
 Samples are a pure function of (seed, stage, step, index) (lfbench.training.data), so a resumed
 run and an uninterrupted one see the same batches. On resume only the ``steps`` of the stage in
 progress may change (cut a long stage short, or extend it): with a constant learning rate per stage
-the result is the run that the new config describes. With K processes (torchrun) rank r takes
+the result is the run that the new config describes (a network's own schedule continues from its state). With K processes (torchrun) rank r takes
 samples [r B/K, (r+1) B/K) of the global batch B, DistributedDataParallel averages the
 gradients, and only rank 0 writes files.
 """
