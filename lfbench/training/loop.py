@@ -24,9 +24,9 @@ Files under OUT:
 Samples are a pure function of (seed, stage, step, index) (lfbench.training.data), so a resumed
 run and an uninterrupted one see the same batches. On resume only the ``steps`` of the stage in
 progress may change (cut a long stage short, or extend it): with a constant learning rate per stage
-the result is the run that the new config describes (a network's own schedule continues from its state). With K processes (torchrun) rank r takes
-samples [r B/K, (r+1) B/K) of the global batch B, DistributedDataParallel averages the
-gradients, and only rank 0 writes files.
+the result is the run that the new config describes (a network's own schedule continues from its
+state). With K processes (torchrun) rank r takes samples [r B/K, (r+1) B/K) of the global batch B,
+DistributedDataParallel averages the gradients, and only rank 0 writes files.
 """
 
 from __future__ import annotations
