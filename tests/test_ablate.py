@@ -14,10 +14,10 @@ import pandas as pd
 import pytest
 import torch
 
-from lfbench.ablation import report
+from lfbench.ablation import facts, report
 from lfbench.ablation.runner import run_ablation
 from lfbench.ablation.spec import load_spec
-from lfbench.runs.results import Record, Results
+from lfbench.results import Record, Results
 from lfbench.training import checkpoint as ckpt
 from lfbench.utils.errors import SpecError
 
@@ -193,7 +193,7 @@ shared = true
     spec = load_spec(write_spec(tmp_path, "table = \"beta\"\n[[grid]]\nloss = [\"uafl\"]\nbeta = [1.0, 0.25]\n",
                                 name="beta.toml"))
     assert [c.id for c in spec.cells] == ["loss=uafl_beta=1", "loss=uafl_beta=0.25"]
-    assert [report.uafl_beta(c.config) for c in spec.cells] == [1.0, 0.25]
+    assert [facts.loss_beta(c.config) for c in spec.cells] == [1.0, 0.25]
 
 
 def run_main(args: list[str], capsys) -> tuple[int, str]:

@@ -179,9 +179,9 @@ def test_final_weights_and_summary_are_one_set(tmp_path, capsys, data_root, monk
     import json
     import os
 
-    import lfbench.runs.outputs as outputs
-    from lfbench.runs.outputs import check_complete
+    import lfbench.utils.outputs as outputs
     from lfbench.utils.errors import DataError
+    from lfbench.utils.outputs import check_complete
 
     out = tmp_path / "run"
     config = write_config(tmp_path, config_text(data_root, STAGE1))

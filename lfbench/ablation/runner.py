@@ -11,11 +11,13 @@ Layout of OUT::
     methods/<label>/           scores of the spec's extra [[methods]]
     results.json, results.csv  every cell's and method's records (method = cell id or label)
     table_*.md/.tex/.csv, figures/   see lfbench.ablation.report
-    html/                      the HTML report (``html``: lfbench.ablation.html)
+    html/                      the HTML report (``html``: lfbench.ablation.report.AblationSite)
 
 spec.toml, results.json, results.csv, the tables, figures and html/ are one output set
-(lfbench.runs.outputs): written into a staging folder and committed together, under OUT's
-results.json.lock, so that a kill or a full disk leaves the previous set or the new one.
+(lfbench.utils.outputs), written by the ablation's output writers (lfbench.ablation.report.report_writers)
+into a staging folder and committed together, under OUT's results.json.lock, so that a kill or a full
+disk leaves the previous set or the new one. Each cell's and extra method's scores and maps are a set of
+their own folder (lfbench.runs.folder.evaluate_to_folder with lfbench.reports.writers.Maps).
 
 Re-running the same command skips finished cells (their marker is written last) and resumes an
 interrupted one from its training checkpoint.
@@ -38,11 +40,15 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-from lfbench.ablation.cell import CellTask, is_done, read_marker, run_cell
+from lfbench.ablation.cell import MAPS, CellTask, is_done, load_scenes, read_marker, run_cell
 from lfbench.ablation.executor import ClusterOptions
+from lfbench.ablation.report import report_writers, run_writers
 from lfbench.ablation.spec import AblationSpec, Cell, SyntheticEval, sha256_of
-from lfbench.runs.outputs import OutputSet, prepare_output_folder, read_manifest, recover, staged_outputs
-from lfbench.runs.results import Results
+from lfbench.method.registry import create_from_spec
+from lfbench.reports.writers import Maps
+from lfbench.results import Results
+from lfbench.runs.folder import evaluate_to_folder
+from lfbench.scoring.rules import ScoringRules
 from lfbench.training.loop import check_data
 from lfbench.utils.atomic import fresh_dir, write_text
 from lfbench.utils.errors import DataError, SpecError
@@ -50,6 +56,7 @@ from lfbench.utils.hardware import available_cores
 from lfbench.utils.jsonfile import json_text, read_json
 from lfbench.utils.log import log_to_file
 from lfbench.utils.names import file_name
+from lfbench.utils.outputs import OutputSet, prepare_output_folder, read_manifest, recover, staged_outputs
 from lfbench.utils.tomlfile import toml_text
 
 Log = Callable[[str], None]
@@ -295,10 +302,6 @@ def _time_all(tasks, threads: int) -> list[dict[str, Any]]:
 
 def run_methods(spec: AblationSpec, out: Path, scenes: tuple[tuple[str, str], ...], log: Log) -> list[Results]:
     """Score the spec's [[methods]] (cached in OUT/methods/<label>/ with a marker, like cells)."""
-    from lfbench.ablation.cell import load_scenes, save_maps
-    from lfbench.method.registry import create_from_spec
-    from lfbench.runs.folder import evaluate_to_folder
-    from lfbench.scoring.rules import ScoringRules
 
     ev = spec.evaluation
     rules = ScoringRules(allow_highres=not ev.lowres_only)
@@ -313,8 +316,8 @@ def run_methods(spec: AblationSpec, out: Path, scenes: tuple[tuple[str, str], ..
             out_list.append(Results.read(folder))
             log(f"method {m.label}: finished earlier, skipped")
             continue
-        res = evaluate_to_folder([create_from_spec(m.spec)], loaded, folder, rules=rules, label=m.label, tables=False,
-                                 on_prediction=save_maps(folder / "maps"), progress=False,
+        res = evaluate_to_folder([create_from_spec(m.spec)], loaded, folder, rules=rules, label=m.label,
+                                 writers=[Maps(MAPS, per_method=False, uncertainty=True)], progress=False,
                                  meta={"method": {"label": m.label, "spec": m.spec}})
         if res.records:  # a method that served no scene (e.g. weights not there yet) is tried again next time
             write_text(marker, json_text({"label": m.label, "spec": m.spec, "key": key}, indent=2) + "\n")
@@ -380,7 +383,7 @@ def run_ablation(spec: AblationSpec, out: str | Path, *, jobs: int = 1, progress
         merged = merge_results(out, combined, outputs.stage)
         if spec.text:
             write_text(outputs.stage / "spec.toml", spec.text)
-        written = _write_set(spec, out, outputs, combined, markers, paper=paper, html=html, log=log)
+        written = _write_set(spec, out, outputs, combined, markers, paper=paper, html=html, log=log, scenes=scenes)
     if len(merged.methods) > len(combined.methods):
         log(f"{out / 'results.json'}: {len(combined.methods)} of {len(merged.methods)} cells/methods from this run "
             "(the others from earlier runs); `lfbench ablate SPEC --report-only` tabulates them all")
@@ -390,7 +393,7 @@ def run_ablation(spec: AblationSpec, out: str | Path, *, jobs: int = 1, progress
 def check_folders(spec: AblationSpec, out: Path) -> None:
     """DataError when a folder the run trains, scores or generates into (stage1, cells/<id>, methods/<label>,
     data, eval_data, submitit) leads out of OUT through a symbolic link: an ablation writes inside OUT only."""
-    from lfbench.runs.outputs import check_within
+    from lfbench.utils.outputs import check_within
 
     names = ["cells", "methods", "stage1", "data", "eval_data", "submitit"]
     names += [f"cells/{c.id}" for c in spec.cells] + [f"methods/{file_name(m.label)}" for m in spec.methods]
@@ -407,23 +410,18 @@ def _set_lock(out: Path):
 
 
 def _write_set(spec: AblationSpec, out: Path, outputs: OutputSet, results: Results, markers: list[dict[str, Any]], *,
-               paper: str | Path | None, html: bool, log: Log, keep: tuple[str, ...] = ()) -> list[Path]:
-    """Tables, figures (and the site, drawn from the staged results.json) into the staging folder, then the
-    commit of the staged entries; returns their final paths."""
-    from lfbench.ablation.report import write_report
-
+               paper: str | Path | None, html: bool, log: Log, keep: tuple[str, ...] = (),
+               scenes: tuple[tuple[str, str], ...] | None = None) -> list[Path]:
+    """The ablation's writers (tables, figures and, with ``html``, the site, drawn from the staged
+    results.json) into the staging folder, then the commit of the staged entries; returns the final paths
+    of what the writers wrote. ``scenes``: the evaluation scenes (prepared here when None and the site needs
+    them)."""
     stage = outputs.stage
-    staged = write_report(spec, stage, results, markers, paper=paper, log=log, folder=out)
-    if html:
-        from lfbench.ablation.html import write_site
-        from lfbench.reports.html import SITE_DIR
-
-        staged.append(write_site(spec, out, results_dir=stage if (stage / "results.json").is_file() else out,
-                                 site=stage / SITE_DIR))
-    entries = {p.relative_to(stage).parts[0] for p in staged}
-    entries |= {name for name in ("results.json", "results.csv", "spec.toml") if (stage / name).is_file()}
-    outputs.commit(sorted(entries), keep=keep)
-    written = [outputs.final(p) for p in staged]
+    writers = report_writers(spec, markers, results, paper=paper, folder=out, html=html, log=log)
+    site_scenes = load_scenes(scenes if scenes is not None else prepare_evaluation(spec, out, log)) if html else ()
+    staged = run_writers(writers, spec, results, stage, out, site_scenes)
+    books = [stage / name for name in ("results.json", "results.csv", "spec.toml") if (stage / name).is_file()]
+    written = outputs.commit_written([*staged, *books], keep=keep)[:len(staged)]
     log(f"wrote {len(written)} files into {out} (results.json, table_*.md/.tex/.csv, figures/)")
     return written
 

@@ -9,6 +9,7 @@ are expanded)::
 
     title = "Table IV: disparity interval x interpolation"
     table = "table4"            # paper table beside ours: table4 | table5 | beta | tables12 | none
+                                # (with "none": no paper numbers unless [report] or --paper asks)
     base = "../configs/subfocal_cpu_small.toml"   # or an inline [base] table (training-config layout)
     seeds = [1, 2, 3]           # optional: every cell once per seed (ids end in _seed=K)
 
@@ -37,6 +38,11 @@ are expanded)::
     [[methods]]                 # more rows for Tables I/II: any registered method spec
     label = "SubFocal (published maps)"
     spec = "published:path=${LFBENCH_HCI_ROOT}/../published/subfocal"
+
+    [report]                    # which paper stands beside ours (lfbench.reports.reference)
+    reference = "subfocal-tci2023"  # a registered reference, or "none" (default: the network's own
+                                # when the spec asks for a paper table or paper methods or --paper is given)
+    paper_methods = ["SubFocal"]  # its methods beside ours in Tables I/II (default: the reference's own)
 
 Grid axes: the network's own parameters (the base config's ``method``, a registered trainable:
 SubFocal's interval, interpolation, width, attention, d_min, d_max; ``Trainable.axes``), written into
@@ -174,7 +180,12 @@ class Stage1:
 
 @dataclass(frozen=True)
 class Report:
-    paper_methods: tuple[str, ...] = option(("SubFocal",), single=True, help="paper methods beside ours in Tables I/II")
+    reference: str | None = option(None, default_text="the network's own, when asked",
+                                   help="the paper beside ours: a registered reference (lfbench.reports.reference) "
+                                        "or \"none\"; by default the network's own when the spec asks for a paper "
+                                        "table or paper methods, or --paper is given")
+    paper_methods: tuple[str, ...] | None = option(None, single=True, default_text="the reference's own",
+                                                   help="the reference's methods beside ours in Tables I/II")
 
 
 def _unique(values: tuple) -> str | None:
@@ -238,7 +249,8 @@ class AblationSpec:
     shared_stage1: bool
     evaluation: Evaluation
     methods: tuple[ExtraMethod, ...] = ()
-    paper_methods: tuple[str, ...] = ("SubFocal",)
+    paper_methods: tuple[str, ...] | None = None  # None: the reference's own
+    reference: str | None = None  # a registered reference's name, "none", or None: the network's when asked
     out: str | None = None
     text: str = field(default="", repr=False)
     seeds: tuple[int, ...] = ()  # training seeds every cell runs (empty: the base config's seed, once)
@@ -327,8 +339,8 @@ def parse_spec(raw: dict[str, Any], source: Path, text: str = "") -> AblationSpe
         raise SpecError("evaluation: give synthetic = {seed, size, scenes} and/or data = ROOT with scenes", source)
     return AblationSpec(source=source, title=f.title if f.title is not None else source.stem, table=f.table,
                         base_source=base_source, budget=budget, cells=cells, shared_stage1=shared,
-                        evaluation=evaluation, methods=methods, paper_methods=f.report.paper_methods, out=f.out,
-                        text=text, seeds=seeds)
+                        evaluation=evaluation, methods=methods, paper_methods=f.report.paper_methods,
+                        reference=f.report.reference, out=f.out, text=text, seeds=seeds)
 
 
 def _with_seeds(cells: tuple[Cell, ...], seeds: tuple[int, ...], source: Path) -> tuple[Cell, ...]:

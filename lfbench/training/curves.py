@@ -146,9 +146,9 @@ def _number(value: Any) -> float:
 def plot_learning_curve(entries: Sequence[dict[str, Any]], path: str | Path, title: str = "") -> Path:
     """Training loss (log scale; one colour per stage, boundaries dotted) and validation BadPix (%) and
     MSE x100 against the global step, as a PNG."""
-    from lfbench.reports.figures import _pyplot, save_figure
+    from lfbench.reports.plotting import pyplot, save_figure
 
-    plt = _pyplot()
+    plt = pyplot()
     train = [e for e in entries if e.get("event") == "train"]
     val = [e for e in entries if e.get("event") == "validation"]
     fig, (ax_loss, ax_val) = plt.subplots(1, 2, figsize=(10.5, 3.8))

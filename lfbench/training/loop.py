@@ -19,7 +19,7 @@ Files under OUT:
   loggers of lfbench.training.curves that see every metrics.jsonl entry;
 - ``command.txt``: every command that ran on this folder; ``config.toml``: the config text;
   ``summary.json``: the final numbers; ``data/<category>``: generated synthetic scenes. ``final.pt`` and
-  ``summary.json`` are one output set (lfbench.runs.outputs): they appear together, after a kill too.
+  ``summary.json`` are one output set (lfbench.utils.outputs): they appear together, after a kill too.
 
 Samples are a pure function of (seed, stage, step, index) (lfbench.training.data), so a resumed
 run and an uninterrupted one see the same batches. On resume only the ``steps`` of the stage in
@@ -55,7 +55,6 @@ from tqdm import tqdm
 from lfbench.data.scene import Benchmark, Scene, check_scene_names
 from lfbench.data.synth import write_benchmark
 from lfbench.method.trainable import check_state_dict, get_trainable, to_channels_last
-from lfbench.runs.outputs import read_manifest, recover, staged_outputs
 from lfbench.training import checkpoint as ckpt
 from lfbench.training.config import TrainConfig, expand_path, resume_view
 from lfbench.training.curves import MAX_LOG_BYTES, RunLogger, default_loggers, parse_log_line
@@ -69,11 +68,12 @@ from lfbench.utils.hardware import available_cores, require_bf16, set_fp32_numer
 from lfbench.utils.jsonfile import json_text
 from lfbench.utils.malloc import retain_freed_memory
 from lfbench.utils.names import file_name
+from lfbench.utils.outputs import read_manifest, recover, staged_outputs
 from lfbench.utils.readfile import read_text
 from lfbench.utils.threads import torch_threads
 from lfbench.utils.tomlfile import MAX_TOML_BYTES
 
-EXPORTS = "train"  # the output set (lfbench.runs.outputs) of a run's final exports: final.pt and summary.json
+EXPORTS = "train"  # the output set (lfbench.utils.outputs) of a run's final exports: final.pt and summary.json
 
 
 class TrainingInterrupted(Interrupted):
