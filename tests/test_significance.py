@@ -68,7 +68,7 @@ def test_seeds_expand_every_cell_and_set_the_config_seed(tmp_path):
 
 @pytest.mark.parametrize("head,message", [
     ("seeds = [1, 1]\n", "each seed once"),
-    ("seeds = [1, -2]\n", "non-negative integers"),
+    ("seeds = [1, -2]\n", r"seeds: expected numbers >= 0, got \[1, -2\]"),
     ("seeds = [1, 2]\n[[grid]]\nseed = [4, 5]\n", "both a grid axis and given by seeds"),
     ("seeds = [1, 2]\n[stage1]\nshared = true\n[[grid]]\nbeta = [0.1, 1]\n", "cannot vary with seeds"),
 ])

@@ -3,7 +3,7 @@
 and writes the tables (beside the reference of its network, lfbench.reports.reference: for SubFocal
 its paper's IV, V, the beta sweep, I/II).
 
-Modules: spec (the TOML spec and its cells), toml_text (writing a cell's training config), cell (one
+Modules: spec (the TOML spec, its declared keys and its cells), reference (docs/ablation-spec.md), cell (one
 cell: train, evaluate with its maps, time, marker), runner (all cells, resumable, in parallel processes),
 facts (what each cell is: variant, seed, [model] values, loss, beta), significance (seeds: intervals and
 paired tests), baselines (does every cell beat the spec's [[methods]]?), plots (figures) and report (the

@@ -30,7 +30,6 @@ from typing import Any
 import numpy as np
 
 from lfbench.ablation.spec import Evaluation
-from lfbench.ablation.toml_text import dumps
 from lfbench.method.trainable import DEFAULT_TRAINABLE
 from lfbench.utils.atomic import write_bytes, write_text
 from lfbench.utils.errors import DataError, SpecError
@@ -38,6 +37,7 @@ from lfbench.utils.jsonfile import json_text, read_json
 from lfbench.utils.log import log_to_file
 from lfbench.utils.readfile import read_bytes
 from lfbench.utils.threads import torch_threads
+from lfbench.utils.tomlfile import toml_text
 
 MARKER, TRAIN_CONFIG, LOG, MAPS, TIMING = "cell.json", "train.toml", "log.txt", "maps", "timing.json"
 MAX_COPY_BYTES = 4 * 1024**3  # a shared stage-1 export copied into a cell (weights of at most 2 GiB, its log)
@@ -93,13 +93,12 @@ def is_done(task: CellTask) -> bool:
 
 def write_train_config(task: CellTask) -> Path:
     """Write CELL/train.toml (unchanged if present with the same config; SpecError if it differs)."""
-    from lfbench.training.config import TrainConfig
-    from lfbench.training.loop import comparable
+    from lfbench.training.config import TrainConfig, comparable
 
     path = task.path / TRAIN_CONFIG
     header = (f"Ablation cell {task.cell_id}: written by lfbench ablate.\n"
               f"Reproduce: lfbench train {path} --out {task.path}")
-    text = dumps(task.config, header)
+    text = toml_text(task.config, header)
     if path.is_file():
         old = TrainConfig.from_toml(path).to_dict()
         if comparable(old) != comparable(task.config):

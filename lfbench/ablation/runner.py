@@ -43,12 +43,13 @@ from typing import Any
 from lfbench.ablation.cell import MAPS, CellTask, is_done, load_scenes, read_marker, run_cell
 from lfbench.ablation.executor import ClusterOptions
 from lfbench.ablation.report import report_writers, run_writers
-from lfbench.ablation.spec import AblationSpec, Cell, SyntheticEval, _sha
+from lfbench.ablation.spec import AblationSpec, Cell, SyntheticEval, sha256_of
 from lfbench.method.registry import create_from_spec
 from lfbench.reports.writers import Maps
 from lfbench.results import Results
 from lfbench.runs.folder import evaluate_to_folder
 from lfbench.scoring.rules import ScoringRules
+from lfbench.training.loop import check_data
 from lfbench.utils.atomic import fresh_dir, write_text
 from lfbench.utils.errors import DataError, SpecError
 from lfbench.utils.hardware import available_cores
@@ -56,6 +57,7 @@ from lfbench.utils.jsonfile import json_text, read_json
 from lfbench.utils.log import log_to_file
 from lfbench.utils.names import file_name
 from lfbench.utils.outputs import OutputSet, prepare_output_folder, read_manifest, recover, staged_outputs
+from lfbench.utils.tomlfile import toml_text
 
 Log = Callable[[str], None]
 _log = logging.getLogger(__name__)
@@ -81,16 +83,28 @@ def _generate(target: Path, seed: int, size: int, scenes: int, category: str, lo
 
 
 def prepare_training_data(cells: tuple[Cell, ...], out: Path, log: Log) -> dict[str, dict[str, str]]:
-    """Generate every [[data.synthetic]] set of the cells once into OUT/data/; returns, per cell id,
-    category -> folder (linked into the cell as CELL/data/<category>)."""
+    """Generate every [[data.synthetic]] set the cells read (DataConfig.synthetic_in_use: not a validation set
+    that data.validation = [] leaves unused) once into OUT/data/; returns, per cell id, category -> folder
+    (linked into the cell as CELL/data/<category>)."""
     links: dict[str, dict[str, str]] = {}
     for cell in cells:
         links[cell.id] = {}
-        for syn in cell.config["data"].get("synthetic", []):
-            name = f"{syn['category']}_s{syn['seed']}_{syn['size']}px_{syn['scenes']}"
-            folder = _generate(out / "data" / name, syn["seed"], syn["size"], syn["scenes"], syn["category"], log)
-            links[cell.id][syn["category"]] = str(folder)
+        for syn in cell.train_config().data.synthetic_in_use():
+            name = f"{syn.category}_s{syn.seed}_{syn.size}px_{syn.scenes}"
+            folder = _generate(out / "data" / name, syn.seed, syn.size, syn.scenes, syn.category, log)
+            links[cell.id][syn.category] = str(folder)
     return links
+
+
+def check_training_data(spec: AblationSpec, out: Path) -> None:
+    """Every cell's data names (roots, train / validation scenes, validation border) checked before anything
+    is generated or written (lfbench.training.loop.check_data; cells with the same data checked once)."""
+    seen = set()
+    for cell in spec.cells:
+        key = json.dumps([cell.config["data"], cell.config["validation"]], sort_keys=True)
+        if key not in seen:
+            seen.add(key)
+            check_data(cell.train_config(spec.source), out / "cells" / cell.id / "data")
 
 
 def prepare_evaluation(spec: AblationSpec, out: Path, log: Log) -> tuple[tuple[str, str], ...]:
@@ -130,16 +144,15 @@ def run_shared_stage1(spec: AblationSpec, out: Path, links: dict[str, str], thre
 def _shared_stage1(spec: AblationSpec, folder: Path, links: dict[str, str], threads: int, progress: bool | None,
                    log: Log) -> Path:
     from lfbench.ablation.cell import LOG, TRAIN_CONFIG
-    from lfbench.ablation.toml_text import dumps
-    from lfbench.training.config import TrainConfig
-    from lfbench.training.loop import comparable, train
+    from lfbench.training.config import TrainConfig, comparable
+    from lfbench.training.loop import train
 
     cfg = spec.stage1_config()
     cfg["training"]["threads"] = threads
     path = folder / TRAIN_CONFIG
     if path.is_file() and comparable(TrainConfig.from_toml(path).to_dict()) != comparable(cfg):
         raise SpecError(f"{path} holds another stage-1 config; use another --out folder")
-    write_text(path, dumps(cfg, f"The shared stage 1 of {spec.source}: written by lfbench ablate."))
+    write_text(path, toml_text(cfg, f"The shared stage 1 of {spec.source}: written by lfbench ablate."))
     for category, target in links.items():
         link = folder / "data" / category
         if link.is_symlink() and link.resolve() != Path(target).resolve():
@@ -171,7 +184,7 @@ def make_tasks(spec: AblationSpec, out: Path, links: dict[str, dict[str, str]], 
         config["training"]["threads"] = threads
         tasks.append(CellTask(
             cell_id=cell.id, values=cell.values, config=config, fingerprint=cell.fingerprint,
-            eval_fingerprint=_sha([spec.evaluation.fingerprint(), [s for s, _ in scenes]]),
+            eval_fingerprint=sha256_of([spec.evaluation.fingerprint(), [s for s, _ in scenes]]),
             cell_dir=str(out / "cells" / cell.id), data_links=links[cell.id],
             stage1_dir=str(stage1) if stage1 is not None else None, scenes=scenes, evaluation=spec.evaluation,
             threads=threads, progress=progress))
@@ -296,7 +309,7 @@ def run_methods(spec: AblationSpec, out: Path, scenes: tuple[tuple[str, str], ..
     out_list = []
     for m in spec.methods:
         folder = out / "methods" / file_name(m.label)
-        key = _sha([m.spec, ev.fingerprint(), [s for s, _ in scenes]])
+        key = sha256_of([m.spec, ev.fingerprint(), [s for s, _ in scenes]])
         marker = folder / "method.json"
         done = read_json(marker, "method marker") if marker.is_file() else None
         if isinstance(done, dict) and done.get("key") == key:
@@ -338,6 +351,7 @@ def run_ablation(spec: AblationSpec, out: str | Path, *, jobs: int = 1, progress
 
         check_executor(cluster)  # before any work: no data generated, nothing submitted
     out = Path(out)
+    check_training_data(spec, out)
     prepare_output_folder(out)
     with _set_lock(out):
         recover(out)  # a cut commit of an earlier run is finished (or its journal refused) before any work

@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from lfbench.utils.figure_text import plain_log_ticks, plain_text
+from lfbench.utils.readfile import read_text
 
 __all__ = ["LEARNING_CURVE", "LearningCurveLogger", "RunLogger", "TensorBoardLogger", "default_loggers",
            "plot_learning_curve", "read_metrics", "tensorboard_available"]
@@ -121,8 +122,6 @@ def default_loggers(out: str | Path) -> list[RunLogger]:
 
 def read_metrics(path: str | Path) -> list[dict[str, Any]]:
     """The entries of a metrics.jsonl (lines that do not parse, e.g. cut by a kill, are skipped)."""
-    from lfbench.utils.readfile import read_text
-
     entries = (parse_log_line(line) for line in read_text(path, "training log", MAX_LOG_BYTES,
                                                           errors="replace").splitlines())
     return [e for e in entries if e is not None]
