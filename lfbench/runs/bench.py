@@ -272,6 +272,8 @@ def bench_inference(size: int = 512, precision: str = "fp32", *, model: str = DE
     if "tiles" in phases:
         record["tiles"] = phases["tiles"]
     record["phases_s"] = {k: round(v, 3) for k, v in phases.items() if k.endswith("_s")}
+    if isinstance(phases.get("cpu"), dict):  # the same phases in CPU seconds, when the network reports them
+        record["phases_cpu_s"] = {k: round(v, 3) for k, v in phases["cpu"].items() if k.endswith("_s")}
     return _described(record, net, params)
 
 
