@@ -114,20 +114,23 @@ def measure(size: int, precision: str, threads: int, repeat: int, peaks: dict, p
 
 def sweep(size: int, precision: str, params: dict, repeat: int = 2) -> list[dict]:
     """The fast path's convolution op alone, in the same process as the peak, on the peak's shape and on the
-    network's own: a 3D layer over the whole tile this size gets (fused ReLU, and in-place add), and a slab of
-    the first 3D convolution (4N channels in). GFLOP per CPU second, best of ``repeat`` after one warm-up.
-    A class of the network's convolutions that runs well below the peak at its own shape but near it here
-    says: the shape (size, channels); near the peak here too: something around the op (layout, copies)."""
+    network's own: a 3D layer over the widest region of the planned tiles (fused ReLU, and in-place add), the
+    same over the whole image width when the plan is narrower (bf16 on AMX: oneDNN's slow path from 256 px
+    wide, see lfbench_methods.subfocal.inference.AMX_MAX_CONV_WIDTH), and a slab of the first 3D convolution
+    (4N channels in). GFLOP per CPU second, best of ``repeat`` after one warm-up. A class of the network's
+    convolutions far below the peak at its own shape but near it here says: the shape (width, channels);
+    near the peak here too: something around the op (layout, copies)."""
     import torch
     from lfbench_methods.subfocal.bench import PAPER_WIDTH
     from lfbench_methods.subfocal.fast import conv
-    from lfbench_methods.subfocal.inference import _SLAB, EXACT_HALO, plan_tiles
+    from lfbench_methods.subfocal.inference import _SLAB, EXACT_HALO, _spans, plan_tiles
     from lfbench_methods.subfocal.network import SubFocalNet
 
     net = SubFocalNet(**params)
     width, d, channels = params["width"], net.disparities.numel(), net.angular ** 2 * 4
-    rows, cols = (min(t + 2 * EXACT_HALO, size) if t < size else size for t in plan_tiles(net, size, size,
-                                                                                              precision=precision))
+    th, tw = plan_tiles(net, size, size, precision=precision)
+    rows = max(r1 - r0 for *_, r0, r1 in _spans(size, th, EXACT_HALO))
+    cols = max(c1 - c0 for *_, c0, c1 in _spans(size, tw, EXACT_HALO))
     dtype = torch.float32 if precision == "fp32" else torch.bfloat16
     g = torch.Generator().manual_seed(0)
     cl = torch.channels_last_3d
@@ -149,10 +152,14 @@ def sweep(size: int, precision: str, params: dict, repeat: int = 2) -> list[dict
         return {"case": name, "shape": [cin, cout, depth, h, w], "cpu_seconds": best,
                 "gflops_per_cpu_s": flops / best / 1e9}
 
-    return [case("peak shape (lfbench bench peak)", PAPER_WIDTH, PAPER_WIDTH, 17, 64, 64, (1, 1, 1), False),
-            case("a 3D layer of this tile", width, width, d, rows, cols, (1, 1, 1), False),
-            case("a 3D layer of this tile, in-place add", width, width, d, rows, cols, (1, 1, 1), True),
-            case("a first-convolution slab of this tile", channels, width, _SLAB + 2, rows, cols, (0, 1, 1), False)]
+    cases = [case("peak shape (lfbench bench peak)", PAPER_WIDTH, PAPER_WIDTH, 17, 64, 64, (1, 1, 1), False),
+             case("a 3D layer of the planned tile", width, width, d, rows, cols, (1, 1, 1), False)]
+    if cols < size:
+        cases.append(case("a 3D layer as wide as the image", width, width, d, rows, size, (1, 1, 1), False))
+    return cases + [case("a 3D layer of the planned tile, in-place add", width, width, d, rows, cols, (1, 1, 1),
+                         True),
+                    case("a first-convolution slab of the planned tile", channels, width, _SLAB + 2, rows, cols,
+                         (0, 1, 1), False)]
 
 
 def profile_table(size: int, precision: str, rows: int, params: dict) -> str:

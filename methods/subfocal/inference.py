@@ -41,6 +41,12 @@ _RUNTIME_BYTES = 0.35e9  # the interpreter, torch, oneDNN and the weights (measu
 _CUDA_RUNTIME_BYTES = 0.5e9  # on a GPU: cuDNN workspaces and the caching allocator's slack beside planned tensors
 CPU_BUDGET_GB = 4.0  # the default budget on the CPU (on CUDA: the GPU's available memory)
 _SLAB = 2  # disparities per slab of the first 3D convolution
+# oneDNN runs a bf16 convolution with AMX through its fast micro-kernel path (brgemm "uker", with spatial
+# blocking across rows) only when the output is less than 256 px wide (a heuristic in
+# src/cpu/x64/jit_brgemm_conv_utils.cpp); wider, it takes a slower AMX path. On an AMX Xeon the paper network
+# at 256x256 in bf16 (one 256 px wide tile) ran 4.9x off the floor of a 64 px wide conv3d. So on a CPU with
+# AMX, bf16 tiles are at most this wide, halo included (exact tiling; at 256x256: two strips, 6 % more voxels).
+AMX_MAX_CONV_WIDTH = 255
 
 
 @dataclass
@@ -148,6 +154,24 @@ def _spans(size: int, tile: int, halo: int) -> list[tuple[int, int, int, int]]:
     return [(a, min(a + tile, size), max(a - halo, 0), min(a + tile + halo, size)) for a in range(0, size, tile)]
 
 
+def cpu_has_amx_bf16() -> bool:
+    """True when this CPU has AMX for bf16 (oneDNN then runs bf16 convolutions on its tiles)."""
+    try:
+        return bool(torch.cpu.get_capabilities().get("amx_bf16", False))
+    except (AttributeError, RuntimeError):  # an older torch
+        from lfbench.utils.hardware import cpu_flags
+
+        return "amx_bf16" in cpu_flags()
+
+
+def conv_width_limit(precision: str = "fp32", device=None) -> int | None:
+    """The widest tile (px, halo included) the 3D aggregation should run on: :data:`AMX_MAX_CONV_WIDTH` for
+    bf16 on a CPU with AMX, else None (no limit)."""
+    if precision == "bf16" and _is_cpu(device) and cpu_has_amx_bf16():
+        return AMX_MAX_CONV_WIDTH
+    return None
+
+
 def _tile_fits(net: SubFocalNet, rows: int, cols: int, budget: float, precision: str, plan=None,
                device=None) -> bool:
     return _tile_need(net, rows, cols, precision, plan, device) <= budget
@@ -172,9 +196,11 @@ def plan_tiles(net: SubFocalNet, height: int, width: int, halo: int = EXACT_HALO
     """Core tile (rows, cols) for ``max_memory_gb`` that computes the fewest voxels (tiles plus halos): the
     whole image when it fits, else e.g. full-width strips or a grid; ties go to fewer tiles. Tiles of
     at least 8 px are used even when the budget is smaller than that. ``device`` (default CPU): where it runs
-    (see :func:`memory_budget_gb` for the budget of a GPU)."""
+    (see :func:`memory_budget_gb` for the budget of a GPU). Tiles are at most :func:`conv_width_limit` px
+    wide, halo included (bf16 on a CPU with AMX)."""
     budget = _budget(net, height, width, max_memory_gb, device)
     plan = net._shift_plan() if net.interpolation == "bilinear" else None
+    max_cols = conv_width_limit(precision, device) or width
     best = None
     for ky in range(1, math.ceil(height / 8) + 1):
         th = math.ceil(height / ky)
@@ -184,7 +210,7 @@ def plan_tiles(net: SubFocalNet, height: int, width: int, halo: int = EXACT_HALO
             tw = math.ceil(width / kx)
             xs = _spans(width, tw, halo)
             cols = max(c1 - c0 for _, _, c0, c1 in xs)
-            if not _tile_fits(net, rows, cols, budget, precision, plan, device):
+            if cols > max_cols or not _tile_fits(net, rows, cols, budget, precision, plan, device):
                 continue
             work = sum(r1 - r0 for *_, r0, r1 in ys) * sum(c1 - c0 for *_, c0, c1 in xs)
             key = (work, len(ys) * len(xs))
@@ -422,6 +448,7 @@ def tile_count(height: int, width: int, tile: int) -> int:
 
 
 __all__ = ["infer", "InferenceOutput", "plan_tile", "plan_tiles", "memory_budget_gb", "CPU_BUDGET_GB",
+           "conv_width_limit", "cpu_has_amx_bf16", "AMX_MAX_CONV_WIDTH",
            "estimate_tile_bytes", "gather_bytes",
            "region_volume", "distribution_std", "eval_cost", "padded_features", "tile_count", "EXACT_HALO",
            "PRECISIONS"]
