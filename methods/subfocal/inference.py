@@ -13,7 +13,8 @@ channel attention (a mean over the whole cost volume). Exact tiling therefore wo
    result identical to whole-image inference (up to float rounding).
 
 ``tile=0`` picks the tiling from a memory budget (``max_memory_gb``): the whole image in one piece when
-it fits, else the tiles (strips or a grid) that compute the fewest voxels. The output uncertainty is the
+it fits, else the tiles (strips or a grid) that compute the fewest voxels; in bf16 on a CPU with AMX, tiles
+at most :data:`AMX_MAX_CONV_WIDTH` px wide (oneDNN's fast AMX kernels stop at 256 px). The output uncertainty is the
 standard deviation of the predicted distribution in px: sqrt(sum_k p_k (d_k - d_hat)^2).
 """
 
