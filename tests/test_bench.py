@@ -45,6 +45,7 @@ def test_inference_command_writes_the_contract_records(tmp_path: Path, capsys):
         assert r["floor_s"] == pytest.approx(r["tflop"] * 1e3 / r["peak_gflops_per_s"])
         # Both floors beside each record, whatever precision it ran in (bf16: where this CPU has it).
         assert r["ratio_to_fp32_floor"] == pytest.approx(r["seconds"] / r["fp32_floor_s"])
+        assert r["ratio_to_fp32_floor_cpu"] > 0 and set(r["phases_cpu_s"]) == set(r["phases_s"])
         if missing is None:
             assert r["ratio_to_bf16_floor"] == pytest.approx(r["seconds"] / r["bf16_floor_s"])
             assert r[f"ratio_to_{r['precision']}_floor"] == pytest.approx(r["ratio_to_floor"])
@@ -165,6 +166,11 @@ def test_both_floors_beside_every_inference_record():
     assert bf16["fp32_floor_s"] == 8.0 and bf16["ratio_to_fp32_floor"] == 1.25
     assert bf16["bf16_floor_s"] == pytest.approx(2000 / 350) and bf16["ratio_to_bf16_floor"] == pytest.approx(1.75)
     assert bf16["ratio_to_floor"] == pytest.approx(1.75)
+    # By CPU seconds: 5 CPU s for 2 TFLOP at the peaks' 250 / 350 GFLOP per CPU second.
+    bf16_cpu = bench.attach_peaks([*records[:5], {**records[5], "cpu_seconds": 5.0}, *records[6:]])[5]
+    assert bf16_cpu["ratio_to_fp32_floor_cpu"] == pytest.approx(0.625)
+    assert bf16_cpu["ratio_to_bf16_floor_cpu"] == pytest.approx(0.875)
+    assert "ratio_to_bf16_floor_cpu" not in bf16  # no CPU time, no CPU ratio
     rows = _table_rows(bench.table(bench.attach_peaks(records)), "size")
     assert rows[1]["precision"] == "bf16"
     assert {k: rows[1][k] for k in ("ratio_to_fp32_floor", "bf16_floor_s", "ratio_to_bf16_floor")} == {

@@ -461,7 +461,9 @@ def attach_peaks(records: Sequence[dict]) -> list[dict]:
     less sensitive to other processes on the cores); for inference also floor_s (network FLOPs / peak) and
     ratio_to_floor (seconds / floor_s) of its own precision, and for every precision P whose peak was
     measured in the run, P_floor_s and ratio_to_P_floor (fp32 and bf16 side by side, whatever precision
-    the case ran in); where the peak of P was skipped (bf16 on a CPU without it), P_floor_skipped says why."""
+    the case ran in; ratio_to_P_floor_cpu: the same by CPU seconds, inference and peak alike, which other
+    processes on the cores inflate far less); where the peak of P was skipped (bf16 on a CPU without it),
+    P_floor_skipped says why."""
     out = [dict(r) for r in records]
     ok = [i for i, r in enumerate(out) if r.get("bench") == "peak" and "error" not in r and "skipped" not in r]
     skipped = {r.get("precision"): r["skipped"] for r in out if r.get("bench") == "peak" and "skipped" in r}
@@ -485,6 +487,9 @@ def attach_peaks(records: Sequence[dict]) -> list[dict]:
                 if other is not None:
                     r[f"{precision}_floor_s"] = r["tflop"] * 1e3 / other
                     r[f"ratio_to_{precision}_floor"] = r["seconds"] / r[f"{precision}_floor_s"]
+                    other_cpu = near(i, precision, "gflops_per_cpu_s")
+                    if other_cpu is not None and "cpu_seconds" in r:  # the same in CPU seconds (less load-bound)
+                        r[f"ratio_to_{precision}_floor_cpu"] = r["cpu_seconds"] * other_cpu / (r["tflop"] * 1e3)
                 elif precision in skipped:
                     r[f"{precision}_floor_skipped"] = skipped[precision]
         peak = near(i, r.get("precision"))
