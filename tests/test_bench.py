@@ -183,6 +183,7 @@ def test_both_floors_beside_every_inference_record():
     assert r["ratio_to_fp32_floor"] == 1.5 and r["bf16_floor_skipped"] == reason and "bf16_floor_s" not in r
     row = _table_rows(bench.table([r]), "size")[0]
     assert (row["ratio_to_fp32_floor"], row["bf16_floor_s"], row["ratio_to_bf16_floor"]) == ("1.5", "", "skipped")
+    assert row["ratio_to_bf16_floor_cpu"] == "skipped"
 
 
 def _table_rows(text: str, first: str) -> list[dict]:

@@ -509,8 +509,8 @@ def attach_peaks(records: Sequence[dict]) -> list[dict]:
 _COLUMNS = {
     "peak": ["precision", "shape", "seconds", "gflops_per_s", "gflops_per_cpu_s"],
     "inference": ["size", "<network>", "precision", "seconds", "peak_memory_gb", "gflops_per_s", "fraction_of_peak",
-                  "fraction_of_peak_cpu", "fp32_floor_s", "ratio_to_fp32_floor", "bf16_floor_s", "ratio_to_bf16_floor",
-                  "tile", "tiles", "phases_s"],
+                  "fraction_of_peak_cpu", "fp32_floor_s", "ratio_to_fp32_floor", "ratio_to_fp32_floor_cpu",
+                  "bf16_floor_s", "ratio_to_bf16_floor", "ratio_to_bf16_floor_cpu", "tile", "tiles", "phases_s"],
     "volume": ["size", "interval", "precision", "method", "seconds", "volume_gb", "gb_per_s", "peak_memory_gb"],
     "train": ["<network>", "batch", "patch", "<variant>", "precision", "seconds_per_step", "steps_per_s",
               "cpu_seconds", "gflops_per_s", "fraction_of_peak", "fraction_of_peak_cpu", "peak_memory_gb"],
@@ -531,8 +531,8 @@ def _fmt(value) -> str:
 def _cell(record: dict, column: str) -> str:
     """A table cell: the formatted value; ``skipped`` for the ratio to a floor whose peak this machine could not
     measure (the reason is the peak's own row)."""
-    if column.startswith("ratio_to_") and column.endswith("_floor") and column not in record:
-        precision = column.removeprefix("ratio_to_").removesuffix("_floor")
+    if column.startswith("ratio_to_") and column.endswith(("_floor", "_floor_cpu")) and column not in record:
+        precision = column.removeprefix("ratio_to_").removesuffix("_cpu").removesuffix("_floor")
         if f"{precision}_floor_skipped" in record:
             return "skipped"
     return _fmt(record.get(column))
