@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import json
 from pathlib import Path
 
@@ -42,6 +43,14 @@ def test_inference_command_writes_the_contract_records(tmp_path: Path, capsys):
         assert r["fraction_of_peak"] == pytest.approx(r["gflops_per_s"] / r["peak_gflops_per_s"])
         assert r["fraction_of_peak_cpu"] > 0 and r["cpu_seconds"] > 0
         assert r["floor_s"] == pytest.approx(r["tflop"] * 1e3 / r["peak_gflops_per_s"])
+        # Both floors beside each record, whatever precision it ran in (bf16: where this CPU has it).
+        assert r["ratio_to_fp32_floor"] == pytest.approx(r["seconds"] / r["fp32_floor_s"])
+        assert r["ratio_to_fp32_floor_cpu"] > 0 and set(r["phases_cpu_s"]) == set(r["phases_s"])
+        if missing is None:
+            assert r["ratio_to_bf16_floor"] == pytest.approx(r["seconds"] / r["bf16_floor_s"])
+            assert r[f"ratio_to_{r['precision']}_floor"] == pytest.approx(r["ratio_to_floor"])
+        else:
+            assert "avx512" in r["bf16_floor_skipped"] and "ratio_to_bf16_floor" not in r
     text = capsys.readouterr().out
     assert "## inference" in text and "## peak" in text and "machine:" in text
 
@@ -85,6 +94,37 @@ def test_network_flops_are_the_analytic_count():
     assert SubFocalNet(interval=0.1).flops(512, 512)["aggregation"] == pytest.approx(f["aggregation"] * 81 / 17)
 
 
+def _parse(argv: list[str]):
+    import argparse
+
+    from lfbench.cli.bench import add_arguments
+
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
+    return parser.parse_args(argv)
+
+
+def test_every_inference_case_sits_between_the_fp32_and_the_bf16_peak(monkeypatch):
+    from lfbench.cli.bench import _cases
+
+    args = _parse(["inference", "--size", "12", "--precision", "fp32", "--interval", "1", "0.5", "--device", "cpu"])
+    monkeypatch.delenv(FORCE_NO_BF16_ENV, raising=False)
+    order = [(bench_, params.get("precision"), params.get("interval")) for bench_, params in _cases(args)]
+    if cpu_bf16_missing() is None:
+        peaks = [("peak", "fp32", None), ("peak", "bf16", None)]
+        assert order == [*peaks, ("inference", "fp32", 1.0), *peaks, ("inference", "fp32", 0.5), *peaks]
+    # A CPU without bf16: its bf16 peak is one skipped case (one line), not one around every case.
+    monkeypatch.setenv(FORCE_NO_BF16_ENV, "1")
+    cases = _cases(args)
+    order = [(bench_, params.get("precision")) for bench_, params in cases]
+    assert order == [("peak", "fp32"), ("peak", "bf16"), ("inference", "fp32"), ("peak", "fp32"),
+                     ("inference", "fp32"), ("peak", "fp32")]
+    record = bench.run_isolated(*cases[1])  # decided here, no process
+    assert record["skipped"].startswith("bf16 convolutions: this CPU lacks avx512bw")
+    assert _parse(["inference", "--no-peak"]).no_peak and all(b == "inference" for b, _ in _cases(
+        _parse(["inference", "--no-peak", "--device", "cpu"])))
+
+
 def test_attach_peaks_and_the_table():
     peak = {"bench": "peak", "precision": "bf16", "seconds": 1.0, "shape": [150, 17, 64, 64]}
     records = [{**peak, "gflops_per_s": 300.0, "gflops_per_cpu_s": 200.0},
@@ -105,6 +145,54 @@ def test_attach_peaks_and_the_table():
     assert "## peak" in text and "## inference" in text
     row = next(line for line in text.splitlines() if line.startswith("| 512") and "bf16" in line)
     assert "| 2.5 " in row and "| 0.5 " in row  # load average and fraction of peak in the row
+
+
+def test_both_floors_beside_every_inference_record():
+    def peak(precision: str, gflops: float) -> dict:
+        return {"bench": "peak", "precision": precision, "gflops_per_s": gflops, "gflops_per_cpu_s": gflops}
+
+    def case(precision: str, seconds: float) -> dict:
+        return {"bench": "inference", "size": 64, "precision": precision, "seconds": seconds, "tflop": 2.0,
+                "gflops_per_s": 2000 / seconds}
+
+    records = [peak("fp32", 100.0), peak("bf16", 300.0), case("fp32", 30.0), peak("fp32", 300.0),
+               peak("bf16", 500.0), case("bf16", 10.0), peak("fp32", 200.0), peak("bf16", 200.0)]
+    fp32, bf16 = bench.attach_peaks(records)[2], bench.attach_peaks(records)[5]
+    # fp32 case: peaks (100 + 300) / 2 = 200 (fp32) and (300 + 500) / 2 = 400 (bf16) GFLOP/s around it.
+    assert fp32["fp32_floor_s"] == 10.0 and fp32["ratio_to_fp32_floor"] == 3.0
+    assert fp32["bf16_floor_s"] == 5.0 and fp32["ratio_to_bf16_floor"] == 6.0
+    assert fp32["ratio_to_floor"] == 3.0  # its own precision's floor
+    # bf16 case: fp32 peak (300 + 200) / 2 = 250, bf16 peak (500 + 200) / 2 = 350.
+    assert bf16["fp32_floor_s"] == 8.0 and bf16["ratio_to_fp32_floor"] == 1.25
+    assert bf16["bf16_floor_s"] == pytest.approx(2000 / 350) and bf16["ratio_to_bf16_floor"] == pytest.approx(1.75)
+    assert bf16["ratio_to_floor"] == pytest.approx(1.75)
+    # By CPU seconds: 5 CPU s for 2 TFLOP at the peaks' 250 / 350 GFLOP per CPU second.
+    bf16_cpu = bench.attach_peaks([*records[:5], {**records[5], "cpu_seconds": 5.0}, *records[6:]])[5]
+    assert bf16_cpu["ratio_to_fp32_floor_cpu"] == pytest.approx(0.625)
+    assert bf16_cpu["ratio_to_bf16_floor_cpu"] == pytest.approx(0.875)
+    assert "ratio_to_bf16_floor_cpu" not in bf16  # no CPU time, no CPU ratio
+    rows = _table_rows(bench.table(bench.attach_peaks(records)), "size")
+    assert rows[1]["precision"] == "bf16"
+    assert {k: rows[1][k] for k in ("ratio_to_fp32_floor", "bf16_floor_s", "ratio_to_bf16_floor")} == {
+        "ratio_to_fp32_floor": "1.25", "bf16_floor_s": "5.71", "ratio_to_bf16_floor": "1.75"}
+    # Without bf16 units: the bf16 peak is a skipped record, and so is the ratio to its floor.
+    reason = "bf16 convolutions: this CPU lacks avx512bw, avx512vl, avx512dq; fp32 runs"
+    no_bf16 = [peak("fp32", 100.0), {"bench": "peak", "precision": "bf16", "skipped": reason}, case("fp32", 30.0),
+               peak("fp32", 100.0)]
+    r = bench.attach_peaks(no_bf16)[2]
+    assert r["ratio_to_fp32_floor"] == 1.5 and r["bf16_floor_skipped"] == reason and "bf16_floor_s" not in r
+    row = _table_rows(bench.table([r]), "size")[0]
+    assert (row["ratio_to_fp32_floor"], row["bf16_floor_s"], row["ratio_to_bf16_floor"]) == ("1.5", "", "skipped")
+    assert row["ratio_to_bf16_floor_cpu"] == "skipped"
+
+
+def _table_rows(text: str, first: str) -> list[dict]:
+    """The rows (column -> cell) of the Markdown table in ``text`` whose first column is ``first``."""
+    lines = text.splitlines()
+    start = next(i for i, line in enumerate(lines) if line.startswith(f"| {first} "))
+    table = itertools.takewhile(lambda line: line.startswith("|"), lines[start:])
+    cells = [[c.strip() for c in line.strip().strip("|").split("|")] for line in table]
+    return [dict(zip(cells[0], row, strict=True)) for row in cells[2:]]
 
 
 def test_metrics_bench_scores_every_scene_and_method():

@@ -141,7 +141,10 @@ def test_plain_ops_without_onednn_fusion_give_the_same_result(monkeypatch):
     assert (fused.disparity - plain.disparity).abs().max().item() < 1e-5
 
 
-def test_planner_takes_the_cheapest_tiling_that_fits():
+def test_planner_takes_the_cheapest_tiling_that_fits(monkeypatch):
+    from lfbench_methods.subfocal import inference
+
+    monkeypatch.setattr(inference, "cpu_has_amx_bf16", lambda: False)  # no width limit (see the next test)
     paper = SubFocalNet()
     assert plan_tiles(paper, 64, 64, max_memory_gb=100) == (64, 64)  # everything fits: one piece
     plan = fast.net_shift_plan(paper)
@@ -153,3 +156,37 @@ def test_planner_takes_the_cheapest_tiling_that_fits():
     # bf16 halves the activations: its tiles are at least as large as fp32's.
     assert (lambda a, b: a[0] * a[1] >= b[0] * b[1])(plan_tiles(paper, 512, 512, precision="bf16"),
                                                       plan_tiles(paper, 512, 512, precision="fp32"))
+
+
+@pytest.mark.parametrize("amx", [False, True])
+def test_bf16_tiles_on_an_amx_cpu_stay_narrower_than_onednn_s_slow_path(monkeypatch, amx):
+    from lfbench_methods.subfocal import inference
+
+    monkeypatch.setattr(inference, "cpu_has_amx_bf16", lambda: amx)
+    paper = SubFocalNet()
+
+    def widest(size: int, precision: str, device=None) -> int:
+        """The widest region (core + halo, px) a 3D convolution runs on under the plan."""
+        _, tw = plan_tiles(paper, size, size, max_memory_gb=4, precision=precision, device=device)
+        return max(c1 - c0 for *_, c0, c1 in inference._spans(size, tw, inference.EXACT_HALO))
+
+    # 256x256: one 256 px wide piece, unless bf16 on AMX, where oneDNN's AMX kernels are slow from 256 px.
+    assert widest(256, "bf16") == (128 + 8 if amx else 256)
+    assert widest(512, "bf16") == (171 + 16 if amx else 256 + 8)  # 3 strips instead of 2
+    assert widest(256, "fp32") == 256 and widest(512, "fp32") == 171 + 16  # fp32 never runs on AMX
+    assert inference.conv_width_limit("bf16", torch.device("cuda")) is None  # a GPU: no limit
+    assert inference.conv_width_limit("bf16") == (inference.AMX_MAX_CONV_WIDTH if amx else None)
+
+
+def test_inference_keeps_to_the_width_limit_and_stays_exact(monkeypatch):
+    from lfbench_methods.subfocal import inference
+
+    net = _net()
+    views = _views(20, 64, seed=7)
+    whole = infer(net, views, tile=64)
+    monkeypatch.setattr(inference, "conv_width_limit", lambda precision="fp32", device=None: 40)
+    timings: dict = {}
+    limited = infer(net, views, timings=timings)
+    spans = inference._spans(64, timings["tile"][1], inference.EXACT_HALO)
+    assert max(c1 - c0 for *_, c0, c1 in spans) <= 40 and timings["tiles"] == len(spans) == 2  # 2 x (32 + 8) px
+    assert (limited.disparity - whole.disparity).abs().max().item() < 1e-5

@@ -29,6 +29,10 @@ Examples:
 the clocks are read after torch.cuda.synchronize, peak_memory_gb is torch.cuda.max_memory_allocated and
 fp32 is IEEE fp32 (TF32 off). A bf16 case on a CPU without bf16 instructions is recorded as skipped
 (with the reason) and does not change the exit code.
+
+Each inference case sits between conv3d peaks of both precisions (unless --no-peak), so its row gives the
+ratio to the fp32 floor and to the bf16 floor (network FLOPs / peak) side by side; on a CPU without bf16
+instructions the bf16 peak is one skipped line and the bf16 ratio reads "skipped".
 """
 
 from __future__ import annotations
@@ -227,6 +231,29 @@ def _sweep(args: argparse.Namespace, trainable, base: dict, defaults: dict | Non
     return [{**base, **dict(zip(values, combo, strict=True))} for combo in itertools.product(*values.values())]
 
 
+class _FloorPeaks:
+    """The peak cases measured around each inference case: one per precision of lfbench.runs.bench.PRECISIONS,
+    whatever precisions the cases run, so that every inference record gets its ratio to the fp32 floor and
+    to the bf16 floor. A peak this machine cannot run (bf16 on a CPU without bf16 instructions) is listed
+    once, as its one skipped record, not around every case."""
+
+    def __init__(self, model: str, th: dict) -> None:
+        from lfbench.runs.bench import PRECISIONS, skip_reason
+
+        self.params = [{"model": model, "precision": p, **th} for p in PRECISIONS]
+        self.skipped = [skip_reason("peak", params) is not None for params in self.params]
+        self.listed: set[int] = set()
+
+    def cases(self) -> list[tuple[str, dict]]:
+        out = []
+        for i, params in enumerate(self.params):
+            if self.skipped[i] and i in self.listed:
+                continue
+            self.listed.add(i)
+            out.append(("peak", dict(params)))
+        return out
+
+
 def _cases(args: argparse.Namespace) -> list[tuple[str, dict]]:
     """(bench, params) in the order they run."""
     which = args.which
@@ -242,15 +269,16 @@ def _cases(args: argparse.Namespace) -> list[tuple[str, dict]]:
         size = 64 if getattr(args, "quick", False) else args.size
         if which == "inference" or "inference" not in skip:
             peaks = "peak" in has and not args.no_peak and not (which == "suite" and "peak" in skip)
+            floors = _FloorPeaks(model, th)
             for net in _sweep(args, trainable, model_params):
                 for precision in args.precision:
                     if peaks:
-                        cases.append(("peak", {"model": model, "precision": precision, **th}))
+                        cases += floors.cases()
                     cases.append(("inference", {"model": model, **net, "size": size, "precision": precision,
                                                 "weights": args.weights, "max_memory_gb": args.max_memory,
                                                 "tile": args.tile, "repeat": args.repeat, **th}))
-            if peaks:  # the peak again after the last case: each case sits between two peak measurements
-                cases += [("peak", {"model": model, "precision": p, **th}) for p in args.precision]
+            if peaks:  # the peaks again after the last case: each case sits between two peak measurements
+                cases += floors.cases()
         elif "peak" not in skip and "peak" in has:  # the suite without inference: peaks beside the training bench
             cases += [("peak", {"model": model, "precision": p, **th}) for p in args.precision]
         if which == "suite":

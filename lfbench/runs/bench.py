@@ -30,8 +30,10 @@ A trainable contributes its own benches (``Trainable.benches``); SubFocal's (lfb
   grid_sample path.
 
 :func:`attach_peaks` puts the peak measured next to each inference record beside it (fraction of peak by
-wall time and per CPU second, the floor = network FLOPs / peak, and seconds / floor). On a shared machine
-the wall-time numbers swing with the other processes' load; the CPU-time fraction much less.
+wall time and per CPU second, the floor = network FLOPs / peak, and seconds / floor), and the floors of both
+precisions side by side (``ratio_to_fp32_floor``, ``ratio_to_bf16_floor``: how far an fp32 or a bf16 run
+is from what the same FLOPs take at the fp32 or the bf16 conv3d peak measured in the same run). On a shared
+machine the wall-time numbers swing with the other processes' load; the CPU-time fraction much less.
 """
 
 from __future__ import annotations
@@ -270,6 +272,8 @@ def bench_inference(size: int = 512, precision: str = "fp32", *, model: str = DE
     if "tiles" in phases:
         record["tiles"] = phases["tiles"]
     record["phases_s"] = {k: round(v, 3) for k, v in phases.items() if k.endswith("_s")}
+    if isinstance(phases.get("cpu"), dict):  # the same phases in CPU seconds, when the network reports them
+        record["phases_cpu_s"] = {k: round(v, 3) for k, v in phases["cpu"].items() if k.endswith("_s")}
     return _described(record, net, params)
 
 
@@ -455,24 +459,47 @@ def attach_peaks(records: Sequence[dict]) -> list[dict]:
     measured next to it (the last one before it and the first one after it, when present; else the best of
     all). Adds peak_gflops_per_s, fraction_of_peak (wall time), fraction_of_peak_cpu (per CPU second, far
     less sensitive to other processes on the cores); for inference also floor_s (network FLOPs / peak) and
-    ratio_to_floor (seconds / floor_s)."""
+    ratio_to_floor (seconds / floor_s) of its own precision, and for every precision P whose peak was
+    measured in the run, P_floor_s and ratio_to_P_floor (fp32 and bf16 side by side, whatever precision
+    the case ran in; ratio_to_P_floor_cpu: the same by CPU seconds, inference and peak alike, which other
+    processes on the cores inflate far less); where the peak of P was skipped (bf16 on a CPU without it),
+    P_floor_skipped says why."""
     out = [dict(r) for r in records]
     ok = [i for i, r in enumerate(out) if r.get("bench") == "peak" and "error" not in r and "skipped" not in r]
+    skipped = {r.get("precision"): r["skipped"] for r in out if r.get("bench") == "peak" and "skipped" in r}
+
+    def near(i: int, precision: str, key: str = "gflops_per_s") -> float | None:
+        """Mean ``key`` of the peaks of ``precision`` next to record i (else the best of all of them)."""
+        same = [j for j in ok if out[j].get("precision") == precision and key in out[j]]
+        if not same:
+            return None
+        before = [j for j in same if j < i][-1:]
+        after = [j for j in same if j > i][:1]
+        chosen = before + after or [max(same, key=lambda j: out[j][key])]
+        return sum(out[j][key] for j in chosen) / len(chosen)
+
     for i, r in enumerate(out):
         if r.get("bench") not in ("inference", "train") or "error" in r or "skipped" in r:
             continue
-        same = [j for j in ok if out[j]["precision"] == r.get("precision")]
-        if not same:
+        if r["bench"] == "inference" and "tflop" in r:
+            for precision in PRECISIONS:
+                other = near(i, precision)
+                if other is not None:
+                    r[f"{precision}_floor_s"] = r["tflop"] * 1e3 / other
+                    r[f"ratio_to_{precision}_floor"] = r["seconds"] / r[f"{precision}_floor_s"]
+                    other_cpu = near(i, precision, "gflops_per_cpu_s")
+                    if other_cpu is not None and "cpu_seconds" in r:  # the same in CPU seconds (less load-bound)
+                        r[f"ratio_to_{precision}_floor_cpu"] = r["cpu_seconds"] * other_cpu / (r["tflop"] * 1e3)
+                elif precision in skipped:
+                    r[f"{precision}_floor_skipped"] = skipped[precision]
+        peak = near(i, r.get("precision"))
+        if peak is None or "gflops_per_s" not in r:  # no peak of its precision, or a network without FLOPs
             continue
-        before = [j for j in same if j < i][-1:]
-        after = [j for j in same if j > i][:1]
-        near = before + after or [max(same, key=lambda j: out[j]["gflops_per_s"])]
-        peak = sum(out[j]["gflops_per_s"] for j in near) / len(near)
         r["peak_gflops_per_s"] = peak
         r["fraction_of_peak"] = r["gflops_per_s"] / peak
-        cpu_peaks = [out[j]["gflops_per_cpu_s"] for j in near if "gflops_per_cpu_s" in out[j]]
-        if cpu_peaks and "gflops_per_cpu_s" in r:
-            r["fraction_of_peak_cpu"] = r["gflops_per_cpu_s"] / (sum(cpu_peaks) / len(cpu_peaks))
+        cpu_peak = near(i, r.get("precision"), "gflops_per_cpu_s")
+        if cpu_peak is not None and "gflops_per_cpu_s" in r:
+            r["fraction_of_peak_cpu"] = r["gflops_per_cpu_s"] / cpu_peak
         if r["bench"] == "inference":
             r["floor_s"] = r["tflop"] * 1e3 / peak
             r["ratio_to_floor"] = r["seconds"] / r["floor_s"]
@@ -482,7 +509,8 @@ def attach_peaks(records: Sequence[dict]) -> list[dict]:
 _COLUMNS = {
     "peak": ["precision", "shape", "seconds", "gflops_per_s", "gflops_per_cpu_s"],
     "inference": ["size", "<network>", "precision", "seconds", "peak_memory_gb", "gflops_per_s", "fraction_of_peak",
-                  "fraction_of_peak_cpu", "floor_s", "ratio_to_floor", "tile", "tiles", "phases_s"],
+                  "fraction_of_peak_cpu", "fp32_floor_s", "ratio_to_fp32_floor", "ratio_to_fp32_floor_cpu",
+                  "bf16_floor_s", "ratio_to_bf16_floor", "ratio_to_bf16_floor_cpu", "tile", "tiles", "phases_s"],
     "volume": ["size", "interval", "precision", "method", "seconds", "volume_gb", "gb_per_s", "peak_memory_gb"],
     "train": ["<network>", "batch", "patch", "<variant>", "precision", "seconds_per_step", "steps_per_s",
               "cpu_seconds", "gflops_per_s", "fraction_of_peak", "fraction_of_peak_cpu", "peak_memory_gb"],
@@ -498,6 +526,16 @@ def _fmt(value) -> str:
     if isinstance(value, list):
         return "x".join(str(v) for v in value)
     return "" if value is None else str(value)
+
+
+def _cell(record: dict, column: str) -> str:
+    """A table cell: the formatted value; ``skipped`` for the ratio to a floor whose peak this machine could not
+    measure (the reason is the peak's own row)."""
+    if column.startswith("ratio_to_") and column.endswith(("_floor", "_floor_cpu")) and column not in record:
+        precision = column.removeprefix("ratio_to_").removesuffix("_cpu").removesuffix("_floor")
+        if f"{precision}_floor_skipped" in record:
+            return "skipped"
+    return _fmt(record.get(column))
 
 
 def _columns(bench: str, rows: Sequence[dict]) -> list[str]:
@@ -523,7 +561,7 @@ def table(records: Sequence[dict]) -> str:
         if not rows:
             continue
         cols = _columns(bench, rows)
-        body = [[_fmt(r.get(c)) for c in cols] + [_fmt((r.get("machine") or {}).get("load_average")),
+        body = [[_cell(r, c) for c in cols] + [_fmt((r.get("machine") or {}).get("load_average")),
                                                   r.get("error", "") or (f"skipped: {r['skipped']}" if "skipped" in r
                                                                          else "")] for r in rows]
         models = ", ".join(dict.fromkeys(str(r["model"]) for r in rows if r.get("model")))

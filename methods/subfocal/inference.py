@@ -13,7 +13,8 @@ channel attention (a mean over the whole cost volume). Exact tiling therefore wo
    result identical to whole-image inference (up to float rounding).
 
 ``tile=0`` picks the tiling from a memory budget (``max_memory_gb``): the whole image in one piece when
-it fits, else the tiles (strips or a grid) that compute the fewest voxels. The output uncertainty is the
+it fits, else the tiles (strips or a grid) that compute the fewest voxels; in bf16 on a CPU with AMX, tiles
+at most :data:`AMX_MAX_CONV_WIDTH` px wide (oneDNN's fast AMX kernels stop at 256 px). The output uncertainty is the
 standard deviation of the predicted distribution in px: sqrt(sum_k p_k (d_k - d_hat)^2).
 """
 
@@ -41,6 +42,12 @@ _RUNTIME_BYTES = 0.35e9  # the interpreter, torch, oneDNN and the weights (measu
 _CUDA_RUNTIME_BYTES = 0.5e9  # on a GPU: cuDNN workspaces and the caching allocator's slack beside planned tensors
 CPU_BUDGET_GB = 4.0  # the default budget on the CPU (on CUDA: the GPU's available memory)
 _SLAB = 2  # disparities per slab of the first 3D convolution
+# oneDNN runs a bf16 convolution with AMX through its fast micro-kernel path (brgemm "uker", with spatial
+# blocking across rows) only when the output is less than 256 px wide (a heuristic in
+# src/cpu/x64/jit_brgemm_conv_utils.cpp); wider, it takes a slower AMX path. On an AMX Xeon the paper network
+# at 256x256 in bf16 (one 256 px wide tile) ran 4.9x off the floor of a 64 px wide conv3d. So on a CPU with
+# AMX, bf16 tiles are at most this wide, halo included (exact tiling; at 256x256: two strips, 6 % more voxels).
+AMX_MAX_CONV_WIDTH = 255
 
 
 @dataclass
@@ -67,7 +74,7 @@ def estimate_tile_bytes(net: SubFocalNet, rows: int, cols: int, precision: str =
     ``width``-channel activations (three without oneDNN's in-place add), or the last activation and its
     27 float32 taps. The interpolated maps the volume is gathered from are :func:`gather_bytes`. ``device``
     (default: the CPU) decides whether oneDNN's in-place add runs."""
-    from lfbench_methods.subfocal.fast import _fused_ops_work
+    from lfbench_methods.subfocal.fast import LAST_BLOCK, _fused_ops_work
 
     d = net.disparities.numel()
     n = net.angular ** 2
@@ -77,7 +84,7 @@ def estimate_tile_bytes(net: SubFocalNet, rows: int, cols: int, precision: str =
     act = width * item
     first = d * plane * act + (_SLAB + 2) * plane * channels * item + _SLAB * plane * act + (_SLAB + 1) * plane * n * 4
     live = 2 if _is_cpu(device) and _fused_ops_work() else 3
-    rest = d * plane * max(live * act, act + 27 * 4) + 65536 * width * 4
+    rest = d * plane * max(live * act, act + 27 * 4) + LAST_BLOCK * width * 4
     return int(1.1 * max(first, rest))
 
 
@@ -148,6 +155,24 @@ def _spans(size: int, tile: int, halo: int) -> list[tuple[int, int, int, int]]:
     return [(a, min(a + tile, size), max(a - halo, 0), min(a + tile + halo, size)) for a in range(0, size, tile)]
 
 
+def cpu_has_amx_bf16() -> bool:
+    """True when this CPU has AMX for bf16 (oneDNN then runs bf16 convolutions on its tiles)."""
+    try:
+        return bool(torch.cpu.get_capabilities().get("amx_bf16", False))
+    except (AttributeError, RuntimeError):  # an older torch
+        from lfbench.utils.hardware import cpu_flags
+
+        return "amx_bf16" in cpu_flags()
+
+
+def conv_width_limit(precision: str = "fp32", device=None) -> int | None:
+    """The widest tile (px, halo included) the 3D aggregation should run on: :data:`AMX_MAX_CONV_WIDTH` for
+    bf16 on a CPU with AMX, else None (no limit)."""
+    if precision == "bf16" and _is_cpu(device) and cpu_has_amx_bf16():
+        return AMX_MAX_CONV_WIDTH
+    return None
+
+
 def _tile_fits(net: SubFocalNet, rows: int, cols: int, budget: float, precision: str, plan=None,
                device=None) -> bool:
     return _tile_need(net, rows, cols, precision, plan, device) <= budget
@@ -172,9 +197,11 @@ def plan_tiles(net: SubFocalNet, height: int, width: int, halo: int = EXACT_HALO
     """Core tile (rows, cols) for ``max_memory_gb`` that computes the fewest voxels (tiles plus halos): the
     whole image when it fits, else e.g. full-width strips or a grid; ties go to fewer tiles. Tiles of
     at least 8 px are used even when the budget is smaller than that. ``device`` (default CPU): where it runs
-    (see :func:`memory_budget_gb` for the budget of a GPU)."""
+    (see :func:`memory_budget_gb` for the budget of a GPU). Tiles are at most :func:`conv_width_limit` px
+    wide, halo included (bf16 on a CPU with AMX)."""
     budget = _budget(net, height, width, max_memory_gb, device)
     plan = net._shift_plan() if net.interpolation == "bilinear" else None
+    max_cols = conv_width_limit(precision, device) or width
     best = None
     for ky in range(1, math.ceil(height / 8) + 1):
         th = math.ceil(height / ky)
@@ -184,7 +211,7 @@ def plan_tiles(net: SubFocalNet, height: int, width: int, halo: int = EXACT_HALO
             tw = math.ceil(width / kx)
             xs = _spans(width, tw, halo)
             cols = max(c1 - c0 for _, _, c0, c1 in xs)
-            if not _tile_fits(net, rows, cols, budget, precision, plan, device):
+            if cols > max_cols or not _tile_fits(net, rows, cols, budget, precision, plan, device):
                 continue
             work = sum(r1 - r0 for *_, r0, r1 in ys) * sum(c1 - c0 for *_, c0, c1 in xs)
             key = (work, len(ys) * len(xs))
@@ -325,8 +352,10 @@ def eval_cost(net: SubFocalNet, views: torch.Tensor, tile_h: int, tile_w: int, *
     """The raw cost (B, D, H, W) float32 of the eval-mode network on views (B, N, H, W), in tiles of
     tile_h x tile_w px (each computed with ``halo`` px of context), on the fast path. Call under
     torch.inference_mode() with ``net`` in eval mode. ``timings`` (a dict) receives the seconds of the
-    phases (features_s, attention_s, aggregation_s) and the tiling (tiles, tile)."""
-    clock = time.perf_counter()
+    phases (features_s, attention_s, aggregation_s), the same in CPU seconds of this process (``cpu``: a
+    dict with the same keys; far less inflated than wall time by other processes on the cores) and the
+    tiling (tiles, tile)."""
+    clock, cpu_clock = time.perf_counter(), time.process_time()
     from lfbench_methods.subfocal.fast import FastAggregation, VolumeGather, attention_sum
 
     b, n, h, w = views.shape
@@ -340,7 +369,8 @@ def eval_cost(net: SubFocalNet, views: torch.Tensor, tile_h: int, tile_w: int, *
     feats = padded[:, pad:pad + h, pad:pad + w].permute(0, 3, 4, 1, 2)  # (B, N, 4, H, W) view
     release_memory()
     times = {"features_s": time.perf_counter() - clock}
-    clock = time.perf_counter()
+    cpu = {"features_s": time.process_time() - cpu_clock}
+    clock, cpu_clock = time.perf_counter(), time.process_time()
     d = net.disparities.numel()
     tiles = list(_tiles(h, w, tile_h, tile_w))
     weights = None
@@ -353,7 +383,8 @@ def eval_cost(net: SubFocalNet, views: torch.Tensor, tile_h: int, tile_w: int, *
                 total += _grid_region_volume(net, feats, y0, y1, x0, x1).sum(dim=(2, 3, 4), dtype=torch.float64)
         weights = net.attention_weights((total / (d * h * w)).float().to(device))
     times["attention_s"] = time.perf_counter() - clock
-    clock = time.perf_counter()
+    cpu["attention_s"] = time.process_time() - cpu_clock
+    clock, cpu_clock = time.perf_counter(), time.process_time()
     aggregate = FastAggregation(net.aggregation, dtype)
     cost = torch.empty((b, d, h, w), dtype=torch.float32, device=device)
     bar = tqdm(tiles, desc="subfocal tiles", unit="tile", disable=not progress or len(tiles) == 1)
@@ -369,8 +400,9 @@ def eval_cost(net: SubFocalNet, views: torch.Tensor, tile_h: int, tile_w: int, *
         del source
         release_memory()
     times["aggregation_s"] = time.perf_counter() - clock
+    cpu["aggregation_s"] = time.process_time() - cpu_clock
     if timings is not None:
-        timings.update(times, tiles=len(tiles), tile=[min(tile_h, h), min(tile_w, w)])
+        timings.update(times, cpu=cpu, tiles=len(tiles), tile=[min(tile_h, h), min(tile_w, w)])
     return cost
 
 
@@ -417,6 +449,7 @@ def tile_count(height: int, width: int, tile: int) -> int:
 
 
 __all__ = ["infer", "InferenceOutput", "plan_tile", "plan_tiles", "memory_budget_gb", "CPU_BUDGET_GB",
+           "conv_width_limit", "cpu_has_amx_bf16", "AMX_MAX_CONV_WIDTH",
            "estimate_tile_bytes", "gather_bytes",
            "region_volume", "distribution_std", "eval_cost", "padded_features", "tile_count", "EXACT_HALO",
            "PRECISIONS"]
