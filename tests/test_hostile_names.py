@@ -115,6 +115,24 @@ def test_write_table_escapes_captions_headers_index_and_cells(tmp_path):
                     [one_line(hostile), "1.500", "note \\end{tabular}"], ["s", "-", "x"]]
 
 
+def test_markdown_tables_keep_a_hostile_label_in_its_cell(tmp_path):
+    """A "|" or a line break in a label, a scene name or a cell cannot add a column or end a row of a
+    Markdown table; the cell reads back as the text on one line."""
+    import pandas as pd
+
+    from lfbench.reports.tables import write_table
+
+    hostile = "a|b\n| c |\r\nd"
+    table = pd.DataFrame({hostile: [1.5, 2.0], "badpix_0.07": ["x|y", "z"]},
+                         index=pd.Index([hostile, "s"], name="scene|name"))
+    path = next(p for p in write_table(table, tmp_path, "t") if p.suffix == ".md")
+    rows = [line for line in path.read_text(encoding="utf-8").splitlines() if line.startswith("|")]
+    cells = [[c.strip().replace("\\|", "|") for c in re.split(r"(?<!\\)\|", row)[1:-1]] for row in rows]
+    assert len(rows) == 4 and {len(r) for r in cells} == {3}
+    assert cells[0] == ["scene|name", "a|b | c | d", "BadPix(0.07)"]
+    assert cells[2] == ["a|b | c | d", "1.500", "x|y"] and cells[3] == ["s", "2.000", "z"]
+
+
 # --------------------------------------------------------------------------- every path into a .tex file, end to end
 
 SIZE = 40

@@ -16,6 +16,7 @@ from lfbench.reports import latex
 from lfbench.results import Results
 from lfbench.scoring.metrics import find_metric, list_metrics
 from lfbench.utils.atomic import write_text
+from lfbench.utils.markdown import markdown_cell
 
 PAPER_METRIC_ORDER = ("badpix_0.07", "badpix_0.03", "badpix_0.01", "mse_x100", "q25_x100")
 
@@ -96,6 +97,9 @@ def render(table: pd.DataFrame, fmt: str = "markdown", floatfmt: str = ".3f") ->
     rows = [[cell(v) for v in row] for row in flat.itertuples(index=False)]
     if fmt == "latex":
         return latex.tabular(headers, rows)  # every cell and header escaped (lfbench.reports.latex)
+    if fmt == "markdown":  # a label's "|" or newline would break the row (lfbench.utils.markdown)
+        headers = [markdown_cell(h) for h in headers]
+        rows = [[markdown_cell(v) for v in row] for row in rows]
     return tabulate(rows, headers=headers, tablefmt="github" if fmt == "markdown" else "simple",
                     disable_numparse=True) + "\n"
 

@@ -13,7 +13,8 @@ import sys
 
 from lfbench.training.config import TrainConfig
 from lfbench.training.losses import LOSSES, NEEDS_DISTRIBUTION
-from lfbench.utils.options import markdown_table, reference_markdown
+from lfbench.utils.markdown import markdown_table
+from lfbench.utils.options import reference_markdown
 
 COMMAND = "python -m lfbench.training.reference > docs/training-config.md"
 

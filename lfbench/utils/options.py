@@ -30,9 +30,10 @@ from pathlib import PurePath
 from typing import Any
 
 from lfbench.utils.errors import SpecError
+from lfbench.utils.markdown import markdown_cell, markdown_table
 
 __all__ = ["Option", "option", "option_fields", "is_section", "Table", "parse_section", "plain_dict", "coerce",
-           "TypeMismatch", "type_name", "option_paths", "reference_markdown", "markdown_table", "bounds_text"]
+           "TypeMismatch", "type_name", "option_paths", "reference_markdown", "bounds_text"]
 
 _KEY = "lfbench.option"
 
@@ -454,10 +455,6 @@ def _toml(x: Any) -> str:
     return str(x)
 
 
-def _cell(text: str) -> str:
-    return " ".join(text.split()).replace("|", "\\|")
-
-
 def reference_markdown(cls: type, heading: str = "", level: int = 2, free: dict[str, str] | None = None) -> str:
     """Markdown tables of every option of ``cls`` and of its nested tables and arrays of tables: key, type,
     default, bounds, whether a resumed run may change it, meaning. ``heading``: the table's TOML header
@@ -485,17 +482,12 @@ def reference_markdown(cls: type, heading: str = "", level: int = 2, free: dict[
     text = (f"{'#' * level} `{heading}`\n\n" if heading else "") + table
     for sub_heading, sub, opt in nested:
         if sub is None:
-            text += f"\n{'#' * level} `{sub_heading}`\n\n{_cell(opt.free_text or opt.help)}\n"
+            text += f"\n{'#' * level} `{sub_heading}`\n\n{markdown_cell(opt.free_text or opt.help)}\n"
         else:
             text += "\n" + reference_markdown(sub, sub_heading, level)
     return text
 
 
-def markdown_table(head: list[str], rows: list[list[str]]) -> str:
-    """A Markdown table; cells on one line, ``|`` escaped."""
-    lines = ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
-    lines += ["| " + " | ".join(_cell(c) for c in row) + " |" for row in rows]
-    return "\n".join(lines) + "\n"
 
 
 def _all_options(cls: type) -> Iterator[tuple[dataclasses.Field, Option, Any]]:
