@@ -22,7 +22,7 @@ from lfbench.utils.jsonfile import json_text, read_json
 from lfbench.utils.names import file_names
 from lfbench.utils.outputs import check_complete, check_within
 
-__all__ = ["CSV_COLUMNS", "Record", "Results", "RunInfo", "check_names"]
+__all__ = ["CSV_COLUMNS", "Record", "Results", "RunInfo", "check_names", "check_unique"]
 
 CSV_COLUMNS = ("method", "scene", "metric", "value", "resolution")
 
@@ -143,16 +143,21 @@ class Results:
         return results
 
 
-def check_names(results: Results, source: str | Path | None = None) -> None:
-    """DataError (naming ``source``) when ``results`` hold a (method, scene, metric) twice (tables and
-    ranks would merge them), or two methods or two scenes whose names are one file name
-    (lfbench.utils.names: their maps, figures and pages would be one file)."""
+def check_unique(results: Results, source: str | Path | None = None) -> None:
+    """DataError naming ``source`` when ``results`` hold one (method, scene, metric) twice."""
     seen: set[tuple[str, str, str]] = set()
     for r in results.records:
         key = (r.method, r.scene, r.metric)
         if key in seen:
-            raise DataError(f"record {'/'.join(key)} appears twice", source)  # as regress.check_unique says
+            raise DataError(f"record {'/'.join(key)} appears twice", source)
         seen.add(key)
+
+
+def check_names(results: Results, source: str | Path | None = None) -> None:
+    """DataError (naming ``source``) when ``results`` hold a (method, scene, metric) twice (tables and
+    ranks would merge them), or two methods or two scenes whose names are one file name
+    (lfbench.utils.names: their maps, figures and pages would be one file)."""
+    check_unique(results, source)
     file_names(results.methods, "method label", source=source)
     file_names(results.scenes, "scene", source=source)
 

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from lfbench.data.scene import HIGHRES, LOWRES
-from lfbench.results import Results
+from lfbench.results import Results, check_unique
 from lfbench.scoring.metrics import Metric, find_metric
 from lfbench.utils.atomic import write_text
 from lfbench.utils.errors import DataError, SpecError
@@ -146,16 +146,6 @@ def read_golden(path: str | Path) -> list[GoldenRecord]:
         seen.add(rec.key)
         out.append(rec)
     return out
-
-
-def check_unique(results: Results, path: str | Path) -> None:
-    """DataError naming ``path`` when ``results`` hold one (method, scene, metric) twice."""
-    seen: set[tuple[str, str, str]] = set()
-    for r in results.records:
-        key = (r.method, r.scene, r.metric)
-        if key in seen:
-            raise DataError(f"record {'/'.join(key)} appears twice", path)
-        seen.add(key)
 
 
 def _is_tolerance(v: object) -> bool:
