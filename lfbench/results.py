@@ -138,6 +138,7 @@ class Results:
         meta = data.get("meta", {}) if isinstance(data, dict) else {}
         if not isinstance(meta, dict):
             raise DataError("'meta' must be an object", path)
+        _check_meta(meta, path)
         results = cls(records=records, runs=runs, meta=meta)
         check_names(results, path)
         return results
@@ -193,6 +194,27 @@ def _run_info(item: Any, i: int, path: Path) -> RunInfo:
 
 def _is_int(v: Any) -> bool:
     return isinstance(v, int) and not isinstance(v, bool)
+
+
+#: The meta keys lfbench reads back, each with the JSON type it must have (other keys are kept as they are).
+_META_TYPES: dict[str, tuple[type, str]] = {
+    "data_root": (str, "a folder name (a string)"), "created": (str, "a string"),
+    "lfbench_version": (str, "a string"), "scoring": (dict, "an object"), "ablation": (dict, "an object"),
+    "scenes": (list, "a list of folder names"), "methods": (dict, "an object"),
+}
+
+
+def _check_meta(meta: dict[str, Any], path: Path) -> None:
+    """DataError naming ``path`` when a meta key that lfbench reads back has the wrong type (a results
+    file from elsewhere is untrusted: a number as data_root would end in a traceback, not one line)."""
+    for key, (kind, text) in _META_TYPES.items():
+        if key in meta and meta[key] is not None and not isinstance(meta[key], kind):
+            raise DataError(f"'meta.{key}' must be {text}, got {type(meta[key]).__name__}", path)
+    if "\0" in (meta.get("data_root") or "") or any(not isinstance(s, str) for s in meta.get("scenes") or []):
+        raise DataError("'meta.data_root' and 'meta.scenes' must be folder names", path)
+    ablation = meta.get("ablation") or {}
+    if not isinstance(ablation.get("title", ""), str) or not isinstance(ablation.get("cells", []), list):
+        raise DataError("'meta.ablation' must have a string title and a list of cells", path)
 
 
 def _text(v: Any, name: str) -> str:

@@ -343,3 +343,28 @@ def test_an_ablation_folder_leading_out_of_out_is_refused_before_any_work(tmp_pa
     assert_one_error_line(rc, err, str(out / where), "symbolic link leading out of the ablation folder")
     after = {k: v for k, v in tree(tmp_path).items() if not k.endswith(".lock")}
     assert after == before
+
+
+@pytest.mark.parametrize(("key", "value", "fragment"), [
+    ("data_root", 5, "'meta.data_root' must be a folder name"),
+    ("data_root", ["/etc"], "'meta.data_root' must be a folder name"),
+    ("scenes", "s0", "'meta.scenes' must be a list"),
+    ("scenes", [1, 2], "must be folder names"),
+    ("ablation", "title", "'meta.ablation' must be an object"),
+    ("ablation", {"title": {"x": 1}}, "string title"),
+    ("scoring", [], "'meta.scoring' must be an object"),
+    ("created", 3, "'meta.created' must be a string"),
+])
+@pytest.mark.parametrize("command", ["report", "report-html", "report-maps"])
+def test_meta_read_back_with_the_wrong_types_is_one_line(tmp_path, capsys, data, key, value, fragment, command):
+    """What a results file's meta tells a later command (its data root, scenes, ablation title, scoring
+    rules) is untrusted: a value of the wrong type is one line naming results.json, before any output."""
+    res = tmp_path / "res"
+    assert evaluate(capsys, data, res)[0] == 0
+    doc = json.loads((res / "results.json").read_text())
+    doc["meta"][key] = value
+    (res / "results.json").write_text(json.dumps(doc))
+    extra = {"report": [], "report-html": ["--html"], "report-maps": ["--maps", str(res / "maps")]}[command]
+    rc, _, err = run_cli(capsys, "report", res, "--out", tmp_path / "rep", *extra)
+    assert_one_error_line(rc, err, str(res / "results.json"), fragment)
+    assert not (tmp_path / "rep").exists()
