@@ -219,7 +219,8 @@ def test_training_and_ablation_figures_draw_dollar_labels(tmp_path):
 
     from lfbench.ablation.plots import accuracy_vs_time, beta_curve
     from lfbench.reports.sweep_table import NAMES, sweep_figure
-    from lfbench.scoring.uncertainty import Sparsification, plot_sparsification
+    from lfbench.reports.uncertainty import plot_sparsification
+    from lfbench.scoring.uncertainty import Sparsification
     from lfbench.training.curves import plot_learning_curve
 
     entries = [{"event": "train", "stage": 1, "stage_name": MATHTEXT_BREAKER, "global_step": s, "loss": 1.0 / (s + 1)}

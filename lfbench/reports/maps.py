@@ -66,9 +66,11 @@ def load_scene_maps(scene: LightField, folders: Mapping[str, str | Path], border
     """The scene's ground truth, mask and centre view and the saved map of every method in ``folders``
     that has one for it (methods without are left out)."""
     from lfbench.data.submission import disp_map_path, read_submission_map
-    from lfbench.reports.figures import disparity_range, evaluation_mask
-    from lfbench.scoring.rules import align_prediction
+    from lfbench.reports.figures import disparity_range
+    from lfbench.scoring.prepare import SceneReference
+    from lfbench.scoring.rules import ScoringRules
 
+    reference = SceneReference(scene, ScoringRules(border_px=border_px))
     gt = scene.gt_disparity()
     centre = np.clip(np.asarray(scene.center_view(), dtype=np.float32), 0, 1)
     if centre.ndim == 2:
@@ -78,7 +80,7 @@ def load_scene_maps(scene: LightField, folders: Mapping[str, str | Path], border
     for label, folder in folders.items():
         if disp_map_path(folder, scene.name).is_file():
             disp, _ = read_submission_map(folder, scene.name, max_shape=shape)
-            preds[label], _ = align_prediction(disp, shape, f"{label} on {scene.name}", max_crop=border_px)
+            preds[label], _ = reference.align(disp, f"{label} on {scene.name}")
     first = next(iter(preds.values()), None)
-    return SceneMaps(scene=scene, gt=gt, mask=evaluation_mask(scene, shape, border_px), centre=centre,
+    return SceneMaps(scene=scene, gt=gt, mask=reference.evaluation_mask(), centre=centre,
                      disp_range=disparity_range(scene, gt, first), preds=preds)

@@ -92,7 +92,7 @@ def evaluate_to_folder(methods: Sequence[Method], scenes: Sequence[Scene], out: 
 def _all_metrics(scene: Scene, rules: ScoringRules) -> list[Metric]:
     """Everything the toolkit scores on ``scene``: the general metrics, the region / stratified ones whose
     masks exist, and the runtime metrics (recorded where the method reports a runtime)."""
-    from lfbench.scoring.region_metrics import applicable_metrics
+    from lfbench.scoring.score import applicable_metrics
 
     return [*applicable_metrics(scene, rules=rules), *RUNTIME_METRICS]
 
@@ -151,8 +151,9 @@ def _run_into(stage: Path, methods: Sequence[Method], scenes: Sequence[Scene], *
 
         files += write_tables(results, stage)
     if collector is not None:
+        from lfbench.reports.ci import format_ci_table
         from lfbench.reports.tables import write_table
-        from lfbench.scoring.stats import ci_records, format_ci_table
+        from lfbench.scoring.stats import ci_records
         from lfbench.utils.atomic import write_text
 
         long = ci_records(results, collector.errors, n=ci.resamples, seed=ci.seed, block=ci.block,
@@ -161,7 +162,7 @@ def _run_into(stage: Path, methods: Sequence[Method], scenes: Sequence[Scene], *
         files.append(stage / "ci.csv")
         files += write_table(format_ci_table(long), stage, "table_ci_per_scene")
     if rater is not None:
-        from lfbench.scoring.uncertainty import write_uncertainty_report
+        from lfbench.reports.uncertainty import write_uncertainty_report
 
         files += write_uncertainty_report(rater, stage)
         for name in sorted(rater.without):
