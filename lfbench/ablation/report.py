@@ -38,6 +38,7 @@ import pandas as pd
 from lfbench.ablation.spec import AblationSpec
 from lfbench.reports.tables import write_table
 from lfbench.runs.results import Results
+from lfbench.scoring.metrics import get_metric
 from lfbench.utils.errors import DataError
 
 PAPER_LABEL = "paper (RTX 3090, full training)"
@@ -45,8 +46,6 @@ TABLE4_FILE, TABLE5_FILE = "table4_interval_interp", "table5_losses"
 PAPER_LOSS_NAMES = {"l1": "baseline_l1"}  # our loss name -> the paper's Table V row
 PAPER_UAFL_BETA = 0.1
 METRICS = ("badpix_0.07", "badpix_0.03", "badpix_0.01", "mse_x100")
-METRIC_NAMES = {"badpix_0.07": "BadPix 0.07 (%)", "badpix_0.03": "BadPix 0.03 (%)", "badpix_0.01": "BadPix 0.01 (%)",
-                "mse_x100": "MSE x100"}
 Log = Callable[[str], None]
 _log = logging.getLogger(__name__)
 
@@ -123,7 +122,7 @@ def cells_table(spec: AblationSpec, frame: pd.DataFrame) -> pd.DataFrame:
     grid_cols = [c for c in frame.columns if c.startswith("grid:")]
     out = frame[grid_cols].rename(columns=lambda c: c[5:]).copy()
     for metric in METRICS:
-        out[f"{METRIC_NAMES[metric]}, {ours_label(spec)}"] = frame[metric]
+        out[f"{get_metric(metric).label}, {ours_label(spec)}"] = frame[metric]
     out["train time (min)"] = frame["train_s"] / 60.0
     out[f"test time (s), {time_label(frame)}"] = frame["test_s"]
     out["scenes"] = frame["scenes"]

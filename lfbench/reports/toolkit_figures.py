@@ -29,6 +29,7 @@ import numpy as np
 import pandas as pd
 
 from lfbench.reports.figures import _as_gray, _colorbar, _colormap, _pyplot, save_formats
+from lfbench.scoring.metrics import describe_metric, find_metric, metric_order
 from lfbench.utils.errors import SpecError
 from lfbench.utils.figure_text import plain_text
 
@@ -152,12 +153,9 @@ def heatmap_image(values: np.ndarray, vmin: float, vmax: float, cmap: str = HEAT
 def radar_metric_ids(results: Any) -> list[str]:
     """The metrics a radar chart shows: the region and stratified metrics the results hold, else the
     general ones (in the tables' order)."""
-    from lfbench.reports.tables import _metric_order
-    from lfbench.scoring.metrics import find_metric
-
     held = list(dict.fromkeys(r.metric for r in results.records))
     region = [m for m in held if getattr(find_metric(m), "category", "general") in ("region", "stratified")]
-    return region or _metric_order(held)
+    return region or metric_order(held)
 
 
 def radar_scores(results: Any, methods: Sequence[str] | None = None, metrics: Sequence[str] | None = None,
@@ -266,7 +264,7 @@ def plot_radar(scores: pd.DataFrame, path: str | Path, *, title: str = "", highl
     ax.set_yticks([0.2, 0.4, 0.6, 0.8, 1.0])
     ax.set_yticklabels([])
     ax.set_xticks(angles)
-    names = [(labels or {}).get(m, _metric_name(m)) for m in scores.index]
+    names = [(labels or {}).get(m, describe_metric(m).name) for m in scores.index]
     ax.set_xticklabels([n.replace(": ", ":\n") for n in names], fontsize=8)
     ax.set_thetalim(0, 2 * np.pi)  # set_xticks may have narrowed the view to the ticks
     ax.grid(alpha=0.35)
@@ -285,13 +283,6 @@ def plot_radar(scores: pd.DataFrame, path: str | Path, *, title: str = "", highl
     fig.suptitle(title or "Median over scenes (outer ring = 1.2 x the largest value per axis; lower is better)",
                  fontsize=9)
     return save_formats(fig, path, formats)
-
-
-def _metric_name(metric_id: str) -> str:
-    from lfbench.scoring.metrics import find_metric
-
-    found = find_metric(metric_id)
-    return found.name if found is not None else metric_id
 
 
 def write_toolkit_figures(results: Any, scenes: Sequence[Any], maps: Mapping[str, str | Path], out_dir: str | Path,
