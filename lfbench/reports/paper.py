@@ -7,7 +7,8 @@ lfbench ships no copy of them: the folder is the user's (e.g. ../shared/data/pap
 :func:`find_paper_dir` (--paper DIR, else $LFBENCH_PAPER_DIR, else $LFBENCH_HCI_ROOT/../paper).
 
 Resolution: the benchmark (and so the paper) scores backgammon, dots and stripes at high
-resolution, the other scenes at 512x512; the columns added here say so.
+resolution (lfbench.scoring.rules.BENCHMARK_HIGHRES_SCENES), the other scenes at 512x512; the columns
+added here say so.
 """
 
 from __future__ import annotations
@@ -20,11 +21,11 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from lfbench.scoring.rules import BENCHMARK_HIGHRES_SCENES
 from lfbench.utils.errors import DataError, SpecError
 
 PAPER_DIR_ENV, HCI_ROOT_ENV = "LFBENCH_PAPER_DIR", "LFBENCH_HCI_ROOT"
 PER_SCENE_FILE, AVERAGE_FILE = "table1_per_scene.csv", "table2_average.csv"
-PAPER_HIGHRES_SCENES = frozenset({"backgammon", "dots", "stripes"})
 DEFAULT_PAPER_METHODS = ("SubFocal",)
 PAPER_RESOLUTION_COLUMN = "paper resolution"
 
@@ -121,7 +122,7 @@ def load_paper(path: str | Path) -> PaperTables:
 
 def paper_resolution(scene: str) -> str:
     """How the benchmark (and so the paper) scored ``scene``: 'highres' or 'lowres'."""
-    return "highres" if scene in PAPER_HIGHRES_SCENES else "lowres"
+    return "highres" if scene in BENCHMARK_HIGHRES_SCENES else "lowres"
 
 
 def paper_column(method: str) -> str:
