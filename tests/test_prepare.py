@@ -16,11 +16,14 @@ from helpers import write_scene
 from PIL import Image
 from scipy import ndimage
 
-from lfbench.data.scene import Scene
+from lfbench.data.params import SceneParameters
+from lfbench.data.pfm import write_pfm
+from lfbench.data.scene import ArrayLightField, Scene
 from lfbench.method.base import Prediction
-from lfbench.scoring.metrics import describe_metric, get_metric, metric_order
+from lfbench.scoring.metrics import RUNTIME_METRICS, describe_metric, get_metric, metric_order
 from lfbench.scoring.prepare import SceneReference
 from lfbench.scoring.rules import ScoringRules
+from lfbench.utils.errors import DataError
 
 F32 = np.float32
 N, S, BORDER, CROP = 20, 10, 3, 2  # 20x20 scene, x10 high resolution, 3 px border, a map cropped by 2 px a side
@@ -70,6 +73,7 @@ def test_prepare_is_the_toolkits_zoom_with_the_scaled_border_and_the_valid_mask(
     p = reference.prepare(pred, "highres", "mine")
     up, mask = _expected(gt_hi, valid, pred)
     assert (p.scale, p.resolution, p.aligned_from) == (S, "highres", (N - 2 * CROP, N - 2 * CROP))
+    assert type(p.scale) is int
     assert p.pred.dtype == F32 and np.array_equal(p.pred, up, equal_nan=True)
     assert np.array_equal(p.mask, mask) and np.array_equal(p.gt, gt_hi)
     # (the toolkit's zoom is not a plain repeat, so this reference tells the two apart)
@@ -90,7 +94,6 @@ def test_prepare_is_the_toolkits_zoom_with_the_scaled_border_and_the_valid_mask(
 def test_a_crop_wider_than_the_border_is_refused_by_every_scorer(tmp_path):
     from lfbench.scoring.score import score_scene
     from lfbench.scoring.stats import scene_errors
-    from lfbench.utils.errors import DataError
 
     scene, gt_hi, _ = _highres_scene(tmp_path)
     pred = gt_hi[::S, ::S][4:-4, 4:-4].copy()  # 4 px a side, the border is 3
@@ -100,6 +103,103 @@ def test_a_crop_wider_than_the_border_is_refused_by_every_scorer(tmp_path):
                   lambda: SceneReference(scene, rules).prepare(pred, "lowres", "mine")):
         with pytest.raises(DataError, match="^mine: prediction is 12x12, scene is 20x20"):
             score()
+    reference = SceneReference(scene, rules)
+    for step in (lambda: reference.prepare(np.zeros((N, N, 3), F32), "lowres"), lambda: reference.align(pred)):
+        with pytest.raises(DataError, match="^prediction: "):  # a prediction not named is 'prediction'
+            step()
+
+
+H2, W2, S2 = 8, 12, 2  # a non-square scene whose high resolution is x2
+
+
+def _nonsquare_scene(tmp_path: Path) -> tuple[Scene, np.ndarray]:
+    """Stripes (a high-resolution scene) of H2 x W2 px at x S2, with a valid mask: (scene, valid mask)."""
+    folder = tmp_path / "stratified" / "stripes"
+    folder.mkdir(parents=True)
+    params = SceneParameters(focal_length_mm=100.0, image_resolution_x_px=W2, image_resolution_y_px=H2,
+                             sensor_size_mm=35.0, num_cams_x=9, num_cams_y=9, baseline_mm=30.0, focus_distance_m=8.3,
+                             disp_min=-1.0, disp_max=1.0, depth_map_scale=float(S2), name="stripes",
+                             category="stratified")
+    (folder / "parameters.cfg").write_text(params.to_cfg(), encoding="utf-8")
+    rng = np.random.default_rng(8)
+    write_pfm(folder / "gt_disp_lowres.pfm", rng.uniform(-1, 1, (H2, W2)).astype(F32))
+    write_pfm(folder / "gt_disp_highres.pfm", rng.uniform(-1, 1, (H2 * S2, W2 * S2)).astype(F32))
+    valid = np.ones((H2, W2), bool)
+    valid[2:4, 3:9] = False
+    Image.fromarray(np.where(valid, 255, 0).astype(np.uint8)).save(folder / "valid_mask.png")
+    return Scene(folder), valid
+
+
+def test_a_non_square_scene_and_its_uncertainty_are_prepared_rows_to_rows(tmp_path):
+    """The valid mask and the uncertainty map of a non-square scene at x2 follow the toolkit's zoom; an
+    uncertainty map cropped wider than the border is refused, named as the prediction's uncertainty."""
+    scene, valid = _nonsquare_scene(tmp_path)
+    rng = np.random.default_rng(9)
+    pred = rng.uniform(-1, 1, (H2 - 2, W2 - 2)).astype(F32)  # cropped by the 1 px border
+    unc = rng.uniform(0, 1, (H2 - 2, W2 - 2))  # float64: kept as it is
+    reference = SceneReference(scene, ScoringRules(border_px=1))
+    p = reference.prepare(pred, "highres", "mine", uncertainty=unc)
+
+    def zoomed(low: np.ndarray, dtype) -> np.ndarray:
+        canvas = np.full((H2, W2), np.nan, dtype)
+        canvas[1:-1, 1:-1] = low
+        return ndimage.zoom(canvas, S2, order=0)
+
+    mask = np.zeros((H2 * S2, W2 * S2), bool)
+    mask[S2:-S2, S2:-S2] = True
+    assert p.scale == S2 and np.array_equal(p.pred, zoomed(pred, F32), equal_nan=True)
+    assert np.array_equal(p.mask, mask & ndimage.zoom(valid.astype(np.uint8), S2, order=0).astype(bool))
+    assert p.uncertainty.dtype == np.float32 and np.array_equal(p.uncertainty, zoomed(unc, F32), equal_nan=True)
+    whole = reference.prepare(np.zeros((H2, W2), F32), "highres", uncertainty=np.ones((H2, W2)))
+    assert whole.uncertainty.dtype == np.float64 and whole.uncertainty.shape == (H2 * S2, W2 * S2)
+    with pytest.raises(DataError, match="^mine uncertainty: prediction is 8x4, scene is 12x8"):
+        reference.prepare(np.zeros((H2, W2), F32), "highres", "mine", uncertainty=np.ones((H2 - 4, W2 - 4)))
+
+
+def test_a_light_field_held_in_memory_is_scored_inside_the_border():
+    """A light field without files (views in memory, a training validation crop): its own size, its ground
+    truth at low resolution only, no masks, the border of the rules; none of its arrays made read-only."""
+    rng = np.random.default_rng(7)
+    gt = rng.uniform(-1, 1, (12, 16)).astype(F32)
+    views = rng.random((3, 3, 12, 16)).astype(F32)
+    rules = ScoringRules(border_px=2)
+    inside = np.zeros((12, 16), bool)
+    inside[2:10, 2:14] = True
+    lf = ArrayLightField(views=views, name="toy", gt=gt)
+    reference = SceneReference(lf, rules)
+    assert SceneReference.of(reference) is reference and SceneReference.of(lf).scene is lf
+    assert reference.has_gt() and not reference.has_gt("highres") and reference.mask_names() == []
+    assert reference.spatial_size == (12, 16) and reference.general_resolution() == "lowres"
+    assert reference.valid_mask() is None and np.array_equal(reference.evaluation_mask(), inside)
+    p = reference.prepare(gt + F32(0.5), "lowres")
+    assert np.array_equal(p.gt, gt) and np.array_equal(p.mask, inside) and p.scale == 1
+    bare = SceneReference(ArrayLightField(views=views, name="bare"), rules)
+    assert not bare.has_gt() and np.array_equal(bare.evaluation_mask(), inside)
+    with pytest.raises(DataError, match="^no ground truth \\(gt_disp_lowres.pfm\\) to score against$"):
+        bare.prepare(gt, "lowres")
+    crop = SceneReference.of_ground_truth(gt, rules, name="val")
+    assert (crop.name, crop.spatial_size, crop.rules) == ("val", (12, 16), rules)
+    assert np.array_equal(crop.gt(), gt) and np.array_equal(crop.evaluation_mask(), inside)
+    assert gt.flags.writeable and views.flags.writeable
+
+
+def test_score_scene_records_the_runtime_a_method_reports(tmp_path):
+    """Runtime metrics, in any place of the list, take the reported runtime; none, NaN or a non-positive
+    one gives no record, and a non-positive one a note."""
+    from lfbench.scoring.score import score_scene
+
+    scene = Scene(write_scene(tmp_path, "toy", size=40, views=False))
+    runtime, log = RUNTIME_METRICS
+    metrics = [runtime, get_metric("badpix_0.07"), log]
+    score = score_scene(scene, np.ones((40, 40), F32), metrics, runtime_s=2.5)
+    assert score.values == {"runtime": 2.5, "runtime_log": float(np.log10(2.5)), "badpix_0.07": 0.0}
+    assert score.resolution == {"runtime": "lowres", "runtime_log": "lowres", "badpix_0.07": "lowres"}
+    assert score.notes == []
+    for reported in (None, float("nan")):
+        score = score_scene(scene, np.ones((40, 40), F32), [runtime], runtime_s=reported)
+        assert score.values == {} and score.notes == []
+    score = score_scene(scene, np.ones((40, 40), F32), [runtime], runtime_s=0.0)
+    assert score.values == {} and score.notes == ["runtime 0 s is not a positive number: no runtime record"]
 
 
 def test_every_scorer_scores_the_prepared_pixels(tmp_path):
@@ -160,8 +260,10 @@ def test_metric_order_and_labels_come_from_the_metrics():
     assert labels == {"badpix_0.07": "BadPix 0.07 (%)", "badpix_0.03": "BadPix 0.03 (%)",
                       "badpix_0.01": "BadPix 0.01 (%)", "mse_x100": "MSE x100"}
     assert get_metric("badpix_0.05").label == "BadPix 0.05 (%)" and get_metric("q25_x100").label == "Q25"
+    assert all(get_metric(m).value_range == (0.0, 100.0) for m in ("badpix_0.07", "badpix_0.05"))
     unknown = describe_metric("mine")
     assert (unknown.id, unknown.name, unknown.unit, unknown.higher_is_better) == ("mine", "mine", "", False)
+    assert unknown.category == "undefined"  # none of the categories lfbench scores
     with pytest.raises(TypeError, match="not defined by lfbench"):
         unknown(np.zeros((2, 2)), np.zeros((2, 2)))
     assert describe_metric("badpix_0070") is get_metric("badpix_0.07")

@@ -556,12 +556,15 @@ def test_slanted_bumpiness_keeps_the_border(tmp_path):
 
 def test_bad_metric_definitions_are_refused_with_a_reason():
     """Kills the errors of a bad metric definition (a plugin's) losing their message: an unknown scene
-    aggregate or pixel statistic, a non-Metric registered."""
+    aggregate or pixel statistic, an empty or NaN value range, a non-Metric registered."""
     from lfbench.scoring.metrics import METRICS, Metric, PixelStatistic
 
     with pytest.raises(ValueError, match="^metric 'x': unknown scene_aggregate 'median'; use one of mean$"):
         Metric(id="x", name="x", description="x", unit="%", fn=bad_pix, scene_aggregate="median")
     with pytest.raises(ValueError, match="^unknown pixel statistic 'median': badpix, mse or quantile$"):
         PixelStatistic("median")
+    for bad in ((1.0, 1.0), (2.0, 1.0), (float("nan"), 1.0), (0.0, float("nan"))):  # an empty or NaN range
+        with pytest.raises(ValueError, match=r"^metric 'x': value_range must be \(low, high\) with low < high, got "):
+            Metric(id="x", name="x", description="x", unit="%", fn=bad_pix, value_range=bad)
     with pytest.raises(TypeError, match="^{} registered as metric '\\?' is not a Metric$"):
         METRICS.register({})

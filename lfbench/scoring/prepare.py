@@ -30,12 +30,13 @@ from typing import Any
 
 import numpy as np
 
-from lfbench.data.scene import LOWRES, ArrayLightField, LightField, read_png
+from lfbench.data.scene import LOWRES, LightField, read_png
 from lfbench.scoring.base import Metric
 from lfbench.scoring.rules import ScoringRules, metric_resolution
 from lfbench.utils.errors import DataError
 
 __all__ = [
+    "GroundTruth",
     "Prepared",
     "SceneReference",
     "align_prediction",
@@ -105,6 +106,21 @@ def _kept(arr: np.ndarray | None) -> np.ndarray | None:
     return view
 
 
+@dataclass
+class GroundTruth(LightField):
+    """A ground truth (H, W) px held in memory, without views or masks (:meth:`SceneReference.of_ground_truth`)."""
+
+    name: str
+    gt: np.ndarray
+
+    @property
+    def spatial_size(self) -> tuple[int, int]:
+        return tuple(self.gt.shape)
+
+    def gt_disparity(self) -> np.ndarray:
+        return self.gt
+
+
 @dataclass(frozen=True)
 class Prepared:
     """A prediction made ready to be compared with the ground truth at one resolution.
@@ -155,13 +171,10 @@ class SceneReference:
         return scene if isinstance(scene, SceneReference) else cls(scene)
 
     @classmethod
-    def of_ground_truth(cls, gt: np.ndarray, rules: ScoringRules = ScoringRules(),
-                        name: str = "array") -> SceneReference:
-        """A reference to a low-resolution ground truth (H, W) held in memory, without views or masks (e.g.
-        a validation crop during training): scored inside the rules' border."""
-        gt = np.asarray(gt)
-        views = np.broadcast_to(np.float32(0), (1, 1, *gt.shape))  # a light field's shape; never read
-        return cls(ArrayLightField(views=views, name=name, gt=gt), rules)
+    def of_ground_truth(cls, gt: np.ndarray, rules: ScoringRules, name: str) -> SceneReference:
+        """A reference to a low-resolution ground truth (H, W) px held in memory, without views or masks
+        (e.g. a validation crop during training), named ``name``: scored inside the rules' border."""
+        return cls(GroundTruth(name, np.asarray(gt)), rules)
 
     def __repr__(self) -> str:
         return f"SceneReference({self.scene!r}, {self.rules!r})"
