@@ -161,8 +161,8 @@ def section_phase(device, sizes: dict) -> dict:
 def _train_config(folder: Path, device, sizes: dict, hci: Path | None) -> Path:
     """configs/subfocal_paper.toml with stage 1 only, ``steps`` steps, checkpoints every ``kill_after``,
     no validation, on ``device``; synthetic scenes unless ``hci`` has the paper's training scenes."""
-    from lfbench.ablation.toml_text import dumps
     from lfbench.training.config import TrainConfig
+    from lfbench.utils.tomlfile import toml_text
 
     cfg = TrainConfig.from_toml(PAPER_CONFIG).to_dict() if hci else None
     if cfg is None:
@@ -183,7 +183,7 @@ def _train_config(folder: Path, device, sizes: dict, hci: Path | None) -> Path:
     cfg["stages"] = [{**cfg["stages"][0], "steps": sizes["steps"]}]
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / "train.toml"
-    path.write_text(dumps(cfg, "configs/subfocal_paper.toml as benchmarks/gpu_check.py runs it"), encoding="utf-8")
+    path.write_text(toml_text(cfg, "configs/subfocal_paper.toml as benchmarks/gpu_check.py runs it"), encoding="utf-8")
     return path
 
 

@@ -14,8 +14,9 @@ The public API, importable from ``lfbench`` itself:
 
 Where things are: ``lfbench.data`` (scenes, PFM, parameters, submissions, synthetic scenes),
 ``lfbench.scoring`` (metrics, scoring rules, statistics, uncertainty), ``lfbench.method`` (Method,
-registry), ``lfbench.runs`` (``evaluate_to_folder``, results, regression, demo, benchmarks),
-``lfbench.training``, ``lfbench.ablation``, ``lfbench.reports``, ``lfbench.cli``.
+registry), ``lfbench.results`` (results files), ``lfbench.runs`` (``folder.evaluate_to_folder``, regression,
+demo, benchmarks), ``lfbench.training``, ``lfbench.ablation``, ``lfbench.reports`` (output writers,
+tables, figures, the HTML report, references), ``lfbench.cli``.
 """
 
 __version__ = "0.1.0"

@@ -60,7 +60,7 @@ def main(argv: list[str] | None = None) -> int:
             real = [s for s in Benchmark.discover(args.hci) if s.has_gt()]
             more.append(([create("published", path=published)], real))
     meta = {"golden_setup": {"synthetic": SYNTH, "hci": str(args.hci) if args.hci else None}}
-    results = evaluate_to_folder(methods, scenes, args.out, more=more, tables=False, meta=meta, progress=False)
+    results = evaluate_to_folder(methods, scenes, args.out, more=more, writers=(), meta=meta, progress=False)
     print(f"{len(results.records)} records from {', '.join(results.methods)} -> {args.out / 'results.json'}")
     if args.update is not None:
         n = make_golden(results, TOLERANCES, args.update)

@@ -54,11 +54,11 @@ def warm() -> None:
     list_methods()
     for name in ("lfbench.runs.folder", "lfbench.runs.demo", "lfbench.reports.html", "lfbench.reports.from_results",
                  "lfbench.reports.toolkit_figures", "lfbench.scoring.stats", "lfbench.scoring.region_metrics",
-                 "lfbench.ablation.runner", "lfbench.ablation.report", "lfbench.ablation.html", "jinja2", "filelock"):
+                 "lfbench.ablation.runner", "lfbench.ablation.report", "jinja2", "filelock"):
         importlib.import_module(name)
-    from lfbench.reports.figures import _pyplot
+    from lfbench.reports.plotting import pyplot
 
-    _pyplot()
+    pyplot()
 
 
 def _child(argv: Sequence[str], kill_at: int | None, log: Path, cwd: Path | None,
@@ -77,7 +77,7 @@ def _child(argv: Sequence[str], kill_at: int | None, log: Path, cwd: Path | None
         import datetime as dt
 
         import lfbench.method.base as base
-        import lfbench.runs.results as results
+        import lfbench.results as results
 
         class FixedNow(dt.datetime):
             @classmethod
@@ -211,8 +211,8 @@ def pending_journals(folder: Path) -> list[str]:
 def settle(folder: Path) -> bool:
     """Check that readers refuse a folder with a cut commit, then finish it as the next run does. Returns
     whether a commit was cut."""
-    from lfbench.runs.outputs import check_complete, recover
     from lfbench.utils.errors import DataError
+    from lfbench.utils.outputs import check_complete, recover
 
     if not folder.is_dir() or not pending_journals(folder):
         return False

@@ -14,10 +14,10 @@ import pandas as pd
 import pytest
 import torch
 
-from lfbench.ablation import report
+from lfbench.ablation import facts, report
 from lfbench.ablation.runner import run_ablation
 from lfbench.ablation.spec import load_spec
-from lfbench.runs.results import Record, Results
+from lfbench.results import Record, Results
 from lfbench.training import checkpoint as ckpt
 from lfbench.utils.errors import SpecError
 
@@ -127,7 +127,7 @@ def test_table4_grid_expands_to_six_cells_with_the_budget(tmp_path):
 [budget]
 steps = [7, 3]
 batch = 2
-width = 4
+model = { width = 4 }
 patch = 24
 threads = 1
 [set]
@@ -148,6 +148,28 @@ data.scene_weights = { synth_1_0 = 2.0 }
     spec = load_spec(write_spec(tmp_path, "[[grid]]\nmodel.attention = [true, false]\n", name="c.toml"))
     assert [(c.id, c.config["model"]["attention"]) for c in spec.cells] == [("model.attention=true", True),
                                                                            ("model.attention=false", False)]
+
+
+def test_only_the_synthetic_sets_the_cells_read_are_generated(tmp_path):
+    """A base config's validation set that [set] "data.validation" = [] leaves unused is not generated."""
+    from lfbench.ablation.runner import prepare_training_data
+
+    sets = ('"data.synthetic" = [{category = "synthetic", seed = 1, size = 16, scenes = 1}, '
+            '{category = "synthetic_val", seed = 2, size = 16, scenes = 1}]\n')
+    for validation, generated in (("[]", ["synthetic_s1_16px_1"]),
+                                  ('["synthetic_val"]', ["synthetic_s1_16px_1", "synthetic_val_s2_16px_1"])):
+        out = tmp_path / validation.strip('[]"') / "out"
+        spec = load_spec(write_spec(out.parent, "", f'[set]\n{sets}"data.validation" = {validation}\n'))
+        links = prepare_training_data(spec.cells, out, quiet)
+        assert sorted(p.name for p in (out / "data").iterdir()) == generated
+        assert sorted(links["base"]) == sorted(n.split("_s")[0] for n in generated)
+
+
+def test_a_cell_data_name_that_selects_nothing_is_refused_before_anything_is_written(tmp_path):
+    spec = load_spec(write_spec(tmp_path, "", '[set]\n"data.validation" = ["nosuch"]\n'))
+    with pytest.raises(SpecError, match=r"spec.toml: \[data\] no scene 'nosuch'; available: synth_1_0"):
+        run_ablation(spec, tmp_path / "out", progress=False, log=quiet)
+    assert not (tmp_path / "out").exists()
 
 
 def test_loss_and_beta_axes(tmp_path):
@@ -171,7 +193,7 @@ shared = true
     spec = load_spec(write_spec(tmp_path, "table = \"beta\"\n[[grid]]\nloss = [\"uafl\"]\nbeta = [1.0, 0.25]\n",
                                 name="beta.toml"))
     assert [c.id for c in spec.cells] == ["loss=uafl_beta=1", "loss=uafl_beta=0.25"]
-    assert [report.uafl_beta(c.config) for c in spec.cells] == [1.0, 0.25]
+    assert [facts.loss_beta(c.config) for c in spec.cells] == [1.0, 0.25]
 
 
 def run_main(args: list[str], capsys) -> tuple[int, str]:
@@ -203,6 +225,15 @@ def test_bad_budget_and_missing_base(tmp_path, capsys):
     path.write_text(path.read_text().replace("[budget]\nthreads = 1\n", "[budget]\nsteps = [5]\n"))
     code, err = run_main(["ablate", str(path), "--list"], capsys)
     assert code == 2 and "budget.steps: expected 2 numbers" in err and str(path) in err
+    # [budget.model] holds the network's own parameters, of their types; the old budget.width says where it went
+    for budget, problem in (("model = { width = 2.5 }", "budget.model: width expects int, got float 2.5"),
+                            ("model = { widht = 4 }", "budget.model: unknown key(s): widht (accepted: angular, "
+                                                      "attention, d_max, d_min, interpolation, interval, width)"),
+                            ("width = 4", "budget.width: is now [budget.model] width")):
+        path.write_text(write_spec(tmp_path, "").read_text().replace("[budget]\nthreads = 1\n",
+                                                                     f"[budget]\n{budget}\n"))
+        code, err = run_main(["ablate", str(path), "--list"], capsys)
+        assert code == 2 and err.count("\n") == 1 and problem in err and str(path) in err, err
     other = tmp_path / "nobase.toml"
     other.write_text("base = \"missing.toml\"\n[evaluation]\nsynthetic = {seed = 1, size = 48, scenes = 1}\n")
     code, err = run_main(["ablate", str(other)], capsys)
@@ -298,7 +329,7 @@ def test_shared_stage1_is_trained_once_and_bit_identical(shared_run, tmp_path):
 def test_table5_has_the_paper_value_beside_ours(shared_run):
     _, out, _, run = shared_run
     t5 = pd.read_csv(out / "table5.csv").set_index("cell")
-    ours = [c for c in t5.columns if c.startswith("BadPix 0.07 (%), ours (width 2, batch 1, patch 16, 2+1 steps")]
+    ours = [c for c in t5.columns if c.startswith("BadPix 0.07 (%), ours (batch 1, patch 16, 2+1 steps")]
     theirs = "BadPix 0.07 (%), paper (RTX 3090, full training)"
     assert len(ours) == 1 and list(t5.columns).index(theirs) == list(t5.columns).index(ours[0]) + 1
     for cid, paper_value in (("loss=l1", 12.5), ("loss=uafl", 7.25)):
@@ -313,7 +344,7 @@ def test_table5_has_the_paper_value_beside_ours(shared_run):
     test_time = cells.loc["loss=uafl", "test time (s), ours (9x9x16x16, cpu, 1 thread)"]
     assert test_time == float("%.6g" % timing["test_s"])
     md = (out / "table5.md").read_text()
-    assert "paper (RTX 3090, full training)" in md and "ours (width 2" in md and "12.500" in md
+    assert "paper (RTX 3090, full training)" in md and "ours (batch 1" in md and "12.500" in md
     combined = Results.read(out / "results.json")
     assert set(combined.methods) == {"loss=l1", "loss=uafl"} and combined.meta["ablation"]["shared_stage1"]
     for stem in ("table5", "table_cells", "table_per_scene", "table_average"):

@@ -19,9 +19,9 @@ from test_ablate import quiet, write_spec
 
 from lfbench.ablation import baselines, report
 from lfbench.ablation.baselines import baselines_table, summary_lines
-from lfbench.ablation.significance import cell_info
+from lfbench.ablation.facts import cell_info
 from lfbench.ablation.spec import load_spec
-from lfbench.runs.results import Record, Results
+from lfbench.results import Record, Results
 from lfbench.scoring.metrics import get_metric
 
 PLANE, ZERO = "Plane sweep", "Zero map"
@@ -178,7 +178,7 @@ def test_report_writes_the_table_and_heads_the_captions_with_the_summary(tmp_pat
     assert csv.loc["interval=0.5", f"{BP}, synthetic (mean of 1), cell 95% high"] == float(
         "%.6g" % (18 + _half([15, 18, 21])))
     md = (tmp_path / "out" / "table_baselines.md").read_text().splitlines()
-    assert md[1] == summary + "  " and "95 % t-interval over seeds must lie wholly" in md[2]
+    assert md[1] == summary + "  " and "95 % t-interval over seeds (within the metric's range) must lie wholly" in md[2]
     for stem in ("table_cells", "table4"):
         assert (tmp_path / "out" / f"{stem}.md").read_text().splitlines()[1] == summary + "  "
     # no paper tables given: only the table with paper columns says so; the others do not mention the paper

@@ -10,6 +10,7 @@ from PIL import Image
 from lfbench.data.scene import ArrayLightField
 from lfbench.method.base import Prediction
 from lfbench.reports import figures as fig
+from lfbench.reports.plotting import write_image
 from lfbench.scoring.metrics import bad_pix
 from lfbench.scoring.prepare import border_mask
 from lfbench.utils.errors import DataError
@@ -64,7 +65,7 @@ def test_badpix_map_with_a_centre_view_background_stays_grey_where_good():
 
 def test_written_badpix_png_has_red_exactly_at_the_bad_pixels(tmp_path):
     gt, pred, mask, expected_bad = _hand_case()
-    path = fig.write_image(tmp_path / "bp.png", fig.badpix_image(fig.badpix_codes(gt, pred, mask)))
+    path = write_image(tmp_path / "bp.png", fig.badpix_image(fig.badpix_codes(gt, pred, mask)))
     with Image.open(path) as img:
         arr = np.asarray(img.convert("RGB"))
     assert arr.shape == (6, 6, 3)
@@ -144,7 +145,7 @@ def test_hook_writes_overviews_rows_and_curves(tmp_path):
     for k in range(2):
         gt = rng.uniform(-1.5, 1.5, (h, w)).astype(np.float32)
         scenes.append(ArrayLightField(views=rng.random((3, 3, h, w)).astype(np.float32), name=f"toy{k}", gt=gt))
-    hook = fig.scene_figure_hook(tmp_path / "figs")
+    hook = fig.SceneFigureWriter(tmp_path / "figs")
     preds = {}
     for label, sigma in (("oracle", 0.0), ("noisy", 0.05)):
         for lf in scenes:
@@ -179,14 +180,14 @@ def test_hook_writes_overviews_rows_and_curves(tmp_path):
 
 
 def test_curves_from_records_average_the_stored_thresholds():
-    from lfbench.runs.results import Record, Results
+    from lfbench.results import Record, Results
 
     values = (("a", "badpix_0.07", 2.0), ("a", "badpix_0.01", 8.0), ("b", "badpix_0.07", 4.0),
               ("b", "badpix_0.01", 10.0), ("b", "mse_x100", 1.0))
     r = Results(records=[Record("m", s, k, v, "lowres") for s, k, v in values])
     series = fig.curves_from_records(r)
-    (label, (t, v)), = series.items()
-    assert label == "m (2 scenes)"
+    (method, (t, v, scenes)), = series.items()
+    assert method == "m" and scenes == 2
     np.testing.assert_allclose(t, [0.01, 0.07])
     np.testing.assert_allclose(v, [9.0, 3.0])
 

@@ -1,4 +1,4 @@
-"""lfbench.runs.evaluate_to_folder: the one orchestration behind evaluate, demo, golden.py and the ablation."""
+"""lfbench.runs.folder.evaluate_to_folder: the one orchestration behind evaluate, demo, golden.py and the ablation."""
 
 from __future__ import annotations
 
@@ -11,8 +11,9 @@ from helpers import write_scene, write_submission
 from lfbench.data.scene import Benchmark
 from lfbench.method.registry import create
 from lfbench.reports.tables import TABLE_FORMATS, render, render_with_caption, write_table
-from lfbench.runs import CIOptions, evaluate_to_folder
-from lfbench.runs.results import Results
+from lfbench.reports.writers import BootstrapCIs, SceneFigures, Tables
+from lfbench.results import Results
+from lfbench.runs.folder import CIOptions, evaluate_to_folder
 
 SIZE = 40  # 10 x 10 scored pixels inside the 15 px border
 
@@ -42,11 +43,11 @@ def test_label_more_groups_and_no_tables(scenes, tmp_path):
     sub = write_submission(tmp_path / "sub", {"beta": np.full((SIZE, SIZE), 0.1, np.float32)})
     out = tmp_path / "out"
     results = evaluate_to_folder([create("gt")], scenes[:1], out, more=[([create("published", path=sub)], scenes)],
-                                 tables=False, progress=False)
+                                 writers=[], progress=False)
     assert sorted(p.name for p in out.iterdir() if not p.name.startswith(".")) == ["results.csv", "results.json"]
     assert {(r.method, r.scene) for r in results.records} == {("gt", "alpha"), ("published:sub", "beta")}
     assert results.value("published:sub", "beta", "badpix_0.07") == 100.0  # |0.1| > 0.07 on every pixel
-    named = evaluate_to_folder([create("gt")], scenes, tmp_path / "cell", label="cell-1", tables=False,
+    named = evaluate_to_folder([create("gt")], scenes, tmp_path / "cell", label="cell-1", writers=[],
                                progress=False)
     assert set(named.methods) == {"cell-1"} and {r.method for r in named.runs} == {"cell-1"}
     with pytest.raises(ValueError, match="single method"):
@@ -57,8 +58,8 @@ def test_figures_replace_an_earlier_run_and_ci_files(scenes, tmp_path):
     out = tmp_path / "out"
     (out / "figures").mkdir(parents=True)
     (out / "figures" / "stale.png").write_bytes(b"old run")
-    results = evaluate_to_folder([create("gt")], scenes, out, figures=True, ci=CIOptions(resamples=50, block=4),
-                                 progress=False)
+    results = evaluate_to_folder([create("gt")], scenes, out, progress=False,
+                                 writers=[SceneFigures(), Tables(), BootstrapCIs(CIOptions(resamples=50, block=4))])
     figures = sorted(p.name for p in (out / "figures").iterdir())
     assert "stale.png" not in figures and "overview_alpha.png" in figures
     assert not [p for p in out.iterdir() if p.name.startswith(".figures.")]  # no temporary folder left

@@ -248,14 +248,14 @@ def test_training_and_ablation_figures_draw_dollar_labels(tmp_path):
 def test_log_axis_ticks_are_plain_text(tmp_path):
     """Under plain text, matplotlib's default log tick labels ($\\mathdefault{10^{0}}$) would show their
     markup: the learning curve's loss axis labels its ticks as plain numbers."""
-    from lfbench.reports.figures import _pyplot
+    from lfbench.reports.plotting import pyplot
     from lfbench.utils.figure_text import plain_log_ticks, plain_text
 
     labels = []
 
     @plain_text
     def draw():
-        plt = _pyplot()
+        plt = pyplot()
         fig, ax = plt.subplots()
         ax.plot([0, 1], [0.01, 10])
         ax.set_yscale("log")
@@ -455,7 +455,7 @@ def test_toolkit_pairwise_names_of_one_file_are_refused_before_drawing(tmp_path)
     from lfbench.data.scene import Scene
     from lfbench.reports.maps import load_scene_maps
     from lfbench.reports.toolkit_figures import toolkit_figures_from_scene_maps
-    from lfbench.runs.results import Record, Results
+    from lfbench.results import Record, Results
     from lfbench.utils.errors import DataError
 
     scene = Scene(write_scene(tmp_path / "data", "s0", "training", size=SIZE))

@@ -12,9 +12,9 @@ from pathlib import Path
 import pytest
 from helpers import assert_one_error_line, run_cli, write_scene
 
-from lfbench.runs.outputs import JOURNAL, MANIFEST, recover
-from lfbench.runs.results import Results
+from lfbench.results import Results
 from lfbench.utils.errors import DataError
+from lfbench.utils.outputs import JOURNAL, MANIFEST, recover
 
 SIZE = 24
 
@@ -40,12 +40,12 @@ def test_a_failure_while_writing_leaves_the_previous_run_whole(tmp_path, capsys,
     rc, _, err = evaluate(capsys, data, out)
     assert rc == 0, err
     before = snapshot(out)
-    import lfbench.reports.tables as tables
+    import lfbench.reports.writers as writers
 
     def full(*args, **kwargs):  # results.json and results.csv are written, then the disk fills
         raise OSError(errno.ENOSPC, "No space left on device", str(args[1]) + "/table_per_scene.md")
 
-    monkeypatch.setattr(tables, "write_tables", full)
+    monkeypatch.setattr(writers, "write_table", full)
     rc, _, err = evaluate(capsys, data, out, "--scenes", "s0")
     assert_one_error_line(rc, err, "table_per_scene.md", "No space left on device", f"nothing written to {out}")
     assert str(out / "table_per_scene.md") in err  # named where it would have landed, not in the staging folder
@@ -58,7 +58,7 @@ def test_a_commit_cut_short_is_refused_by_readers_and_rolled_forward(tmp_path, c
     instead of mixing two runs; the next run finishes the commit."""
     out = tmp_path / "out"
     assert evaluate(capsys, data, out)[0] == 0
-    import lfbench.runs.outputs as outputs
+    import lfbench.utils.outputs as outputs
 
     real_replace, calls = os.replace, []
 

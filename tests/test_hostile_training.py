@@ -47,7 +47,7 @@ def write_config(tmp_path: Path, text: str, name: str = "c.toml") -> Path:
     (STAGE1.replace("lr = 1e-3", "lr = inf"), "", "", "stages[0].lr: must be a finite number"),
     (STAGE1.replace("lr = 1e-3", "lr = 0"), "", "", "stages[0].lr: must be > 0.0"),
     (STAGE1.replace("steps = 2", "steps = 0"), "", "", "stages[0].steps: must be >= 1"),
-    (STAGE1 + "betas = [1.5, 0.9]\n", "", "", "stages[0].betas: expected two numbers in [0, 1)"),
+    (STAGE1 + "betas = [1.5, 0.9]\n", "", "", "stages[0].betas: expected numbers in [0, 1)"),
     (STAGE1, "", "", None),  # placeholder replaced below (batch_size)
 ], ids=["beta-str", "beta-neg", "beta-nan", "lr-nan", "lr-inf", "lr-0", "steps-0", "betas", "ok"])
 def test_every_stage_is_validated_before_step_1(tmp_path, capsys, data_root, stages, training, data, problem):
@@ -179,9 +179,9 @@ def test_final_weights_and_summary_are_one_set(tmp_path, capsys, data_root, monk
     import json
     import os
 
-    import lfbench.runs.outputs as outputs
-    from lfbench.runs.outputs import check_complete
+    import lfbench.utils.outputs as outputs
     from lfbench.utils.errors import DataError
+    from lfbench.utils.outputs import check_complete
 
     out = tmp_path / "run"
     config = write_config(tmp_path, config_text(data_root, STAGE1))

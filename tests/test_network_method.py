@@ -114,12 +114,15 @@ def _lf(size: int = 20, seed: int = 1) -> ArrayLightField:
 
 
 def _reference(path: Path, lf: ArrayLightField) -> tuple[np.ndarray, np.ndarray]:
-    """The network rebuilt by hand from the weights file and run on the whole light field."""
+    """The network rebuilt by hand from the weights file and run on the whole light field, on one thread (as
+    the method runs with threads=1: the same kernels, so the same float rounding)."""
+    from lfbench.utils.threads import torch_threads
+
     payload = torch.load(path, map_location="cpu", weights_only=True)
     net = Stack(**payload["config"])
     net.load_state_dict(payload["state_dict"])
     views = torch.from_numpy(lf.gray_views().reshape(1, 81, *lf.gray_views().shape[2:]))
-    with torch.inference_mode():
+    with torch.inference_mode(), torch_threads(1):
         d, p = net.eval()(views)
     return d[0].numpy(), p[0].numpy()
 
@@ -132,7 +135,7 @@ def test_a_network_registered_once_runs_as_a_method(nets):
     assert "network parameters (with weights=..., the weights' own" in text
     assert "hidden (int, default 4, 1 to 64): hidden channels" in text
     lf = _lf()
-    method = create_from_spec(f"stack:weights={nets['stack']},device=cpu")
+    method = create_from_spec(f"stack:weights={nets['stack']},device=cpu,threads=1")
     assert isinstance(method, NetworkMethod) and method.available_for(lf) is None
     pred = method.run(lf)
     disparity, probability = _reference(nets["stack"], lf)
@@ -172,7 +175,11 @@ def test_the_two_class_style_still_works(nets):
     lf = _lf()
     method = create("stack2", weights=nets["stack2"])
     assert type(method) is StackMethod
-    np.testing.assert_array_equal(method.run(lf).disparity, _reference(nets["stack2"], lf)[0])
+    from lfbench.utils.threads import torch_threads
+
+    with torch_threads(1):  # as the reference runs
+        disparity = method.run(lf).disparity
+    np.testing.assert_array_equal(disparity, _reference(nets["stack2"], lf)[0])
     assert get_trainable("stack2").method_name == "stack2"
 
 
@@ -235,7 +242,7 @@ def test_results_are_keyed_by_the_weights_content_not_their_path(nets, tmp_path,
     for tag, spec in (("rel", "stack:weights=stack.pt"), ("abs", f"stack:weights={nets['stack']}"),
                       ("moved", f"stack:weights={moved}")):
         method = create_from_spec(spec)
-        runs[tag] = evaluate_to_folder([method], [scene], tmp_path / tag, tables=False, progress=False,
+        runs[tag] = evaluate_to_folder([method], [scene], tmp_path / tag, writers=(), progress=False,
                                        meta={"methods": {method.label: method.provenance()}})
     labels = {tag: set(r.methods) for tag, r in runs.items()}
     digest = __import__("hashlib").sha256(nets["stack"].read_bytes()).hexdigest()

@@ -7,8 +7,8 @@ import json
 import pytest
 
 from lfbench.cli import main
+from lfbench.results import Record, Results
 from lfbench.runs.regress import compare, make_golden, read_golden
-from lfbench.runs.results import Record, Results
 
 
 def _results(**overrides: float) -> Results:

@@ -24,7 +24,7 @@ from lfbench.reports.paper import (
     per_scene_with_paper,
 )
 from lfbench.reports.tables import average_table, per_scene_table
-from lfbench.runs.results import Record, Results
+from lfbench.results import Record, Results
 from lfbench.utils.errors import DataError, SpecError
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -289,9 +289,9 @@ def test_report_with_maps_and_html_reads_every_input_once(evaluated, tmp_path, m
     # of the scenes and one load of every saved map; the site ranks each metric once for all its tables.
     from collections import Counter
 
-    import lfbench.data.submission as submission
     from lfbench.data.scene import Benchmark
     from lfbench.reports import leaderboard
+    from lfbench.reports import maps as saved_maps
 
     counts: Counter = Counter()
 
@@ -303,8 +303,8 @@ def test_report_with_maps_and_html_reads_every_input_once(evaluated, tmp_path, m
 
     monkeypatch.setattr(Results, "read", counted(lambda path: "results.json", Results.read))
     monkeypatch.setattr(Benchmark, "discover", counted(lambda root: "discover", Benchmark.discover))
-    monkeypatch.setattr(submission, "read_submission_map", counted(lambda root, scene: (Path(root).name, scene),
-                                                                   submission.read_submission_map))
+    monkeypatch.setattr(saved_maps, "read_submission_map", counted(lambda root, scene: (Path(root).name, scene),
+                                                                   saved_maps.read_submission_map))
     monkeypatch.setattr(leaderboard, "metric_ranks", counted(lambda results, metric: metric, leaderboard.metric_ranks))
     assert main(["report", str(evaluated / "eval"), "--out", str(tmp_path / "r"), "--maps",
                  str(evaluated / "eval" / "maps"), "--html", "--format", "md"]) == 0

@@ -11,9 +11,10 @@ import pytest
 from test_ablate import quiet, write_spec
 
 from lfbench.ablation import report
-from lfbench.ablation.significance import cell_info, comparisons, paired_t, seeds_table, significance_table, t_interval
+from lfbench.ablation.facts import cell_info
+from lfbench.ablation.significance import comparisons, paired_t, seeds_table, significance_table, t_interval
 from lfbench.ablation.spec import load_spec
-from lfbench.runs.results import Record, Results
+from lfbench.results import Record, Results
 from lfbench.utils.errors import SpecError
 
 T975_DF2 = 4.302652729911275  # Student t 0.975 quantile, 2 degrees of freedom (printed tables: 4.303)
@@ -67,7 +68,7 @@ def test_seeds_expand_every_cell_and_set_the_config_seed(tmp_path):
 
 @pytest.mark.parametrize("head,message", [
     ("seeds = [1, 1]\n", "each seed once"),
-    ("seeds = [1, -2]\n", "non-negative integers"),
+    ("seeds = [1, -2]\n", r"seeds: expected numbers >= 0, got \[1, -2\]"),
     ("seeds = [1, 2]\n[[grid]]\nseed = [4, 5]\n", "both a grid axis and given by seeds"),
     ("seeds = [1, 2]\n[stage1]\nshared = true\n[[grid]]\nbeta = [0.1, 1]\n", "cannot vary with seeds"),
 ])
@@ -119,11 +120,40 @@ def test_significance_verdicts_on_hand_made_scores(tmp_path):
 
 def test_seeds_table_means_and_intervals(tmp_path):
     spec = _spec(tmp_path)
-    table = seeds_table(cell_info(spec), _scores(HAND), ["badpix_0.07"])
+    table, clipped = seeds_table(cell_info(spec), _scores(HAND), ["badpix_0.07"])
     row = table.loc["interval=1"]  # scene means 50, 52, 48: mean 50, sd 2
     assert row["seeds"] == 3 and row["badpix_0.07 mean"] == pytest.approx(50.0)
     assert row["badpix_0.07 95% low"] == pytest.approx(50 - T975_DF2 * 2 / math.sqrt(3))
     assert row["badpix_0.07 95% high"] == pytest.approx(50 + T975_DF2 * 2 / math.sqrt(3))
+    assert clipped == []  # 50 +- 5 stays inside 0 .. 100 %
+
+
+T975_DF1 = 12.706204736174696  # scipy.stats.t.ppf(0.975, 1)
+
+
+def test_seed_intervals_stay_within_the_metric_range(tmp_path):
+    """Two seeds far apart: the t-interval (df 1) of BadPix reaches far past 0 and 100 %; the table bounds it
+    by the metric's value_range and the caption says so (issue 22.8)."""
+    spec = _spec(tmp_path, 'seeds = [1, 2]\ntable = "table4"\n[[grid]]\ninterval = [1, 0.5]\n')
+    wide = {(1, 1): (2, 4), (1, 2): (88, 92), (0.5, 1): (40, 42), (0.5, 2): (41, 43)}
+    table, clipped = seeds_table(cell_info(spec), _scores(wide), ["badpix_0.07"])
+    row = table.loc["interval=1"]  # scene means 3 and 90: mean 46.5, sd 61.52
+    half = T975_DF1 * math.sqrt(((3 - 46.5) ** 2 + (90 - 46.5) ** 2) / 1) / math.sqrt(2)
+    assert 46.5 - half < 0 and 46.5 + half > 100  # what the bare t-interval gives
+    assert row["badpix_0.07 mean"] == pytest.approx(46.5)
+    assert (row["badpix_0.07 95% low"], row["badpix_0.07 95% high"]) == (0.0, 100.0)
+    narrow = table.loc["interval=0.5"]  # 41 and 42: 41.5 +- 6.35, inside the range, untouched
+    assert narrow["badpix_0.07 95% low"] == pytest.approx(41.5 - T975_DF1 * math.sqrt(0.5) / math.sqrt(2))
+    assert clipped == ["BadPix(0.07): 0 to 100"]
+    results = Results(records=[Record(r.method, r.scene, r.metric, float(r.value), r.resolution)
+                               for r in _scores(wide).itertuples()])
+    markers = [{"id": c.id, "train_s": 60.0, "own_train_s": 60.0, "test_s": 1.0, "time_size": 16, "device": "cpu",
+                "threads": 1} for c in spec.cells]
+    report.write_report(spec, tmp_path / "out", results, markers, log=quiet)
+    text = (tmp_path / "out" / "table_seeds.md").read_text()
+    assert "intervals clipped to the metric's range (BadPix(0.07): 0 to 100)" in text
+    lows = pd.read_csv(tmp_path / "out" / "table_seeds.csv")
+    assert lows["badpix_0.07 95% low"].min() >= 0 and lows["badpix_0.07 95% high"].max() <= 100
 
 
 def test_loss_and_beta_orderings(tmp_path):

@@ -11,7 +11,7 @@ import pytest
 from scipy import stats as sps
 
 from lfbench.reports.ci import ci_table
-from lfbench.runs.results import Record, Results
+from lfbench.results import Record, Results
 from lfbench.scoring import stats
 from lfbench.scoring.metrics import bad_pix, mse_x100, q25_x100
 from lfbench.utils.errors import SpecError

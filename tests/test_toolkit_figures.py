@@ -12,7 +12,7 @@ import pytest
 
 from lfbench.reports import toolkit_figures as tk
 from lfbench.reports.leaderboard import metric_ranks, metric_table, overall_ranks
-from lfbench.runs.results import Record, Results
+from lfbench.results import Record, Results
 from lfbench.utils.errors import SpecError
 
 # --------------------------------------------------------------------------- pairwise

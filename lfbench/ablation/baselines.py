@@ -24,7 +24,7 @@ from collections.abc import Sequence
 
 import pandas as pd
 
-from lfbench.ablation.significance import LEVEL, scene_scores, t_interval
+from lfbench.ablation.significance import LEVEL, scene_scores, t_interval, within_range
 from lfbench.reports.sweep_table import SYNTH_PREFIX, scene_group
 from lfbench.scoring.metrics import get_metric
 
@@ -98,7 +98,7 @@ def baselines_table(info: pd.DataFrame, scores: pd.DataFrame, baselines: Sequenc
     """One row per variant (``seeds``: the mean over its seeds, index 'variant') or cell (index 'cell'): per
     scene group and metric the cell's value (with seeds also its 95 % interval end that decides), each
     baseline's value, then one verdict column 'vs <baseline>' per baseline (:func:`verdict`).
-    ``info``: lfbench.ablation.significance.cell_info; ``baselines``: method labels in ``scores``."""
+    ``info``: lfbench.ablation.facts.cell_info; ``baselines``: method labels in ``scores``."""
     if info.empty:
         return pd.DataFrame()
     values = group_scores(scores, metrics)
@@ -115,6 +115,7 @@ def baselines_table(info: pd.DataFrame, scores: pd.DataFrame, baselines: Sequenc
             for metric in metrics:
                 vals = [float(values.loc[(c, group), metric]) for c in cells.index if (c, group) in values.index]
                 mean, low, high = t_interval(vals)
+                low, high, _ = within_range(metric, low, high)  # the cell's interval within the metric's range
                 bound = (high if get_metric(metric).lower_is_better else low) if seeds else math.nan
                 mine[(metric, group)] = (mean, bound)
                 name = get_metric(metric).name
@@ -160,7 +161,7 @@ def baselines_caption(metrics: Sequence[str] = VERDICT_METRICS, *, seeds: bool) 
     rule = (f"'{BEATS}' = better than the baseline on each of {how} on every scene group (synthetic: the mean over its "
             "scenes)")
     if seeds:
-        rule += (f"; with seeds, on each, the cell's {round(LEVEL * 100)} % t-interval over seeds must lie wholly on "
-                 f"the better side of the baseline's value (the baseline is deterministic); '{NOT_RESOLVED}' when "
-                 "the mean is better but the interval reaches the baseline")
+        rule += (f"; with seeds, on each, the cell's {round(LEVEL * 100)} % t-interval over seeds (within the metric's "
+                 "range) must lie wholly on the better side of the baseline's value (the baseline is deterministic); "
+                 f"'{NOT_RESOLVED}' when the mean is better but the interval reaches the baseline")
     return rule

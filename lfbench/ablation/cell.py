@@ -30,7 +30,6 @@ from typing import Any
 import numpy as np
 
 from lfbench.ablation.spec import Evaluation
-from lfbench.ablation.toml_text import dumps
 from lfbench.method.trainable import DEFAULT_TRAINABLE
 from lfbench.utils.atomic import write_bytes, write_text
 from lfbench.utils.errors import DataError, SpecError
@@ -38,9 +37,9 @@ from lfbench.utils.jsonfile import json_text, read_json
 from lfbench.utils.log import log_to_file
 from lfbench.utils.readfile import read_bytes
 from lfbench.utils.threads import torch_threads
+from lfbench.utils.tomlfile import toml_text
 
 MARKER, TRAIN_CONFIG, LOG, MAPS, TIMING = "cell.json", "train.toml", "log.txt", "maps", "timing.json"
-UNCERTAINTY_DIR = "uncertainty"
 MAX_COPY_BYTES = 4 * 1024**3  # a shared stage-1 export copied into a cell (weights of at most 2 GiB, its log)
 
 
@@ -94,13 +93,12 @@ def is_done(task: CellTask) -> bool:
 
 def write_train_config(task: CellTask) -> Path:
     """Write CELL/train.toml (unchanged if present with the same config; SpecError if it differs)."""
-    from lfbench.training.config import TrainConfig
-    from lfbench.training.loop import comparable
+    from lfbench.training.config import TrainConfig, comparable
 
     path = task.path / TRAIN_CONFIG
     header = (f"Ablation cell {task.cell_id}: written by lfbench ablate.\n"
               f"Reproduce: lfbench train {path} --out {task.path}")
-    text = dumps(task.config, header)
+    text = toml_text(task.config, header)
     if path.is_file():
         old = TrainConfig.from_toml(path).to_dict()
         if comparable(old) != comparable(task.config):
@@ -202,19 +200,6 @@ def _sync() -> None:
         torch.cuda.synchronize()
 
 
-def save_maps(folder: Path):
-    """A prediction hook writing disparity (and uncertainty) maps in the submission layout."""
-    from lfbench.data.pfm import write_pfm
-    from lfbench.data.submission import write_submission_map
-
-    def hook(method, scene, pred) -> None:
-        write_submission_map(folder, scene.name, pred.disparity, pred.runtime_s)
-        if pred.uncertainty is not None:
-            write_pfm(folder / UNCERTAINTY_DIR / f"{scene.name}.pfm", np.asarray(pred.uncertainty, np.float32))
-
-    return hook
-
-
 def load_scenes(pairs: tuple[tuple[str, str], ...]):
     from lfbench.data.scene import Scene
 
@@ -222,15 +207,17 @@ def load_scenes(pairs: tuple[tuple[str, str], ...]):
 
 
 def evaluate_weights(label: str, weights: Path, ev: Evaluation, scenes, threads: int, out: Path,
-                     maps_dir: Path | None, network: str = DEFAULT_TRAINABLE):
-    """Score the weights (of the trainable ``network``) on the scenes into ``out`` (results.json/csv);
-    the records are named ``label``."""
+                     save_maps: bool = True, network: str = DEFAULT_TRAINABLE):
+    """Score the weights (of the trainable ``network``) on the scenes into ``out`` (results.json/csv and,
+    with ``save_maps``, the maps with their uncertainty in OUT/maps, as one set); the records are named
+    ``label``."""
+    from lfbench.reports.writers import Maps
     from lfbench.runs.folder import evaluate_to_folder
     from lfbench.scoring.rules import ScoringRules
 
-    return evaluate_to_folder([make_method(weights, ev, threads, network)], scenes, out, label=label, tables=False,
-                              rules=ScoringRules(allow_highres=not ev.lowres_only), progress=False,
-                              on_prediction=save_maps(maps_dir) if maps_dir else None)
+    return evaluate_to_folder([make_method(weights, ev, threads, network)], scenes, out, label=label,
+                              writers=[Maps(MAPS, per_method=False, uncertainty=True)] if save_maps else [],
+                              rules=ScoringRules(allow_highres=not ev.lowres_only), progress=False)
 
 
 def timing_key(ev: Evaluation, threads: int) -> dict[str, Any]:
@@ -294,7 +281,7 @@ def _run(task: CellTask) -> dict[str, Any]:
     train_s = float(summary["elapsed_s"])
 
     results = evaluate_weights(task.cell_id, task.path / "final.pt", task.evaluation, load_scenes(task.scenes),
-                               task.evaluation.threads or task.threads, task.path, task.path / MAPS, task.network)
+                               task.evaluation.threads or task.threads, task.path, True, task.network)
     marker: dict[str, Any] = {
         "id": task.cell_id, "values": task.values, "fingerprint": task.fingerprint,
         "eval_fingerprint": task.eval_fingerprint, "steps": int(summary["steps"]),

@@ -1,25 +1,25 @@
-"""Figures of an ablation (PNG, written atomically through lfbench.reports.figures): the beta curve,
-accuracy against test time per interval, and error maps per variant."""
+"""Figures of an ablation (PNG, written atomically through lfbench.reports.plotting): the beta curve and
+accuracy against test time per interval, each with what the reference says beside ours (the error maps
+per variant are lfbench.reports.writers.SceneFigures over the cells' saved maps)."""
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from lfbench.reports.figures import _pyplot, save_figure
+from lfbench.reports.plotting import INTERPOLATION_COLOURS, pyplot, save_figure
+from lfbench.reports.reference import Table4
 from lfbench.utils.figure_text import plain_text
-
-INTERP_COLOURS = {"bilinear": "tab:blue", "nearest": "tab:orange", "phase": "tab:green"}
 
 
 @plain_text
-def beta_curve(frame: pd.DataFrame, records: pd.DataFrame, path: Path, ours: str) -> Path:
-    """BadPix 0.07 (%) against the UAFL beta: the mean over scenes (line) and each scene (faint);
-    the axis runs from beta = 1 down to 0.1 as in the paper's figure."""
-    plt = _pyplot()
+def beta_curve(frame: pd.DataFrame, records: pd.DataFrame, path: Path, ours: str, said: str | None = None) -> Path:
+    """BadPix 0.07 (%) against the UAFL beta: the mean over scenes (line) and each scene (faint); the axis
+    runs from the largest beta down to the smallest. ``said``: what the reference says about beta (title)."""
+    plt = pyplot()
     cells = frame[frame["beta"].notna()].sort_values("beta")
     fig, ax = plt.subplots(figsize=(6.0, 4.0))
     bp = records[records["metric"] == "badpix_0.07"]
@@ -33,8 +33,7 @@ def beta_curve(frame: pd.DataFrame, records: pd.DataFrame, path: Path, ours: str
     ax.invert_xaxis()
     ax.set_xlabel("UAFL beta")
     ax.set_ylabel("BadPix 0.07 (%)")
-    ax.set_title(f"BadPix 0.07 vs beta: {ours}\n(grey: single scenes; the paper: BadPix falls as beta goes 1 -> 0.1, "
-                 "values not printed)", fontsize=8)
+    ax.set_title(f"BadPix 0.07 vs beta: {ours}\n(grey: single scenes{f'; {said}' if said else ''})", fontsize=8)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
     fig.tight_layout()
@@ -47,7 +46,7 @@ def _scatter(ax, xs: Sequence[float], ys: Sequence[float], intervals: Sequence[f
     for x, y, iv, ip in zip(xs, ys, intervals, interps, strict=True):
         if not (np.isfinite(x) and np.isfinite(y)):
             continue
-        colour = INTERP_COLOURS.get(ip, "tab:gray")
+        colour = INTERPOLATION_COLOURS.get(ip, "tab:gray")
         ax.scatter([x], [y], color=colour, s=40, label=ip if ip not in done else None, zorder=3)
         done.add(ip)
         ax.annotate(f"{iv:g}", (x, y), textcoords="offset points", xytext=(5, 4), fontsize=8)
@@ -55,7 +54,7 @@ def _scatter(ax, xs: Sequence[float], ys: Sequence[float], intervals: Sequence[f
     pts = sorted((x, y) for x, y, ip in zip(xs, ys, interps, strict=True) if ip == "bilinear" and np.isfinite(x)
                  and np.isfinite(y))
     if len(pts) > 1:
-        ax.plot(*zip(*pts, strict=True), color=INTERP_COLOURS["bilinear"], linewidth=1, alpha=0.5)
+        ax.plot(*zip(*pts, strict=True), color=INTERPOLATION_COLOURS["bilinear"], linewidth=1, alpha=0.5)
     finite = [x for x in xs if np.isfinite(x) and x > 0]
     if finite and max(finite) / min(finite) > 8:  # a log axis with plain labels (1, 2, 5, 10, ...)
         from matplotlib.ticker import FormatStrFormatter, LogLocator, NullFormatter
@@ -73,51 +72,22 @@ def _scatter(ax, xs: Sequence[float], ys: Sequence[float], intervals: Sequence[f
 
 
 @plain_text
-def accuracy_vs_time(frame: pd.DataFrame, paper: pd.DataFrame | None, path: Path, ours: str, time_label: str) -> Path:
-    """BadPix 0.07 against test time for each interval and interpolation: ours and, beside, the paper's."""
-    plt = _pyplot()
-    panels = 2 if paper is not None else 1
+def accuracy_vs_time(frame: pd.DataFrame, paper: pd.DataFrame | None, path: Path, ours: str, time_label: str,
+                     layout: Table4 | None = None) -> Path:
+    """BadPix 0.07 against test time for each interval and interpolation: ours and, beside, the reference's
+    Table IV (``paper``, read as its ``layout`` says)."""
+    plt = pyplot()
+    panels = 2 if paper is not None and layout is not None else 1
     fig, axes = plt.subplots(1, panels, figsize=(6.0 * panels, 4.4), squeeze=False)
     _scatter(axes[0, 0], frame["test_s"].astype(float).tolist(), frame["badpix_0.07"].astype(float).tolist(),
              frame["interval"].astype(float).tolist(), frame["interpolation"].astype(str).tolist(),
              f"{ours}", f"test time (s), {time_label}")
-    if paper is not None:
-        _scatter(axes[0, 1], pd.to_numeric(paper["test_seconds_512x512_rtx3090"], errors="coerce").tolist(),
+    if paper is not None and layout is not None:
+        _scatter(axes[0, 1], pd.to_numeric(paper[layout.test_seconds], errors="coerce").tolist(),
                  pd.to_numeric(paper["badpix_0.07"], errors="coerce").tolist(),
                  pd.to_numeric(paper["interval"], errors="coerce").tolist(),
                  paper["interpolation"].astype(str).str.strip().tolist(),
-                 "paper (RTX 3090, full training), Table IV", "test time (s), RTX 3090, 512x512")
+                 layout.figure_title, layout.figure_time_label)
     fig.suptitle("Accuracy vs test time per disparity interval", fontsize=9)
     fig.tight_layout()
     return save_figure(fig, path, dpi=110)
-
-
-def error_maps(scene_dirs: Sequence[str], maps: Mapping[str, Path], out: Path,
-               within: Path | None = None) -> list[Path]:
-    """Per scene an overview with one row per variant (disparity, BadPix map, signed error, uncertainty)
-    and the BadPix(t) curves, from the maps the cells saved (lfbench.reports.figures.SceneFigureWriter).
-    ``within``: the ablation folder the maps must not lead out of (symbolic links)."""
-    from lfbench.data.pfm import read_pfm
-    from lfbench.data.scene import Scene
-    from lfbench.data.submission import check_inside, disp_map_path, read_submission_map
-    from lfbench.method.base import Prediction
-    from lfbench.reports.figures import SceneFigureWriter
-    from lfbench.runs.outputs import check_within
-
-    writer = SceneFigureWriter(out)
-    present = {label: root for label, root in maps.items() if Path(root).is_dir()}  # a results/ copy has none
-    for root in present.values() if within is not None else ():
-        check_within(root, within, "the ablation folder")
-    for folder in scene_dirs if present else []:
-        scene = Scene(folder)
-        for label, root in present.items():
-            if not disp_map_path(root, scene.name).is_file():
-                continue
-            disp, runtime = read_submission_map(root, scene.name, max_shape=scene.spatial_size)
-            unc_path = Path(root) / "uncertainty" / f"{scene.name}.pfm"
-            if unc_path.is_file():
-                check_inside(root, unc_path)
-            unc = (read_pfm(unc_path, max_shape=scene.spatial_size, what="uncertainty map")
-                   if unc_path.is_file() else None)
-            writer.add(label, scene, Prediction(disparity=disp, uncertainty=unc, runtime_s=runtime))
-    return sorted(writer.written)

@@ -1,28 +1,36 @@
-"""Tables and figures of an ablation run, with the paper's numbers in adjacent, labelled columns.
+"""Tables and figures of an ablation run, with a reference's numbers (the paper of the spec's network,
+lfbench.reports.reference) in adjacent, labelled columns: the ablation's output writers
+(lfbench.reports.writers), which ``lfbench ablate`` runs into its staged set.
 
 Written into OUT (each table as .md, .tex and .csv):
 
 - ``table_cells``: one row per cell: its grid values, mean BadPix 0.07/0.03/0.01 and MSE x100 over the
   evaluation scenes, train time and test time;
 - ``table4`` (spec table = "table4"): interval, interpolation, BadPix 0.07, MSE x100, train time, test
-  time, ours beside the paper's Table IV;
-- ``table5`` ("table5"): BadPix 0.07 per fine-tuning loss, ours beside the paper's Table V;
-- ``table_beta`` ("beta"): BadPix 0.07 and MSE x100 per UAFL beta (the paper prints no values);
+  time, ours beside the reference's Table IV;
+- ``table5`` ("table5"): BadPix 0.07 per fine-tuning loss, ours beside the reference's Table V;
+- ``table_beta`` ("beta"): BadPix 0.07 and MSE x100 per loss beta (what the reference says about it);
+- ``table_seeds`` / ``table_significance`` (the spec has seeds): mean and 95 % t-interval over seeds per
+  variant (clipped to each metric's range), and the reference's orderings as paired t-tests;
 - ``table_baselines`` (the spec has [[methods]]): every cell (with seeds: variant) against each extra
   method, e.g. the plane sweep and the zero map, per scene group in BadPix 0.07 and MSE x100, with a
   verdict per baseline (lfbench.ablation.baselines); its summary lines ("every cell beats ..." or "K of N
   cells do not beat ...") are logged and head the captions of table_cells, this table and the paper-style
   table;
-- ``table_per_scene`` / ``table_average`` (Tables I/II) for every cell and extra method, and, when the
-  evaluation includes scenes the paper reports, ``table_per_scene_paper`` / ``table_average_paper``;
+- ``table_per_scene`` / ``table_average`` (Tables I/II) for every cell and extra method, and, with a
+  reference whose Tables I/II cover some evaluation scene, ``table_per_scene_paper`` / ``table_average_paper``;
 - figures/: ``beta_curve.png`` (BadPix 0.07 against beta), ``accuracy_vs_test_time.png`` (BadPix 0.07
-  against test time, per interval and interpolation, ours and the paper's), and ``error_maps/``
+  against test time, per interval and interpolation, ours and the reference's), and ``error_maps/``
   (per scene: one row per variant with disparity, BadPix map, signed error and uncertainty; the
-  BadPix(t) curves), drawn with lfbench.reports.figures.
+  BadPix(t) curves), drawn from the maps the cells saved;
+- html/ (``--html``): the site, with the tables of the means over seeds, the orderings and the verdicts.
 
 "ours" columns are labelled with the budget (width, batch, patch, steps, device) and the test-time
-input size; "paper" columns with "RTX 3090, full training". Without the paper's tables there are no
-paper columns, and one line says so.
+input size; "paper" columns with the reference's label. Which reference: the spec's ``[report]
+reference``, else the reference of the spec's network when the spec asks for a paper table
+(``table`` is not "none"), names paper methods, or ``--paper`` is given; a plugin's ablation with
+``table = "none"`` shows no paper numbers. Without the paper's tables (its folder not found) there
+are no paper columns, and one line says so.
 """
 
 from __future__ import annotations
@@ -35,43 +43,67 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from lfbench.ablation import plots
+from lfbench.ablation.baselines import baselines_caption, baselines_table, scene_groups, summary_lines
+from lfbench.ablation.facts import cell_info, last_stage_loss, loss_beta, model_value, network_of
+from lfbench.ablation.significance import ALPHA, seeds_table, significance_table
 from lfbench.ablation.spec import AblationSpec
+from lfbench.data.scene import Scene
+from lfbench.reports.html import SiteInputs, SiteSection
+from lfbench.reports.maps import saved_predictions
+from lfbench.reports.paper import PaperTables, find_paper_dir, load_paper
+from lfbench.reports.reference import Reference, default_reference, get_reference, reference_for_network
 from lfbench.reports.tables import write_table
-from lfbench.runs.results import Results
+from lfbench.reports.writers import (
+    FIGURES_DIR,
+    OutputWriter,
+    RunOutputs,
+    SceneFigures,
+    Site,
+    Tables,
+    replay,
+    write_outputs,
+)
+from lfbench.results import Results
 from lfbench.scoring.metrics import get_metric
 from lfbench.utils.errors import DataError
+from lfbench.utils.names import file_name
+from lfbench.utils.outputs import check_within
 
-PAPER_LABEL = "paper (RTX 3090, full training)"
-TABLE4_FILE, TABLE5_FILE = "table4_interval_interp", "table5_losses"
-PAPER_LOSS_NAMES = {"l1": "baseline_l1"}  # our loss name -> the paper's Table V row
-PAPER_UAFL_BETA = 0.1
+__all__ = ["AblationFigures", "AblationSite", "AblationTables", "cell_frame", "load_paper_tables", "report_writers",
+           "run_writers", "saved_map_folders", "spec_reference", "write_report"]
+
 METRICS = ("badpix_0.07", "badpix_0.03", "badpix_0.01", "mse_x100")
+ERROR_MAPS_DIR = f"{FIGURES_DIR}/error_maps"
 Log = Callable[[str], None]
 _log = logging.getLogger(__name__)
 
 
-# --------------------------------------------------------------------------- facts per cell
+# --------------------------------------------------------------------------- the reference
 
-def last_stage_loss(config: dict[str, Any]) -> tuple[str, dict[str, Any]]:
-    """(loss name, loss parameters) of a cell's last training stage."""
-    from lfbench.training.config import STAGE_KEYS
-
-    st = config["stages"][-1]
-    return st["loss"], {k: v for k, v in st.items() if k not in STAGE_KEYS}
-
-
-def uafl_beta(config: dict[str, Any]) -> float | None:
-    loss, params = last_stage_loss(config)
-    return float(params.get("beta", PAPER_UAFL_BETA)) if loss == "uafl" else None
+def spec_reference(spec: AblationSpec, paper: str | Path | None = None) -> Reference | None:
+    """The reference the spec's tables stand beside: its ``[report] reference`` ("none": no reference), else,
+    when the spec asks for a paper table (``table`` other than "none"), names paper methods, or ``paper``
+    (--paper) is given, the reference of the spec's network, else the default reference; None otherwise."""
+    if spec.reference is not None:
+        return None if spec.reference == "none" else get_reference(spec.reference)
+    if spec.table == "none" and spec.paper_methods is None and paper is None:
+        return None
+    return reference_for_network(network_of(spec)) or default_reference()
 
 
-def _model_value(config: dict[str, Any], key: str, kind: type, missing: Any) -> Any:
-    """[model] ``key`` of a cell's config, else the network's default; ``missing`` if it has no such parameter."""
-    from lfbench.ablation.spec import network_default
+def load_paper_tables(paper: str | Path | None, log: Log, reference: Reference | None = None) -> PaperTables | None:
+    """The paper's tables (read as ``reference``'s, default the default reference), or None (with one line
+    saying so) when no folder is given or found."""
+    try:
+        folder = find_paper_dir(paper)
+    except DataError:
+        log("the paper's tables were not found (--paper DIR or LFBENCH_PAPER_DIR): tables without paper columns")
+        return None
+    return load_paper(folder, reference)
 
-    value = config["model"].get(key, network_default(config, key))
-    return missing if value is None else kind(value)
 
+# --------------------------------------------------------------------------- the cells
 
 def cell_frame(spec: AblationSpec, results: Results, markers: Sequence[dict[str, Any]]) -> pd.DataFrame:
     """One row per cell (index: cell id): grid values, interval, interpolation, loss, beta, mean metrics
@@ -83,11 +115,11 @@ def cell_frame(spec: AblationSpec, results: Results, markers: Sequence[dict[str,
         m = by_id.get(cell.id, {})
         loss, params = last_stage_loss(cell.config)
         row: dict[str, Any] = {"cell": cell.id, **{f"grid:{k}": v for k, v in cell.values.items()},
-                               "interval": _model_value(cell.config, "interval", float, np.nan),
-                               "interpolation": _model_value(cell.config, "interpolation", str, ""),
+                               "interval": model_value(cell.config, "interval", float, np.nan),
+                               "interpolation": model_value(cell.config, "interpolation", str, ""),
                                "loss": loss + ("" if not params else "(" + ", ".join(f"{k}={v}" for k, v in
                                                                                        params.items()) + ")"),
-                               "beta": uafl_beta(cell.config)}
+                               "beta": loss_beta(cell.config)}
         sel = df[df["method"] == cell.id]
         for metric in METRICS:
             vals = sel[sel["metric"] == metric]["value"]
@@ -129,9 +161,12 @@ def cells_table(spec: AblationSpec, frame: pd.DataFrame) -> pd.DataFrame:
     return out
 
 
-def _paper_extra(paper, name: str, columns: Sequence[str], log: Log) -> pd.DataFrame | None:
+def _paper_extra(paper: PaperTables | None, file: str, columns: Sequence[str], log: Log) -> pd.DataFrame | None:
+    """The paper's table in ``file`` of its folder (checked for ``columns``), or None (with one line) when
+    the folder has no such file."""
     if paper is None:
         return None
+    name = Path(file).stem
     df = paper.extra.get(name)
     if df is None:
         log(f"the paper folder {paper.source} has no {name}.csv: no paper columns in that table")
@@ -142,11 +177,19 @@ def _paper_extra(paper, name: str, columns: Sequence[str], log: Log) -> pd.DataF
     return df
 
 
-def table4(spec: AblationSpec, frame: pd.DataFrame, paper, log: Log) -> pd.DataFrame:
+def _layout(paper: PaperTables | None, table: str) -> Any:
+    """The reference's layout of ``table`` (its Table4 / Table5 / BetaSweep), None without one."""
+    reference = paper.reference if paper is not None else None
+    return getattr(reference, table, None) if reference is not None else None
+
+
+def table4(spec: AblationSpec, frame: pd.DataFrame, paper: PaperTables | None, log: Log) -> pd.DataFrame:
     """Table IV: interval, interpolation, BadPix 0.07, MSE x100, train time, test time (ours | paper)."""
     ours, test = ours_label(spec), time_label(frame)
-    ref = _paper_extra(paper, TABLE4_FILE, ("interval", "interpolation", "badpix_0.07", "mse_x100",
-                                            "train_hours_rtx3090", "test_seconds_512x512_rtx3090"), log)
+    layout = _layout(paper, "table4")
+    ref = None if layout is None else _paper_extra(paper, layout.file, (
+        "interval", "interpolation", "badpix_0.07", "mse_x100", layout.train_hours, layout.test_seconds), log)
+    label = paper.reference.label if ref is not None else ""
     rows = []
     for cid, r in frame.iterrows():
         p = None
@@ -157,41 +200,48 @@ def table4(spec: AblationSpec, frame: pd.DataFrame, paper, log: Log) -> pd.DataF
         row = {"cell": cid, "interval (px)": f"{r['interval']:g}", "interpolation": r["interpolation"],
                f"BadPix 0.07 (%), {ours}": r["badpix_0.07"]}
         if ref is not None:
-            row[f"BadPix 0.07 (%), {PAPER_LABEL}"] = _num(p, "badpix_0.07")
+            row[f"BadPix 0.07 (%), {label}"] = _num(p, "badpix_0.07")
         row[f"MSE x100, {ours}"] = r["mse_x100"]
         if ref is not None:
-            row[f"MSE x100, {PAPER_LABEL}"] = _num(p, "mse_x100")
+            row[f"MSE x100, {label}"] = _num(p, "mse_x100")
         row[f"train time (min), {ours}"] = float(r["train_s"]) / 60.0
         if ref is not None:
-            row[f"train time (h), {PAPER_LABEL}"] = _num(p, "train_hours_rtx3090")
+            row[f"train time (h), {label}"] = _num(p, layout.train_hours)
         row[f"test time (s), {test}"] = float(r["test_s"])
         if ref is not None:
-            row["test time (s), paper (RTX 3090, 512x512)"] = _num(p, "test_seconds_512x512_rtx3090")
+            row[f"test time (s), {layout.test_label}"] = _num(p, layout.test_seconds)
         rows.append(row)
     return pd.DataFrame(rows).set_index("cell")
 
 
-def paper_loss_name(config: dict[str, Any]) -> str | None:
-    """The paper's Table V row of a cell's last-stage loss (UAFL only with the paper's beta 0.1)."""
+def paper_loss_name(config: dict[str, Any], reference: Reference | None = None) -> str | None:
+    """The reference's (default: the default reference's) Table V row of a cell's last-stage loss: its best
+    loss only at its beta, other losses without parameters by their name (or the name it gives them)."""
+    reference = reference or default_reference()
+    if reference is None or reference.table5 is None:
+        return None
     loss, params = last_stage_loss(config)
-    if loss == "uafl":
-        return "uafl" if abs(float(params.get("beta", PAPER_UAFL_BETA)) - PAPER_UAFL_BETA) < 1e-12 else None
-    return PAPER_LOSS_NAMES.get(loss, loss) if not params else None
+    if loss == reference.table5.best_loss:
+        beta, best = loss_beta(config), reference.beta.best if reference.beta is not None else None
+        return loss if beta is None or best is None or abs(beta - best) < 1e-12 else None
+    return reference.table5.loss_names.get(loss, loss) if not params else None
 
 
-def table5(spec: AblationSpec, frame: pd.DataFrame, paper, log: Log) -> pd.DataFrame:
+def table5(spec: AblationSpec, frame: pd.DataFrame, paper: PaperTables | None, log: Log) -> pd.DataFrame:
     """Table V: BadPix 0.07 per fine-tuning loss (ours | paper), and our MSE x100."""
     ours = ours_label(spec)
-    ref = _paper_extra(paper, TABLE5_FILE, ("loss", "badpix_0.07"), log)
+    layout = _layout(paper, "table5")
+    ref = None if layout is None else _paper_extra(paper, layout.file, ("loss", "badpix_0.07"), log)
+    reference = paper.reference if paper is not None else None
     configs = {c.id: c.config for c in spec.cells}
     rows = []
     for cid, r in frame.iterrows():
-        name = paper_loss_name(configs[cid])
+        name = paper_loss_name(configs[cid], reference)
         row = {"cell": cid, "loss (stage 2)": r["loss"], "paper row": name or "-",
                f"BadPix 0.07 (%), {ours}": r["badpix_0.07"]}
         if ref is not None:
             hit = ref[ref["loss"].astype(str).str.strip() == name] if name else ref.iloc[0:0]
-            row[f"BadPix 0.07 (%), {PAPER_LABEL}"] = float(hit["badpix_0.07"].iloc[0]) if len(hit) else np.nan
+            row[f"BadPix 0.07 (%), {reference.label}"] = float(hit["badpix_0.07"].iloc[0]) if len(hit) else np.nan
         row[f"MSE x100, {ours}"] = r["mse_x100"]
         row["stage-2 train time (min)"] = r["own_train_s"] / 60.0
         rows.append(row)
@@ -212,15 +262,13 @@ def _num(row, key: str) -> float:
     return float(value)
 
 
-# --------------------------------------------------------------------------- seeds
+# --------------------------------------------------------------------------- seeds and baselines
 
 def seed_means(spec: AblationSpec, frame: pd.DataFrame) -> tuple[pd.DataFrame, dict[str, str]]:
     """The cell frame averaged over seeds (one row per variant, indexed by its first seed's cell so the table
     builders find its config) and the map from that cell id to the variant id; unchanged without seeds."""
     if not spec.seeds or frame.empty:
         return frame, {}
-    from lfbench.ablation.significance import cell_info
-
     info = cell_info(spec).reindex(frame.index)
     numeric = frame.select_dtypes(include="number").columns
     rows, rename = [], {}
@@ -236,9 +284,6 @@ def seed_means(spec: AblationSpec, frame: pd.DataFrame) -> tuple[pd.DataFrame, d
 def baseline_verdicts(spec: AblationSpec, results: Results) -> tuple[pd.DataFrame, list[str], list[str]]:
     """table_baselines (every cell or variant against the spec's [[methods]], see lfbench.ablation.baselines),
     its caption and the summary lines (one per baseline); empty without cells or [[methods]]."""
-    from lfbench.ablation.baselines import baselines_caption, baselines_table, scene_groups, summary_lines
-    from lfbench.ablation.significance import cell_info
-
     scores = results.to_frame()
     if not spec.cells or not spec.methods or scores.empty:
         return pd.DataFrame(), [], []
@@ -252,30 +297,7 @@ def baseline_verdicts(spec: AblationSpec, results: Results) -> tuple[pd.DataFram
     return table, [title, *lines, baselines_caption(seeds=bool(spec.seeds)), ours], lines
 
 
-def write_seed_tables(spec: AblationSpec, results: Results, out: Path) -> list[Path]:
-    """table_seeds (mean and 95 % t-interval over seeds per variant) and table_significance (the paper's
-    orderings as paired t-tests over seeds); see lfbench.ablation.significance."""
-    from lfbench.ablation.significance import ALPHA, cell_info, seeds_table, significance_table
-
-    info, scores = cell_info(spec), results.to_frame()
-    caption = caption_lines(spec, f"mean over seeds {', '.join(str(x) for x in spec.seeds)} and 95 % "
-                                        "t-interval over seeds of the scene-mean score")
-    written = write_table(seeds_table(info, scores, METRICS), out, "table_seeds", caption)
-    sig = significance_table(spec.table, info, scores)
-    if not sig.empty:
-        caption = caption_lines(spec, "the paper's orderings, paired t-test over seeds (BadPix 0.07, lower "
-                                            f"is better; two-sided, alpha {ALPHA:g})")
-        written += write_table(sig.set_index("claim (paper)"), out, "table_significance", caption)
-    return written
-
-
-# --------------------------------------------------------------------------- writing
-
-PAPER_ABLATION_NOTE = ("paper: Chao et al., IEEE TCI 2023 (RTX 3090, full training: 50 + 10 epochs, batch 32, the 16 "
-                       "additional scenes; scored on 8 validation scenes; test time for a 512x512 input)")
-PAPER_BENCHMARK_NOTE = ("paper: Chao et al., IEEE TCI 2023, Tables I/II (HCI benchmark; backgammon, dots and stripes "
-                        "scored at high resolution, see 'paper resolution')")
-
+# --------------------------------------------------------------------------- captions
 
 def caption_lines(spec: AblationSpec, what: str | None = None) -> list[str]:
     """The first lines above a table: what it is and what 'ours' means (budget, scenes, times). A table with
@@ -296,9 +318,11 @@ def caption_lines(spec: AblationSpec, what: str | None = None) -> list[str]:
     return [spec.title if what is None else f"{spec.title}: {what}", ours]
 
 
-def paper_line(paper, note: str = PAPER_ABLATION_NOTE) -> str:
+def paper_line(paper: PaperTables | None) -> str:
     """What the 'paper' columns of a table that can have them are, or that they are absent and why."""
-    return note if paper is not None else "paper: not shown (the paper's tables were not found)"
+    if paper is None:
+        return "paper: not shown (the paper's tables were not found)"
+    return paper.reference.ablation_note if paper.reference is not None else f"paper: {paper.source}"
 
 
 def _with_summary(caption: list[str], summary: Sequence[str]) -> list[str]:
@@ -306,93 +330,171 @@ def _with_summary(caption: list[str], summary: Sequence[str]) -> list[str]:
     return [*caption[:1], *summary, *caption[1:]]
 
 
-def load_paper_tables(paper: str | Path | None, log: Log):
-    """The paper's tables, or None (with one line saying so) when no folder is given or found."""
-    from lfbench.reports.paper import find_paper_dir, load_paper
+# --------------------------------------------------------------------------- the writers
 
-    try:
-        folder = find_paper_dir(paper)
-    except DataError:
-        log("the paper's tables were not found (--paper DIR or LFBENCH_PAPER_DIR): tables without paper columns")
-        return None
-    return load_paper(folder)
+class AblationTables(OutputWriter):
+    """table_cells, the reference's table of the spec (table4, table5, table_beta), table_seeds and
+    table_significance (seeds) and table_baselines ([[methods]]). ``paper``: the reference's numbers
+    (None: no paper columns). After the write, ``sections`` holds the tables the site shows besides its
+    leaderboard: the means over seeds with their intervals, the orderings and the verdicts."""
+
+    def __init__(self, spec: AblationSpec, markers: Sequence[dict[str, Any]], paper: PaperTables | None,
+                 reference: Reference | None, log: Log = _log.info) -> None:
+        self.spec, self.markers, self.paper, self.reference, self.log = spec, markers, paper, reference, log
+        self.sections: list[SiteSection] = []
+
+    def write(self, run: RunOutputs) -> list[Path]:
+        spec, results, out = self.spec, run.results, run.stage
+        frame = cell_frame(spec, results, self.markers)
+        if frame.empty:
+            return []
+        bar, bar_caption, bar_lines = baseline_verdicts(spec, results)
+        for line in bar_lines:
+            self.log(line)
+        written = write_table(cells_table(spec, frame), out, "table_cells",
+                              _with_summary(caption_lines(spec, "all cells"), bar_lines))
+        means, rename = seed_means(spec, frame)
+        seeds_note = ([f"ours: mean over seeds {', '.join(str(x) for x in spec.seeds)} (intervals and paired tests: "
+                       "table_seeds, table_significance)"] if spec.seeds else [])
+        with_paper = _with_summary([*caption_lines(spec), paper_line(self.paper), *seeds_note], bar_lines)
+        if spec.table == "table4":
+            written += write_table(table4(spec, means, self.paper, self.log).rename(index=rename), out, "table4",
+                                   with_paper)
+        elif spec.table == "table5":
+            written += write_table(table5(spec, means, self.paper, self.log).rename(index=rename), out, "table5",
+                                   with_paper)
+        elif spec.table == "beta":
+            said = [self.reference.beta.note] if self.reference is not None and self.reference.beta else []
+            caption = _with_summary([*caption_lines(spec), *seeds_note, *said], bar_lines)
+            written += write_table(table_beta(spec, means).rename(index=rename), out, "table_beta", caption)
+        if spec.seeds:
+            written += self._seed_tables(results, out)
+        if not bar.empty:
+            written += write_table(bar, out, "table_baselines", bar_caption)
+            self.sections.append(SiteSection("baselines", "Against the baselines", bar, bar_caption))
+        return written
+
+    def _seed_tables(self, results: Results, out: Path) -> list[Path]:
+        """table_seeds (mean and 95 % t-interval over seeds per variant, within each metric's range) and
+        table_significance (the reference's orderings as paired t-tests over seeds);
+        see lfbench.ablation.significance."""
+        spec = self.spec
+        info, scores = cell_info(spec), results.to_frame()
+        seeds, clipped = seeds_table(info, scores, METRICS)
+        caption = caption_lines(spec, f"mean over seeds {', '.join(str(x) for x in spec.seeds)} and 95 % "
+                                      "t-interval over seeds of the scene-mean score")
+        if clipped:
+            caption.append(f"intervals clipped to the metric's range ({'; '.join(clipped)}): with few seeds the "
+                           "t-interval can reach past it")
+        written = write_table(seeds, out, "table_seeds", caption)
+        self.sections.append(SiteSection("seeds", "Mean over seeds", seeds, caption))
+        sig = significance_table(spec.table, info, scores, reference=self.reference)
+        if not sig.empty:
+            caption = caption_lines(spec, "the paper's orderings, paired t-test over seeds (BadPix 0.07, lower "
+                                          f"is better; two-sided, alpha {ALPHA:g})")
+            sig = sig.set_index("claim (paper)")
+            written += write_table(sig, out, "table_significance", caption)
+            self.sections.append(SiteSection("significance", "The paper's orderings", sig, caption))
+        return written
+
+
+class AblationFigures(OutputWriter):
+    """figures/beta_curve.png (spec table "beta") and figures/accuracy_vs_test_time.png ("table4", with
+    the reference's Table IV beside ours when its numbers are there)."""
+
+    def __init__(self, spec: AblationSpec, markers: Sequence[dict[str, Any]], paper: PaperTables | None,
+                 reference: Reference | None) -> None:
+        self.spec, self.markers, self.paper, self.reference = spec, markers, paper, reference
+
+    def write(self, run: RunOutputs) -> list[Path]:
+        spec, fig_dir = self.spec, run.stage / FIGURES_DIR
+        frame = cell_frame(spec, run.results, self.markers)
+        written = []
+        if not frame.empty and spec.table == "beta" and frame["beta"].notna().any():
+            said = self.reference.beta.curve_note if self.reference is not None and self.reference.beta else None
+            written.append(plots.beta_curve(frame, run.results.to_frame(), fig_dir / "beta_curve.png",
+                                            ours_label(spec), said))
+        if not frame.empty and spec.table == "table4":
+            layout = _layout(self.paper, "table4")
+            ref = None if layout is None else _paper_extra(self.paper, layout.file, (
+                "interval", "interpolation", "badpix_0.07", layout.test_seconds), lambda _: None)
+            written.append(plots.accuracy_vs_time(frame, ref, fig_dir / "accuracy_vs_test_time.png", ours_label(spec),
+                                                  time_label(frame), layout))
+        return written
+
+
+class AblationSite(Site):
+    """The ablation's site: the leaderboard of the cells and extra methods, their maps, and the tables of
+    :class:`AblationTables` (means over seeds with intervals, orderings, verdicts against each baseline)."""
+
+    def __init__(self, spec: AblationSpec, tables: AblationTables, folder: Path) -> None:
+        super().__init__(title=spec.title, notes=[
+            f"Ablation {spec.source}: budget {spec.budget_label()}; one method per cell (its id) and per extra "
+            f"method. Training curves: tensorboard --logdir {folder / 'cells'}."])
+        self.tables = tables
+
+    def inputs(self, run: RunOutputs) -> SiteInputs:
+        for path in run.maps.values():
+            if (path / "disp_maps").is_dir():
+                check_within(path, run.folder, "the ablation folder")
+        self.maps, self.sections = run.maps, self.tables.sections
+        return super().inputs(run)
+
+
+def saved_map_folders(spec: AblationSpec, folder: Path) -> dict[str, Path]:
+    """Where each cell and extra method of the ablation in ``folder`` saved its maps: label -> submission folder."""
+    maps = {cell.id: folder / "cells" / cell.id / "maps" for cell in spec.cells}
+    return maps | {m.label: folder / "methods" / file_name(m.label) / "maps" for m in spec.methods}
+
+
+def report_writers(spec: AblationSpec, markers: Sequence[dict[str, Any]], results: Results, *,
+                   paper: str | Path | None = None, folder: Path, html: bool = False,
+                   log: Log = _log.info) -> list[OutputWriter]:
+    """The writers of an ablation's tables and figures (and, with ``html``, its site), in order. ``paper``:
+    the paper's tables folder (--paper; None: found as lfbench.reports.paper.find_paper_dir says) when
+    the spec has a reference (:func:`spec_reference`); ``folder``: the ablation's folder."""
+    reference = spec_reference(spec, paper)
+    tables = load_paper_tables(paper, log, reference) if reference is not None else None
+    ablation = AblationTables(spec, markers, tables, reference, log)
+    writers: list[OutputWriter] = [ablation, _tables_i_ii(spec, results, tables),
+                                   AblationFigures(spec, markers, tables, reference)]
+    if spec.evaluation.error_maps:
+        writers.append(SceneFigures(ERROR_MAPS_DIR, files=True))
+    if html:
+        writers.append(AblationSite(spec, ablation, folder))
+    return writers
+
+
+def _tables_i_ii(spec: AblationSpec, results: Results, paper: PaperTables | None) -> Tables:
+    """Tables I/II of every cell and method, with the paper's beside them when it reports an evaluation scene."""
+    caption = caption_lines(spec, "Tables I/II")
+    covered = paper is not None and any(s in paper.scenes for s in results.scenes)
+    if not covered:
+        return Tables(caption=caption)
+    note = [paper.reference.benchmark_note] if paper.reference is not None else []
+    return Tables(caption=caption, paper=paper, paper_methods=spec.paper_methods or (), paper_caption=[*caption, *note])
 
 
 def write_report(spec: AblationSpec, out: str | Path, results: Results, markers: Sequence[dict[str, Any]], *,
                  paper: str | Path | None = None, log: Log = _log.info, folder: str | Path | None = None) -> list[Path]:
-    """Every table and figure of the run into ``out``; returns the files written. ``folder``: the
-    ablation's folder, whose cells' and methods' saved maps the error maps are drawn from (default ``out``)."""
-    from lfbench.reports.paper import average_with_paper, per_scene_with_paper
-    from lfbench.reports.tables import average_table, per_scene_table
-
+    """Every table and figure of the run straight into ``out`` (:func:`report_writers` without the site);
+    returns the files written. ``folder``: the ablation's folder, whose cells' and methods' saved maps the
+    error maps are drawn from (default ``out``)."""
     out = Path(out)
-    paper_tables = load_paper_tables(paper, log)
-    frame = cell_frame(spec, results, markers)
-    written: list[Path] = []
-    if not frame.empty:
-        bar, bar_caption, bar_lines = baseline_verdicts(spec, results)
-        for line in bar_lines:
-            log(line)
-        written += write_table(cells_table(spec, frame), out, "table_cells",
-                               _with_summary(caption_lines(spec, "all cells"), bar_lines))
-        means, rename = seed_means(spec, frame)
-        seeds_note = ([f"ours: mean over seeds {', '.join(str(x) for x in spec.seeds)} (intervals and paired tests: "
-                       "table_seeds, table_significance)"] if spec.seeds else [])
-        with_paper = _with_summary([*caption_lines(spec), paper_line(paper_tables), *seeds_note], bar_lines)
-        if spec.table == "table4":
-            written += write_table(table4(spec, means, paper_tables, log).rename(index=rename), out, "table4",
-                                   with_paper)
-        elif spec.table == "table5":
-            written += write_table(table5(spec, means, paper_tables, log).rename(index=rename), out, "table5",
-                                   with_paper)
-        elif spec.table == "beta":
-            caption = _with_summary([*caption_lines(spec), *seeds_note, "paper: no values printed (its "
-                                     "figure: BadPix 0.07 improves as beta goes from 1 down to 0.1)"], bar_lines)
-            written += write_table(table_beta(spec, means).rename(index=rename), out, "table_beta", caption)
-        if spec.seeds:
-            written += write_seed_tables(spec, results, out)
-        if not bar.empty:
-            written += write_table(bar, out, "table_baselines", bar_caption)
-    per_scene, average = per_scene_table(results), average_table(results)
-    base_caption = caption_lines(spec, "Tables I/II")
-    written += write_table(per_scene, out, "table_per_scene", base_caption)
-    written += write_table(average, out, "table_average", base_caption)
-    if paper_tables is not None and not per_scene.empty:
-        covered = [s for s in results.scenes if s in paper_tables.scenes]
-        if covered:
-            methods = [paper_tables.resolve_method(m) for m in spec.paper_methods]
-            caption = [*caption_lines(spec, "Tables I/II"), PAPER_BENCHMARK_NOTE]
-            written += write_table(per_scene_with_paper(per_scene, paper_tables, methods), out,
-                                   "table_per_scene_paper", caption)
-            written += write_table(average_with_paper(average, paper_tables, results.scenes, methods), out,
-                                   "table_average_paper", caption)
-    written += write_figures(spec, out, frame, results, paper_tables, log, Path(folder) if folder is not None else out)
-    return written
+    folder = Path(folder) if folder is not None else out
+    writers = report_writers(spec, markers, results, paper=paper, folder=folder, log=log)
+    return run_writers(writers, spec, results, out, folder)
 
 
-# --------------------------------------------------------------------------- figures
-
-def write_figures(spec: AblationSpec, out: Path, frame: pd.DataFrame, results: Results, paper, log: Log,
-                  folder: Path | None = None) -> list[Path]:
-    """The figures into out/figures; the error maps from the maps saved under ``folder`` (default ``out``)."""
-    from lfbench.ablation import plots
-
-    fig_dir = out / "figures"
-    written = []
-    if not frame.empty and spec.table == "beta" and frame["beta"].notna().any():
-        per_scene = results.to_frame()
-        written.append(plots.beta_curve(frame, per_scene, fig_dir / "beta_curve.png", ours_label(spec)))
-    if not frame.empty and spec.table == "table4":
-        ref = _paper_extra(paper, TABLE4_FILE, ("interval", "interpolation", "badpix_0.07",
-                                                "test_seconds_512x512_rtx3090"), lambda _: None)
-        written.append(plots.accuracy_vs_time(frame, ref, fig_dir / "accuracy_vs_test_time.png", ours_label(spec),
-                                              time_label(frame)))
+def run_writers(writers: Sequence[OutputWriter], spec: AblationSpec, results: Results, stage: Path, folder: Path,
+                scenes: Sequence[Any] = ()) -> list[Path]:
+    """Run the ablation's ``writers`` into ``stage``: the saved maps of its cells and methods under
+    ``folder`` are handed to them as predictions (the error maps), on the evaluation scenes the results
+    record; ``scenes``: the evaluation scenes, for the site."""
+    run = RunOutputs(stage=stage, results=results, scenes=scenes, source=folder, maps=saved_map_folders(spec, folder))
+    for writer in writers:
+        writer.start(run)
     if spec.evaluation.error_maps:
-        folder = folder if folder is not None else out
-        maps = {cid: folder / "cells" / cid / "maps" for cid in frame.index} if not frame.empty else {}
-        from lfbench.utils.names import file_name
-
-        for m in spec.methods:
-            maps[m.label] = folder / "methods" / file_name(m.label) / "maps"
-        written += plots.error_maps(results.meta.get("scenes", []), maps, fig_dir / "error_maps", folder)
-    return written
+        recorded = [Scene(d) for d in results.meta.get("scenes", [])]
+        replay(writers, saved_predictions(recorded, run.maps, within=folder))
+    return write_outputs(writers, run)

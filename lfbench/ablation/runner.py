@@ -11,11 +11,13 @@ Layout of OUT::
     methods/<label>/           scores of the spec's extra [[methods]]
     results.json, results.csv  every cell's and method's records (method = cell id or label)
     table_*.md/.tex/.csv, figures/   see lfbench.ablation.report
-    html/                      the HTML report (``html``: lfbench.ablation.html)
+    html/                      the HTML report (``html``: lfbench.ablation.report.AblationSite)
 
 spec.toml, results.json, results.csv, the tables, figures and html/ are one output set
-(lfbench.runs.outputs): written into a staging folder and committed together, under OUT's
-results.json.lock, so that a kill or a full disk leaves the previous set or the new one.
+(lfbench.utils.outputs), written by the ablation's output writers (lfbench.ablation.report.report_writers)
+into a staging folder and committed together, under OUT's results.json.lock, so that a kill or a full
+disk leaves the previous set or the new one. Each cell's and extra method's scores and maps are a set of
+their own folder (lfbench.runs.folder.evaluate_to_folder with lfbench.reports.writers.Maps).
 
 Re-running the same command skips finished cells (their marker is written last) and resumes an
 interrupted one from its training checkpoint.
@@ -38,17 +40,24 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-from lfbench.ablation.cell import CellTask, is_done, read_marker, run_cell
+from lfbench.ablation.cell import MAPS, CellTask, is_done, load_scenes, read_marker, run_cell
 from lfbench.ablation.executor import ClusterOptions
-from lfbench.ablation.spec import AblationSpec, Cell, SyntheticEval, _sha
-from lfbench.runs.outputs import OutputSet, prepare_output_folder, read_manifest, recover, staged_outputs
-from lfbench.runs.results import Results
+from lfbench.ablation.report import report_writers, run_writers
+from lfbench.ablation.spec import AblationSpec, Cell, SyntheticEval, sha256_of
+from lfbench.method.registry import create_from_spec
+from lfbench.reports.writers import Maps
+from lfbench.results import Results
+from lfbench.runs.folder import evaluate_to_folder
+from lfbench.scoring.rules import ScoringRules
+from lfbench.training.loop import check_data
 from lfbench.utils.atomic import fresh_dir, write_text
 from lfbench.utils.errors import DataError, SpecError
 from lfbench.utils.hardware import available_cores
 from lfbench.utils.jsonfile import json_text, read_json
 from lfbench.utils.log import log_to_file
 from lfbench.utils.names import file_name
+from lfbench.utils.outputs import OutputSet, prepare_output_folder, read_manifest, recover, staged_outputs
+from lfbench.utils.tomlfile import toml_text
 
 Log = Callable[[str], None]
 _log = logging.getLogger(__name__)
@@ -74,16 +83,28 @@ def _generate(target: Path, seed: int, size: int, scenes: int, category: str, lo
 
 
 def prepare_training_data(cells: tuple[Cell, ...], out: Path, log: Log) -> dict[str, dict[str, str]]:
-    """Generate every [[data.synthetic]] set of the cells once into OUT/data/; returns, per cell id,
-    category -> folder (linked into the cell as CELL/data/<category>)."""
+    """Generate every [[data.synthetic]] set the cells read (DataConfig.synthetic_in_use: not a validation set
+    that data.validation = [] leaves unused) once into OUT/data/; returns, per cell id, category -> folder
+    (linked into the cell as CELL/data/<category>)."""
     links: dict[str, dict[str, str]] = {}
     for cell in cells:
         links[cell.id] = {}
-        for syn in cell.config["data"].get("synthetic", []):
-            name = f"{syn['category']}_s{syn['seed']}_{syn['size']}px_{syn['scenes']}"
-            folder = _generate(out / "data" / name, syn["seed"], syn["size"], syn["scenes"], syn["category"], log)
-            links[cell.id][syn["category"]] = str(folder)
+        for syn in cell.train_config().data.synthetic_in_use():
+            name = f"{syn.category}_s{syn.seed}_{syn.size}px_{syn.scenes}"
+            folder = _generate(out / "data" / name, syn.seed, syn.size, syn.scenes, syn.category, log)
+            links[cell.id][syn.category] = str(folder)
     return links
+
+
+def check_training_data(spec: AblationSpec, out: Path) -> None:
+    """Every cell's data names (roots, train / validation scenes, validation border) checked before anything
+    is generated or written (lfbench.training.loop.check_data; cells with the same data checked once)."""
+    seen = set()
+    for cell in spec.cells:
+        key = json.dumps([cell.config["data"], cell.config["validation"]], sort_keys=True)
+        if key not in seen:
+            seen.add(key)
+            check_data(cell.train_config(spec.source), out / "cells" / cell.id / "data")
 
 
 def prepare_evaluation(spec: AblationSpec, out: Path, log: Log) -> tuple[tuple[str, str], ...]:
@@ -123,16 +144,15 @@ def run_shared_stage1(spec: AblationSpec, out: Path, links: dict[str, str], thre
 def _shared_stage1(spec: AblationSpec, folder: Path, links: dict[str, str], threads: int, progress: bool | None,
                    log: Log) -> Path:
     from lfbench.ablation.cell import LOG, TRAIN_CONFIG
-    from lfbench.ablation.toml_text import dumps
-    from lfbench.training.config import TrainConfig
-    from lfbench.training.loop import comparable, train
+    from lfbench.training.config import TrainConfig, comparable
+    from lfbench.training.loop import train
 
     cfg = spec.stage1_config()
     cfg["training"]["threads"] = threads
     path = folder / TRAIN_CONFIG
     if path.is_file() and comparable(TrainConfig.from_toml(path).to_dict()) != comparable(cfg):
         raise SpecError(f"{path} holds another stage-1 config; use another --out folder")
-    write_text(path, dumps(cfg, f"The shared stage 1 of {spec.source}: written by lfbench ablate."))
+    write_text(path, toml_text(cfg, f"The shared stage 1 of {spec.source}: written by lfbench ablate."))
     for category, target in links.items():
         link = folder / "data" / category
         if link.is_symlink() and link.resolve() != Path(target).resolve():
@@ -164,7 +184,7 @@ def make_tasks(spec: AblationSpec, out: Path, links: dict[str, dict[str, str]], 
         config["training"]["threads"] = threads
         tasks.append(CellTask(
             cell_id=cell.id, values=cell.values, config=config, fingerprint=cell.fingerprint,
-            eval_fingerprint=_sha([spec.evaluation.fingerprint(), [s for s, _ in scenes]]),
+            eval_fingerprint=sha256_of([spec.evaluation.fingerprint(), [s for s, _ in scenes]]),
             cell_dir=str(out / "cells" / cell.id), data_links=links[cell.id],
             stage1_dir=str(stage1) if stage1 is not None else None, scenes=scenes, evaluation=spec.evaluation,
             threads=threads, progress=progress))
@@ -282,10 +302,6 @@ def _time_all(tasks, threads: int) -> list[dict[str, Any]]:
 
 def run_methods(spec: AblationSpec, out: Path, scenes: tuple[tuple[str, str], ...], log: Log) -> list[Results]:
     """Score the spec's [[methods]] (cached in OUT/methods/<label>/ with a marker, like cells)."""
-    from lfbench.ablation.cell import load_scenes, save_maps
-    from lfbench.method.registry import create_from_spec
-    from lfbench.runs.folder import evaluate_to_folder
-    from lfbench.scoring.rules import ScoringRules
 
     ev = spec.evaluation
     rules = ScoringRules(allow_highres=not ev.lowres_only)
@@ -293,15 +309,15 @@ def run_methods(spec: AblationSpec, out: Path, scenes: tuple[tuple[str, str], ..
     out_list = []
     for m in spec.methods:
         folder = out / "methods" / file_name(m.label)
-        key = _sha([m.spec, ev.fingerprint(), [s for s, _ in scenes]])
+        key = sha256_of([m.spec, ev.fingerprint(), [s for s, _ in scenes]])
         marker = folder / "method.json"
         done = read_json(marker, "method marker") if marker.is_file() else None
         if isinstance(done, dict) and done.get("key") == key:
             out_list.append(Results.read(folder))
             log(f"method {m.label}: finished earlier, skipped")
             continue
-        res = evaluate_to_folder([create_from_spec(m.spec)], loaded, folder, rules=rules, label=m.label, tables=False,
-                                 on_prediction=save_maps(folder / "maps"), progress=False,
+        res = evaluate_to_folder([create_from_spec(m.spec)], loaded, folder, rules=rules, label=m.label,
+                                 writers=[Maps(MAPS, per_method=False, uncertainty=True)], progress=False,
                                  meta={"method": {"label": m.label, "spec": m.spec}})
         if res.records:  # a method that served no scene (e.g. weights not there yet) is tried again next time
             write_text(marker, json_text({"label": m.label, "spec": m.spec, "key": key}, indent=2) + "\n")
@@ -335,6 +351,7 @@ def run_ablation(spec: AblationSpec, out: str | Path, *, jobs: int = 1, progress
 
         check_executor(cluster)  # before any work: no data generated, nothing submitted
     out = Path(out)
+    check_training_data(spec, out)
     prepare_output_folder(out)
     with _set_lock(out):
         recover(out)  # a cut commit of an earlier run is finished (or its journal refused) before any work
@@ -366,7 +383,7 @@ def run_ablation(spec: AblationSpec, out: str | Path, *, jobs: int = 1, progress
         merged = merge_results(out, combined, outputs.stage)
         if spec.text:
             write_text(outputs.stage / "spec.toml", spec.text)
-        written = _write_set(spec, out, outputs, combined, markers, paper=paper, html=html, log=log)
+        written = _write_set(spec, out, outputs, combined, markers, paper=paper, html=html, log=log, scenes=scenes)
     if len(merged.methods) > len(combined.methods):
         log(f"{out / 'results.json'}: {len(combined.methods)} of {len(merged.methods)} cells/methods from this run "
             "(the others from earlier runs); `lfbench ablate SPEC --report-only` tabulates them all")
@@ -376,7 +393,7 @@ def run_ablation(spec: AblationSpec, out: str | Path, *, jobs: int = 1, progress
 def check_folders(spec: AblationSpec, out: Path) -> None:
     """DataError when a folder the run trains, scores or generates into (stage1, cells/<id>, methods/<label>,
     data, eval_data, submitit) leads out of OUT through a symbolic link: an ablation writes inside OUT only."""
-    from lfbench.runs.outputs import check_within
+    from lfbench.utils.outputs import check_within
 
     names = ["cells", "methods", "stage1", "data", "eval_data", "submitit"]
     names += [f"cells/{c.id}" for c in spec.cells] + [f"methods/{file_name(m.label)}" for m in spec.methods]
@@ -393,23 +410,18 @@ def _set_lock(out: Path):
 
 
 def _write_set(spec: AblationSpec, out: Path, outputs: OutputSet, results: Results, markers: list[dict[str, Any]], *,
-               paper: str | Path | None, html: bool, log: Log, keep: tuple[str, ...] = ()) -> list[Path]:
-    """Tables, figures (and the site, drawn from the staged results.json) into the staging folder, then the
-    commit of the staged entries; returns their final paths."""
-    from lfbench.ablation.report import write_report
-
+               paper: str | Path | None, html: bool, log: Log, keep: tuple[str, ...] = (),
+               scenes: tuple[tuple[str, str], ...] | None = None) -> list[Path]:
+    """The ablation's writers (tables, figures and, with ``html``, the site, drawn from the staged
+    results.json) into the staging folder, then the commit of the staged entries; returns the final paths
+    of what the writers wrote. ``scenes``: the evaluation scenes (prepared here when None and the site needs
+    them)."""
     stage = outputs.stage
-    staged = write_report(spec, stage, results, markers, paper=paper, log=log, folder=out)
-    if html:
-        from lfbench.ablation.html import write_site
-        from lfbench.reports.html import SITE_DIR
-
-        staged.append(write_site(spec, out, results_dir=stage if (stage / "results.json").is_file() else out,
-                                 site=stage / SITE_DIR))
-    entries = {p.relative_to(stage).parts[0] for p in staged}
-    entries |= {name for name in ("results.json", "results.csv", "spec.toml") if (stage / name).is_file()}
-    outputs.commit(sorted(entries), keep=keep)
-    written = [outputs.final(p) for p in staged]
+    writers = report_writers(spec, markers, results, paper=paper, folder=out, html=html, log=log)
+    site_scenes = load_scenes(scenes if scenes is not None else prepare_evaluation(spec, out, log)) if html else ()
+    staged = run_writers(writers, spec, results, stage, out, site_scenes)
+    books = [stage / name for name in ("results.json", "results.csv", "spec.toml") if (stage / name).is_file()]
+    written = outputs.commit_written([*staged, *books], keep=keep)[:len(staged)]
     log(f"wrote {len(written)} files into {out} (results.json, table_*.md/.tex/.csv, figures/)")
     return written
 

@@ -6,15 +6,19 @@ seeds (mean +- t_{0.975, n-1} s / sqrt(n)): the seed is the unit of replication,
 are a fixed test set, so the interval says how much a re-training with another seed moves the number.
 
 Each of the paper's orderings becomes paired comparisons of neighbouring variants (Table IV: interval
-1 worse than 0.5 worse than 0.25 worse than 0.1 at the same interpolation; Table V: UAFL better than
-each other loss; beta sweep: beta 0.1 better than each other beta), in BadPix 0.07 (lower is better).
+1 worse than 0.5 worse than 0.25 worse than 0.1 at the same interpolation; Table V: the reference's
+best loss (SubFocal's paper: UAFL) better than each other loss; beta sweep: the reference's beta better
+than each other beta), in BadPix 0.07 (lower is better); lfbench.reports.reference says which loss and
+beta the paper finds best.
 The test is a paired t-test over seeds of d_s = score(worse, s) - score(better, s), each score the mean
 over the scenes both cells were scored on: pairing by seed removes what the seeds share (the sampled
 patches, the initialisation), and averaging over scenes first keeps one independent value per training
 run. Pairs over (scene, seed) would count each network once per scene as if the scenes were independent
 replicates, which they are not (one network scores all of them): the p-values would be too small. With
 n seeds the test has n - 1 degrees of freedom (with 3 seeds an effect must be about 4.3 standard errors
-to reach p < 0.05), so "not resolved" is a common, honest outcome at a small budget.
+to reach p < 0.05), so "not resolved" is a common, honest outcome at a small budget. With so few seeds a
+t-interval can also reach past what the metric can take (BadPix over 100 %): the seeds table clips it to
+the metric's range (``Metric.value_range``) and says so.
 
 Verdict per comparison at alpha = 0.05 (two-sided): ``reproduced`` (the paper's better variant is
 significantly better), ``reversed`` (significantly worse), ``not resolved`` (otherwise, or fewer than
@@ -30,20 +34,21 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+from scipy import stats
 
-__all__ = ["ALPHA", "Comparison", "cell_info", "comparisons", "paired_t", "scene_scores", "seeds_table",
+from lfbench.reports.reference import Reference, default_reference
+from lfbench.scoring.metrics import find_metric
+
+__all__ = ["ALPHA", "Comparison", "comparisons", "paired_t", "scene_scores", "seeds_table",
            "significance_table", "t_interval", "verdict"]
 
 ALPHA = 0.05
 LEVEL = 0.95
 ORDERING_METRIC = "badpix_0.07"
-PAPER_BETA = 0.1
 
 
 def t_interval(values: Sequence[float], level: float = LEVEL) -> tuple[float, float, float]:
     """(mean, low, high): the t-interval of the mean of ``values`` (NaN bounds for fewer than 2 values)."""
-    from scipy import stats
-
     x = np.asarray([v for v in values if np.isfinite(v)], dtype=np.float64)
     if x.size == 0:
         return math.nan, math.nan, math.nan
@@ -58,8 +63,6 @@ def paired_t(better: Sequence[float], worse: Sequence[float], level: float = LEV
     """Paired t-test of d = worse - better (positive: ``better`` has the lower score). Returns n, mean_diff,
     low, high (its t-interval), t and the two-sided p (NaN with fewer than 2 pairs; with all differences
     equal, p is 0 for a non-zero difference and 1 for none)."""
-    from scipy import stats
-
     d = np.asarray(worse, dtype=np.float64) - np.asarray(better, dtype=np.float64)
     d = d[np.isfinite(d)]
     n = int(d.size)
@@ -91,26 +94,14 @@ class Comparison:
     worse: str
 
 
-def cell_info(spec) -> pd.DataFrame:
-    """One row per cell (index: cell id): variant id, seed, interval, interpolation, loss, beta."""
-    from lfbench.ablation.report import _model_value, last_stage_loss, uafl_beta
-    from lfbench.ablation.spec import cell_id, variant_values
-
-    rows = []
-    for cell in spec.cells:
-        loss, params = last_stage_loss(cell.config)
-        rows.append({"cell": cell.id, "variant": cell_id(variant_values(cell)),
-                     "seed": cell.values.get("seed", cell.config.get("seed")),
-                     "interval": _model_value(cell.config, "interval", float, np.nan),
-                     "interpolation": _model_value(cell.config, "interpolation", str, ""),
-                     "loss": loss, "loss_params": bool(params), "beta": uafl_beta(cell.config)})
-    return pd.DataFrame(rows).set_index("cell") if rows else pd.DataFrame()
-
-
-def comparisons(table: str, info: pd.DataFrame) -> list[Comparison]:
-    """The paper's orderings of ``table`` (table4, table5, beta) as comparisons of the variants present."""
+def comparisons(table: str, info: pd.DataFrame, reference: Reference | None = None) -> list[Comparison]:
+    """The paper's orderings of ``table`` (table4, table5, beta) as comparisons of the variants present;
+    ``reference`` (default: the default reference) names the best loss and beta of table5 and beta."""
     if info.empty:
         return []
+    reference = reference or default_reference()
+    best_loss = reference.table5.best_loss if reference is not None and reference.table5 is not None else None
+    best_beta = reference.beta.best if reference is not None and reference.beta is not None else None
     variants = info.drop_duplicates("variant").set_index("variant")
     out: list[Comparison] = []
     if table == "table4":
@@ -122,20 +113,22 @@ def comparisons(table: str, info: pd.DataFrame) -> list[Comparison]:
                     continue
                 out.append(Comparison(f"{interp}: interval {steps[i + 1]:g} better than {steps[i]:g}",
                                       better=ids[i + 1], worse=ids[i]))
-    elif table == "table5":
-        uafl = variants[(variants["loss"] == "uafl")
-                        & np.isclose(variants["beta"].astype(float).fillna(-1.0), PAPER_BETA)]
-        for best in uafl.index:
+    elif table == "table5" and best_loss is not None:
+        best = variants[variants["loss"] == best_loss]
+        if best_beta is not None:
+            best = best[best["beta"].isna() | np.isclose(best["beta"].astype(float).fillna(best_beta), best_beta)]
+        for b in best.index:
             for other in variants.index:
-                if other != best and variants.loc[other, "loss"] != "uafl":
-                    out.append(Comparison(f"UAFL better than {variants.loc[other, 'loss']}", better=best, worse=other))
-    elif table == "beta":
+                if other != b and variants.loc[other, "loss"] != best_loss:
+                    out.append(Comparison(f"{best_loss.upper()} better than {variants.loc[other, 'loss']}", better=b,
+                                          worse=other))
+    elif table == "beta" and best_beta is not None:
         betas = variants[variants["beta"].notna()]
-        best = betas[np.isclose(betas["beta"].astype(float), PAPER_BETA)]
+        best = betas[np.isclose(betas["beta"].astype(float), best_beta)]
         for b in best.index:
             for other in betas.index:
                 if other != b:
-                    out.append(Comparison(f"beta {PAPER_BETA:g} better than beta {betas.loc[other, 'beta']:g}",
+                    out.append(Comparison(f"beta {best_beta:g} better than beta {betas.loc[other, 'beta']:g}",
                                           better=b, worse=other))
     return out
 
@@ -146,30 +139,50 @@ def scene_scores(scores: pd.DataFrame, metric: str) -> pd.DataFrame:
     return sel.groupby(["method", "scene"])["value"].mean().rename("value").reset_index()
 
 
-def seeds_table(info: pd.DataFrame, scores: pd.DataFrame, metrics: Sequence[str]) -> pd.DataFrame:
+def within_range(metric: str, low: float, high: float) -> tuple[float, float, bool]:
+    """(low, high) of an interval of ``metric`` clipped to the values it can take (``Metric.value_range``;
+    a metric lfbench does not define is left as it is), and whether clipping changed them."""
+    found = find_metric(metric)
+    if found is None:
+        return low, high, False
+    lo, hi = found.value_range
+    clipped_low, clipped_high = min(max(low, lo), hi), max(min(high, hi), lo)
+    changed = (np.isfinite(low) and clipped_low != low) or (np.isfinite(high) and clipped_high != high)
+    return (low if np.isnan(low) else clipped_low), (high if np.isnan(high) else clipped_high), bool(changed)
+
+
+def seeds_table(info: pd.DataFrame, scores: pd.DataFrame, metrics: Sequence[str]) -> tuple[pd.DataFrame, list[str]]:
     """Per variant (index) and metric: the mean over seeds of the scene-mean score, its 95 % t-interval
-    and the number of seeds. ``scores``: long frame (method = cell id, scene, metric, value)."""
+    (clipped to the metric's range, :func:`within_range`) and the number of seeds; and the metrics whose
+    intervals were clipped, with their range (for the caption). ``scores``: long frame (method = cell id,
+    scene, metric, value)."""
     rows: dict[str, dict[str, Any]] = {}
+    clipped: dict[str, str] = {}
     for metric in metrics:
         per_cell = scene_scores(scores, metric).groupby("method")["value"].mean()
         for variant, group in info.groupby("variant", sort=False):
             vals = [float(per_cell[c]) for c in group.index if c in per_cell.index]
             mean, low, high = t_interval(vals)
+            low, high, changed = within_range(metric, low, high)
+            if changed:
+                lo, hi = find_metric(metric).value_range
+                clipped[metric] = f"{find_metric(metric).name}: {lo:g} to {hi:g}"
             row = rows.setdefault(variant, {"variant": variant, "seeds": len(vals)})
             row[f"{metric} mean"] = mean
             row[f"{metric} 95% low"] = low
             row[f"{metric} 95% high"] = high
-    return pd.DataFrame(list(rows.values())).set_index("variant") if rows else pd.DataFrame()
+    table = pd.DataFrame(list(rows.values())).set_index("variant") if rows else pd.DataFrame()
+    return table, list(clipped.values())
 
 
-def significance_table(table: str, info: pd.DataFrame, scores: pd.DataFrame,
-                       metric: str = ORDERING_METRIC) -> pd.DataFrame:
+def significance_table(table: str, info: pd.DataFrame, scores: pd.DataFrame, metric: str = ORDERING_METRIC,
+                       reference: Reference | None = None) -> pd.DataFrame:
     """One row per comparison of :func:`comparisons`: both variants' means over the paired seeds, the mean
     paired difference (worse - better) with its 95 % interval, t, p and the verdict."""
     values = scene_scores(scores, metric)
     cell_scores = {c: dict(zip(g["scene"], g["value"], strict=True)) for c, g in values.groupby("method")}
     rows = []
-    for comp in comparisons(table, info):
+    for comp in comparisons(table, info, reference):
         better_cells = info[info["variant"] == comp.better]
         worse_cells = info[info["variant"] == comp.worse]
         worse_by_seed = {s: c for c, s in zip(worse_cells.index, worse_cells["seed"], strict=True)}

@@ -2,59 +2,47 @@
 of every cell, the evaluation scenes and the paper table to put beside ours. Parsed strictly:
 a bad key or value is a SpecError naming the spec file and the key (the CLI exits with code 2).
 
-Layout (paths are relative to the spec file's folder; ``~`` and ``${VARS}`` are expanded)::
+Every key is declared once, as a field of the sections below (lfbench.utils.options.option: type, default,
+bounds, help); the parser and the reference docs/ablation-spec.md (``python -m lfbench.ablation.reference``)
+come from those declarations. An example (paths are relative to the spec file's folder; ``~`` and ``${VARS}``
+are expanded)::
 
     title = "Table IV: disparity interval x interpolation"
     table = "table4"            # paper table beside ours: table4 | table5 | beta | tables12 | none
-                                # (Tables I/II, per scene and average, are written for every spec)
-    base = "../configs/subfocal_cpu_small.toml"   # the training config every cell starts from,
-                                # or an inline [base] table in the training-config layout
-    out = "runs/ablate/table4"  # default output folder (relative to the current directory)
-    seeds = [1, 2, 3]           # optional: every cell is trained once per seed (the config's seed; cell ids
-                                # end in _seed=K); tables report the mean over seeds with a 95 % t-interval
-                                # and a paired test between neighbouring cells (lfbench.ablation.significance)
+                                # (with "none": no paper numbers unless [report] or --paper asks)
+    base = "../configs/subfocal_cpu_small.toml"   # or an inline [base] table (training-config layout)
+    seeds = [1, 2, 3]           # optional: every cell once per seed (ids end in _seed=K)
 
     [budget]                    # every cell's training budget (written over the base config)
     steps = [48, 12]            # steps per stage, one number per [[stages]] of the base
     batch = 4                   # training.batch_size
-    width = 8                   # model.width (SubFocal: 3D aggregation channels; paper 150)
     patch = 32                  # data.patch
     threads = 0                 # torch threads per cell (0: cores / --jobs)
+    model = { width = 8 }       # [model] overrides (here SubFocal's 3D aggregation channels; paper 150)
 
     [set]                       # any other training-config keys, dotted; list items by 1-based
     "data.validation" = []      # position (stages.2.lr), stages also by name or "last"
 
     [[grid]]                    # the cells: the union of the products of every [[grid]] table
-    interval = [1, 0.5, 0.25, 0.1]              # (identical configs are run once)
+    interval = [1, 0.5, 0.25, 0.1]
     interpolation = ["bilinear"]
-    [[grid]]
-    interval = [0.5]
-    interpolation = ["phase", "nearest", "bilinear"]
 
     [stage1]
-    shared = false              # true: the stages before the last (stage 1) are trained once, in
-                                # OUT/stage1, and every cell trains its last stage from those weights
-                                # (the paper's Table V and beta sweep); cells may then differ only
-                                # in their last stage
+    shared = false              # true: the stages before the last are trained once, in OUT/stage1
 
     [evaluation]
     synthetic = { seed = 1000, size = 64, scenes = 3 }   # generated into OUT/eval_data/
     data = "${LFBENCH_HCI_ROOT}"                          # and/or HCI scenes by name, category or split
     scenes = ["backgammon"]
-    time_size = 512             # test time: one whole 9 x 9 x time_size x time_size light field
-    time_repeats = 1            # timed runs (the median is reported) after time_warmup untimed ones
-    time_warmup = 0
-    device = "cpu"              # cpu, cuda or auto (auto: cuda when available)
-    threads = 0                 # torch threads for scoring (0: the cell's) and for the test time, which
-                                # is measured one cell at a time after all cells are trained (0: all cores)
-    tile = 0; max_memory_gb = 4.0; precision = "fp32"; lowres_only = false; error_maps = true
 
     [[methods]]                 # more rows for Tables I/II: any registered method spec
     label = "SubFocal (published maps)"
     spec = "published:path=${LFBENCH_HCI_ROOT}/../published/subfocal"
 
-    [report]
-    paper_methods = ["SubFocal"]  # paper methods beside ours in Tables I/II
+    [report]                    # which paper stands beside ours (lfbench.reports.reference)
+    reference = "subfocal-tci2023"  # a registered reference, or "none" (default: the network's own
+                                # when the spec asks for a paper table or paper methods or --paper is given)
+    paper_methods = ["SubFocal"]  # its methods beside ours in Tables I/II (default: the reference's own)
 
 Grid axes: the network's own parameters (the base config's ``method``, a registered trainable:
 SubFocal's interval, interpolation, width, attention, d_min, d_max; ``Trainable.axes``), written into
@@ -74,12 +62,17 @@ import re
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 from lfbench.data.synth import MAX_SYNTH_SCENES, MAX_SYNTH_SIZE
-from lfbench.training.config import STAGE_KEYS, TrainConfig, _Table
+from lfbench.method.registry import parse_spec as parse_method_spec
+from lfbench.method.trainable import DEFAULT_TRAINABLE, Trainable, get_trainable
+from lfbench.training.config import STAGE_KEYS, TrainConfig, comparable, model_problem
 from lfbench.utils.envvars import expand_vars
 from lfbench.utils.errors import SpecError
+from lfbench.utils.names import FileNames
+from lfbench.utils.options import Table, option, parse_section
+from lfbench.utils.tomlfile import read_toml
 
 TABLES = ("table4", "table5", "beta", "tables12", "none")
 SPECIAL_AXES = ("loss", "beta", "lr", "seed")
@@ -92,31 +85,35 @@ _ID_SAFE = re.compile(r"[^A-Za-z0-9._=+-]")
 
 @dataclass(frozen=True)
 class Budget:
-    """What every cell is trained with; None = the base config's value."""
+    """What every cell is trained with; None (or no entry) = the base config's value."""
 
-    steps: tuple[int, ...] | None = None
-    batch: int | None = None
-    width: int | None = None
-    patch: int | None = None
-    threads: int = 0
+    steps: tuple[int, ...] | None = option(None, low=1, single=True,
+                                           help="steps per stage, one number per [[stages]] of the base config")
+    batch: int | None = option(None, low=1, help="training.batch_size")
+    patch: int | None = option(None, low=8, help="data.patch (px)")
+    threads: int = option(0, low=0, high=MAX_THREADS, help="torch threads per cell (0: cores / --jobs)")
+    model: dict[str, Any] = option({}, help="[model] overrides: the network's parameters every cell is built with",
+                                   free_text="[model] overrides written over the base config's [model] (e.g. "
+                                             "`model = { width = 8 }` for SubFocal's aggregation channels); "
+                                             "checked against the network's parameters and their types")
 
     def describe(self, config: dict[str, Any]) -> str:
         """A short label of the budget actually used, e.g. 'width 8, batch 4, patch 32, 48+12 steps, cpu'
-        (the width when the network has one: the config's, else the network's default)."""
+        (the [model] overrides first, with the cell's values)."""
         steps = "+".join(str(s["steps"]) for s in config["stages"])
         device = config.get("training", {}).get("device", "auto")
-        width = config["model"].get("width", network_default(config, "width"))
-        return (f"{f'width {width}, ' if width is not None else ''}batch {config['training']['batch_size']}, "
-                f"patch {config['data']['patch']}, {steps} steps, {device}")
+        model = "".join(f"{k} {config['model'].get(k, v)}, " for k, v in self.model.items())
+        return (f"{model}batch {config['training']['batch_size']}, patch {config['data']['patch']}, {steps} steps, "
+                f"{device}")
 
 
 @dataclass(frozen=True)
 class SyntheticEval:
     """Evaluation scenes from lfbench.data.synth: ``scenes`` scenes of ``size`` px, generated with ``seed``."""
 
-    seed: int
-    size: int
-    scenes: int
+    seed: int = option(0, low=0, help="generator seed")
+    size: int = option(64, low=32, high=MAX_SYNTH_SIZE, help="height and width of every scene (px)")
+    scenes: int = option(3, low=1, high=MAX_SYNTH_SCENES, help="number of scenes")
 
     @property
     def folder_name(self) -> str:
@@ -125,32 +122,102 @@ class SyntheticEval:
 
 @dataclass(frozen=True)
 class Evaluation:
-    synthetic: SyntheticEval | None = None
-    data: Path | None = None
-    scenes: tuple[str, ...] = ()
-    time_size: int = 512
-    time_repeats: int = 1
-    time_warmup: int = 0
-    device: str = "cpu"
-    threads: int = 0
-    tile: int = 0
-    max_memory_gb: float = 4.0
-    precision: str = "fp32"
-    lowres_only: bool = False
-    error_maps: bool = True
+    synthetic: SyntheticEval | None = option(None, help="synthetic scenes generated into OUT/eval_data/")
+    data: Path | None = option(None, help="HCI data root of the scenes below (relative to the spec's folder)")
+    scenes: tuple[str, ...] = option((), single=True, help="scenes of data by name, category or split")
+    time_size: int = option(512, low=16, high=MAX_SYNTH_SIZE,
+                            help="test time: one whole 9 x 9 x time_size x time_size light field")
+    time_repeats: int = option(1, low=1, high=MAX_REPEATS, help="timed runs (the median is reported)")
+    time_warmup: int = option(0, low=0, high=MAX_REPEATS, help="untimed runs before them")
+    device: Literal["cpu", "cuda", "auto"] = option("cpu", help="scoring and timing device (auto: cuda when "
+                                                               "available)")
+    threads: int = option(0, low=0, high=MAX_THREADS,
+                          help="torch threads for scoring (0: the cell's) and for the test time, measured one cell "
+                               "at a time after all cells are trained (0: all cores)")
+    tile: int = option(0, low=0, high=MAX_SYNTH_SIZE, help="inference tile size (0: from max_memory_gb)")
+    max_memory_gb: float = option(4.0, low=0.0, low_open=True, help="inference memory budget (GB)")
+    precision: Literal["fp32", "bf16"] = option("fp32", help="inference precision")
+    lowres_only: bool = option(False, help="score the low-resolution maps only")
+    error_maps: bool = option(True, help="write the error-map figures")
+
+    @staticmethod
+    def check_options(values: dict[str, Any], t: Table) -> dict[str, Any]:
+        if values["data"] is not None:
+            values["data"] = _resolve(str(values["data"]), Path(t.source or "."), "evaluation.data")
+        elif values["scenes"]:
+            t.fail("scenes", "names scenes of evaluation.data, which is not given")
+        return values
 
     def fingerprint(self) -> str:
         """What the scores of a cell depend on (not how fast or where they are computed)."""
         key = {"synthetic": None if self.synthetic is None else vars(self.synthetic),
                "data": None if self.data is None else str(self.data), "scenes": list(self.scenes),
                "time_size": self.time_size, "lowres_only": self.lowres_only, "precision": self.precision}
-        return _sha(key)
+        return sha256_of(key)
+
+
+@dataclass(frozen=True, kw_only=True)
+class ExtraMethod:
+    label: str | None = option(None, help="its label in the tables (default: the spec)")
+    spec: str = option(help="a registered method spec, e.g. published:path=DIR")
+
+    @staticmethod
+    def check_options(values: dict[str, Any], t: Table) -> dict[str, Any]:
+        where = f"{t.where}.spec"
+        spec = expand_vars(values["spec"], t.source, where)
+        try:
+            parse_method_spec(spec)
+        except SpecError as exc:
+            t.fail("spec", _strip_path(exc))
+        return {"label": values["label"] or spec, "spec": spec}
 
 
 @dataclass(frozen=True)
-class ExtraMethod:
-    label: str
-    spec: str
+class Stage1:
+    shared: bool = option(False, help="train the stages before the last once, in OUT/stage1, and every cell's last "
+                                      "stage from those weights (cells may then differ only in their last stage)")
+
+
+@dataclass(frozen=True)
+class Report:
+    reference: str | None = option(None, default_text="the network's own, when asked",
+                                   help="the paper beside ours: a registered reference (lfbench.reports.reference) "
+                                        "or \"none\"; by default the network's own when the spec asks for a paper "
+                                        "table or paper methods, or --paper is given")
+    paper_methods: tuple[str, ...] | None = option(None, single=True, default_text="the reference's own",
+                                                   help="the reference's methods beside ours in Tables I/II")
+
+
+def _unique(values: tuple) -> str | None:
+    return None if len(set(values)) == len(values) else f"each seed once, got {list(values)}"
+
+
+@dataclass(frozen=True)
+class SpecFile:
+    """The keys of an ablation spec file, as declared (parse_spec makes an :class:`AblationSpec` of them)."""
+
+    title: str | None = option(None, default_text="the file name", help="title of the tables")
+    table: Literal["table4", "table5", "beta", "tables12", "none"] = option(
+        "none", help="the paper table beside ours (Tables I/II, per scene and average, are written for every spec)")
+    base: str | dict[str, Any] | None = option(
+        None, help="the training config every cell starts from (a file, relative to the spec), or an inline [base] "
+                   "table in the training-config layout", free_text="")
+    out: str | None = option(None, help="default output folder (relative to the current directory)")
+    seeds: tuple[int, ...] = option((), low=0, check=_unique,
+                                    help="train every cell once per seed (the config's seed; ids end in _seed=K); "
+                                         "tables report the mean over seeds with a 95 % t-interval")
+    budget: Budget = option(factory=Budget, help="every cell's training budget, written over the base config")
+    set: dict[str, Any] = option({}, help="training-config keys written over the base config",
+                                 free_text="any training-config keys, dotted (`\"training.log_every\" = 5`, or "
+                                           "nested tables); list items by 1-based position (`stages.2.lr`), stages "
+                                           "also by name or `last`")
+    grid: tuple[dict[str, Any], ...] = option(
+        (), help="the cells: the union of the products of every [[grid]] table's axis = [values] (identical configs "
+                 "run once); axes: the network's parameters, seed, loss, beta, lr or a dotted training-config key")
+    stage1: Stage1 = option(factory=Stage1, help="a stage 1 shared by the cells")
+    evaluation: Evaluation = option(factory=Evaluation, help="the scenes and timing every cell is scored with")
+    methods: tuple[ExtraMethod, ...] = option((), help="more rows for Tables I/II: any registered method spec")
+    report: Report = option(factory=Report, help="what the tables show beside ours")
 
 
 @dataclass(frozen=True)
@@ -168,9 +235,7 @@ class Cell:
     @property
     def fingerprint(self) -> str:
         """SHA-256 of the config without the settings that may change on resume (threads, device, ...)."""
-        from lfbench.training.loop import comparable
-
-        return _sha(comparable(self.config))
+        return sha256_of(comparable(self.config))
 
 
 @dataclass(frozen=True)
@@ -184,7 +249,8 @@ class AblationSpec:
     shared_stage1: bool
     evaluation: Evaluation
     methods: tuple[ExtraMethod, ...] = ()
-    paper_methods: tuple[str, ...] = ("SubFocal",)
+    paper_methods: tuple[str, ...] | None = None  # None: the reference's own
+    reference: str | None = None  # a registered reference's name, "none", or None: the network's when asked
     out: str | None = None
     text: str = field(default="", repr=False)
     seeds: tuple[int, ...] = ()  # training seeds every cell runs (empty: the base config's seed, once)
@@ -199,10 +265,8 @@ class AblationSpec:
         return cfg
 
 
-def trainable_of(config: dict[str, Any]):
+def trainable_of(config: dict[str, Any]) -> Trainable:
     """The registered trainable network a training config (dict layout) trains."""
-    from lfbench.method.trainable import DEFAULT_TRAINABLE, get_trainable
-
     return get_trainable(config.get("method", DEFAULT_TRAINABLE))
 
 
@@ -212,7 +276,8 @@ def network_default(config: dict[str, Any], key: str) -> Any:
     return None if param is None else param.default
 
 
-def _sha(obj: Any) -> str:
+def sha256_of(obj: Any) -> str:
+    """SHA-256 (hex) of ``obj`` as canonical JSON (sorted keys; other objects as their str)."""
     return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()
 
 
@@ -225,38 +290,23 @@ def _resolve(value: str, source: Path, key: str) -> Path:
 
 def load_spec(path: str | Path) -> AblationSpec:
     """Read and check an ablation spec (every cell's training config is parsed; no work is done)."""
-    from lfbench.utils.tomlfile import read_toml
-
     path = Path(path)
     raw, text = read_toml(path, "ablation spec")
     return parse_spec(raw, path, text)
 
 
 def parse_spec(raw: dict[str, Any], source: Path, text: str = "") -> AblationSpec:
-    src = str(source)
-    top = _Table(raw, "", src)
-    title = top.get("title", str, source.stem)
-    table = top.get("table", str, "none")
-    if table not in TABLES:
-        top._fail("table", f"expected one of {', '.join(TABLES)}, got {table!r}")
-    out = top.get("out", str, None)
-    seeds = _parse_seeds(top)
-    base_cfg, base_source = _parse_base(top, source)
-    budget = _parse_budget(top.table("budget"), base_cfg, source)
-    set_t = top.table("set")
-    overrides = flatten(set_t.raw)
-    set_t.used |= set(set_t.raw)
-    grid_raw = top.get("grid", list, [])
-    stage1_t = top.table("stage1")
-    shared = stage1_t.get("shared", bool, False)
-    stage1_t.done()
-    evaluation = _parse_evaluation(top.table("evaluation"), source)
-    methods = _parse_methods(top.get("methods", list, []), source)
-    report_t = top.table("report")
-    paper_methods = report_t.strings("paper_methods", ("SubFocal",))
-    report_t.done()
-    top.done()
-
+    top = Table(raw, "", str(source))
+    if isinstance(raw.get("budget"), dict) and "width" in raw["budget"]:
+        top.fail("budget.width", "is now [budget.model] width (model = { width = N }: any of the network's "
+                                 "parameters)")
+    f = parse_section(SpecFile, top)
+    base_cfg, base_source = _parse_base(f.base, source)
+    budget = f.budget
+    if base_cfg is not None:
+        _check_budget(budget, base_cfg, source)
+    overrides = flatten(f.set)
+    seeds, grid_raw = f.seeds, list(f.grid)
     cells: tuple[Cell, ...] = ()
     if base_cfg is not None:
         base = _apply_budget(base_cfg.to_dict(), budget)
@@ -269,30 +319,28 @@ def parse_spec(raw: dict[str, Any], source: Path, text: str = "") -> AblationSpe
             cells = _with_seeds(cells, seeds, source)
     elif grid_raw:
         raise SpecError("grid: cells need a base training config (base = \"CONFIG.toml\" or [base])", source)
+    methods = f.methods
+    labels = [m.label for m in methods]
+    if len(set(labels)) != len(labels):
+        raise SpecError(f"methods: labels must be unique, got {labels}", source)
     _check_method_names(cells, methods, source)
     if not cells and not methods:
         raise SpecError("nothing to run: give a base config (with a [[grid]], or one cell from the base alone) "
                         "and/or [[methods]]", source)
+    shared = f.stage1.shared
     if shared:
         if len(seeds) > 1:
             raise SpecError("stage1.shared trains one stage 1 for all cells, so it cannot vary with seeds; start "
                             "every cell from trained weights instead ([set] init = \"WEIGHTS.pt\", one stage)",
                             source)
         _check_shared_stage1(cells, source)
+    evaluation = f.evaluation
     if evaluation.synthetic is None and evaluation.data is None:
         raise SpecError("evaluation: give synthetic = {seed, size, scenes} and/or data = ROOT with scenes", source)
-    return AblationSpec(source=source, title=title, table=table, base_source=base_source, budget=budget,
-                        cells=cells, shared_stage1=shared, evaluation=evaluation, methods=methods,
-                        paper_methods=paper_methods, out=out, text=text, seeds=seeds)
-
-
-def _parse_seeds(top: _Table) -> tuple[int, ...]:
-    raw = top.get("seeds", list, [])
-    if not all(isinstance(x, int) and not isinstance(x, bool) and 0 <= x < 2**63 for x in raw):
-        top._fail("seeds", f"expected a list of non-negative integers, got {raw!r}")
-    if len(set(raw)) != len(raw):
-        top._fail("seeds", f"each seed once, got {raw!r}")
-    return tuple(raw)
+    return AblationSpec(source=source, title=f.title if f.title is not None else source.stem, table=f.table,
+                        base_source=base_source, budget=budget, cells=cells, shared_stage1=shared,
+                        evaluation=evaluation, methods=methods, paper_methods=f.report.paper_methods,
+                        reference=f.report.reference, out=f.out, text=text, seeds=seeds)
 
 
 def _with_seeds(cells: tuple[Cell, ...], seeds: tuple[int, ...], source: Path) -> tuple[Cell, ...]:
@@ -338,8 +386,7 @@ def _strip_path(exc: SpecError) -> str:
     return " ".join(str(exc.args[0]).split()) if exc.args else str(exc)
 
 
-def _parse_base(top: _Table, source: Path) -> tuple[TrainConfig | None, str]:
-    value = top.get("base", (str, dict), None)
+def _parse_base(value: str | dict[str, Any] | None, source: Path) -> tuple[TrainConfig | None, str]:
     if value is None:
         return None, ""
     if isinstance(value, str):
@@ -357,29 +404,15 @@ def _parse_base(top: _Table, source: Path) -> tuple[TrainConfig | None, str]:
     raise AssertionError  # unreachable
 
 
-def _parse_budget(t: _Table, base: TrainConfig | None, source: Path) -> Budget:
-    steps = t.get("steps", (list, int), None)
-    if isinstance(steps, int) and not isinstance(steps, bool):
-        steps = [steps]
-    if steps is not None:
-        if not all(isinstance(s, int) and not isinstance(s, bool) and s >= 1 for s in steps):
-            t._fail("steps", f"expected positive integers (one per stage), got {steps!r}")
-        if base is not None and len(steps) != len(base.stages):
-            t._fail("steps", f"expected {len(base.stages)} numbers (one per [[stages]] of the base config), "
-                             f"got {len(steps)}")
-    budget = Budget(steps=tuple(steps) if steps is not None else None,
-                    batch=t.number("batch", None, low=1, integer=True) if "batch" in t.raw else None,
-                    width=t.number("width", None, low=1, integer=True) if "width" in t.raw else None,
-                    patch=t.number("patch", None, low=8, integer=True) if "patch" in t.raw else None,
-                    threads=t.number("threads", 0, low=0, high=MAX_THREADS, integer=True))
-    t.done()
-    if budget.width is not None and base is not None:
-        from lfbench.method.trainable import get_trainable
-
-        if "width" not in get_trainable(base.method).parameters():
-            _fail(source, "budget.width", f"network {base.method!r} has no width parameter; set its [model] "
-                                          "parameters with [set] instead")
-    return budget
+def _check_budget(budget: Budget, base: TrainConfig, source: Path) -> None:
+    """One number of steps per stage of the base; [budget.model] names parameters of its network, with
+    values of their types."""
+    if budget.steps is not None and len(budget.steps) != len(base.stages):
+        _fail(source, "budget.steps", f"expected {len(base.stages)} numbers (one per [[stages]] of the base config), "
+                                      f"got {len(budget.steps)}")
+    problem = model_problem(get_trainable(base.method), budget.model)
+    if problem:
+        _fail(source, "budget.model", problem)
 
 
 def _apply_budget(cfg: dict[str, Any], budget: Budget) -> dict[str, Any]:
@@ -390,72 +423,16 @@ def _apply_budget(cfg: dict[str, Any], budget: Budget) -> dict[str, Any]:
             stage["steps"] = steps
     if budget.batch is not None:
         cfg["training"]["batch_size"] = budget.batch
-    if budget.width is not None:
-        cfg["model"]["width"] = budget.width
+    cfg["model"].update(copy.deepcopy(budget.model))
     if budget.patch is not None:
         cfg["data"]["patch"] = budget.patch
     return cfg
-
-
-def _parse_evaluation(t: _Table, source: Path) -> Evaluation:
-    syn = None
-    if "synthetic" in t.raw:
-        st = t.table("synthetic")
-        syn = SyntheticEval(seed=st.number("seed", 0, low=0, integer=True),
-                            size=st.number("size", 64, low=32, high=MAX_SYNTH_SIZE, integer=True),
-                            scenes=st.number("scenes", 3, low=1, high=MAX_SYNTH_SCENES, integer=True))
-        st.done()
-    data_value = t.get("data", str, None)
-    data = _resolve(data_value, source, "evaluation.data") if data_value is not None else None
-    scenes = t.strings("scenes")
-    if scenes and data is None:
-        t._fail("scenes", "names scenes of evaluation.data, which is not given")
-    device = t.get("device", str, "cpu")
-    if device not in DEVICES:
-        t._fail("device", f"expected one of {', '.join(DEVICES)}, got {device!r}")
-    precision = t.get("precision", str, "fp32")
-    if precision not in ("fp32", "bf16"):
-        t._fail("precision", f"expected fp32 or bf16, got {precision!r}")
-    ev = Evaluation(synthetic=syn, data=data, scenes=scenes,
-                    time_size=t.number("time_size", 512, low=16, high=MAX_SYNTH_SIZE, integer=True),
-                    time_repeats=t.number("time_repeats", 1, low=1, high=MAX_REPEATS, integer=True),
-                    time_warmup=t.number("time_warmup", 0, low=0, high=MAX_REPEATS, integer=True),
-                    device=device, threads=t.number("threads", 0, low=0, high=MAX_THREADS, integer=True),
-                    tile=t.number("tile", 0, low=0, high=MAX_SYNTH_SIZE, integer=True),
-                    max_memory_gb=t.number("max_memory_gb", 4.0, low=0.0, low_open=True),
-                    precision=precision, lowres_only=t.get("lowres_only", bool, False),
-                    error_maps=t.get("error_maps", bool, True))
-    t.done()
-    return ev
-
-
-def _parse_methods(raw: list[Any], source: Path) -> tuple[ExtraMethod, ...]:
-    from lfbench.method.registry import parse_spec as parse_method_spec
-
-    out = []
-    for i, item in enumerate(raw):
-        t = _Table(item, f"methods[{i}]", str(source))
-        spec = t.get("spec", str, None, required=True)
-        label = t.get("label", str, None)
-        t.done()
-        spec = expand_vars(spec, source, f"methods[{i}].spec")
-        try:
-            parse_method_spec(spec)
-        except SpecError as exc:
-            _fail(source, f"methods[{i}].spec", _strip_path(exc))
-        out.append(ExtraMethod(label=label or spec, spec=spec))
-    labels = [m.label for m in out]
-    if len(set(labels)) != len(labels):
-        raise SpecError(f"methods: labels must be unique, got {labels}", source)
-    return tuple(out)
 
 
 def _check_method_names(cells: tuple[Cell, ...], methods: tuple[ExtraMethod, ...], source: Path) -> None:
     """Cell ids and [[methods]] labels name the records (method = id or label), the HTML pages and the
     cells/<id> and methods/<label> folders: SpecError when a label is a cell's id, DataError when two
     are one file name (lfbench.utils.names: 'm<1' and 'm>1' would share methods/m_1)."""
-    from lfbench.utils.names import FileNames
-
     ids = {c.id for c in cells}
     for m in methods:
         if m.label in ids:
@@ -602,8 +579,6 @@ def _check_cell_count(grid_raw: list[Any], seeds: int, source: Path) -> None:
 
 
 def _expand_grid(grid_raw: list[Any], base: dict[str, Any], source: Path) -> tuple[Cell, ...]:
-    from lfbench.training.loop import comparable
-
     if not grid_raw:
         return (Cell(id="base", values={}, config=base),)
     cells: list[Cell] = []
@@ -638,8 +613,6 @@ def _expand_grid(grid_raw: list[Any], base: dict[str, Any], source: Path) -> tup
 
 def _check_shared_stage1(cells: tuple[Cell, ...], source: Path) -> None:
     """With a shared stage 1, cells may differ only in their last stage (and need two stages or more)."""
-    from lfbench.training.loop import comparable
-
     if not cells:
         raise SpecError("stage1.shared: there are no cells", source)
     first = cells[0].config

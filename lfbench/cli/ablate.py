@@ -5,7 +5,8 @@
 
 Shipped specs: ablations/table4_cpu.toml, table5_cpu.toml, beta_cpu.toml (2-core CPU presets on
 synthetic scenes), *_paper.toml (the paper's widths, steps and data, for a GPU) and tables12_*.toml
-(Tables I/II for any set of methods). Spec layout: lfbench/ablation/spec.py.
+(Tables I/II for any set of methods). Every key of a spec, with its type, default, bounds and meaning:
+docs/ablation-spec.md (or ``python -m lfbench.ablation.reference``).
 
 Re-running the same command skips finished cells and resumes an interrupted one from its
 checkpoint. ``--jobs N`` trains N cells at a time in separate processes (cores / N threads each), each
@@ -21,9 +22,13 @@ without them the tables have no paper columns.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 from pathlib import Path
 
+from lfbench.ablation.executor import ClusterOptions
 from lfbench.cli.argtypes import int_range
+from lfbench.utils.errors import SpecError
+from lfbench.utils.tomlfile import toml_text
 
 HELP = ("train and score a grid of network variants (SubFocal's Tables IV, V, beta sweep, I/II beside the paper's "
         "numbers, or a plugin's network)")
@@ -57,15 +62,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from lfbench.ablation.spec import load_spec
-    from lfbench.utils.errors import SpecError
+    from lfbench.ablation.spec import load_spec  # imported here (torch): `lfbench --help` starts without it
 
     spec = load_spec(args.spec)
     if args.jobs < 1:
         raise SpecError(f"--jobs must be >= 1, got {args.jobs}")
     if args.cells.strip():
-        import dataclasses
-
         wanted = [c.strip() for c in args.cells.split(",") if c.strip()]
         known = {c.id: c for c in spec.cells}
         unknown = [c for c in wanted if c not in known]
@@ -74,12 +76,10 @@ def run(args: argparse.Namespace) -> int:
         spec = dataclasses.replace(spec, cells=tuple(known[c] for c in wanted))
     out = args.out or (Path(spec.out) if spec.out else Path("runs") / "ablate" / args.spec.stem)
     if args.list:
-        from lfbench.ablation.toml_text import dumps
-
         print(f"{spec.title}: {len(spec.cells)} cell(s), budget {spec.budget_label()}"
               f"{', shared stage 1' if spec.shared_stage1 else ''}; output {out}")
         for cell in spec.cells:
-            print(f"\n## cell {cell.id}\n{dumps(cell.config)}", end="")
+            print(f"\n## cell {cell.id}\n{toml_text(cell.config)}", end="")
         for m in spec.methods:
             print(f"\n## method {m.label}: {m.spec}")
         return 0
@@ -93,8 +93,6 @@ def run(args: argparse.Namespace) -> int:
 
         cluster = None
         if args.executor is not None:
-            from lfbench.ablation.executor import ClusterOptions
-
             cluster = ClusterOptions(args.executor, gpus_per_job=args.gpus_per_job, cpus_per_job=args.cpus_per_job,
                                      timeout_min=args.timeout_min, partition=args.partition,
                                      max_parallel=args.max_parallel)

@@ -58,8 +58,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from lfbench.data.scene import Benchmark
     from lfbench.method.registry import create_from_spec
+    from lfbench.reports import writers as w
+    from lfbench.reports.html import SITE_DIR, check_site_dir
     from lfbench.reports.tables import per_scene_table, render
-    from lfbench.runs.folder import CIOptions, evaluate_to_folder
+    from lfbench.runs.folder import evaluate_to_folder
     from lfbench.scoring.rules import ScoringRules
     from lfbench.utils.errors import DataError, SpecError
 
@@ -71,26 +73,23 @@ def run(args: argparse.Namespace) -> int:
             raise SpecError("--label: a label must not be empty")
         methods = [m.with_label(label) for m, label in zip(methods, args.label, strict=True)]
     if args.html:
-        from lfbench.reports.html import SITE_DIR, check_site_dir
-
         check_site_dir(args.out / SITE_DIR)
     scenes = Benchmark.discover(args.data).select([s for s in args.scenes.split(",") if s.strip()])
     scenes = [s for s in scenes if s.has_gt()]
     if not scenes:
         raise DataError("none of the selected scenes has ground truth (gt_disp_lowres.pfm)", args.data)
     rules = ScoringRules(toolkit=args.toolkit_nonfinite, allow_highres=not args.lowres_only)
-    results = evaluate_to_folder(
-        methods, scenes, args.out, rules=rules, all_metrics=args.all_metrics, save_maps=args.save_maps or args.html,
-        figures=args.figures,
-        ci=CIOptions(resamples=args.ci_resamples, block=args.ci_block) if args.ci else None,
-        uncertainty=args.uncertainty, site=args.html, progress=not args.no_progress,
-        meta={"data_root": str(args.data), "methods": {m.label: m.provenance() for m in methods}})
+    writers = [*([w.SceneFigures()] if args.figures else []), *([w.Maps()] if args.save_maps or args.html else []),
+               w.Tables(),
+               *([w.BootstrapCIs(w.CIOptions(resamples=args.ci_resamples, block=args.ci_block))] if args.ci else []),
+               *([w.UncertaintyRatings()] if args.uncertainty else []), *([w.Site()] if args.html else [])]
+    meta = {"data_root": str(args.data), "methods": {m.label: m.provenance() for m in methods}}
+    results = evaluate_to_folder(methods, scenes, args.out, rules=rules, all_metrics=args.all_metrics, writers=writers,
+                                 meta=meta, progress=not args.no_progress)
     if args.out / "table_uncertainty.md" in results.files:
         print((args.out / "table_uncertainty.md").read_text(encoding="utf-8"))
     print(render(per_scene_table(results), "markdown"), end="")
     print(f"\nwrote {args.out / 'results.json'} and {args.out / 'results.csv'}")
     if args.html:
-        from lfbench.reports.html import SITE_DIR
-
         print(f"HTML report: {args.out / SITE_DIR / 'index.html'}")
     return 0

@@ -60,9 +60,9 @@ def run(args: argparse.Namespace) -> int:
 
     from lfbench.data.pfm import write_pfm
     from lfbench.method.registry import create_from_spec
-    from lfbench.runs.outputs import check_output_file
     from lfbench.utils.atomic import atomic_open
     from lfbench.utils.errors import DataError
+    from lfbench.utils.outputs import check_output_file
 
     if args.out.suffix not in (".pfm", ".npy"):
         raise DataError("output must end in .pfm or .npy", args.out)

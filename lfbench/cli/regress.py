@@ -58,8 +58,8 @@ def _parse_tolerance(text: str):
 
 
 def run(args: argparse.Namespace) -> int:
+    from lfbench.results import Results
     from lfbench.runs.regress import check, check_unique, make_golden, read_golden
-    from lfbench.runs.results import Results
 
     tolerance = _parse_tolerance(args.tolerance)  # checked even without --update: a typo is an error
     new = Results.read(args.new)

@@ -33,8 +33,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="add the paper's numbers from DIR, a folder with table1_per_scene.csv and table2_average.csv "
                         "(e.g. ../shared/data/paper); a bare --paper uses $LFBENCH_PAPER_DIR, else "
                         "$LFBENCH_HCI_ROOT/../paper")
-    p.add_argument("--paper-methods", default="SubFocal", metavar="NAMES",
-                   help="comma-separated paper methods to show (default SubFocal; e.g. SubFocal,SubFocal-L,OACC-Net)")
+    p.add_argument("--paper-methods", default="", metavar="NAMES",
+                   help="comma-separated paper methods to show (default: the paper's own, as its reference says; "
+                        "e.g. SubFocal,SubFocal-L,OACC-Net)")
     p.add_argument("--format", default="md,tex,csv", help="comma-separated table formats: md, tex, csv")
     p.add_argument("--curves", type=Path, metavar="CSV",
                    help="BadPix curves CSV (default: RESULTS_DIR/figures/badpix_series.csv when present)")
@@ -68,7 +69,7 @@ def parse_formats(text: str) -> list[tuple[str, str]]:
 
 
 def parse_figure_formats(text: str) -> list[str]:
-    from lfbench.reports.figures import FIGURE_FORMATS
+    from lfbench.reports.plotting import FIGURE_FORMATS
     from lfbench.utils.errors import SpecError
 
     out = list(dict.fromkeys(s.strip().lower() for s in text.split(",") if s.strip()))
@@ -89,12 +90,12 @@ def run(args: argparse.Namespace) -> int:
         from lfbench.reports.html import SITE_DIR, check_site_dir
 
         check_site_dir(args.out / SITE_DIR)
-    paper, paper_methods = None, ["SubFocal"]
+    paper = None
     if args.paper is not None:
         from lfbench.reports.paper import find_paper_dir, load_paper
 
         paper = load_paper(find_paper_dir(args.paper or None))
-        paper_methods = [m.strip() for m in args.paper_methods.split(",") if m.strip()]
+    paper_methods = [m.strip() for m in args.paper_methods.split(",") if m.strip()]
     outcome = report_from_results(args.results, args.out, formats=formats, paper=paper, paper_methods=paper_methods,
                                   curves=args.curves, maps=args.maps, data=args.data, figure_formats=figure_formats,
                                   html=args.html)

@@ -1,8 +1,9 @@
-"""Train a network from a TOML config (see lfbench/training/config.py and configs/*.toml): SubFocal by
-default, or any registered trainable network named by the config's ``method`` (lfbench.method.trainable).
+"""Train a network from a TOML config (examples: configs/*.toml): SubFocal by default, or any registered
+trainable network named by the config's ``method``. Every key of the config, with its type, default, bounds
+and meaning: docs/training-config.md (or ``python -m lfbench.training.reference``).
 
 Runs the config's stages in order (e.g. L1, then UAFL from the stage-1 weights with a fresh
-Adam), validating on the chosen scenes every N steps. Checkpoints go to OUT/checkpoint.pt
+optimizer), validating on the chosen scenes every N steps. Checkpoints go to OUT/checkpoint.pt
 (atomic); re-running the same command after a kill or Ctrl-C resumes from the last one. The
 final weights are OUT/final.pt, runnable as ``METHOD:weights=OUT/final.pt`` (e.g. subfocal). For data-parallel training
 start it with torchrun, e.g. ``torchrun --nproc-per-node 4 -m lfbench train CONFIG.toml``.
@@ -11,6 +12,8 @@ start it with torchrun, e.g. ``torchrun --nproc-per-node 4 -m lfbench train CONF
 from __future__ import annotations
 
 import argparse
+import os
+import shlex
 from pathlib import Path
 
 HELP = "train SubFocal or a plugin's network from a TOML config (resumable, multi-process with torchrun)"
@@ -26,10 +29,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import os
-    import shlex
-
-    from lfbench.training.config import TrainConfig, expand_path
+    from lfbench.training.config import TrainConfig, expand_path  # imported here: `lfbench --help` needs no torch
     from lfbench.training.loop import train
 
     cfg = TrainConfig.from_toml(args.config)

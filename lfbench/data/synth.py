@@ -795,6 +795,11 @@ def write_scene(scene: SyntheticScene, folder: str | Path) -> Path:
     return folder
 
 
+def scene_name(seed: int, index: int) -> str:
+    """The name (folder) of scene ``index`` of the set generated with ``seed``: ``synth_<seed>_<index>``."""
+    return f"synth_{seed}_{index}"
+
+
 def scene_seed(seed: int, index: int) -> int:
     """The seed of scene ``index`` of a benchmark generated with ``seed`` (independent streams)."""
     return int(np.random.SeedSequence([int(seed), int(index)]).generate_state(1, np.uint32)[0])
@@ -840,7 +845,7 @@ def write_benchmark(out: str | Path, seed: int = 0, size: int = 128, scenes: int
         if not cat or cat in (".", "..") or "/" in cat or "\\" in cat:
             raise SpecError(f"invalid category name {cat!r}")
     out = Path(out)
-    targets = [out / cat / f"synth_{seed}_{i}" for i, cat in enumerate(cats)]
+    targets = [out / cat / scene_name(seed, i) for i, cat in enumerate(cats)]
     if not force:
         for t in targets:
             if t.exists():

@@ -14,6 +14,8 @@ its ``lfbench.methods`` entry points, and says:
 - optionally how inference runs (:meth:`Trainable.infer`: whole image, or exact tiles when the network
   has a ``receptive_radius``: :meth:`Trainable.receptive_radius`), its FLOPs (:meth:`Trainable.flops`)
   and its own benches and bench options (:attr:`Trainable.benches`, :attr:`Trainable.train_bench_options`).
+- optionally how a training stage is optimised: :meth:`Trainable.configure_optimizers` (default:
+  Adam with the stage's lr, betas and eps, a constant rate).
 
 The network contract (a ``torch.nn.Module``):
 
@@ -38,7 +40,7 @@ import inspect
 import itertools
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 
 from lfbench.method.checkpoint import read_weights
 from lfbench.method.params import Param, docstring_help, signature_params, value_problem
@@ -80,6 +82,16 @@ def check_network_size(build: Callable[..., torch.nn.Module], params: dict[str, 
         raise ValueError(f"the network would hold {size / 1024**3:.3g} GiB of parameters and buffers, more than "
                          f"lfbench builds ({MAX_NETWORK_BYTES / 1024**3:g} GiB)")
     return size
+
+
+class StageOptions(Protocol):
+    """What :meth:`Trainable.configure_optimizers` reads of a training stage (lfbench.training.config.StageConfig)."""
+
+    name: str
+    lr: float
+    steps: int
+    eps: float
+    betas: tuple[float, float]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -198,6 +210,20 @@ class Trainable:
         """What a checkpoint stores as ``config``: ``net.config()`` when the network has one, else ``params``."""
         config = getattr(net, "config", None)
         return dict(config()) if callable(config) else dict(params)
+
+    # -- training --------------------------------------------------------------------------------
+
+    def configure_optimizers(self, net: torch.nn.Module, stage: StageOptions
+                             ) -> torch.optim.Optimizer | tuple[torch.optim.Optimizer, Any]:
+        """The optimizer of one training stage (``lfbench train`` makes a fresh one per stage) and, optionally,
+        its learning-rate schedule (a ``torch.optim.lr_scheduler`` stepped after every optimizer step; its
+        state is kept in checkpoints): an optimizer, or ``(optimizer, schedule or None)``. ``stage`` holds
+        the stage's options (``lr``, ``betas``, ``eps``, ``steps``, ``name``). Default: Adam with the stage's
+        lr, betas and eps (1e-7, Keras's), at a constant rate (so the steps of the stage in progress may
+        change on resume)."""
+        import torch
+
+        return torch.optim.Adam(net.parameters(), lr=stage.lr, betas=stage.betas, eps=stage.eps)
 
     # -- weights ---------------------------------------------------------------------------------
 
@@ -457,7 +483,7 @@ def trainable_names() -> list[str]:
 list_trainables = trainable_names
 
 
-__all__ = ["Trainable", "BenchOption", "network_from_state", "check_state_dict", "network_bytes",
+__all__ = ["Trainable", "StageOptions", "BenchOption", "network_from_state", "check_state_dict", "network_bytes",
            "check_network_size", "contract_problem", "to_channels_last", "tiled_forward", "MAX_NETWORK_BYTES",
            "TRAINABLES", "DEFAULT_TRAINABLE", "ENTRY_POINT_GROUP", "register_trainable", "get_trainable",
            "find_trainable", "trainable_names", "list_trainables", "trainable_registry"]

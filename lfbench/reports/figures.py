@@ -13,10 +13,10 @@ Conventions of the benchmark's toolkit (docs/benchmark-rules.md, Outputs):
 Every panel is first computed as an RGB array by a pure function (``badpix_image``,
 ``signed_error_image``, ...), so tests can check exactly what is drawn. Files are written atomically.
 
-:class:`SceneFigureWriter` is the prediction hook of ``lfbench evaluate --figures``: each prediction is
-drawn into its own row PNG as it arrives, and the scene overview is re-assembled from the row PNGs
-on disk, so memory does not grow with the number of methods or scenes (only the BadPix curves,
-101 numbers per run, are kept).
+:class:`SceneFigureWriter` draws the figures of ``lfbench evaluate --figures``
+(lfbench.reports.writers.SceneFigures) and of a report's saved maps: each prediction is drawn into its own
+row PNG as it arrives, and the scene overview is re-assembled from the row PNGs on disk, so memory does
+not grow with the number of methods or scenes (only the BadPix curves, 101 numbers per run, are kept).
 """
 
 from __future__ import annotations
@@ -30,16 +30,20 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from PIL import Image
 
 from lfbench.data.scene import LightField
+from lfbench.data.submission import disp_map_path, read_submission_map
 from lfbench.method.base import Prediction
+from lfbench.reports.plotting import add_colorbar, as_gray, colormap, legend_label, method_colours, pyplot, save_figure
 from lfbench.scoring.metrics import bad_pix_curve, find_metric
 from lfbench.scoring.prepare import SceneReference, align_prediction
 from lfbench.scoring.rules import ScoringRules
 from lfbench.utils.atomic import write_bytes, write_text
-from lfbench.utils.errors import SpecError
+from lfbench.utils.errors import DataError
 from lfbench.utils.figure_text import plain_text
 from lfbench.utils.names import FileNames, file_name, file_names
+from lfbench.utils.readfile import check_regular_file, read_text
 
 _log = logging.getLogger(__name__)
 
@@ -56,26 +60,10 @@ OUTSIDE_GREY = 0.45
 GOOD_LIGHT = (0.80, 0.20)  # good pixel grey = 0.80 + 0.20 * centre-view gray (0.92 without a view)
 DISPARITY_CMAP, ERROR_CMAP, UNCERTAINTY_CMAP = "viridis", "seismic", "magma"
 
-PANEL_IN, ROW_HEIGHT_IN, DPI = 3.2, 3.0, 90
+PANEL_IN, ROW_HEIGHT_IN = 3.2, 3.0
 
 
 # --------------------------------------------------------------------------- pure panel arrays
-
-def _as_gray(image: np.ndarray | None, shape: tuple[int, int]) -> np.ndarray | None:
-    """A centre view (H, W[, 3]) in [0, 1] as gray (H, W) float32, or None if absent or mis-shaped."""
-    if image is None:
-        return None
-    img = np.asarray(image, dtype=np.float32)
-    if img.ndim == 3:
-        img = img[..., :3] @ np.array([0.299, 0.587, 0.114], dtype=np.float32)
-    return np.clip(img, 0, 1) if img.shape == shape else None
-
-
-def _colormap(name: str):
-    import matplotlib
-
-    return matplotlib.colormaps[name]
-
 
 def badpix_codes(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = None,
                  threshold: float = BADPIX_THRESHOLD) -> np.ndarray:
@@ -92,7 +80,7 @@ def badpix_codes(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = Non
 def badpix_image(codes: np.ndarray, background: np.ndarray | None = None) -> np.ndarray:
     """The BadPix map drawn from :func:`badpix_codes`: (H, W, 3) float32 RGB; BAD pure red, GOOD light
     grey (a faint copy of ``background``, the centre view, when given), OUTSIDE dark grey."""
-    gray = _as_gray(background, codes.shape)
+    gray = as_gray(background, codes.shape)
     light = np.full(codes.shape, GOOD_LIGHT[0] + GOOD_LIGHT[1] * 0.6, np.float32) if gray is None \
         else GOOD_LIGHT[0] + GOOD_LIGHT[1] * gray
     level = np.where(codes == GOOD, light, OUTSIDE_GREY).astype(np.float32)
@@ -106,7 +94,7 @@ def disparity_image(disparity: np.ndarray, vmin: float, vmax: float, cmap: str =
     d = np.asarray(disparity, dtype=np.float32)
     finite = np.isfinite(d)
     t = np.clip((np.where(finite, d, vmin) - vmin) / max(vmax - vmin, 1e-12), 0, 1)
-    rgb = _colormap(cmap)(t)[..., :3].astype(np.float32)
+    rgb = colormap(cmap)(t)[..., :3].astype(np.float32)
     rgb[~finite] = NONFINITE_RGB
     return rgb
 
@@ -123,7 +111,7 @@ def signed_error_image(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None
     """(H, W, 3) float32 RGB of gt - pred in ``cmap`` over [-limit, +limit]; grey outside ``mask`` (and
     where gt is non-finite), black where the prediction is non-finite inside it."""
     err = signed_error(gt, pred)
-    rgb = _colormap(cmap)(np.clip((np.nan_to_num(err) + limit) / (2 * limit), 0, 1))[..., :3].astype(np.float32)
+    rgb = colormap(cmap)(np.clip((np.nan_to_num(err) + limit) / (2 * limit), 0, 1))[..., :3].astype(np.float32)
     scored = np.isfinite(np.asarray(gt, dtype=np.float32))
     if mask is not None:
         scored &= np.asarray(mask, dtype=bool)
@@ -217,83 +205,8 @@ def method_panels(label: str, lf: LightField, prediction: Prediction | np.ndarra
 
 # --------------------------------------------------------------------------- drawing
 
-def _pyplot():
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
-FIGURE_FORMATS = ("png", "pdf", "svg")
-# Metadata left out of each format: the files carry no link, so they can go into the offline HTML report.
-_NO_LINK_METADATA = {"png": {"Software": None}, "pdf": {"Producer": None, "Creator": None}, "svg": {"Creator": None}}
-
-
-def _figure_bytes(fig: Any, fmt: str, dpi: int) -> bytes:
-    buf = io.BytesIO()
-    fig.savefig(buf, format=fmt, dpi=dpi, metadata=_NO_LINK_METADATA[fmt])
-    return buf.getvalue()
-
-
-def save_figure(fig: Any, path: str | Path, dpi: int = DPI) -> Path:
-    """Write a matplotlib figure as PNG atomically and close it (no 'Software' metadata)."""
-    plt = _pyplot()
-    try:
-        data = _figure_bytes(fig, "png", dpi)
-    finally:
-        plt.close(fig)
-    write_bytes(path, data)
-    return Path(path)
-
-
-def save_formats(fig: Any, path: str | Path, formats: Sequence[str] = ("png",), dpi: int = 110) -> list[Path]:
-    """Write ``fig`` as path.<format> for each of png / pdf / svg (atomically) and close it. ``path`` is
-    the file name without its format (a trailing .png / .pdf / .svg is replaced; any other dot, as in
-    'pairwise_planesweep_interval=0.25', is part of the name). The files carry no metadata link (PNG
-    'Software', PDF 'Producer' and 'Creator' are left out)."""
-    plt = _pyplot()
-    unknown = [f for f in formats if f not in FIGURE_FORMATS]
-    if unknown or not formats:
-        plt.close(fig)
-        raise SpecError(f"unknown figure format {', '.join(unknown) or '(none)'}; use {', '.join(FIGURE_FORMATS)}")
-    path = Path(path)
-    stem = path.with_suffix("") if path.suffix.lstrip(".") in FIGURE_FORMATS else path
-    written = []
-    try:
-        for fmt in dict.fromkeys(formats):
-            target = stem.with_name(f"{stem.name}.{fmt}")
-            write_bytes(target, _figure_bytes(fig, fmt, dpi))
-            written.append(target)
-    finally:
-        plt.close(fig)
-    return written
-
-
-def write_image(path: str | Path, rgb: np.ndarray) -> Path:
-    """Write an (H, W, 3) float RGB array in [0, 1] as a PNG, one pixel per array element (atomic)."""
-    from PIL import Image
-
-    arr = np.round(np.clip(np.asarray(rgb, dtype=np.float64), 0, 1) * 255).astype(np.uint8)
-    buf = io.BytesIO()
-    Image.fromarray(arr, "RGB").save(buf, format="PNG")
-    write_bytes(path, buf.getvalue())
-    return Path(path)
-
-
-def _colorbar(fig: Any, ax: Any, cmap: str, vmin: float, vmax: float, label: str = "") -> None:
-    import matplotlib as mpl
-
-    sm = mpl.cm.ScalarMappable(norm=mpl.colors.Normalize(vmin=vmin, vmax=vmax), cmap=cmap)
-    cb = fig.colorbar(sm, ax=ax, fraction=0.046, pad=0.03)
-    cb.ax.tick_params(labelsize=7)
-    if label:
-        cb.set_label(label, fontsize=7)
-
-
 def _row_figure(title: str):
-    plt = _pyplot()
+    plt = pyplot()
     fig, axes = plt.subplots(1, 4, figsize=(4 * PANEL_IN, ROW_HEIGHT_IN))
     fig.subplots_adjust(left=0.01, right=0.95, top=0.83, bottom=0.03, wspace=0.28)
     fig.suptitle(title, fontsize=9, x=0.01, ha="left")
@@ -315,20 +228,20 @@ def draw_method_row(panels: MethodPanels, path: str | Path, resolution_note: str
     lo, hi = panels.disparity_range
     axes[0].imshow(panels.disparity, interpolation="nearest")
     axes[0].set_title("disparity (px)", fontsize=8)
-    _colorbar(fig, axes[0], DISPARITY_CMAP, lo, hi)
+    add_colorbar(fig, axes[0], DISPARITY_CMAP, lo, hi)
     if panels.badpix is not None:
         axes[1].imshow(panels.badpix, interpolation="nearest")
         axes[1].set_title(f"BadPix({panels.threshold:g}) = {panels.badpix_percent:.2f}% (red = bad)", fontsize=8)
         axes[2].imshow(panels.error, interpolation="nearest")
         axes[2].set_title("gt - pred (px)", fontsize=8)
-        _colorbar(fig, axes[2], ERROR_CMAP, -ERROR_LIMIT, ERROR_LIMIT)
+        add_colorbar(fig, axes[2], ERROR_CMAP, -ERROR_LIMIT, ERROR_LIMIT)
     else:
         _blank(axes[1], "no ground truth")
         _blank(axes[2], "no ground truth")
     if panels.uncertainty is not None and panels.uncertainty_range is not None:
         axes[3].imshow(panels.uncertainty, interpolation="nearest")
         axes[3].set_title("uncertainty", fontsize=8)
-        _colorbar(fig, axes[3], UNCERTAINTY_CMAP, *panels.uncertainty_range)
+        add_colorbar(fig, axes[3], UNCERTAINTY_CMAP, *panels.uncertainty_range)
     else:
         _blank(axes[3], "no uncertainty map")
     return save_figure(fig, path)
@@ -346,7 +259,7 @@ def draw_scene_header(lf: LightField, path: str | Path, gt: np.ndarray | None,
     if gt is not None:
         axes[1].imshow(disparity_image(gt, *disp_range), interpolation="nearest")
         axes[1].set_title("ground truth (px)", fontsize=8)
-        _colorbar(fig, axes[1], DISPARITY_CMAP, *disp_range)
+        add_colorbar(fig, axes[1], DISPARITY_CMAP, *disp_range)
     else:
         _blank(axes[1], "no ground truth")
     ax = axes[2]
@@ -357,7 +270,7 @@ def draw_scene_header(lf: LightField, path: str | Path, gt: np.ndarray | None,
               (NONFINITE_RGB, "non-finite prediction (maps)"))
     for i, (colour, text) in enumerate(legend):
         y = 0.85 - 0.2 * i
-        ax.add_patch(_pyplot().Rectangle((0.0, y - 0.05), 0.1, 0.1, color=colour, transform=ax.transAxes))
+        ax.add_patch(pyplot().Rectangle((0.0, y - 0.05), 0.1, 0.1, color=colour, transform=ax.transAxes))
         ax.text(0.14, y, text, va="center", fontsize=7, transform=ax.transAxes)
     ax.set_title("BadPix map colours", fontsize=8)
     h, w = (gt.shape if gt is not None else center.shape[:2])
@@ -370,10 +283,6 @@ def draw_scene_header(lf: LightField, path: str | Path, gt: np.ndarray | None,
 
 def stack_rows(row_paths: Sequence[str | Path], path: str | Path) -> Path:
     """Stack row PNGs (equal widths, as drawn by this module) vertically into one PNG (atomic)."""
-    from PIL import Image
-
-    from lfbench.utils.readfile import check_regular_file
-
     images = []
     for p in row_paths:
         check_regular_file(p, "figure row")
@@ -426,14 +335,26 @@ def average_curves(curves: Sequence[Curve]) -> dict[str, tuple[np.ndarray, np.nd
     return {m: (cs[0].thresholds, np.mean([c.values for c in cs], axis=0), len(cs)) for m, cs in out.items()}
 
 
+def plot_mean_series(averaged: Mapping[str, tuple[np.ndarray, np.ndarray, int]], path: str | Path, title: str, *,
+                     markers: bool = False, colours: Mapping[str, str] | None = None) -> Path:
+    """:func:`plot_badpix_series` of series averaged over scenes (method -> (t, values, number of scenes), as
+    :func:`average_curves` and :func:`curves_from_records` give them), each labelled with its scene count."""
+    return plot_badpix_series({m: (t, v) for m, (t, v, _) in averaged.items()}, path, title, markers=markers,
+                              colours=colours, scenes={m: k for m, (_, _, k) in averaged.items()})
+
+
 @plain_text
-def plot_badpix_series(series: Mapping[str, tuple[np.ndarray, np.ndarray]], path: str | Path, title: str,
-                       markers: bool = False) -> Path:
-    """BadPix(t) (%) against t (px), one line per method; dotted lines mark 0.01, 0.03 and 0.07."""
-    plt = _pyplot()
-    fig, ax = plt.subplots(figsize=(6.4, 4.2))
-    for label, (t, v) in series.items():
-        ax.plot(t, v, marker="o" if markers else None, markersize=4, linewidth=1.5, label=label)
+def badpix_series_figure(series: Mapping[str, tuple[np.ndarray, np.ndarray]], title: str, *, markers: bool = False,
+                         colours: Mapping[str, str] | None = None, scenes: Mapping[str, int] | None = None) -> Any:
+    """The figure of :func:`plot_badpix_series` (not saved): the legend beside the axes, never over the
+    curves, its labels wrapped (plotting.legend_label)."""
+    plt = pyplot()
+    colours = colours if colours is not None else method_colours(list(series))
+    fig, ax = plt.subplots(figsize=(8.4, 4.2))
+    for method, (t, v) in series.items():
+        label = method if scenes is None else f"{method} ({scenes[method]} scene{'s' if scenes[method] != 1 else ''})"
+        ax.plot(t, v, marker="o" if markers else None, markersize=4, linewidth=1.5, label=legend_label(label),
+                color=colours.get(method))
     for t in MARKED_THRESHOLDS:
         ax.axvline(t, color="0.7", linestyle=":", linewidth=1)
     ax.set_xlim(0, 0.1)
@@ -443,8 +364,19 @@ def plot_badpix_series(series: Mapping[str, tuple[np.ndarray, np.ndarray]], path
     ax.set_title(title, fontsize=9)
     ax.grid(alpha=0.3)
     if series:
-        ax.legend(fontsize=7, loc="upper right")
+        ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0, frameon=False)
     fig.tight_layout()
+    return fig
+
+
+@plain_text
+def plot_badpix_series(series: Mapping[str, tuple[np.ndarray, np.ndarray]], path: str | Path, title: str, *,
+                       markers: bool = False, colours: Mapping[str, str] | None = None,
+                       scenes: Mapping[str, int] | None = None) -> Path:
+    """BadPix(t) (%) against t (px), one line per method (``series``: method -> (t, values)); dotted lines
+    mark 0.01, 0.03 and 0.07. ``colours``: method -> colour (default: plotting.method_colours in the
+    series' order); ``scenes``: method -> number of scenes averaged, added to its label."""
+    fig = badpix_series_figure(series, title, markers=markers, colours=colours, scenes=scenes)
     return save_figure(fig, path, dpi=110)
 
 
@@ -465,12 +397,8 @@ def write_curves_csv(curves: Sequence[Curve], path: str | Path) -> Path:
 
 def read_curves_csv(path: str | Path) -> list[Curve]:
     """Curves written by :func:`write_curves_csv`; DataError naming the file when malformed."""
-    from lfbench.utils.errors import DataError
-
     path = Path(path)
     rows: dict[tuple[str, str, str], list[tuple[float, float]]] = {}
-    from lfbench.utils.readfile import read_text
-
     reader = csv.DictReader(io.StringIO(read_text(path, "curve file"), newline=""))
     if tuple(reader.fieldnames or ()) != CURVE_CSV_COLUMNS:
         raise DataError(f"expected columns {', '.join(CURVE_CSV_COLUMNS)}", path)
@@ -487,8 +415,10 @@ def read_curves_csv(path: str | Path) -> list[Curve]:
     return out
 
 
-def draw_badpix_curves(curves: Sequence[Curve], out_dir: str | Path) -> list[Path]:
-    """badpix_series.png (mean over scenes per method) in out_dir and <scene>/badpix_series.png per scene."""
+def draw_badpix_curves(curves: Sequence[Curve], out_dir: str | Path,
+                       colours: Mapping[str, str] | None = None) -> list[Path]:
+    """badpix_series.png (mean over scenes per method) in out_dir and <scene>/badpix_series.png per scene;
+    ``colours``: method -> colour (default: by first appearance in ``curves``)."""
     out = Path(out_dir)
     written = []
     by_scene: dict[str, dict[str, tuple[np.ndarray, np.ndarray]]] = {}
@@ -497,19 +427,20 @@ def draw_badpix_curves(curves: Sequence[Curve], out_dir: str | Path) -> list[Pat
         by_scene.setdefault(c.scene, {})[c.method] = (c.thresholds, c.values)
         res_of.setdefault(c.scene, set()).add(c.resolution)
     folders = file_names(by_scene, "scene", reserved=RESERVED_SCENE_NAMES)
+    colours = colours if colours is not None else method_colours([c.method for c in curves])
     for scene, series in by_scene.items():
         written.append(plot_badpix_series(series, out / folders[scene] / "badpix_series.png",
-                                          f"BadPix series, {scene} ({'/'.join(sorted(res_of[scene]))})"))
-    avg = average_curves(curves)
-    n = {m: k for m, (_, _, k) in avg.items()}
-    series = {f"{m} ({n[m]} scene{'s' if n[m] != 1 else ''})": (t, v) for m, (t, v, _) in avg.items()}
-    written.append(plot_badpix_series(series, out / "badpix_series.png", "BadPix series, mean over scenes"))
+                                          f"BadPix series, {scene} ({'/'.join(sorted(res_of[scene]))})",
+                                          colours=colours))
+    written.append(plot_mean_series(average_curves(curves), out / "badpix_series.png",
+                                    "BadPix series, mean over scenes", colours=colours))
     return written
 
 
 def curves_from_records(results: Any) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """Mean BadPix at the thresholds a results file holds (badpix_<t>), per method: the coarse series
-    available without the maps. Only scenes where the method has every threshold are averaged."""
+    available without the maps, method -> (thresholds, values, number of scenes) as :func:`average_curves`
+    gives them. Only scenes where the method has every threshold are averaged."""
     df = results.to_frame()
     thresholds = {}
     for metric_id in dict.fromkeys(df["metric"]):
@@ -524,8 +455,7 @@ def curves_from_records(results: Any) -> dict[str, tuple[np.ndarray, np.ndarray]
     for method, g in df.groupby("method", sort=False):
         table = g.pivot_table(index="scene", columns="t", values="value", aggfunc="first").dropna()
         if not table.empty:
-            out[f"{method} ({len(table)} scene{'s' if len(table) != 1 else ''})"] = (
-                table.columns.to_numpy(dtype=float), table.mean(axis=0).to_numpy(dtype=float))
+            out[method] = (table.columns.to_numpy(dtype=float), table.mean(axis=0).to_numpy(dtype=float), len(table))
     return out
 
 
@@ -549,11 +479,12 @@ class SceneFigureWriter:
     and, when ``curves`` is set, ``badpix_series.csv``, ``badpix_series.png`` (mean over scenes) and
     ``<scene>/badpix_series.png``. Only the row file names and the curves are kept in memory. Scene and
     method names are file names by lfbench.utils.names: two that would share a file are refused
-    (DataError) before anything of the second is drawn.
+    (DataError) before anything of the second is drawn. Each method keeps one colour on every series
+    chart (plotting.method_colours, by its place in ``methods``, else by arrival).
     """
 
     def __init__(self, out_dir: str | Path, rules: ScoringRules = ScoringRules(),
-                 threshold: float = BADPIX_THRESHOLD, curves: bool = True) -> None:
+                 threshold: float = BADPIX_THRESHOLD, curves: bool = True, methods: Sequence[str] = ()) -> None:
         self.out = Path(out_dir)
         self.rules = rules
         self.threshold = threshold
@@ -564,6 +495,7 @@ class SceneFigureWriter:
         self._scene_names = FileNames("scene", reserved=RESERVED_SCENE_NAMES)
         self._method_names = FileNames("method label", reserved=RESERVED_ROW_NAMES)
         self.written: set[Path] = set()
+        self._methods = list(methods)  # the order colours are given in; methods not named follow as they arrive
 
     def __call__(self, method: Any, scene: LightField, prediction: Prediction) -> None:
         self.add(method.label, scene, prediction)
@@ -576,6 +508,8 @@ class SceneFigureWriter:
         """Draw one prediction's row, re-assemble the scene's overview and update the curves."""
         pred = prediction if isinstance(prediction, Prediction) else Prediction(disparity=np.asarray(prediction))
         scene_name, method_name = self._scene_names(scene.name), self._method_names(label)
+        if label not in self._methods:
+            self._methods.append(label)
         scene_dir = self.out / scene_name
         gt = scene.gt_disparity()
         written = []
@@ -603,23 +537,14 @@ class SceneFigureWriter:
             if curve is not None:
                 self._curves[(label, scene.name)] = curve
                 written.append(write_curves_csv(self.curves, self.out / "badpix_series.csv"))
-                scene_curves = [c for c in self.curves if c.scene == scene.name]
-                series = {c.method: (c.thresholds, c.values) for c in scene_curves}
+                colours = method_colours(self._methods)
+                series = {c.method: (c.thresholds, c.values) for c in self.curves if c.scene == scene.name}
                 written.append(plot_badpix_series(series, scene_dir / "badpix_series.png",
-                                                  f"BadPix series, {scene.name} ({curve.resolution})"))
-                avg = average_curves(self.curves)
-                written.append(plot_badpix_series(
-                    {f"{m} ({k} scene{'s' if k != 1 else ''})": (t, v) for m, (t, v, k) in avg.items()},
-                    self.out / "badpix_series.png", "BadPix series, mean over scenes"))
+                                                  f"BadPix series, {scene.name} ({curve.resolution})", colours=colours))
+                written.append(plot_mean_series(average_curves(self.curves), self.out / "badpix_series.png",
+                                                "BadPix series, mean over scenes", colours=colours))
         self.written.update(written)
         return written
-
-
-def scene_figure_hook(out_dir: str | Path, rules: ScoringRules = ScoringRules(),
-                      threshold: float = BADPIX_THRESHOLD, curves: bool = True) -> SceneFigureWriter:
-    """The ``--figures`` hook of ``lfbench evaluate``: a callable (method, scene, prediction) -> None
-    that writes the per-scene overviews and BadPix-series curves into ``out_dir``."""
-    return SceneFigureWriter(out_dir, rules=rules, threshold=threshold, curves=curves)
 
 
 def figures_from_maps(scenes: Sequence[LightField], maps: Mapping[str, str | Path], out_dir: str | Path,
@@ -628,8 +553,6 @@ def figures_from_maps(scenes: Sequence[LightField], maps: Mapping[str, str | Pat
     (disp_maps/<scene>.pfm, as written by ``evaluate --save-maps`` or a published submission).
     Scenes without a map for a method are left out for that method. Returns the writer (its
     ``written`` files and ``curves``)."""
-    from lfbench.data.submission import disp_map_path, read_submission_map
-
     writer = SceneFigureWriter(out_dir, rules=rules)
     for scene in scenes:
         for label, folder in maps.items():

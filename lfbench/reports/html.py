@@ -6,7 +6,9 @@ Layout of the site folder (``OUT/html`` by default)::
 
     index.html              leaderboard: average ranks, one sortable table per metric (value and rank per
                             scene, mean, average rank; bootstrap intervals when computed; the paper's
-                            numbers in labelled columns with --paper), radar chart, BadPix series
+                            numbers in labelled columns with --paper), radar chart, BadPix series, and
+                            the caller's further tables (an ablation: means over seeds, intervals and
+                            verdicts against each baseline)
     scene-<scene>.html      centre view, ground truth, and every method's disparity, BadPix and signed
                             error maps at one colour scale; pairwise comparisons, error heatmaps
     method-<method>.html    one method's numbers and ranks on every scene, its radar chart and maps
@@ -23,31 +25,50 @@ import math
 import shutil
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from importlib.resources import files
 from pathlib import Path
 from typing import Any
 from urllib.parse import quote
 
+import jinja2
 import numpy as np
 import pandas as pd
 
+from lfbench.data.scene import Benchmark
 from lfbench.reports import figures as fig
 from lfbench.reports import toolkit_figures as tk
 from lfbench.reports.leaderboard import all_metric_ranks, metric_table, overall_ranks
 from lfbench.reports.maps import MAPS_DIR, SceneMaps, load_scene_maps, map_folders
-from lfbench.runs.outputs import check_within
-from lfbench.runs.results import Results, check_names
+from lfbench.reports.paper import PAPER_RESOLUTION_COLUMN, average_with_paper, paper_column, per_scene_with_paper
+from lfbench.reports.plotting import colormap, method_colours, write_image
+from lfbench.reports.tables import average_table, per_scene_table
+from lfbench.results import Results, check_names
 from lfbench.scoring.metrics import describe_metric, metric_order
 from lfbench.scoring.rules import ScoringRules
+from lfbench.scoring.stats import read_ci_csv
 from lfbench.utils.atomic import fresh_dir, replace_dir, write_text
 from lfbench.utils.errors import DataError
+from lfbench.utils.outputs import check_within
 
-__all__ = ["SITE_DIR", "SiteInputs", "build_site", "build_site_from_dir", "check_site_dir", "site_inputs",
-           "site_inputs_from_dir"]
+__all__ = ["SITE_DIR", "SiteInputs", "SiteSection", "build_site", "build_site_from_dir", "check_site_dir",
+           "site_inputs", "site_inputs_from_dir"]
 
 SITE_DIR = "html"
 ASSETS = ("site.css", "site.js")
 MAX_ALL_PAIRS = 5  # up to this many methods: every pair on a scene page; more: each against the best
 FLOATFMT = ".3f"
+
+
+@dataclass(frozen=True)
+class SiteSection:
+    """A further table on the index page: ``title``, ``caption`` lines and ``table`` (its index is the
+    first column; numbers are shown with three decimals, text as it is), e.g. an ablation's means over
+    seeds with their intervals, or its verdicts against each baseline."""
+
+    id: str
+    title: str
+    table: pd.DataFrame
+    caption: Sequence[str] = ()
 
 
 @dataclass
@@ -56,7 +77,8 @@ class SiteInputs:
     ``maps``: method label -> submission folder of its saved maps; ``scene_maps``: scene name ->
     those maps already loaded (lfbench.reports.maps.load_scene_maps, at the site's border), used instead
     of loading them again; ``ci``: the long bootstrap frame of lfbench.scoring.stats.ci_records
-    (ci.csv), or None; ``paper``: PaperTables or None."""
+    (ci.csv), or None; ``paper``: PaperTables or None, with ``paper_methods`` (default: the paper's
+    own default methods); ``sections``: further tables on the index page."""
 
     results: Results
     scenes: Sequence[Any] = ()
@@ -64,9 +86,10 @@ class SiteInputs:
     scene_maps: Mapping[str, SceneMaps] = field(default_factory=dict)
     ci: pd.DataFrame | None = None
     paper: Any = None
-    paper_methods: Sequence[str] = ("SubFocal",)
+    paper_methods: Sequence[str] = ()
     title: str = "lfbench results"
     notes: Sequence[str] = ()
+    sections: Sequence[SiteSection] = ()
 
 
 # --------------------------------------------------------------------------- helpers
@@ -144,16 +167,13 @@ def _metric_section(results: Results, metric: str, ci: Mapping, scene_pages: Map
 
 def _paper_section(results: Results, metric: str, paper: Any, paper_methods: Sequence[str]) -> dict[str, Any] | None:
     """Rows scene (our scenes the paper reports), columns our methods then the paper's, labelled."""
-    from lfbench.reports.paper import PAPER_RESOLUTION_COLUMN, paper_column, per_scene_with_paper
-    from lfbench.reports.tables import per_scene_table
-
     table = per_scene_with_paper(per_scene_table(results, [metric]), paper, paper_methods)
     if table.empty:
         return None
     table = table.xs(metric, level="metric")
     ours = [c for c in table.columns if c not in ("resolution", PAPER_RESOLUTION_COLUMN)
             and not str(c).endswith(" (paper)")]
-    theirs = [paper_column(paper.resolve_method(m)) for m in paper_methods]
+    theirs = [paper_column(m) for m in paper.methods_shown(paper_methods)]
     if table[theirs].isna().all().all():
         return None
     rows = []
@@ -175,8 +195,6 @@ def _overview(results: Results, method_pages: Mapping[str, str], paper: Any,
     for m in metrics:
         res = "+".join(sorted(set(df.loc[df["metric"] == m, "resolution"])))
         columns.append({"id": m, "name": describe_metric(m).name, "res": res})
-    from lfbench.reports.tables import average_table
-
     means = average_table(results)
     rows = []
     for method in results.methods:
@@ -190,13 +208,28 @@ def _overview(results: Results, method_pages: Mapping[str, str], paper: Any,
         row["pos"] = pos
     paper_rows = []
     if paper is not None:
-        from lfbench.reports.paper import average_with_paper
-
         table = average_with_paper(means, paper, results.scenes, paper_methods)
         for label in table.index[len(results.methods):]:
             paper_rows.append({"method": label, "cells": [_cell(table.loc[label].get(m)) for m in metrics],
                                "scenes": int(table.loc[label, "scenes"])})
     return {"columns": columns, "rows": rows, "paper_rows": paper_rows}
+
+
+def _section_table(section: SiteSection) -> dict[str, Any]:
+    """A :class:`SiteSection` as the template shows it: a header and rows of cells (numbers sortable)."""
+    table = section.table
+    numeric = [pd.api.types.is_numeric_dtype(table[c]) and not pd.api.types.is_bool_dtype(table[c])
+               for c in table.columns]
+    header = [{"label": str(table.index.name or ""), "kind": "text"}]
+    header += [{"label": str(c), "kind": "num" if num else "text"} for c, num in zip(table.columns, numeric,
+                                                                                      strict=True)]
+    rows = []
+    for key, *values in table.itertuples(name=None):  # not iterrows: a row of mixed numbers would turn all float
+        cells = [_cell(v) | {"num": True} if num else {"text": _fmt(v), "v": str(v), "num": False}
+                 for v, num in zip(values, numeric, strict=True)]
+        rows.append({"key": str(key), "cells": cells})
+    return {"id": section.id, "title": section.title, "caption": list(section.caption), "header": header,
+            "rows": rows}
 
 
 # --------------------------------------------------------------------------- images
@@ -208,16 +241,14 @@ class _Images:
         self.root = root
 
     def rgb(self, rel: str, rgb: np.ndarray) -> str:
-        fig.write_image(self.root / rel, rgb)
+        write_image(self.root / rel, rgb)
         return rel
 
     def colorbar(self, cmap: str) -> str:
         rel = f"img/colorbar_{cmap}.png"
         if not (self.root / rel).is_file():
-            import matplotlib
-
-            row = matplotlib.colormaps[cmap](np.linspace(0, 1, 256))[None, :, :3]
-            fig.write_image(self.root / rel, np.repeat(row, 12, axis=0))
+            row = colormap(cmap)(np.linspace(0, 1, 256))[None, :, :3]
+            write_image(self.root / rel, np.repeat(row, 12, axis=0))
         return rel
 
 
@@ -279,9 +310,7 @@ def _scene_images(sm: SceneMaps, images: _Images, threshold: float, pair_thresho
 
 # --------------------------------------------------------------------------- the site
 
-def _environment():
-    import jinja2
-
+def _environment() -> jinja2.Environment:
     env = jinja2.Environment(loader=jinja2.PackageLoader("lfbench.reports", "site_assets"),
                              autoescape=jinja2.select_autoescape(["html"]), undefined=jinja2.StrictUndefined,
                              trim_blocks=True, lstrip_blocks=True)
@@ -341,8 +370,6 @@ def build_site(inputs: SiteInputs, out: str | Path, *, threshold: float = fig.BA
 
 
 def _write_site(inputs: SiteInputs, root: Path, threshold: float, pair_threshold: float, border: int) -> None:
-    from importlib.resources import files
-
     results = inputs.results
     env = _environment()
     assets = files("lfbench.reports").joinpath("site_assets")
@@ -370,6 +397,7 @@ def _write_site(inputs: SiteInputs, root: Path, threshold: float, pair_threshold
     # maps, drawn scene by scene (one scene's arrays in memory at a time unless the caller loaded them all)
     drawn: dict[str, dict[str, Any]] = {}
     curves: list[fig.Curve] = []
+    colours = method_colours(methods)  # one colour per method on every chart of the site
     rules = _rules(results)
     for name in scene_names:
         scene = scenes_by_name.get(name)
@@ -390,25 +418,25 @@ def _write_site(inputs: SiteInputs, root: Path, threshold: float, pair_threshold
             series = {c.method: (c.thresholds, c.values) for c in curves if c.scene == name}
             res = "/".join(sorted({c.resolution for c in curves if c.scene == name}))
             path = root / "img" / fig.safe_name(name) / "badpix_series.png"
-            fig.plot_badpix_series(series, path, f"BadPix series, {name} ({res})")
+            fig.plot_badpix_series(series, path, f"BadPix series, {name} ({res})", colours=colours)
             drawn[name]["series"] = f"img/{fig.safe_name(name)}/badpix_series.png"
         del sm
     figures: dict[str, str | None] = {"series": None, "radar": None, "radar_metrics": None}
     if curves:
-        avg = fig.average_curves(curves)
-        series = {f"{m} ({k} scene{'s' if k != 1 else ''})": (t, v) for m, (t, v, k) in avg.items()}
-        fig.plot_badpix_series(series, root / "img" / "badpix_series.png", "BadPix series, mean over scenes")
+        fig.plot_mean_series(fig.average_curves(curves), root / "img" / "badpix_series.png",
+                             "BadPix series, mean over scenes", colours=colours)
         figures["series"] = "img/badpix_series.png"
     else:
-        series = fig.curves_from_records(results)
-        if series:
-            fig.plot_badpix_series(series, root / "img" / "badpix_series.png",
-                                   "BadPix at the thresholds in the results, mean over scenes", markers=True)
+        averaged = fig.curves_from_records(results)
+        if averaged:
+            fig.plot_mean_series(averaged, root / "img" / "badpix_series.png",
+                                 "BadPix at the thresholds in the results, mean over scenes", markers=True,
+                                 colours=colours)
             figures["series"] = "img/badpix_series.png"
     radar = tk.radar_scores(results)
     radar_ok = len(radar.index) >= 3
     if radar_ok:
-        tk.plot_radar(radar, root / "img" / "radar.png")
+        tk.plot_radar(radar, root / "img" / "radar.png", colours=colours)
         figures["radar"] = "img/radar.png"
         figures["radar_metrics"] = ", ".join(describe_metric(m).name for m in radar.index)
 
@@ -421,7 +449,7 @@ def _write_site(inputs: SiteInputs, root: Path, threshold: float, pair_threshold
         scene_cards=[{"label": s, "href": scene_pages[s], "thumb": drawn.get(s, {}).get("centre"),
                       "res": "/".join(sorted({r.resolution for r in results.records if r.scene == s}))}
                      for s in scene_names],
-        has_ci=bool(ci), threshold=threshold)
+        has_ci=bool(ci), threshold=threshold, tables=[_section_table(t) for t in inputs.sections])
     write_text(root / "index.html", index)
     for s in scene_names:
         write_text(root / scene_pages[s], env.get_template("scene.html").render(
@@ -432,7 +460,8 @@ def _write_site(inputs: SiteInputs, root: Path, threshold: float, pair_threshold
         radar_src = None
         if radar_ok and m in radar.columns:
             rel = f"img/radar_{fig.safe_name(m)}.png"
-            tk.plot_radar(radar, root / rel, highlight=m, title=f"{m} against the other methods (median over scenes)")
+            tk.plot_radar(radar, root / rel, highlight=m, title=f"{m} against the other methods (median over scenes)",
+                          colours=colours)
             radar_src = rel
         write_text(root / method_pages[m], env.get_template("method.html").render(
             **common, page="method", method=m, method_table=_method_table(results, m, scene_pages, ci, ranks),
@@ -507,7 +536,7 @@ def _method_table(results: Results, method: str, scene_pages: Mapping[str, str],
 
 def site_inputs_from_dir(results_path: str | Path, *, data_root: str | Path | None = None,
                          maps: str | Path | None = None, scenes: Sequence[Any] | None = None, paper: Any = None,
-                         paper_methods: Sequence[str] = ("SubFocal",), title: str | None = None) -> SiteInputs:
+                         paper_methods: Sequence[str] = (), title: str | None = None) -> SiteInputs:
     """What a results folder holds for a site: results.json, ci.csv (when ``--ci`` ran), the saved maps
     (``maps`` or RESULTS_DIR/maps when present) and the scenes of ``data_root`` (default: the data
     root the results record, when it exists), or ``scenes`` (those the results were scored on)."""
@@ -518,23 +547,24 @@ def site_inputs_from_dir(results_path: str | Path, *, data_root: str | Path | No
 
 
 def site_inputs(results: Results, folder: Path, *, data_root: str | Path | None = None,
-                maps: str | Path | None = None, scenes: Sequence[Any] | None = None,
+                maps: str | Path | Mapping[str, Path] | None = None, scenes: Sequence[Any] | None = None,
                 scene_maps: Mapping[str, SceneMaps] | None = None, paper: Any = None,
-                paper_methods: Sequence[str] = ("SubFocal",), title: str | None = None) -> SiteInputs:
+                paper_methods: Sequence[str] = (), title: str | None = None) -> SiteInputs:
     """:func:`site_inputs_from_dir` for ``results`` already read from the results folder ``folder``.
-    ``scenes``: the results' scenes of the data root when already discovered (then ``data_root`` is
-    not searched again); ``scene_maps``: their saved maps when already loaded (SiteInputs)."""
-    from lfbench.data.scene import Benchmark
-    from lfbench.scoring.stats import read_ci_csv
-
+    ``maps``: a folder of submission folders, or method label -> submission folder (those that hold
+    maps are used); ``scenes``: the results' scenes of the data root when already discovered (then
+    ``data_root`` is not searched again); ``scene_maps``: their saved maps when already loaded (SiteInputs)."""
     ci = None
     if (folder / "ci.csv").is_symlink():
         check_within(folder / "ci.csv", folder, "the results folder")
     if (folder / "ci.csv").is_file():
         ci = read_ci_csv(folder / "ci.csv")
-    maps_dir = Path(maps) if maps is not None else folder / MAPS_DIR
-    folders = (map_folders(maps_dir, results.methods, within=None if maps is not None else folder)
-               if (maps is not None or maps_dir.is_dir()) else {})
+    if isinstance(maps, Mapping):
+        folders = {label: Path(f) for label, f in maps.items() if (Path(f) / "disp_maps").is_dir()}
+    else:
+        maps_dir = Path(maps) if maps is not None else folder / MAPS_DIR
+        folders = (map_folders(maps_dir, results.methods, within=None if maps is not None else folder)
+                   if (maps is not None or maps_dir.is_dir()) else {})
     root = Path(data_root) if data_root is not None else (
         Path(results.meta["data_root"]) if results.meta.get("data_root") else None)
     notes = []

@@ -1,10 +1,12 @@
-"""The SubFocal paper's published numbers, for "paper vs ours" columns in the tables.
+"""A paper's published numbers, for "paper vs ours" columns in the tables.
 
 A paper folder holds ``table1_per_scene.csv`` (method, scene, metric, value: Table I),
 ``table2_average.csv`` (method, metric, value: Table II, mean over the 12 benchmark scenes) and
-other tables (``table4_interval_interp.csv``, ``table5_losses.csv``, ...) kept as plain DataFrames.
-lfbench ships no copy of them: the folder is the user's (e.g. ../shared/data/paper), found by
-:func:`find_paper_dir` (--paper DIR, else $LFBENCH_PAPER_DIR, else $LFBENCH_HCI_ROOT/../paper).
+other tables (e.g. an ablation's, which the paper's reference names: lfbench.reports.reference) kept as
+plain DataFrames. lfbench ships no copy of them: the folder is the user's (e.g. ../shared/data/paper),
+found by :func:`find_paper_dir` (--paper DIR, else $LFBENCH_PAPER_DIR, else $LFBENCH_HCI_ROOT/../paper)
+and read as the numbers of a reference (by default the default reference: the default network's paper),
+which says which of its methods are shown unless asked otherwise (:attr:`PaperTables.default_methods`).
 
 Resolution: the benchmark (and so the paper) scores backgammon, dots and stripes at high
 resolution (lfbench.scoring.rules.BENCHMARK_HIGHRES_SCENES), the other scenes at 512x512; the columns
@@ -21,12 +23,13 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from lfbench.reports.reference import Reference, default_reference
 from lfbench.scoring.rules import BENCHMARK_HIGHRES_SCENES
 from lfbench.utils.errors import DataError, SpecError
+from lfbench.utils.readfile import read_csv
 
 PAPER_DIR_ENV, HCI_ROOT_ENV = "LFBENCH_PAPER_DIR", "LFBENCH_HCI_ROOT"
 PER_SCENE_FILE, AVERAGE_FILE = "table1_per_scene.csv", "table2_average.csv"
-DEFAULT_PAPER_METHODS = ("SubFocal",)
 PAPER_RESOLUTION_COLUMN = "paper resolution"
 
 
@@ -50,12 +53,28 @@ def find_paper_dir(explicit: str | Path | None = None) -> Path:
 @dataclass
 class PaperTables:
     """The paper's tables: per_scene (method, scene, metric, value), average (method, metric, value),
-    and ``extra`` (file stem -> DataFrame) for the others."""
+    and ``extra`` (file stem -> DataFrame) for the others; ``reference``: what the paper is (its
+    methods shown by default, its labels and ablation tables), None when no reference is registered."""
 
     source: Path
     per_scene: pd.DataFrame
     average: pd.DataFrame
     extra: dict[str, pd.DataFrame] = field(default_factory=dict)
+    reference: Reference | None = None
+
+    @property
+    def default_methods(self) -> tuple[str, ...]:
+        """The paper's methods shown beside ours unless others are asked for (its reference's)."""
+        return self.reference.methods if self.reference is not None else ()
+
+    def methods_shown(self, asked: Sequence[str] | None = None) -> list[str]:
+        """The paper's spelling of ``asked`` (default: :attr:`default_methods`); SpecError for an unknown
+        name or when neither names any."""
+        names = list(asked) if asked else list(self.default_methods)
+        if not names:
+            raise SpecError(f"the paper's tables in {self.source} come with no reference that names its methods: "
+                            "name them (--paper-methods, [report] paper_methods)")
+        return [self.resolve_method(m) for m in names]
 
     @property
     def methods(self) -> list[str]:
@@ -86,8 +105,6 @@ class PaperTables:
 
 
 def _read_csv(path: Path, columns: Sequence[str] | None) -> pd.DataFrame:
-    from lfbench.utils.readfile import read_csv
-
     df = read_csv(path, "paper table")
     if columns is None:
         return df
@@ -107,9 +124,10 @@ def _read_csv(path: Path, columns: Sequence[str] | None) -> pd.DataFrame:
     return df
 
 
-def load_paper(path: str | Path) -> PaperTables:
-    """Load the paper's tables from a folder (see :func:`find_paper_dir` to locate it).
-    DataError naming the file when a table is missing or malformed."""
+def load_paper(path: str | Path, reference: Reference | None = None) -> PaperTables:
+    """Load the paper's tables from a folder (see :func:`find_paper_dir` to locate it) as the numbers of
+    ``reference`` (default: the default reference). DataError naming the file when a table is missing or
+    malformed."""
     folder = Path(path)
     if not folder.is_dir():
         raise DataError("paper folder not found (expected table1_per_scene.csv, table2_average.csv)", folder)
@@ -117,7 +135,8 @@ def load_paper(path: str | Path) -> PaperTables:
     average = _read_csv(folder / AVERAGE_FILE, ("method", "metric", "value"))
     extra = {p.stem: _read_csv(p, None) for p in sorted(folder.glob("*.csv"))
              if p.name not in (PER_SCENE_FILE, AVERAGE_FILE)}
-    return PaperTables(source=folder, per_scene=per_scene, average=average, extra=extra)
+    return PaperTables(source=folder, per_scene=per_scene, average=average, extra=extra,
+                       reference=reference or default_reference())
 
 
 def paper_resolution(scene: str) -> str:
@@ -131,14 +150,14 @@ def paper_column(method: str) -> str:
 
 
 def per_scene_with_paper(table: pd.DataFrame, paper: PaperTables,
-                         methods: Sequence[str] = DEFAULT_PAPER_METHODS) -> pd.DataFrame:
+                         methods: Sequence[str] | None = None) -> pd.DataFrame:
     """Table I (rows (scene, metric), from report.tables.per_scene_table) with the paper's values of
-    ``methods`` in columns 'NAME (paper)' and the resolution the paper's number was scored at in
-    'paper resolution' (high resolution for backgammon, dots and stripes). Cells the paper does not
-    report (other scenes, Q25) are NaN."""
+    ``methods`` (default: the paper's default methods) in columns 'NAME (paper)' and the resolution the
+    paper's number was scored at in 'paper resolution' (high resolution for backgammon, dots and
+    stripes). Cells the paper does not report (other scenes, Q25) are NaN."""
     if table.empty:
         return table
-    names = [paper.resolve_method(m) for m in methods]
+    names = paper.methods_shown(methods)
     out = table.copy()
     scenes = out.index.get_level_values(0)
     metrics = out.index.get_level_values(1)
@@ -151,14 +170,14 @@ def per_scene_with_paper(table: pd.DataFrame, paper: PaperTables,
 
 
 def average_with_paper(table: pd.DataFrame, paper: PaperTables, scenes: Sequence[str],
-                       methods: Sequence[str] = DEFAULT_PAPER_METHODS) -> pd.DataFrame:
+                       methods: Sequence[str] | None = None) -> pd.DataFrame:
     """Table II (rows method, from report.tables.average_table) with rows for the paper's methods:
     'NAME (paper, Table II, 12 scenes)' (the published averages) and, when the paper reports some of
     ``scenes`` (ours) but not all 12, 'NAME (paper, N of our scenes)': the mean of its Table I over
     those N scenes, the row to compare with a method scored on the same scenes (see 'scenes')."""
     if table.empty:
         return table
-    names = [paper.resolve_method(m) for m in methods]
+    names = paper.methods_shown(methods)
     metric_cols = [c for c in table.columns if c not in ("scenes", "runtime_s")]
     rows = {}
     n_paper = len(paper.scenes)

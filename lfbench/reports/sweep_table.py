@@ -22,8 +22,9 @@ import pandas as pd
 
 from lfbench.data.scene import LOWRES
 from lfbench.method.registry import parse_spec
+from lfbench.reports.plotting import INTERPOLATION_COLOURS, pyplot, save_figure
 from lfbench.reports.tables import write_table
-from lfbench.runs.results import Results
+from lfbench.results import Results
 from lfbench.scoring.metrics import get_metric
 from lfbench.utils.errors import DataError, LFBenchError
 from lfbench.utils.figure_text import plain_text
@@ -89,18 +90,16 @@ def sweep_table(frame: pd.DataFrame) -> pd.DataFrame:
 def sweep_figure(table: pd.DataFrame, path: Path) -> Path:
     """BadPix 0.07 against the interval (log axis, coarse to fine), a line per interpolation and fit, a panel
     per scene group."""
-    from lfbench.ablation.plots import INTERP_COLOURS
-    from lfbench.reports.figures import _pyplot, save_figure
-
-    plt = _pyplot()
+    plt = pyplot()
     groups = list(dict.fromkeys(table.index))
     fig, axes = plt.subplots(1, len(groups), figsize=(4.2 * len(groups), 3.8), squeeze=False)
     for ax, group in zip(axes[0], groups, strict=True):
         sel = table.loc[[group]]
         for (interp, fit), rows in sel.groupby(["interpolation", "sub-pixel fit"], sort=False):
             xs = rows["interval (px)"].astype(float)
-            ax.plot(xs, rows[get_metric("badpix_0.07").label], marker="o",
-                    color=INTERP_COLOURS.get(interp, "tab:gray"), linestyle="-" if fit == "equiangular" else "--",
+            colour = INTERPOLATION_COLOURS.get(interp, "tab:gray")
+            ax.plot(xs, rows[get_metric("badpix_0.07").label], marker="o", color=colour,
+                    linestyle="-" if fit == "equiangular" else "--",
                     label=f"{interp}" + ("" if fit == "equiangular" else f", fit {fit}"))
         ax.set_xscale("log")
         ax.invert_xaxis()

@@ -10,9 +10,10 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from tabulate import tabulate
 
 from lfbench.reports import latex
-from lfbench.runs.results import Results
+from lfbench.results import Results
 from lfbench.scoring.metrics import find_metric, list_metrics, metric_order
 from lfbench.utils.atomic import write_text
 
@@ -88,8 +89,6 @@ def render(table: pd.DataFrame, fmt: str = "markdown", floatfmt: str = ".3f") ->
     rows = [[cell(v) for v in row] for row in flat.itertuples(index=False)]
     if fmt == "latex":
         return latex.tabular(headers, rows)  # every cell and header escaped (lfbench.reports.latex)
-    from tabulate import tabulate
-
     return tabulate(rows, headers=headers, tablefmt="github" if fmt == "markdown" else "simple",
                     disable_numparse=True) + "\n"
 
@@ -120,12 +119,4 @@ def write_table(table: pd.DataFrame, out_dir: str | Path, stem: str, caption: Se
         path = Path(out_dir) / f"{stem}.{ext}"
         write_text(path, render_with_caption(table, fmt, caption))
         written.append(path)
-    return written
-
-
-def write_tables(results: Results, out_dir: str | Path, stem: str = "table") -> list[Path]:
-    """Write per-scene and average tables as .md, .tex and .csv into out_dir; returns the paths."""
-    written = []
-    for name, table in (("per_scene", per_scene_table(results)), ("average", average_table(results))):
-        written += write_table(table, out_dir, f"{stem}_{name}")
     return written

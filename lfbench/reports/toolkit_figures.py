@@ -28,17 +28,19 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from lfbench.reports.figures import _as_gray, _colorbar, _colormap, _pyplot, save_formats
+from lfbench.reports.maps import load_scene_maps
+from lfbench.reports.plotting import add_colorbar, as_gray, colormap, legend_label, method_colours, pyplot, save_formats
 from lfbench.scoring.metrics import describe_metric, find_metric, metric_order
 from lfbench.utils.errors import SpecError
 from lfbench.utils.figure_text import plain_text
+from lfbench.utils.names import FileNames, file_names
 
 __all__ = [
     "A_BETTER", "B_BETTER", "HEATMAP_CMAP", "OUTSIDE", "PAIRWISE_LIMIT", "PAIRWISE_THRESHOLD", "TIE",
     "absolute_error", "bad_fraction_map", "heatmap_image", "median_error_map", "pairwise_classes",
     "pairwise_difference", "pairwise_image", "pairwise_shares", "plot_error_heatmaps", "plot_pairwise",
-    "plot_radar", "radar_metric_ids", "radar_radii", "radar_scores", "save_formats", "toolkit_figures_from_scene_maps",
-    "write_toolkit_figures",
+    "plot_radar", "radar_figure", "radar_metric_ids", "radar_radii", "radar_scores", "save_formats",
+    "toolkit_figures_from_scene_maps", "write_toolkit_figures",
 ]
 
 PAIRWISE_LIMIT = 0.1  # px, colour range of the pairwise maps (the toolkit's)
@@ -108,8 +110,8 @@ def pairwise_image(gt: np.ndarray, a: np.ndarray, b: np.ndarray, mask: np.ndarra
     diff = pairwise_difference(gt, a, b)
     codes = pairwise_classes(gt, a, b, mask, threshold)
     t = np.clip((np.nan_to_num(diff, nan=0.0, posinf=limit, neginf=-limit) + limit) / (2 * limit), 0, 1)
-    rgb = _colormap(PAIRWISE_CMAP)(t)[..., :3].astype(np.float32)
-    gray = _as_gray(background, codes.shape)
+    rgb = colormap(PAIRWISE_CMAP)(t)[..., :3].astype(np.float32)
+    gray = as_gray(background, codes.shape)
     tie = np.full(codes.shape, TIE_LIGHT, np.float32) if gray is None else 0.80 + 0.15 * gray
     rgb[codes == TIE] = np.repeat(tie[..., None], 3, axis=2)[codes == TIE]
     rgb[codes == OUTSIDE] = OUTSIDE_GREY
@@ -143,7 +145,7 @@ def heatmap_image(values: np.ndarray, vmin: float, vmax: float, cmap: str = HEAT
     v = np.asarray(values, dtype=np.float64)
     nan = np.isnan(v)
     t = np.clip((np.nan_to_num(v, nan=vmin, posinf=vmax) - vmin) / max(vmax - vmin, 1e-12), 0, 1)
-    rgb = _colormap(cmap)(t)[..., :3].astype(np.float32)
+    rgb = colormap(cmap)(t)[..., :3].astype(np.float32)
     rgb[nan] = OUTSIDE_GREY
     return rgb
 
@@ -196,7 +198,7 @@ def plot_pairwise(gt_by_scene: Mapping[str, np.ndarray], a_by_scene: Mapping[str
     scenes = [s for s in gt_by_scene if s in a_by_scene and s in b_by_scene]
     if not scenes:
         raise SpecError(f"{labels[0]} and {labels[1]} share no scene with ground truth")
-    plt = _pyplot()
+    plt = pyplot()
     cols = min(per_row, len(scenes))
     rows = -(-len(scenes) // cols)
     fig, axes = plt.subplots(rows, cols, figsize=(3.4 * cols, 3.3 * rows + 0.7), squeeze=False)
@@ -209,7 +211,7 @@ def plot_pairwise(gt_by_scene: Mapping[str, np.ndarray], a_by_scene: Mapping[str
         ax.imshow(pairwise_image(gt, a, b, mask, threshold, background=bg), interpolation="nearest")
         share = pairwise_shares(pairwise_classes(gt, a, b, mask, threshold))
         ax.set_title(f"{scene}\nA better {share['a_better']:.1f}%, B better {share['b_better']:.1f}%", fontsize=8)
-    _colorbar(fig, list(axes.flat), PAIRWISE_CMAP, -PAIRWISE_LIMIT, PAIRWISE_LIMIT, "|A - gt| - |B - gt| (px)")
+    add_colorbar(fig, list(axes.flat), PAIRWISE_CMAP, -PAIRWISE_LIMIT, PAIRWISE_LIMIT, "|A - gt| - |B - gt| (px)")
     fig.suptitle(f"A = {labels[0]}  vs  B = {labels[1]}: blue = A better, red = B better by > {threshold:g} px, "
                  "grey = tie (low resolution)", fontsize=9)
     return save_formats(fig, path, formats)
@@ -224,7 +226,7 @@ def plot_error_heatmaps(gt_by_scene: Mapping[str, np.ndarray], preds_by_scene: M
     scenes = [s for s in gt_by_scene if preds_by_scene.get(s)]
     if not scenes:
         raise SpecError("no scene has both ground truth and maps for the error heatmaps")
-    plt = _pyplot()
+    plt = pyplot()
     fig, axes = plt.subplots(len(scenes), 2, figsize=(7.4, 3.2 * len(scenes) + 0.6), squeeze=False)
     for row, scene in zip(axes, scenes, strict=True):
         mask = None if masks is None else masks.get(scene)
@@ -235,8 +237,8 @@ def plot_error_heatmaps(gt_by_scene: Mapping[str, np.ndarray], preds_by_scene: M
         row[0].set_title(f"{scene}: median |gt - pred| over {len(preds)} methods", fontsize=8)
         row[1].imshow(heatmap_image(frac, 0.0, 100.0), interpolation="nearest")
         row[1].set_title(f"{scene}: % of methods with |gt - pred| > {threshold:g} px", fontsize=8)
-        _colorbar(fig, row[0], HEATMAP_CMAP, 0.0, MEDIAN_ERROR_LIMIT, "px")
-        _colorbar(fig, row[1], HEATMAP_CMAP, 0.0, 100.0, "%")
+        add_colorbar(fig, row[0], HEATMAP_CMAP, 0.0, MEDIAN_ERROR_LIMIT, "px")
+        add_colorbar(fig, row[1], HEATMAP_CMAP, 0.0, 100.0, "%")
         for ax in row:
             ax.set_xticks([])
             ax.set_yticks([])
@@ -247,19 +249,19 @@ def plot_error_heatmaps(gt_by_scene: Mapping[str, np.ndarray], preds_by_scene: M
 
 
 @plain_text
-def plot_radar(scores: pd.DataFrame, path: str | Path, *, title: str = "", highlight: str | None = None,
-               labels: Mapping[str, str] | None = None, formats: Sequence[str] = ("png",)) -> list[Path]:
-    """A radar chart of :func:`radar_scores` (rows metrics, columns methods): one closed line per
-    method, axes scaled by :func:`radar_radii`, ring values printed on each axis. ``highlight``: a
-    method drawn thicker (the others thinner). Needs at least 3 metrics."""
+def radar_figure(scores: pd.DataFrame, *, title: str = "", highlight: str | None = None,
+                 labels: Mapping[str, str] | None = None, colours: Mapping[str, str] | None = None) -> Any:
+    """The figure of :func:`plot_radar` (not saved): the chart at the left, the legend beside it with
+    labels wrapped to fit the figure (plotting.legend_label)."""
     if len(scores.index) < 3:
         raise SpecError(f"a radar chart needs at least 3 metrics, got {len(scores.index)}")
-    plt = _pyplot()
+    plt = pyplot()
+    colours = colours if colours is not None else method_colours(list(scores.columns))
     radii = radar_radii(scores)
     n = len(scores.index)
     angles = (np.pi / 2 + np.arange(n) * 2 * np.pi / n) % (2 * np.pi)
-    fig = plt.figure(figsize=(6.6, 5.6))
-    ax = fig.add_axes((0.1, 0.08, 0.58, 0.78), projection="polar")
+    fig = plt.figure(figsize=(7.8, 5.6))
+    ax = fig.add_axes((0.085, 0.08, 0.49, 0.78), projection="polar")
     ax.set_ylim(0, 1)
     ax.set_yticks([0.2, 0.4, 0.6, 0.8, 1.0])
     ax.set_yticklabels([])
@@ -277,12 +279,24 @@ def plot_radar(scores: pd.DataFrame, path: str | Path, *, title: str = "", highl
     for method in scores.columns:
         r = radii[method].to_numpy(dtype=float)
         width = 2.6 if method == highlight else (1.0 if highlight else 1.8)
-        ax.plot(closed, np.r_[r, r[:1]], linewidth=width, label=method, alpha=1.0 if method == highlight or
-                not highlight else 0.7)
+        ax.plot(closed, np.r_[r, r[:1]], linewidth=width, label=legend_label(method), color=colours.get(method),
+                alpha=1.0 if method == highlight or not highlight else 0.7)
     ax.legend(loc="upper left", bbox_to_anchor=(1.12, 1.05), fontsize=8, frameon=False)
     fig.suptitle(title or "Median over scenes (outer ring = 1.2 x the largest value per axis; lower is better)",
                  fontsize=9)
-    return save_formats(fig, path, formats)
+    return fig
+
+
+@plain_text
+def plot_radar(scores: pd.DataFrame, path: str | Path, *, title: str = "", highlight: str | None = None,
+               labels: Mapping[str, str] | None = None, colours: Mapping[str, str] | None = None,
+               formats: Sequence[str] = ("png",)) -> list[Path]:
+    """A radar chart of :func:`radar_scores` (rows metrics, columns methods): one closed line per
+    method, axes scaled by :func:`radar_radii`, ring values printed on each axis. ``highlight``: a
+    method drawn thicker (the others thinner); ``colours``: method -> colour (default:
+    plotting.method_colours in the columns' order). Needs at least 3 metrics."""
+    return save_formats(radar_figure(scores, title=title, highlight=highlight, labels=labels, colours=colours),
+                        path, formats)
 
 
 def write_toolkit_figures(results: Any, scenes: Sequence[Any], maps: Mapping[str, str | Path], out_dir: str | Path,
@@ -291,8 +305,6 @@ def write_toolkit_figures(results: Any, scenes: Sequence[Any], maps: Mapping[str
     """The toolkit's figures for papers into ``out_dir``: ``radar`` (from the results), and from the saved
     ``maps`` (method label -> submission folder) on ``scenes``: ``error_heatmaps`` and
     ``pairwise_<A>_vs_<B>`` for every pair of methods, each in ``formats``."""
-    from lfbench.reports.maps import load_scene_maps
-
     return toolkit_figures_from_scene_maps(results, (load_scene_maps(scene, maps, border_px) for scene in scenes),
                                            out_dir, formats=formats, threshold=threshold)
 
@@ -302,13 +314,11 @@ def toolkit_figures_from_scene_maps(results: Any, scene_maps: Iterable[Any], out
                                     threshold: float = PAIRWISE_THRESHOLD) -> list[Path]:
     """:func:`write_toolkit_figures` from maps already loaded (lfbench.reports.maps.SceneMaps, one per
     scene)."""
-    from lfbench.utils.names import FileNames, file_names
-
     out = Path(out_dir)
     written: list[Path] = []
     scores = radar_scores(results)
     if len(scores.index) >= 3:
-        written += plot_radar(scores, out / "radar", formats=formats)
+        written += plot_radar(scores, out / "radar", formats=formats, colours=method_colours(results.methods))
     gts, masks, centres, preds = {}, {}, {}, {}
     for sm in scene_maps:
         if sm.gt is None or not sm.preds:

@@ -6,12 +6,12 @@ uncertainty map against its error, :mod:`lfbench.scoring.uncertainty`).
 
 from __future__ import annotations
 
-import io
 from collections.abc import Mapping
 from pathlib import Path
 
+from lfbench.reports.plotting import method_colours, pyplot, save_figure
 from lfbench.scoring.uncertainty import Sparsification, UncertaintyCollector, average_sparsification, uncertainty_table
-from lfbench.utils.atomic import write_bytes, write_text
+from lfbench.utils.atomic import write_text
 from lfbench.utils.figure_text import plain_text
 
 __all__ = ["plot_sparsification", "write_uncertainty_report"]
@@ -31,19 +31,15 @@ def plot_sparsification(results: Sparsification | Mapping[str, Sparsification], 
                         title: str | None = None, dpi: int = 110) -> Path:
     """Draw sparsification (solid), oracle (dashed) and random (dotted) curves with AUSE/AURG in the
     legend, one colour per entry of ``results`` (label -> Sparsification); writes a PNG atomically."""
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     items = {"": results} if isinstance(results, Sparsification) else dict(results)
     if not items:
         raise ValueError("nothing to plot")
     fig, ax = plt.subplots(figsize=(5.6, 4.0))
     try:
-        colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-        for i, (label, sp) in enumerate(items.items()):
-            c = colours[i % len(colours)]
+        colours = method_colours(list(items))
+        for label, sp in items.items():
+            c = colours[label]
             prefix = f"{label}: " if label else ""
             ax.plot(sp.fractions, sp.curve, color=c, lw=1.8,
                     label=f"{prefix}uncertainty (AUSE {sp.ause:.4g}, AURG {sp.aurg:.4g})")
@@ -59,12 +55,10 @@ def plot_sparsification(results: Sparsification | Mapping[str, Sparsification], 
         if title:
             ax.set_title(title, fontsize=9)
         fig.tight_layout()
-        buf = io.BytesIO()
-        fig.savefig(buf, format="png", dpi=dpi)
-    finally:
+    except BaseException:
         plt.close(fig)
-    write_bytes(path, buf.getvalue())
-    return Path(path)
+        raise
+    return save_figure(fig, path, dpi=dpi)
 
 
 def write_uncertainty_report(collector: UncertaintyCollector, out: str | Path) -> list[Path]:

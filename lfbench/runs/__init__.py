@@ -1,21 +1,5 @@
-"""Runs: methods run on scenes and scored (runner) into a folder (folder: :func:`evaluate_to_folder`),
-their records (results), golden regression checks (regress), the offline demo (demo) and
-speed/memory benchmarks (bench)."""
-
-from __future__ import annotations
-
-from typing import Any
-
-__all__ = ["CIOptions", "Results", "evaluate_to_folder"]
-
-
-def __getattr__(name: str) -> Any:  # imported on first use: ``import lfbench.runs.results`` stays light
-    if name in ("CIOptions", "evaluate_to_folder"):
-        from lfbench.runs import folder
-
-        return getattr(folder, name)
-    if name == "Results":
-        from lfbench.runs.results import Results
-
-        return Results
-    raise AttributeError(f"module 'lfbench.runs' has no attribute {name!r}")
+"""Runs: methods run on scenes and scored (runner) into a folder with the chosen output writers
+(folder: ``evaluate_to_folder``), golden regression checks (regress), the offline demo (demo) and
+speed/memory benchmarks (bench). Import from the modules (``lfbench.runs.folder.evaluate_to_folder``):
+the package itself imports nothing, since the command line reads the demo's defaults at start-up. The
+results data model is :mod:`lfbench.results` (also importable as ``lfbench.runs.results``)."""

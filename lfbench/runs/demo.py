@@ -5,7 +5,7 @@ OUT/data/, runs every registered method that can run offline on them, scores the
 does, and writes OUT/results.json, OUT/results.csv, the tables (table_per_scene.*, table_average.*),
 the figures (OUT/figures/), every method's disparity maps (OUT/maps/<method>/, submission layout) and
 the HTML report (OUT/html/index.html; ``lfbench report OUT --out REP --html`` draws it again from those
-files). Results, tables, figures, maps and the report are one output set (lfbench.runs.outputs).
+files). Results, tables, figures, maps and the report are one output set (lfbench.utils.outputs).
 
 Re-running into the same folder reuses the generated data when it was made with the same seed,
 size and number of scenes (OUT/data/demo.json records them) and refuses otherwise: data of two
@@ -28,12 +28,14 @@ from lfbench.utils.errors import DataError, LFBenchError, SpecError
 from lfbench.utils.jsonfile import read_json
 
 MANIFEST = "demo.json"
-DATA_DIR = "data"  # the other folders are named by their owners (runs.folder, reports.maps, reports.html)
+DATA_DIR = "data"  # the other folders are named by their writers (lfbench.reports.writers, maps, html)
 CATEGORY = "synthetic"
 DEFAULT_SEED, DEFAULT_SIZE, DEFAULT_SCENES = 0, 128, 4
 
 Log = Callable[[str], None]
 _log = logging.getLogger(__name__)
+# The layers above (data generation, methods, scoring, writers) are imported where they are used: `lfbench`
+# builds every command's parser at start-up, and the demo's reads this module's defaults.
 
 
 @dataclass
@@ -76,7 +78,7 @@ def prepare_data(out: Path, seed: int, size: int, scenes: int, log: Log = _log.i
     wanted = data_settings(seed, size, scenes)
     manifest = root / MANIFEST
     if root.is_symlink():
-        from lfbench.runs.outputs import check_within
+        from lfbench.utils.outputs import check_within
 
         check_within(root, out, "the demo folder")
     if manifest.is_file():
@@ -192,37 +194,37 @@ def select_methods(requested: Sequence | None, scenes: Sequence, log: Log = _log
 def run_demo(out: str | Path = "lfbench-demo", *, seed: int = DEFAULT_SEED, size: int = DEFAULT_SIZE,
              scenes: int = DEFAULT_SCENES, methods: Sequence[str] | None = None, figures: bool = True,
              html: bool = True, progress: bool = True, log: Log = _log.info) -> DemoOutcome:
-    """Generate (or reuse) the demo data under ``out``, run and score the methods, write results,
-    tables and figures (lfbench.runs.folder.evaluate_to_folder), every method's maps (OUT/maps,
-    replacing an earlier run's as a whole) and, with ``html``, the HTML report (OUT/html).
+    """Generate (or reuse) the demo data under ``out``, run and score the methods and write results,
+    tables, figures, every method's maps (OUT/maps) and, with ``html``, the HTML report (OUT/html), as one
+    set (lfbench.runs.folder.evaluate_to_folder with the writers of lfbench.reports.writers).
     Returns a :class:`DemoOutcome`."""
     from lfbench.data.scene import Benchmark
     from lfbench.method.registry import create_from_spec
+    from lfbench.reports.html import SITE_DIR
     from lfbench.reports.maps import MAPS_DIR
-    from lfbench.runs.folder import FIGURES_DIR, evaluate_to_folder
+    from lfbench.reports.writers import FIGURES_DIR, Maps, SceneFigures, Site, Tables
+    from lfbench.runs.folder import evaluate_to_folder
+    from lfbench.utils.outputs import read_manifest, recover
 
     if int(scenes) != scenes or scenes < 1:
         raise SpecError(f"--scenes must be a positive integer, got {scenes}")
     out = Path(out)
     requested = [create_from_spec(s) for s in methods] if methods else None  # spec errors before any work
     if out.is_dir():  # a cut commit is finished, or a journal or manifest that is not lfbench's refused, first
-        from lfbench.runs.outputs import read_manifest, recover
-
         recover(out)
         read_manifest(out)
     root, reused = prepare_data(out, seed, size, scenes, log)
     scene_list = [s for s in Benchmark.discover(root) if s.has_gt()]
     chosen, skipped = select_methods(requested, scene_list, log)
-    results = evaluate_to_folder(chosen, scene_list, out, figures=figures, progress=progress, save_maps=True,
-                                 site=html, meta={"data_root": str(root), "demo": data_settings(seed, size, scenes),
-                                                  "skipped_methods": skipped})
+    writers = [*([SceneFigures()] if figures else []), Maps(), Tables(), *([Site()] if html else [])]
+    results = evaluate_to_folder(chosen, scene_list, out, writers=writers, progress=progress,
+                                 meta={"data_root": str(root), "demo": data_settings(seed, size, scenes),
+                                       "skipped_methods": skipped})
     files: dict[str, Path] = {"results.json": out / "results.json", "results.csv": out / "results.csv",
                               "tables": out, "data": root, "maps": out / MAPS_DIR}
     if figures:
         files["figures"] = out / FIGURES_DIR
     if html:
-        from lfbench.reports.html import SITE_DIR
-
         files["html"] = out / SITE_DIR / "index.html"
     return DemoOutcome(results=results, methods=[m.label for m in chosen], skipped=skipped, files=files,
                        reused_data=reused)

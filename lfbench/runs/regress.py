@@ -26,7 +26,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from lfbench.data.scene import HIGHRES, LOWRES
-from lfbench.runs.results import Results
+from lfbench.results import Results
 from lfbench.scoring.metrics import Metric, find_metric
 from lfbench.utils.atomic import write_text
 from lfbench.utils.errors import DataError, SpecError

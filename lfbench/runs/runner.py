@@ -5,14 +5,13 @@ from __future__ import annotations
 import logging
 import sys
 from collections.abc import Callable, Sequence
-from pathlib import Path
 
 import numpy as np
 from tqdm import tqdm
 
 from lfbench.data.scene import Scene
 from lfbench.method.base import Method, Prediction
-from lfbench.runs.results import Record, Results, RunInfo
+from lfbench.results import Record, Results, RunInfo
 from lfbench.scoring.metrics import GENERAL_METRICS, Metric
 from lfbench.scoring.rules import ScoringRules
 from lfbench.scoring.score import score_scene
@@ -101,16 +100,3 @@ def check_runnable(methods: Sequence[Method], scenes: Sequence[Scene]) -> list[l
             raise DataError(f"{method.label} cannot run on any selected scene ({names}): {reasons[0]}")
         table.append(reasons)
     return table
-
-
-def save_prediction(out_dir: Path) -> PredictionHook:
-    """A hook writing each prediction in the submission layout under out_dir/<method label>/ (the label as a
-    file name, lfbench.utils.names; two labels that would share a folder are refused)."""
-    from lfbench.data.submission import write_submission_map
-
-    names = FileNames("method label")
-
-    def hook(method: Method, scene: Scene, pred: Prediction) -> None:
-        write_submission_map(out_dir / names(method.label), scene.name, pred.disparity, pred.runtime_s)
-
-    return hook

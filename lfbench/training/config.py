@@ -1,5 +1,9 @@
 """Training configuration: a TOML file parsed into frozen dataclasses, strictly (unknown keys and
-wrong types are SpecErrors naming the file).
+wrong types are SpecErrors naming the file and the key).
+
+Every option is declared once, as a dataclass field (lfbench.utils.options.option: type, default, bounds,
+help, whether a resumed run may change it); the parser, the bounds checks, :data:`RESUME_FREE_KEYS` and the
+reference docs/training-config.md (``python -m lfbench.training.reference``) come from those declarations.
 
 Layout (every table optional except ``[[stages]]``; defaults are the authors' settings)::
 
@@ -42,7 +46,7 @@ Layout (every table optional except ``[[stages]]``; defaults are the authors' se
     every = 2000; max_size = 0; border = 15; threshold = 0.07
 
     [[stages]]                              # run in order; stage k > 1 starts from stage k-1's weights
-    name = "l1"; loss = "l1"; lr = 1e-3; steps = 100000   # fresh Adam (eps 1e-7) per stage
+    name = "l1"; loss = "l1"; lr = 1e-3; steps = 100000   # a fresh optimizer per stage (Trainable.configure_optimizers)
     [[stages]]
     name = "uafl"; loss = "uafl"; beta = 0.1; lr = 1e-4; steps = 20000
 
@@ -51,20 +55,32 @@ Paths expand ``~`` and ``$VARS``; relative paths are taken from the current dire
 
 from __future__ import annotations
 
-import math
+import dataclasses
+import json
 import re
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
-from lfbench.data.synth import MAX_SYNTH_SIZE
-from lfbench.method.trainable import DEFAULT_TRAINABLE
+from lfbench.data.scene import SPLITS
+from lfbench.data.synth import MAX_SYNTH_SIZE, scene_name
+from lfbench.method.params import value_problem
+from lfbench.method.trainable import DEFAULT_TRAINABLE, Trainable, get_trainable
+from lfbench.training.losses import NEEDS_DISTRIBUTION, make_loss
 from lfbench.utils.envvars import expand_vars
 from lfbench.utils.errors import SpecError
 from lfbench.utils.hardware import parse_device
 from lfbench.utils.names import file_names
+from lfbench.utils.options import (
+    Table,
+    option,
+    option_fields,
+    option_paths,
+    parse_section,
+    plain_dict,
+)
+from lfbench.utils.tomlfile import read_toml
 
-STAGE_KEYS = {"name", "loss", "lr", "steps", "eps", "betas"}
 # Bounds of the sizes a config asks for, checked before anything is allocated.
 MAX_BATCH = 4096
 MAX_PATCH = 1024  # px
@@ -74,376 +90,273 @@ MAX_SCENES = 10000
 _SAFE_NAME = re.compile(r"[A-Za-z0-9._-]{1,100}")
 
 
+def _folder_name(value: str) -> str | None:
+    if not _SAFE_NAME.fullmatch(value) or value in (".", ".."):
+        return f"must be a plain folder name (letters, digits, '.', '_', '-'), got {value[:60]!r}"
+    return None
+
+
+def _device(value: str) -> str | None:
+    try:
+        parse_device(value)
+    except SpecError:
+        return f"expected 'auto', 'cpu', 'cuda' or 'cuda:K', got {value[:40]!r}"
+    return None
+
+
 @dataclass(frozen=True)
 class SyntheticSpec:
     """Synthetic scenes written by lfbench.data.synth into OUT/data/<category>."""
 
-    category: str = "synthetic"
-    seed: int = 0
-    size: int = 128
-    scenes: int = 8
+    category: str = option("synthetic", check=_folder_name,
+                           help="folder OUT/data/<category> and the category the scenes are selected by")
+    seed: int = option(0, low=0, help="generator seed; scene i is synth_<seed>_<i>")
+    size: int = option(128, low=16, high=MAX_SYNTH_SIZE, help="height and width of every scene (px)")
+    scenes: int = option(8, low=1, high=MAX_SCENES, help="number of scenes")
+
+    def scene_names(self) -> tuple[str, ...]:
+        return tuple(scene_name(self.seed, i) for i in range(self.scenes))
+
+
+def _stride_weights(values: dict[str, Any], index: int | None) -> tuple[float, ...]:
+    n = len(values["strides"])
+    return (8.0, 6.0, 3.0) if n == 3 else (1.0,) * n
 
 
 @dataclass(frozen=True)
 class DataConfig:
-    roots: tuple[str, ...] = ()
-    synthetic: tuple[SyntheticSpec, ...] = ()
-    train: tuple[str, ...] = ()
-    validation: tuple[str, ...] = ()
-    invalid_area: str | None = None
-    patch: int = 32
-    strides: tuple[int, ...] = (1, 2, 3)
-    stride_weights: tuple[float, ...] = (8.0, 6.0, 3.0)
-    texture: float = 0.01
-    default_scene_weight: float = 1.0
-    scene_weights: dict[str, float] = field(default_factory=dict)
-    random_gray: bool = True
+    roots: tuple[str, ...] = option((), single=True, help="HCI-layout data roots (ROOT/<category>/<scene>)")
+    synthetic: tuple[SyntheticSpec, ...] = option(
+        (), single=True, help="synthetic scene sets generated into OUT/data/<category> (when train names scenes: "
+                              "only the sets that train or validation select)")
+    train: tuple[str, ...] = option((), single=True, help="training scenes: names, categories or splits "
+                                                            "(empty: every scene with gt but the validation ones)")
+    validation: tuple[str, ...] = option((), single=True, help="scenes scored during training (need gt)")
+    invalid_area: str | None = option(None, help="folder of <scene>/input_Cam040_invalid_ver2.png masks: "
+                                                 "patches touching them are not sampled")
+    patch: int = option(32, low=8, high=MAX_PATCH, help="patch and label size (px)")
+    strides: tuple[int, ...] = option((1, 2, 3), low=1, high=MAX_STRIDE, min_length=1,
+                                      help="scale augmentation: a patch of stride s, its label / s")
+    stride_weights: tuple[float, ...] = option((8.0, 6.0, 3.0), low=0.0, default_from=_stride_weights,
+                                               default_text="[8, 6, 3] for three strides, else 1 each",
+                                               help="relative probabilities of the strides (one per stride)")
+    texture: float = option(0.01, low=0.0, help="reject a patch if sum |centre - centre pixel| < texture * patch^2")
+    default_scene_weight: float = option(1.0, low=0.0, help="scene sampling weight (scene_weights overrides it)")
+    scene_weights: dict[str, float] = option({}, low=0.0, help="sampling weight per scene name")
+    random_gray: bool = option(True, help="random RGB->gray weights per patch (else 0.299 / 0.587 / 0.114)")
 
     def __post_init__(self) -> None:
         if len(self.strides) != len(self.stride_weights):
             raise SpecError(f"data.stride_weights needs one weight per stride: {list(self.strides)} vs "
                             f"{list(self.stride_weights)}")
 
+    def synthetic_in_use(self) -> tuple[SyntheticSpec, ...]:
+        """The [[data.synthetic]] sets a run reads (and so generates): all of them when ``train`` is empty
+        (every scene with gt trains), else those that ``train`` or ``validation`` select by category, scene
+        name or split."""
+        if not self.train:
+            return self.synthetic
+        names = {*self.train, *self.validation}
+        split_categories = {c for n in names if n in SPLITS for c in SPLITS[n]}
+        return tuple(s for s in self.synthetic if s.category in names | split_categories
+                     or names.intersection(s.scene_names()))
+
+    @staticmethod
+    def check_options(values: dict[str, Any], t: Table) -> None:
+        n = len(values["strides"])
+        if len(values["stride_weights"]) != n:
+            t.fail("stride_weights", f"expected {n} numbers (one per stride), got {len(values['stride_weights'])}")
+        if sum(values["stride_weights"]) <= 0:
+            t.fail("stride_weights", "must not all be 0")
+        categories = [s.category for s in values["synthetic"]]
+        if len(set(categories)) != len(categories):
+            t.fail("synthetic", "each [[data.synthetic]] entry needs its own category")
+        if not values["roots"] and not values["synthetic"]:
+            t.fail(None, "needs roots = [...] and/or [[data.synthetic]] scenes")
+
 
 @dataclass(frozen=True)
 class AugmentConfig:
-    enabled: bool = True
-    gamma: tuple[float, float] = (0.8, 1.2)
-    flip: float = 0.5
-    rotate: bool = True
-    noise: float = 1.0 / 12.0
-    noise_std: float = math.sqrt(0.2)
+    enabled: bool = option(True, help="augment at all (the authors' order: gamma, flip, rotate, noise, clip)")
+    gamma: tuple[float, float] = option((0.8, 1.2), low=0.0, low_open=True,
+                                        help="[low, high]: every patch x becomes x^g, g ~ U(low, high)")
+    flip: float = option(0.5, low=0.0, high=1.0, help="probability of flipping the rows (and the angular rows)")
+    rotate: bool = option(True, help="rotate by k x 90 degrees, k uniform in 0..3 (views and angular grid)")
+    noise: float = option(1.0 / 12.0, low=0.0, high=1.0, help="probability of additive Gaussian noise")
+    noise_std: float = option(0.2 ** 0.5, low=0.0, help="the noise's std is U(0, 1) x noise_std")
+
+    @staticmethod
+    def check_options(values: dict[str, Any], t: Table) -> None:
+        low, high = values["gamma"]
+        if low > high:
+            t.fail("gamma", f"expected [low, high] with 0 < low <= high, got {[low, high]}")
 
 
 @dataclass(frozen=True)
 class TrainingConfig:
-    batch_size: int = 32
-    accumulate: int = 1
-    threads: int = 0  # 0 = torch's default
-    device: str = "auto"
-    checkpoint_every: int = 500
-    log_every: int = 50
-    prefetch: int = 2
-    channels_last: bool = True  # conv weights/activations channels-last (2-3x faster convolutions on CPU)
-    workers: int = 0  # DataLoader processes making the batches (0: a prefetch thread); batches do not depend on it
-    pin_memory: bool = True  # page-locked batches and non-blocking copies to a CUDA device
-    precision: str = "fp32"  # or "bf16": autocast of the forward pass (CUDA, or a CPU with bf16 instructions)
-    tf32: bool = False  # allow TF32 in CUDA fp32 matmuls / convolutions (default: IEEE fp32)
-    cudnn_benchmark: bool = False  # let cuDNN time its algorithms per input shape (fixed patch size: faster)
-
-
-# Training keys added after configs and cell fingerprints were first written: left out of to_dict() at their
-# defaults, so that those stay the same (and old checkpoints resume).
-NEW_TRAINING_KEYS = ("workers", "pin_memory", "precision", "tf32", "cudnn_benchmark")
-NEW_TRAINING_DEFAULTS = {k: getattr(TrainingConfig, k) for k in NEW_TRAINING_KEYS}  # the dataclass's defaults
+    batch_size: int = option(32, low=1, high=MAX_BATCH, help="samples per optimizer step, over all processes")
+    accumulate: int = option(1, low=1, high=MAX_BATCH, help="micro-batches per step (gradients accumulated)")
+    threads: int = option(0, low=0, high=1024, resume_free=True, help="torch threads (0: torch's default)")
+    device: str = option("auto", check=_device, resume_free=True, help="auto, cpu, cuda or cuda:K")
+    checkpoint_every: int = option(500, low=1, resume_free=True, help="steps between checkpoints")
+    log_every: int = option(50, low=1, resume_free=True, help="steps between log lines")
+    prefetch: int = option(2, low=0, high=64, resume_free=True, help="batches made ahead of the step")
+    channels_last: bool = option(True, resume_free=True,
+                                 help="conv weights and activations channels-last (2-3x faster convolutions on CPU)")
+    workers: int = option(0, low=0, high=256, resume_free=True, omit_default=True,
+                          help="DataLoader processes making the batches (0: a prefetch thread); batches do not "
+                               "depend on it")
+    pin_memory: bool = option(True, resume_free=True, omit_default=True,
+                              help="page-locked batches and non-blocking copies to a CUDA device")
+    precision: Literal["fp32", "bf16"] = option("fp32", omit_default=True,
+                                                help="bf16: autocast of the forward pass (CUDA, or a CPU with bf16 "
+                                                     "instructions)")
+    tf32: bool = option(False, omit_default=True,
+                        help="allow TF32 in CUDA fp32 matmuls and convolutions (default: IEEE fp32)")
+    cudnn_benchmark: bool = option(False, resume_free=True, omit_default=True,
+                                   help="let cuDNN time its algorithms per input shape (fixed patch size: faster)")
 
 
 @dataclass(frozen=True)
 class ValidationConfig:
-    every: int = 0  # 0 = only at the end of each stage
-    max_size: int = 0  # centre-crop larger images to this many px (0 = whole image)
-    border: int = 15
-    threshold: float = 0.07
+    every: int = option(0, low=0, help="steps between validations (0: only at the end of each stage)")
+    max_size: int = option(0, low=0, help="centre-crop larger images to this many px (0: whole image)")
+    border: int = option(15, low=0, help="pixels left out at each image border when scoring")
+    threshold: float = option(0.07, low=0.0, low_open=True, help="BadPix threshold (px)")
 
 
-@dataclass(frozen=True)
+def _stage_name(values: dict[str, Any], index: int | None) -> str:
+    return f"stage{(index or 0) + 1}"
+
+
+@dataclass(frozen=True, kw_only=True)
 class StageConfig:
-    name: str
-    loss: str
-    lr: float
-    steps: int
-    eps: float = 1e-7
-    betas: tuple[float, float] = (0.9, 0.999)
-    loss_params: dict[str, Any] = field(default_factory=dict)
+    name: str = option(default_from=_stage_name, default_text="stage<k>",
+                       help="names the stage<k>_<name>.pt weights (unique)")
+    loss: str = option(convert=lambda s: s.strip().lower(), help="l1, mse, js, kl, l1+js, l1+kl or uafl "
+                                                                  "(lfbench.training.losses)")
+    lr: float = option(1e-3, low=0.0, low_open=True, help="learning rate (constant within the stage)")
+    steps: int = option(low=1, high=MAX_STEPS, help="optimizer steps")
+    eps: float = option(1e-7, low=0.0, help="Adam's epsilon (the default optimizer's)")
+    betas: tuple[float, float] = option((0.9, 0.999), low=0.0, high=1.0, high_open=True,
+                                        help="Adam's betas (the default optimizer's)")
+    loss_params: dict[str, Any] = option({}, rest=True, help="a parameter of the loss, e.g. beta = 0.1 for uafl")
+
+    @staticmethod
+    def check_options(values: dict[str, Any], t: Table) -> None:
+        try:
+            make_loss(values["loss"], **values["loss_params"])  # SpecError for an unknown loss or parameter
+        except SpecError as exc:
+            t.fail(None, str(exc))
 
 
-@dataclass(frozen=True)
+MODEL_HELP = ("the network's build parameters: the keyword arguments of the registered trainable network that "
+              "`method` names (`lfbench info NAME` lists them; SubFocal: d_min, d_max, interval, interpolation, width, "
+              "attention, angular); checked against its annotated types before anything runs")
+
+
+@dataclass(frozen=True, kw_only=True)
 class TrainConfig:
-    stages: tuple[StageConfig, ...]
-    seed: int = 42
-    out: str | None = None
-    data: DataConfig = field(default_factory=DataConfig)
-    augment: AugmentConfig = field(default_factory=AugmentConfig)
-    model: dict[str, Any] = field(default_factory=dict)
-    training: TrainingConfig = field(default_factory=TrainingConfig)
-    validation: ValidationConfig = field(default_factory=ValidationConfig)
-    method: str = DEFAULT_TRAINABLE
-    init: str | None = None  # weights the first stage starts from (None: a fresh initialisation)
-    source: str | None = field(default=None, compare=False)
+    stages: tuple[StageConfig, ...] = option(min_length=1, help="the stages, run in order; stage k > 1 starts from "
+                                                                "stage k-1's weights with a fresh optimizer")
+    seed: int = option(42, low=0, help="seed of the initialisation and of every sample")
+    out: str | None = option(None, resume_free=True, help="default output folder (--out overrides)")
+    data: DataConfig = option(factory=DataConfig, help="the training and validation scenes")
+    augment: AugmentConfig = option(factory=AugmentConfig, help="augmentation of the patches")
+    model: dict[str, Any] = option({}, help="the network's build parameters", free_text=MODEL_HELP)
+    training: TrainingConfig = option(factory=TrainingConfig, help="how the steps run")
+    validation: ValidationConfig = option(factory=ValidationConfig, help="validation during training")
+    method: str = option(DEFAULT_TRAINABLE, omit_default=True,
+                         help="the registered trainable network (lfbench.method.trainable)")
+    init: str | None = option(None, omit_default=True,
+                              help="start from these exported weights (final.pt, best.pt, stage*.pt, "
+                                   "methods/weights/*.pt) instead of a random initialisation; only a new run reads "
+                                   "it")
+    source: str | None = field(default=None, compare=False)  # the file it was read from (not an option)
+
+    @staticmethod
+    def check_options(values: dict[str, Any], t: Table) -> None:
+        stages = values["stages"]
+        names = [s.name for s in stages]
+        if len(set(names)) != len(names):
+            t.fail(None, f"stage names must be unique, got {names}")
+        file_names(names, "stage name", source=t.source)  # they name the stage<k>_<name>.pt files
+        try:
+            trainable = get_trainable(values["method"])
+        except SpecError as exc:
+            t.fail("method", str(exc))
+        for i, st in enumerate(stages):
+            if st.loss in NEEDS_DISTRIBUTION and not trainable.distribution:
+                t.fail(f"stages[{i}].loss", f"{st.loss!r} needs a distribution over disparities, which network "
+                                            f"{values['method']!r} does not return (use l1 or mse)")
+        problem = model_problem(trainable, values["model"])
+        if problem:
+            raise SpecError(f"[model] {problem}", t.source)
 
     def to_dict(self) -> dict[str, Any]:
         """The config in its TOML layout as plain values (storable in a weights-only checkpoint);
-        ``TrainConfig.from_dict(cfg.to_dict()) == cfg``. The default ``method`` is left out, so that configs
-        and cell fingerprints written before the key existed stay the same."""
-        d = _plain(asdict(self))
-        d.pop("source", None)
-        if d["method"] == DEFAULT_TRAINABLE:
-            del d["method"]
-        if d["init"] is None:  # left out, so configs and fingerprints from before the key stay the same
-            del d["init"]
-        for key, default in NEW_TRAINING_DEFAULTS.items():
-            if d["training"].get(key) == default:
-                del d["training"][key]
-        for st in d["stages"]:  # the TOML layout: loss parameters beside the stage's keys
-            st.update(st.pop("loss_params"))
-        return d
+        ``TrainConfig.from_dict(cfg.to_dict()) == cfg``. Options declared ``omit_default`` (``method``,
+        ``init`` and the training keys added later) are left out at their defaults, so that configs and
+        cell fingerprints written before they existed stay the same."""
+        return plain_dict(self)
 
     @classmethod
     def from_dict(cls, d: dict[str, Any], source: str | Path | None = None) -> TrainConfig:
-        return _parse(d, str(source) if source else None)
+        src = str(source) if source else None
+        cfg = parse_section(cls, Table(d, "", src))
+        return dataclasses.replace(cfg, source=src)
 
     @classmethod
     def from_toml(cls, path: str | Path) -> TrainConfig:
-        from lfbench.utils.tomlfile import read_toml
-
         raw, _ = read_toml(path, "config file")
-        return _parse(raw, str(path))
+        return cls.from_dict(raw, path)
 
 
-def _plain(x: Any) -> Any:
-    if isinstance(x, dict):
-        return {str(k): _plain(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_plain(v) for v in x]
-    return x
+def model_problem(trainable: Trainable, params: dict[str, Any]) -> str | None:
+    """Why ``params`` cannot be the ``[model]`` table of ``trainable``: a key the network does not take (naming
+    the ones it does), or a value that does not fit the type and bounds its constructor annotates
+    (lfbench.method.params.value_problem: "channels expects int, got str '16'"); None when they fit. What
+    the network checks itself (Trainable.check) is checked before a run builds it."""
+    accepted = trainable.parameters()
+    unknown = sorted(set(params) - set(accepted))
+    if unknown:
+        return f"unknown key(s): {', '.join(unknown)} (accepted: {', '.join(sorted(accepted))})"
+    for key, value in params.items():
+        problem = value_problem(accepted[key], value)
+        if problem:
+            return f"{key} {problem}"
+    return None
+
+
+#: The keys of a [[stages]] entry that are not loss parameters.
+STAGE_KEYS = frozenset(f.name for f, opt, _ in option_fields(StageConfig) if not opt.rest)
+
+#: The settings a resumed run may change (they do not change the result), as key paths.
+RESUME_FREE_KEYS: tuple[tuple[str, ...], ...] = option_paths(TrainConfig, lambda o: o.resume_free)
+
+
+def comparable(config: dict[str, Any]) -> dict[str, Any]:
+    """The config (dict layout) without the settings that may change on resume (RESUME_FREE_KEYS)."""
+    d = json.loads(json.dumps(config))
+    for keys in RESUME_FREE_KEYS:
+        node = d
+        for k in keys[:-1]:
+            node = node.get(k, {})
+        node.pop(keys[-1], None)
+    return d
+
+
+def resume_view(config: dict[str, Any], stages: int, in_progress: int | None = None) -> dict[str, Any]:
+    """:func:`comparable` with only the first ``stages`` stages: what a resumed run must keep. The stage
+    ``in_progress`` (index) is compared without its ``steps``: the learning rate is constant within a
+    stage, so cutting or extending the stage in progress gives the run the new config describes."""
+    d = comparable(config)
+    d["stages"] = [dict(s) for s in list(d.get("stages", []))[:stages]]
+    if in_progress is not None and in_progress < len(d["stages"]):
+        d["stages"][in_progress].pop("steps", None)
+    return d
 
 
 def expand_path(value: str, source: str | None = None) -> Path:
     """``~`` and ``$VAR`` / ``${VAR}`` expanded (lfbench.utils.envvars); SpecError if a variable is unset."""
     return Path(expand_vars(value, source))
-
-
-class _Table:
-    """Typed, strict access to one TOML table; ``done()`` rejects keys nobody asked for."""
-
-    def __init__(self, raw: Any, where: str, source: str | None) -> None:
-        if not isinstance(raw, dict):
-            raise SpecError(f"[{where}] must be a table", source)
-        self.raw, self.where, self.source, self.used = raw, where, source, set()
-
-    def _fail(self, key: str, msg: str):
-        raise SpecError(f"{self.where}.{key}: {msg}" if self.where else f"{key}: {msg}", self.source)
-
-    def get(self, key: str, kind: type | tuple, default: Any = None, required: bool = False) -> Any:
-        self.used.add(key)
-        if self.raw.get(key) is None:  # absent (None only comes from to_dict(): TOML has no null)
-            if required:
-                self._fail(key, "is required")
-            return default
-        value = self.raw[key]
-        if kind is float and isinstance(value, int) and not isinstance(value, bool):
-            value = float(value)
-        ok = isinstance(value, kind) and not (kind in (int, float) and isinstance(value, bool))
-        if not ok:
-            name = kind.__name__ if isinstance(kind, type) else " or ".join(k.__name__ for k in kind)
-            self._fail(key, f"expected {name}, got {value!r}")
-        return value
-
-    def number(self, key: str, default: float, low: float | None = None, high: float | None = None,
-               integer: bool = False, low_open: bool = False) -> Any:
-        value = self.get(key, int if integer else float, default)
-        if not math.isfinite(value):
-            self._fail(key, f"must be a finite number, got {value}")
-        if low is not None and (value < low or (low_open and value == low)):
-            self._fail(key, f"must be {'>' if low_open else '>='} {low}, got {value}")
-        if high is not None and value > high:
-            self._fail(key, f"must be <= {high}, got {value}")
-        return value
-
-    def strings(self, key: str, default: tuple[str, ...] = ()) -> tuple[str, ...]:
-        value = self.get(key, (list, str), list(default))
-        value = [value] if isinstance(value, str) else value
-        if not all(isinstance(v, str) for v in value):
-            self._fail(key, "expected a list of strings")
-        return tuple(value)
-
-    def floats(self, key: str, default: tuple[float, ...], length: int | None = None) -> tuple[float, ...]:
-        value = self.get(key, list, list(default))
-        if not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value):
-            self._fail(key, "expected a list of numbers")
-        if length is not None and len(value) != length:
-            self._fail(key, f"expected {length} numbers, got {len(value)}")
-        return tuple(float(v) for v in value)
-
-    def table(self, key: str) -> _Table:
-        self.used.add(key)
-        where = f"{self.where}.{key}" if self.where else key
-        return _Table(self.raw.get(key, {}), where, self.source)
-
-    def done(self) -> None:
-        unknown = sorted(set(self.raw) - self.used)
-        if unknown:
-            where = f"[{self.where}] " if self.where else ""
-            raise SpecError(f"{where}unknown key(s): {', '.join(unknown)}", self.source)
-
-
-def _parse(raw: dict[str, Any], source: str | None) -> TrainConfig:
-    top = _Table(raw, "", source)
-    seed = top.number("seed", 42, low=0, integer=True)
-    out = top.get("out", str, None)
-    method = top.get("method", str, DEFAULT_TRAINABLE)
-    init = top.get("init", str, None)
-    data = _parse_data(top.table("data"), source)
-    augment = _parse_augment(top.table("augment"))
-    model_t = top.table("model")
-    model = dict(model_t.raw)
-    model_t.used |= set(model)
-    training = _parse_training(top.table("training"))
-    validation = _parse_validation(top.table("validation"))
-    stages_raw = top.get("stages", list, None, required=True)
-    top.done()
-    if not stages_raw:
-        raise SpecError("at least one [[stages]] entry is required", source)
-    stages = tuple(_parse_stage(_Table(s, f"stages[{i}]", source), i) for i, s in enumerate(stages_raw))
-    names = [s.name for s in stages]
-    if len(set(names)) != len(names):
-        raise SpecError(f"stage names must be unique, got {names}", source)
-    file_names(names, "stage name", source=source)  # they name the stage<k>_<name>.pt files
-    _check_method(method, stages, source)
-    return TrainConfig(stages=stages, seed=seed, out=out, data=data, augment=augment, model=model,
-                       training=training, validation=validation, method=method, init=init, source=source)
-
-
-def _check_method(method: str, stages: tuple[StageConfig, ...], source: str | None) -> None:
-    """The network is registered, and has a distribution if a stage's loss needs one."""
-    from lfbench.method.trainable import get_trainable
-    from lfbench.training.losses import NEEDS_DISTRIBUTION
-
-    try:
-        trainable = get_trainable(method)
-    except SpecError as exc:
-        raise SpecError(f"method: {exc}", source) from None
-    for i, st in enumerate(stages):
-        if st.loss in NEEDS_DISTRIBUTION and not trainable.distribution:
-            raise SpecError(f"stages[{i}].loss: {st.loss!r} needs a distribution over disparities, which network "
-                            f"{method!r} does not return (use l1 or mse)", source)
-
-
-def _parse_data(t: _Table, source: str | None) -> DataConfig:
-    syn_raw = t.get("synthetic", (list, dict), [])
-    syn_raw = [syn_raw] if isinstance(syn_raw, dict) else syn_raw
-    synthetic = []
-    for i, s in enumerate(syn_raw):
-        st = _Table(s, f"data.synthetic[{i}]", source)
-        spec = SyntheticSpec(category=st.get("category", str, "synthetic"),
-                             seed=st.number("seed", 0, low=0, integer=True),
-                             size=st.number("size", 128, low=16, high=MAX_SYNTH_SIZE, integer=True),
-                             scenes=st.number("scenes", 8, low=1, high=MAX_SCENES, integer=True))
-        st.done()
-        if not _SAFE_NAME.fullmatch(spec.category) or spec.category in (".", ".."):
-            st._fail("category", f"must be a plain folder name (letters, digits, '.', '_', '-'), "
-                                 f"got {spec.category[:60]!r}")
-        synthetic.append(spec)
-    if len({s.category for s in synthetic}) != len(synthetic):
-        raise SpecError("each [[data.synthetic]] entry needs its own category", source)
-    weights_t = t.table("scene_weights")
-    scene_weights = {}
-    for k in list(weights_t.raw):
-        scene_weights[k] = weights_t.number(k, 1.0, low=0.0)
-    weights_t.done()
-    strides_f = t.floats("strides", (1, 2, 3))
-    if any(s != int(s) or not 1 <= s <= MAX_STRIDE for s in strides_f):
-        t._fail("strides", f"expected whole numbers from 1 to {MAX_STRIDE}, got {list(strides_f)}")
-    strides = tuple(int(s) for s in strides_f)
-    stride_weights = t.floats("stride_weights", (8.0, 6.0, 3.0) if len(strides) == 3 else (1.0,) * len(strides),
-                              length=len(strides))
-    if not strides or min(strides) < 1 or min(stride_weights) < 0 or sum(stride_weights) <= 0:
-        raise SpecError("data.strides must be positive integers with non-negative weights (not all 0)", source)
-    cfg = DataConfig(
-        roots=t.strings("roots"),
-        synthetic=tuple(synthetic),
-        train=t.strings("train"),
-        validation=t.strings("validation"),
-        invalid_area=t.get("invalid_area", str, None),
-        patch=t.number("patch", 32, low=8, high=MAX_PATCH, integer=True),
-        strides=strides,
-        stride_weights=stride_weights,
-        texture=t.number("texture", 0.01, low=0.0),
-        default_scene_weight=t.number("default_scene_weight", 1.0, low=0.0),
-        scene_weights=scene_weights,
-        random_gray=t.get("random_gray", bool, True),
-    )
-    t.done()
-    if not cfg.roots and not cfg.synthetic:
-        raise SpecError("[data] needs roots = [...] and/or [[data.synthetic]] scenes", source)
-    return cfg
-
-
-def _parse_augment(t: _Table) -> AugmentConfig:
-    cfg = AugmentConfig(
-        enabled=t.get("enabled", bool, True),
-        gamma=t.floats("gamma", (0.8, 1.2), length=2),  # type: ignore[arg-type]
-        flip=t.number("flip", 0.5, low=0.0, high=1.0),
-        rotate=t.get("rotate", bool, True),
-        noise=t.number("noise", 1.0 / 12.0, low=0.0, high=1.0),
-        noise_std=t.number("noise_std", math.sqrt(0.2), low=0.0),
-    )
-    t.done()
-    if not 0 < cfg.gamma[0] <= cfg.gamma[1]:
-        t._fail("gamma", f"expected [low, high] with 0 < low <= high, got {list(cfg.gamma)}")
-    return cfg
-
-
-def _parse_training(t: _Table) -> TrainingConfig:
-    d = TrainingConfig  # the defaults are the dataclass's
-    cfg = TrainingConfig(
-        batch_size=t.number("batch_size", d.batch_size, low=1, high=MAX_BATCH, integer=True),
-        accumulate=t.number("accumulate", d.accumulate, low=1, high=MAX_BATCH, integer=True),
-        threads=t.number("threads", d.threads, low=0, high=1024, integer=True),
-        device=t.get("device", str, d.device),
-        checkpoint_every=t.number("checkpoint_every", d.checkpoint_every, low=1, integer=True),
-        log_every=t.number("log_every", d.log_every, low=1, integer=True),
-        prefetch=t.number("prefetch", d.prefetch, low=0, high=64, integer=True),
-        channels_last=t.get("channels_last", bool, d.channels_last),
-        workers=t.number("workers", d.workers, low=0, high=256, integer=True),
-        pin_memory=t.get("pin_memory", bool, d.pin_memory),
-        precision=t.get("precision", str, d.precision),
-        tf32=t.get("tf32", bool, d.tf32),
-        cudnn_benchmark=t.get("cudnn_benchmark", bool, d.cudnn_benchmark),
-    )
-    t.done()
-    if cfg.precision not in ("fp32", "bf16"):
-        t._fail("precision", f"expected 'fp32' or 'bf16', got {cfg.precision!r}")
-    try:
-        parse_device(cfg.device)
-    except SpecError:
-        t._fail("device", f"expected 'auto', 'cpu', 'cuda' or 'cuda:K', got {cfg.device!r}")
-    return cfg
-
-
-def _parse_validation(t: _Table) -> ValidationConfig:
-    cfg = ValidationConfig(
-        every=t.number("every", 0, low=0, integer=True),
-        max_size=t.number("max_size", 0, low=0, integer=True),
-        border=t.number("border", 15, low=0, integer=True),
-        threshold=t.number("threshold", 0.07, low=0.0, low_open=True),
-    )
-    t.done()
-    return cfg
-
-
-def _parse_stage(t: _Table, index: int) -> StageConfig:
-    from lfbench.training.losses import make_loss
-
-    loss = t.get("loss", str, None, required=True).strip().lower()
-    params = {k: v for k, v in t.raw.items() if k not in STAGE_KEYS}
-    t.used |= set(params)
-    try:
-        make_loss(loss, **params)  # SpecError for an unknown loss or parameter
-    except SpecError as exc:
-        raise SpecError(f"{t.where}: {exc}", t.source) from None
-    t.get("steps", int, required=True)
-    betas = t.floats("betas", (0.9, 0.999), length=2)
-    if not all(0.0 <= b < 1.0 for b in betas):
-        t._fail("betas", f"expected two numbers in [0, 1), got {list(betas)}")
-    stage = StageConfig(
-        name=t.get("name", str, f"stage{index + 1}"),
-        loss=loss,
-        lr=t.number("lr", 1e-3, low=0.0, low_open=True),
-        steps=t.number("steps", 1, low=1, high=MAX_STEPS, integer=True),
-        eps=t.number("eps", 1e-7, low=0.0),
-        betas=betas,  # type: ignore[arg-type]
-        loss_params=params,
-    )
-    t.done()
-    return stage

@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from lfbench.utils.figure_text import plain_log_ticks, plain_text
+from lfbench.utils.readfile import read_text
 
 __all__ = ["LEARNING_CURVE", "LearningCurveLogger", "RunLogger", "TensorBoardLogger", "default_loggers",
            "plot_learning_curve", "read_metrics", "tensorboard_available"]
@@ -121,8 +122,6 @@ def default_loggers(out: str | Path) -> list[RunLogger]:
 
 def read_metrics(path: str | Path) -> list[dict[str, Any]]:
     """The entries of a metrics.jsonl (lines that do not parse, e.g. cut by a kill, are skipped)."""
-    from lfbench.utils.readfile import read_text
-
     entries = (parse_log_line(line) for line in read_text(path, "training log", MAX_LOG_BYTES,
                                                           errors="replace").splitlines())
     return [e for e in entries if e is not None]
@@ -147,9 +146,9 @@ def _number(value: Any) -> float:
 def plot_learning_curve(entries: Sequence[dict[str, Any]], path: str | Path, title: str = "") -> Path:
     """Training loss (log scale; one colour per stage, boundaries dotted) and validation BadPix (%) and
     MSE x100 against the global step, as a PNG."""
-    from lfbench.reports.figures import _pyplot, save_figure
+    from lfbench.reports.plotting import pyplot, save_figure
 
-    plt = _pyplot()
+    plt = pyplot()
     train = [e for e in entries if e.get("event") == "train"]
     val = [e for e in entries if e.get("event") == "validation"]
     fig, (ax_loss, ax_val) = plt.subplots(1, 2, figsize=(10.5, 3.8))

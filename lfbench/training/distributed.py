@@ -21,6 +21,8 @@ import torch
 import torch.distributed as dist
 
 from lfbench.utils.errors import LFBenchError, SpecError
+from lfbench.utils.hardware import parse_device
+from lfbench.utils.hardware import resolve_device as hardware_device
 
 
 @dataclass
@@ -89,9 +91,6 @@ class DistContext:
 def resolve_device(preference: str, local_rank: int = 0) -> torch.device:
     """'auto' / 'cuda' -> this process's GPU (local rank modulo the visible GPUs) when CUDA is available,
     else (auto) the CPU; 'cpu'; 'cuda:K'. SpecError (lfbench.utils.hardware) for a device this machine lacks."""
-    from lfbench.utils.hardware import parse_device
-    from lfbench.utils.hardware import resolve_device as hardware_device
-
     kind, index = parse_device(preference)
     if kind in ("auto", "cuda") and index is None and torch.cuda.is_available():
         return torch.device("cuda", local_rank % torch.cuda.device_count())

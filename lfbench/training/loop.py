@@ -1,10 +1,15 @@
-"""The training loop behind ``lfbench train``: stages, Adam, validation, checkpoints, resume, DDP.
+"""The training loop behind ``lfbench train``: stages, validation, checkpoints, resume, DDP.
+
+:func:`train` checks the config's network parameters and data first (nothing is generated or written for
+a bad config), then :class:`Trainer` runs setup, resume, build, fit and export. Each stage gets a fresh
+optimizer (and optional learning-rate schedule) from the network's ``Trainable.configure_optimizers``
+(default: Adam with the stage's lr, betas, eps, at a constant rate).
 
 Files under OUT:
 
 - ``checkpoint.pt``: the last training checkpoint (atomic; model, optimizer, stage, step, RNG
   states, config). Re-running the same command resumes from it; a stage boundary is stored as
-  (next stage, step 0, no optimizer), so the next stage starts with a fresh Adam.
+  (next stage, step 0, no optimizer), so the next stage starts with a fresh optimizer.
 - ``stage<k>_<name>.pt``: the weights at the end of stage k; ``final.pt``: the weights at the
   end (inference format ``{"state_dict", "config": net.config(), "training": {...}}``);
   ``best.pt``: the weights with the lowest pooled validation BadPix so far.
@@ -14,26 +19,26 @@ Files under OUT:
   loggers of lfbench.training.curves that see every metrics.jsonl entry;
 - ``command.txt``: every command that ran on this folder; ``config.toml``: the config text;
   ``summary.json``: the final numbers; ``data/<category>``: generated synthetic scenes. ``final.pt`` and
-  ``summary.json`` are one output set (lfbench.runs.outputs): they appear together, after a kill too.
+  ``summary.json`` are one output set (lfbench.utils.outputs): they appear together, after a kill too.
 
 Samples are a pure function of (seed, stage, step, index) (lfbench.training.data), so a resumed
 run and an uninterrupted one see the same batches. On resume only the ``steps`` of the stage in
 progress may change (cut a long stage short, or extend it): with a constant learning rate per stage
-the result is the run that the new config describes. With K processes (torchrun) rank r takes
-samples [r B/K, (r+1) B/K) of the global batch B, DistributedDataParallel averages the
-gradients, and only rank 0 writes files.
+the result is the run that the new config describes (a network's own schedule continues from its
+state). With K processes (torchrun) rank r takes samples [r B/K, (r+1) B/K) of the global batch B,
+DistributedDataParallel averages the gradients, and only rank 0 writes files.
 """
 
 from __future__ import annotations
 
 import contextlib
 import functools
-import json
 import logging
 import os
 import shutil
 import signal
 import sys
+import threading
 import time
 from collections.abc import Iterator, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -43,12 +48,15 @@ from typing import Any
 
 import numpy as np
 import torch
+from filelock import FileLock, Timeout
+from torch.nn.parallel import DistributedDataParallel
+from tqdm import tqdm
 
 from lfbench.data.scene import Benchmark, Scene, check_scene_names
+from lfbench.data.synth import write_benchmark
 from lfbench.method.trainable import check_state_dict, get_trainable, to_channels_last
-from lfbench.runs.outputs import read_manifest, recover, staged_outputs
 from lfbench.training import checkpoint as ckpt
-from lfbench.training.config import TrainConfig, expand_path
+from lfbench.training.config import TrainConfig, expand_path, resume_view
 from lfbench.training.curves import MAX_LOG_BYTES, RunLogger, default_loggers, parse_log_line
 from lfbench.training.data import PatchSampler, ValidationScene, load_scene_data, load_validation_scene
 from lfbench.training.distributed import DistContext, agree_on_resume, setup
@@ -56,22 +64,16 @@ from lfbench.training.losses import make_loss
 from lfbench.training.validate import check_validation_area, validate
 from lfbench.utils.atomic import fresh_dir, write_text
 from lfbench.utils.errors import DataError, Interrupted, LFBenchError, SpecError
-from lfbench.utils.hardware import require_bf16, set_fp32_numerics
+from lfbench.utils.hardware import available_cores, require_bf16, set_fp32_numerics
 from lfbench.utils.jsonfile import json_text
 from lfbench.utils.malloc import retain_freed_memory
 from lfbench.utils.names import file_name
+from lfbench.utils.outputs import read_manifest, recover, staged_outputs
 from lfbench.utils.readfile import read_text
 from lfbench.utils.threads import torch_threads
 from lfbench.utils.tomlfile import MAX_TOML_BYTES
 
-# Settings that may change between a run and its resumption (they do not change the result).
-RESUME_FREE_KEYS = (("out",), ("training", "threads"), ("training", "prefetch"), ("training", "log_every"),
-                    ("training", "device"), ("training", "checkpoint_every"),
-                    ("training", "channels_last"), ("training", "workers"), ("training", "pin_memory"),
-                    ("training", "cudnn_benchmark"))
-
-
-EXPORTS = "train"  # the output set (lfbench.runs.outputs) of a run's final exports: final.pt and summary.json
+EXPORTS = "train"  # the output set (lfbench.utils.outputs) of a run's final exports: final.pt and summary.json
 
 
 class TrainingInterrupted(Interrupted):
@@ -124,17 +126,6 @@ def stage_weights_name(index: int, name: str) -> str:
     return f"stage{index + 1}_{file_name(name)}.pt"
 
 
-def resume_view(config: dict[str, Any], stages: int, in_progress: int | None = None) -> dict[str, Any]:
-    """:func:`comparable` with only the first ``stages`` stages: what a resumed run must keep. The stage
-    ``in_progress`` (index) is compared without its ``steps``: the learning rate is constant within a
-    stage, so cutting or extending the stage in progress gives the run the new config describes."""
-    d = comparable(config)
-    d["stages"] = [dict(s) for s in list(d.get("stages", []))[:stages]]
-    if in_progress is not None and in_progress < len(d["stages"]):
-        d["stages"][in_progress].pop("steps", None)
-    return d
-
-
 _STATE_TYPES: dict[str, tuple[type, ...]] = {
     "config": (dict,), "stage": (int,), "step": (int,), "global_step": (int,), "model": (dict,),
     "optimizer": (dict, type(None)), "rng": (dict,), "elapsed_s": (int, float), "best_badpix": (int, float),
@@ -160,31 +151,16 @@ def check_resume_state(state: dict[str, Any], path: Path) -> None:
                         f"{len(state['config']['stages'])} stage(s)", path)
 
 
-def comparable(config: dict[str, Any]) -> dict[str, Any]:
-    """The config without the settings that may change on resume."""
-    d = json.loads(json.dumps(config))
-    for keys in RESUME_FREE_KEYS:
-        node = d
-        for k in keys[:-1]:
-            node = node.get(k, {})
-        node.pop(keys[-1], None)
-    return d
-
-
 # --------------------------------------------------------------------------- data preparation
 
 def prepare_synthetic(cfg: TrainConfig, data_dir: Path, log=logging.getLogger(__name__).info) -> None:
-    """Generate each [[data.synthetic]] set into data_dir/<category> unless it is already there
-    (generated in a temporary folder and renamed, so a killed run never leaves half a set)."""
-    for spec in cfg.data.synthetic:
+    """Generate each [[data.synthetic]] set in use (DataConfig.synthetic_in_use) into data_dir/<category>
+    unless it is already there (generated in a temporary folder and renamed, so a killed run never leaves
+    half a set)."""
+    for spec in cfg.data.synthetic_in_use():
         target = data_dir / spec.category
         if target.is_dir():
             continue
-        try:
-            from lfbench.data.synth import write_benchmark
-            from lfbench.utils.hardware import available_cores
-        except ImportError as exc:
-            raise SpecError(f"[[data.synthetic]] needs lfbench.data.synth ({exc})", cfg.source) from None
         data_dir.mkdir(parents=True, exist_ok=True)
         log(f"generating {spec.scenes} synthetic scenes ({spec.size} px, seed {spec.seed}) into {target}")
         tmp = fresh_dir(data_dir, f".{spec.category}.")
@@ -199,12 +175,15 @@ def prepare_synthetic(cfg: TrainConfig, data_dir: Path, log=logging.getLogger(__
             shutil.rmtree(tmp, ignore_errors=True)
 
 
+def _roots(cfg: TrainConfig, data_dir: Path) -> list[Path]:
+    roots = [expand_path(r, cfg.source) for r in cfg.data.roots]
+    return [*roots, data_dir] if cfg.data.synthetic_in_use() else roots
+
+
 def discover(cfg: TrainConfig, data_dir: Path) -> Benchmark:
     """All scenes of the configured roots and the generated synthetic sets, as one benchmark."""
+    roots = _roots(cfg, data_dir)
     scenes: list[Scene] = []
-    roots = [expand_path(r, cfg.source) for r in cfg.data.roots]
-    if cfg.data.synthetic:
-        roots.append(data_dir)
     for root in roots:
         scenes += Benchmark.discover(root).scenes
     return Benchmark(root=roots[0], scenes=tuple(scenes))
@@ -220,6 +199,56 @@ def select_scenes(bench: Benchmark, cfg: TrainConfig) -> tuple[list[Scene], list
     if not train:
         raise DataError("no training scenes selected", cfg.source)
     return train, val
+
+
+@dataclass(frozen=True)
+class PlannedScene:
+    """A scene that a [[data.synthetic]] set will hold once generated: what scene selection and the
+    validation-area check read of a scene."""
+
+    name: str
+    category: str
+    path: Path
+    spatial_size: tuple[int, int]
+
+    def has_gt(self) -> bool:
+        return True
+
+
+def check_data(cfg: TrainConfig, data_dir: Path) -> None:
+    """The config's data checked before anything is generated or written: the roots hold scenes, every
+    data.train / data.validation name selects scenes of them or of the synthetic sets in use, the
+    validation border leaves pixels to score, data.invalid_area is a folder (DataError / SpecError)."""
+    roots = _roots(cfg, data_dir)
+    real = [s for r in roots if r != data_dir for s in Benchmark.discover(r).scenes]
+    in_use = cfg.data.synthetic_in_use()
+    if in_use and any(p.is_dir() for p in data_dir.glob("*")):  # generated before (a resumed or re-run folder)
+        real += Benchmark.discover(data_dir).scenes
+    planned = [PlannedScene(name, spec.category, data_dir / spec.category / name, (spec.size, spec.size))
+               for spec in in_use if not (data_dir / spec.category).is_dir() for name in spec.scene_names()]
+    try:
+        _, val = select_scenes(Benchmark(root=roots[0], scenes=(*real, *planned)), cfg)  # type: ignore[arg-type]
+    except DataError as exc:  # a name of the config that selects nothing: the config's error
+        raise SpecError(f"[data] {exc.args[0]}", cfg.source) from None
+    check_validation_area(val, cfg.validation.border, cfg.validation.max_size, cfg.source)
+    invalid_area(cfg)
+
+
+def invalid_area(cfg: TrainConfig) -> Path | None:
+    """The data.invalid_area folder (None when not given); DataError when it is not a folder."""
+    path = expand_path(cfg.data.invalid_area, cfg.source) if cfg.data.invalid_area else None
+    if path is not None and not path.is_dir():
+        raise DataError("data.invalid_area folder not found", path)
+    return path
+
+
+def check_model(cfg: TrainConfig) -> None:
+    """The [model] values checked by the network (Trainable.check_params: its own checks, its size on the
+    meta device) before anything is built, generated or written; SpecError naming the config."""
+    try:
+        get_trainable(cfg.method).check_params(cfg.model)
+    except (TypeError, ValueError) as exc:
+        raise SpecError(f"[model]: {exc}", cfg.source) from None
 
 
 # --------------------------------------------------------------------------- helpers
@@ -319,8 +348,6 @@ class StopFlag:
 
     @contextlib.contextmanager
     def installed(self) -> Iterator[StopFlag]:
-        import threading
-
         if threading.current_thread() is threading.main_thread():
             for sig in (signal.SIGINT, signal.SIGTERM):
                 self._old[sig] = signal.signal(sig, self._handler)
@@ -348,21 +375,36 @@ def load_init_weights(cfg: TrainConfig) -> tuple[Path, dict[str, torch.Tensor]]:
 
 def build_model(cfg: TrainConfig) -> torch.nn.Module:
     """The config's trainable network built from [model]; SpecError naming the config for bad parameters."""
-    from lfbench.method.trainable import get_trainable
-
-    trainable = get_trainable(cfg.method)
+    check_model(cfg)
     try:
-        trainable.check_params(cfg.model)
-        return trainable.build(**cfg.model)
+        return get_trainable(cfg.method).build(**cfg.model)
     except (TypeError, ValueError) as exc:
         raise SpecError(f"[model]: {exc}", cfg.source) from None
 
 
 def network_config(cfg: TrainConfig, model: torch.nn.Module) -> dict[str, Any]:
     """What the weights files store as the network's config (``model.config()``, else the [model] table)."""
-    from lfbench.method.trainable import get_trainable
-
     return get_trainable(cfg.method).config_of(model, cfg.model)
+
+
+def stage_optimizer(cfg: TrainConfig, model: torch.nn.Module, si: int
+                    ) -> tuple[torch.optim.Optimizer, torch.optim.lr_scheduler.LRScheduler | None]:
+    """A fresh optimizer (and learning-rate schedule, or None) for stage ``si``, from the trainable
+    network's :meth:`~lfbench.method.trainable.Trainable.configure_optimizers` (default: Adam with the stage's
+    lr, betas and eps, constant rate)."""
+    made = get_trainable(cfg.method).configure_optimizers(model, cfg.stages[si])
+    optimizer, schedule = made if isinstance(made, tuple) else (made, None)
+    if not isinstance(optimizer, torch.optim.Optimizer):
+        raise LFBenchError(f"{cfg.method}: configure_optimizers returned a {type(optimizer).__name__}, not a "
+                           "torch.optim.Optimizer")
+    return optimizer, schedule
+
+
+def describe_optimizer(optimizer: torch.optim.Optimizer) -> str:
+    """E.g. 'Adam lr 0.001 eps 1e-07' (the first parameter group's rate, and epsilon when it has one)."""
+    group = optimizer.param_groups[0]
+    eps = f" eps {group['eps']:g}" if isinstance(group.get("eps"), float) else ""
+    return f"{type(optimizer).__name__} lr {group['lr']:g}{eps}"
 
 
 # --------------------------------------------------------------------------- the trainer
@@ -384,6 +426,8 @@ class Trainer:
         self.t0 = time.perf_counter()
         self.global_step = 0
         self.init_info: dict | None = None  # {"path", "sha256"} of cfg.init once loaded (also kept on resume)
+        self.schedule_state: dict | None = None  # a resumed learning-rate schedule's state
+        self.schedule = None  # the learning-rate schedule of the stage in progress (None: a constant rate)
 
     # -- output ------------------------------------------------------------------------------
 
@@ -426,7 +470,7 @@ class Trainer:
     # -- state -------------------------------------------------------------------------------
 
     def _checkpoint_payload(self, model, optimizer, stage: int, step: int) -> dict:
-        return {
+        payload = {
             "format": ckpt.CHECKPOINT_FORMAT, "version": ckpt.VERSION,
             "config": self.cfg.to_dict(), "stage": stage, "step": step, "global_step": self.global_step,
             "model": {k: v.detach().cpu() for k, v in model.state_dict().items()},
@@ -434,6 +478,9 @@ class Trainer:
             "rng": ckpt.rng_state(), "elapsed_s": self.elapsed(), "world_size": self.ctx.world_size,
             "best_badpix": self.best_badpix, "last_validation": self.last_validation, "init": self.init_info,
         }
+        if optimizer is not None and self.schedule is not None:  # a trainable's own schedule, within a stage
+            payload["schedule"] = self.schedule.state_dict()
+        return payload
 
     def save_checkpoint(self, model, optimizer, stage: int, step: int) -> None:
         if self.ctx.is_main:
@@ -486,17 +533,41 @@ class Trainer:
                 self.export(self.paths.best, model)
         self.ctx.barrier()
 
-    # -- main ----------------------------------------------------------------------------------
+    # -- main: setup, resume, build, fit, export --------------------------------------------------
 
     def run(self, require_checkpoint: bool = False) -> dict:
-        cfg, ctx, paths = self.cfg, self.ctx, self.paths
-        tc = cfg.training
+        """Train (or resume) the config's stages and export the final weights; returns a summary."""
+        local_batch = self._setup()
+        state = self._resume_state(require_checkpoint)
+        init = load_init_weights(self.cfg) if state is None and self.cfg.init else None  # checked before any work
+        paths = self.paths
+        if state is not None and state["stage"] >= len(self.cfg.stages) and paths.final.is_file() \
+                and paths.summary.is_file():
+            self.log(f"{paths.out}: training already complete ({state['global_step']} steps); final weights in "
+                     f"{paths.final}")
+            return {"final": str(paths.final), "steps": state["global_step"], "resumed": True}
+        self._prepare_folder(state)
+        sampler, validation = self._load_data()
+        model = self._build(sampler, init)
+        start_stage, start_step, opt_state = self._restore(model, state)
+        self._place(model)
+        self._fit(model, sampler, validation, start_stage, start_step, opt_state, local_batch)
+        return self._export_final(model, resumed=state is not None)
+
+    def _setup(self) -> int:
+        """Thread count; the samples of a step per process (the batch must split over processes and micro-batches)."""
+        cfg, tc, world = self.cfg, self.cfg.training, self.ctx.world_size
         if tc.threads:
             torch.set_num_threads(tc.threads)
-        local_batch, rem = divmod(tc.batch_size, ctx.world_size)
+        local_batch, rem = divmod(tc.batch_size, world)
         if rem or local_batch % tc.accumulate:
-            raise SpecError(f"training.batch_size {tc.batch_size} must split evenly over {ctx.world_size} "
+            raise SpecError(f"training.batch_size {tc.batch_size} must split evenly over {world} "
                             f"process(es) x accumulate {tc.accumulate}", cfg.source)
+        return local_batch
+
+    def _resume_state(self, require_checkpoint: bool) -> dict | None:
+        """The checkpoint to resume from (None: a new run), the same on every process (or one error everywhere)."""
+        ctx, paths = self.ctx, self.paths
         try:
             if ctx.is_main:
                 recover(paths.out)  # an export cut short by a kill is finished first (a foreign journal refused)
@@ -509,13 +580,12 @@ class Trainer:
         agree_on_resume(ctx, position)  # every rank from the same step, or one error everywhere (no hang)
         if state is None and require_checkpoint:
             raise DataError("--resume given but there is no checkpoint to resume from", paths.checkpoint)
-        init = load_init_weights(cfg) if state is None and cfg.init else None  # checked before any work
-        exported = paths.final.is_file() and paths.summary.is_file()
-        if state is not None and state["stage"] >= len(cfg.stages) and exported:
-            self.log(f"{paths.out}: training already complete ({state['global_step']} steps); final weights in "
-                     f"{paths.final}")
-            return {"final": str(paths.final), "steps": state["global_step"], "resumed": True}
-        if ctx.is_main:
+        return state
+
+    def _prepare_folder(self, state: dict | None) -> None:
+        """config.toml, command.txt, metrics.jsonl (emptied, or cut at the checkpoint) and the synthetic data."""
+        cfg, paths = self.cfg, self.paths
+        if self.ctx.is_main:
             paths.out.mkdir(parents=True, exist_ok=True)
             if cfg.source and Path(cfg.source).is_file():
                 write_text(paths.config, read_text(cfg.source, "config file", MAX_TOML_BYTES, error=SpecError))
@@ -525,24 +595,29 @@ class Trainer:
             else:
                 self._truncate_metrics(state["global_step"])
             prepare_synthetic(cfg, paths.data, self.log)
-        ctx.barrier()
+        self.ctx.barrier()
 
-        bench = discover(cfg, paths.data)
+    def _load_data(self) -> tuple[PatchSampler, list[ValidationScene]]:
+        """The patch sampler over the training scenes and the validation scenes (loaded on rank 0 only)."""
+        cfg = self.cfg
+        bench = discover(cfg, self.paths.data)
         train_scenes, val_scenes = select_scenes(bench, cfg)
         check_validation_area(val_scenes, cfg.validation.border, cfg.validation.max_size, cfg.source)
-        invalid_area = expand_path(cfg.data.invalid_area, cfg.source) if cfg.data.invalid_area else None
-        if invalid_area is not None and not invalid_area.is_dir():
-            raise DataError("data.invalid_area folder not found", invalid_area)
+        masks = invalid_area(cfg)
         unknown = set(cfg.data.scene_weights) - {s.name for s in train_scenes}
         if unknown:
             self.log(f"warning: data.scene_weights names no training scene: {', '.join(sorted(unknown))}")
         self.log(f"training scenes ({len(train_scenes)}): {', '.join(s.name for s in train_scenes)}")
         if val_scenes:
             self.log(f"validation scenes ({len(val_scenes)}): {', '.join(s.name for s in val_scenes)}")
-        sampler = PatchSampler([load_scene_data(s, invalid_area) for s in train_scenes], cfg.data, cfg.augment)
+        sampler = PatchSampler([load_scene_data(s, masks) for s in train_scenes], cfg.data, cfg.augment)
         validation = ([load_validation_scene(s, cfg.validation.max_size) for s in val_scenes]
-                      if ctx.is_main else [])
+                      if self.ctx.is_main else [])
+        return sampler, validation
 
+    def _build(self, sampler: PatchSampler, init: tuple[Path, dict] | None) -> torch.nn.Module:
+        """The network, seeded by the config (and loaded with the init weights), for the scenes' views."""
+        cfg = self.cfg
         torch.manual_seed(cfg.seed)
         np.random.seed(cfg.seed % 2**32)
         model = build_model(cfg)
@@ -550,35 +625,46 @@ class Trainer:
         if angular != sampler.angular[0] or sampler.angular[0] != sampler.angular[1]:
             raise DataError(f"the scenes have {sampler.angular[0]}x{sampler.angular[1]} views, the model expects "
                             f"{angular}x{angular}", cfg.source)
-        start_stage, start_step, opt_state = 0, 0, None
         if init is not None:
             path, weights = init
             check_state_dict(weights, model.state_dict(), path, "init weights")
             model.load_state_dict(weights)
             self.init_info = {"path": str(path), "sha256": ckpt.state_sha256(weights)}
             self.log(f"starting from the weights {path}")
-        if state is not None:
-            check_state_dict(state["model"], model.state_dict(), paths.checkpoint, "training checkpoint model")
-            model.load_state_dict(state["model"])
-            start_stage, start_step, opt_state = state["stage"], state["step"], state["optimizer"]
-            done = start_stage == len(cfg.stages) and start_step == 0  # finished, final weights not yet written
-            if not done and (start_stage >= len(cfg.stages) or start_step > cfg.stages[start_stage].steps):
-                raise DataError(f"training checkpoint is at stage {start_stage + 1} step {start_step}, beyond the "
-                                "config's stages", paths.checkpoint)  # steps == the stage's steps: it ends now
-            self.global_step = state["global_step"]
-            self.elapsed_before = float(state["elapsed_s"])
-            self.best_badpix = float(state["best_badpix"])
-            self.last_validation = state["last_validation"]
-            init_info = state.get("init")
-            self.init_info = init_info if isinstance(init_info, dict) else None
-            try:
-                ckpt.set_rng_state(state["rng"])
-            except (KeyError, TypeError, ValueError, AttributeError, RuntimeError, IndexError):
-                raise DataError("training checkpoint has an unusable RNG state", paths.checkpoint) from None
-            self.log(f"resuming from {paths.checkpoint}: stage {start_stage + 1}, step {start_step} "
-                     f"(global step {self.global_step})")
+        return model
+
+    def _restore(self, model: torch.nn.Module, state: dict | None) -> tuple[int, int, dict | None]:
+        """Load a checkpoint's weights, counters and RNG states: (stage, step, optimizer state) to go on from."""
+        if state is None:
+            return 0, 0, None
+        cfg, paths = self.cfg, self.paths
+        check_state_dict(state["model"], model.state_dict(), paths.checkpoint, "training checkpoint model")
+        model.load_state_dict(state["model"])
+        start_stage, start_step = state["stage"], state["step"]
+        done = start_stage == len(cfg.stages) and start_step == 0  # finished, final weights not yet written
+        if not done and (start_stage >= len(cfg.stages) or start_step > cfg.stages[start_stage].steps):
+            raise DataError(f"training checkpoint is at stage {start_stage + 1} step {start_step}, beyond the "
+                            "config's stages", paths.checkpoint)  # steps == the stage's steps: it ends now
+        self.global_step = state["global_step"]
+        self.elapsed_before = float(state["elapsed_s"])
+        self.best_badpix = float(state["best_badpix"])
+        self.last_validation = state["last_validation"]
+        init_info = state.get("init")
+        self.init_info = init_info if isinstance(init_info, dict) else None
+        self.schedule_state = state.get("schedule")
+        try:
+            ckpt.set_rng_state(state["rng"])
+        except (KeyError, TypeError, ValueError, AttributeError, RuntimeError, IndexError):
+            raise DataError("training checkpoint has an unusable RNG state", paths.checkpoint) from None
+        self.log(f"resuming from {paths.checkpoint}: stage {start_stage + 1}, step {start_step} "
+                 f"(global step {self.global_step})")
+        return start_stage, start_step, state["optimizer"]
+
+    def _place(self, model: torch.nn.Module) -> None:
+        """The model on the device in training mode, in its memory format, with the numerics the config asks."""
+        ctx, tc = self.ctx, self.cfg.training
         model.to(ctx.device).train()
-        if cfg.training.channels_last:
+        if tc.channels_last:
             to_channels_last(model)
         if tc.precision == "bf16":
             require_bf16(ctx.device, "training.precision = 'bf16'")  # one line on a CPU without bf16
@@ -586,12 +672,19 @@ class Trainer:
             set_fp32_numerics(tf32=tc.tf32)  # IEEE fp32 unless training.tf32 = true
             torch.backends.cudnn.benchmark = tc.cudnn_benchmark
 
+    def _fit(self, model, sampler: PatchSampler, validation: list[ValidationScene], start_stage: int,
+             start_step: int, opt_state: dict | None, local_batch: int) -> None:
         self.t0 = time.perf_counter()  # elapsed_s counts training (and validation), not data loading
         with self.stop.installed():
-            for si in range(start_stage, len(cfg.stages)):
-                self._run_stage(model, sampler, validation, si, start_step if si == start_stage else 0,
-                                opt_state if si == start_stage else None, local_batch)
-        result = {"final": str(paths.final), "steps": self.global_step, "resumed": state is not None,
+            for si in range(start_stage, len(self.cfg.stages)):
+                first = si == start_stage
+                self._run_stage(model, sampler, validation, si, start_step if first else 0,
+                                opt_state if first else None, local_batch)
+
+    def _export_final(self, model, resumed: bool) -> dict:
+        """final.pt and summary.json as one output set (rank 0), after the ranks agreed on the weights."""
+        ctx, paths = self.ctx, self.paths
+        result = {"final": str(paths.final), "steps": self.global_step, "resumed": resumed,
                   "elapsed_s": self.elapsed()}
         digests = ctx.gather(ckpt.parameters_sha256(model))  # DDP: identical on every rank
         ctx.broadcast_buffers(model)
@@ -607,99 +700,134 @@ class Trainer:
         result["rank_parameters_sha256"] = digests
         return result
 
+    # -- one stage -------------------------------------------------------------------------------
+
+    def _optimizer(self, model, si: int, opt_state: dict | None):
+        """The stage's fresh optimizer and schedule (the trainable's), with a checkpoint's states when resuming."""
+        optimizer, schedule = stage_optimizer(self.cfg, model, si)
+        if opt_state is None:
+            return optimizer, schedule
+        try:
+            optimizer.load_state_dict(opt_state)
+            for group in optimizer.param_groups:
+                for p in group["params"]:
+                    for value in optimizer.state.get(p, {}).values():
+                        if isinstance(value, torch.Tensor) and value.ndim and value.shape != p.shape:
+                            raise ValueError("shape")
+            if schedule is not None and self.schedule_state is not None:
+                schedule.load_state_dict(self.schedule_state)
+        except (KeyError, TypeError, ValueError, AttributeError, RuntimeError, IndexError):
+            raise DataError("training checkpoint has an optimizer state that does not fit the model",
+                            self.paths.checkpoint) from None
+        return optimizer, schedule
+
+    def _parallel(self, model):
+        """The module the steps call: DistributedDataParallel over the processes, else the model itself."""
+        if not self.ctx.enabled:
+            return model
+        device = self.ctx.device
+        return DistributedDataParallel(model, device_ids=[device.index] if device.type == "cuda" else None)
+
+    def _progress(self, st, step: int, label: str):
+        if not self.ctx.is_main:
+            disable: bool | None = True
+        else:
+            disable = None if self.progress is None else not self.progress  # None: only on a terminal
+        return tqdm(total=st.steps, initial=step, desc=label, disable=disable, dynamic_ncols=True, leave=False,
+                    file=sys.stderr)
+
     def _run_stage(self, model, sampler: PatchSampler, validation: list[ValidationScene], si: int, step: int,
                    opt_state: dict | None, local_batch: int) -> None:
-        from tqdm import tqdm
-
         cfg, ctx = self.cfg, self.ctx
         st, tc = cfg.stages[si], cfg.training
         loss_fn = make_loss(st.loss, **st.loss_params)
-        optimizer = torch.optim.Adam(model.parameters(), lr=st.lr, betas=st.betas, eps=st.eps)
-        if opt_state is not None:
-            try:
-                optimizer.load_state_dict(opt_state)
-                for group in optimizer.param_groups:
-                    for p in group["params"]:
-                        for value in optimizer.state.get(p, {}).values():
-                            if isinstance(value, torch.Tensor) and value.ndim and value.shape != p.shape:
-                                raise ValueError("shape")
-            except (KeyError, TypeError, ValueError, AttributeError, RuntimeError, IndexError):
-                raise DataError("training checkpoint has an optimizer state that does not fit the model",
-                                self.paths.checkpoint) from None
-        net = model
-        if ctx.enabled:
-            from torch.nn.parallel import DistributedDataParallel
-
-            net = DistributedDataParallel(model, device_ids=[ctx.device.index] if ctx.device.type == "cuda" else None)
+        optimizer, schedule = self._optimizer(model, si, opt_state)
+        self.schedule = schedule
+        net = self._parallel(model)
         micro = local_batch // tc.accumulate
-        disparities = getattr(model, "disparities", None)  # what the distribution is over (distribution losses)
         label = f"stage {si + 1}/{len(cfg.stages)} {st.name}"
-        self.log(f"[{label}] loss {loss_fn.__name__}, Adam lr {st.lr:g} eps {st.eps:g}, {st.steps} steps of batch "
+        self.log(f"[{label}] loss {loss_fn.__name__}, {describe_optimizer(optimizer)}, {st.steps} steps of batch "
                  f"{tc.batch_size} ({ctx.world_size} process(es) x {tc.accumulate} micro-batch(es) of {micro}), "
                  f"patch {cfg.data.patch}, from step {step}")
         pinned = tc.pin_memory and ctx.device.type == "cuda"
         batches = batch_source(sampler, cfg, si, step, st.steps, ctx.rank * local_batch, local_batch, pinned)
-        autocast = (functools.partial(torch.autocast, ctx.device.type, dtype=torch.bfloat16)
-                    if tc.precision == "bf16" else contextlib.nullcontext)
-        if not ctx.is_main:
-            disable: bool | None = True
-        else:
-            disable = None if self.progress is None else not self.progress  # None: only on a terminal
-        bar = tqdm(total=st.steps, initial=step, desc=label, disable=disable, dynamic_ncols=True, leave=False,
-                   file=sys.stderr)
-        window_loss, window_n, window_t = 0.0, 0, time.perf_counter()
+        bar = self._progress(st, step, label)
+        window = _Window()
         try:
             while step < st.steps:
-                views, target = batches.get(step)
-                v, t = torch.as_tensor(views), torch.as_tensor(target)
-                if pinned and not v.is_pinned():
-                    v, t = v.pin_memory(), t.pin_memory()
-                v = v.to(ctx.device, non_blocking=pinned)  # page-locked: the copy overlaps the GPU's work
-                t = t.to(ctx.device, non_blocking=pinned)
-                optimizer.zero_grad(set_to_none=True)
-                step_loss = 0.0
-                for m in range(tc.accumulate):
-                    sl = slice(m * micro, (m + 1) * micro)
-                    sync = contextlib.nullcontext() if (not ctx.enabled or m == tc.accumulate - 1) else net.no_sync()
-                    with sync:
-                        with autocast():  # bf16 forward when training.precision = 'bf16'; the loss in fp32
-                            disp, prob = net(v[sl])
-                        disp, prob = disp.float(), None if prob is None else prob.float()
-                        loss = loss_fn(disp, prob, t[sl], disparities) / tc.accumulate
-                        loss.backward()
-                    step_loss += float(loss.detach())
+                step_loss = self._step(net, model, optimizer, loss_fn, batches.get(step), micro, pinned)
                 if ctx.any(not np.isfinite(step_loss)):
                     raise LFBenchError(f"the loss became {step_loss} at stage {si + 1} step {step + 1}; "
                                        f"lower the learning rate (the last checkpoint is {self.paths.checkpoint})")
+                lr = optimizer.param_groups[0]["lr"]  # the rate this step used
                 optimizer.step()
+                if schedule is not None:
+                    schedule.step()
                 step += 1
                 self.global_step += 1
-                window_loss += step_loss
-                window_n += 1
+                window.add(step_loss)
                 bar.update(1)
                 if step % tc.log_every == 0 or step == st.steps:
-                    mean_loss = ctx.mean(window_loss / window_n)
-                    rate = window_n / max(time.perf_counter() - window_t, 1e-9)
-                    bar.set_postfix(loss=f"{mean_loss:.4f}")
-                    self.record({"event": "train", "stage": si + 1, "stage_name": st.name, "step": step,
-                                 "global_step": self.global_step, "loss": mean_loss, "lr": st.lr,
-                                 "steps_per_s": rate, "elapsed_s": round(self.elapsed(), 3)})
-                    self.log(f"[{label}] step {step}/{st.steps} loss {mean_loss:.5f} ({rate:.2f} steps/s, "
-                             f"{self.elapsed():.0f} s)")
-                    window_loss, window_n, window_t = 0.0, 0, time.perf_counter()
-                if cfg.validation.every and step % cfg.validation.every == 0 and step < st.steps:
-                    self.run_validation(model, validation, si, step)
-                stop = ctx.any(self.stop.set)
-                if step < st.steps and (step % tc.checkpoint_every == 0 or stop):
-                    self.save_checkpoint(model, optimizer, si, step)
-                    if stop:
-                        self._interrupted(si, step)
+                    self._log_window(window, bar, si, step, lr, label)
+                self._after_step(model, optimizer, validation, si, step)
         finally:
             bar.close()
             batches.close()
         self._finish_stage(model, validation, si)
         if si + 1 < len(cfg.stages) and ctx.any(self.stop.set):
             self._interrupted(si + 1, 0)
+
+    def _step(self, net, model, optimizer, loss_fn, batch, micro: int, pinned: bool) -> float:
+        """Forward and backward of one step's batch (in ``accumulate`` micro-batches); returns its loss."""
+        ctx, tc = self.ctx, self.cfg.training
+        views, target = batch
+        v, t = torch.as_tensor(views), torch.as_tensor(target)
+        if pinned and not v.is_pinned():
+            v, t = v.pin_memory(), t.pin_memory()
+        v = v.to(ctx.device, non_blocking=pinned)  # page-locked: the copy overlaps the GPU's work
+        t = t.to(ctx.device, non_blocking=pinned)
+        disparities = getattr(model, "disparities", None)  # what the distribution is over (distribution losses)
+        autocast = (functools.partial(torch.autocast, ctx.device.type, dtype=torch.bfloat16)
+                    if tc.precision == "bf16" else contextlib.nullcontext)
+        optimizer.zero_grad(set_to_none=True)
+        step_loss = 0.0
+        for m in range(tc.accumulate):
+            sl = slice(m * micro, (m + 1) * micro)
+            sync = contextlib.nullcontext() if (not ctx.enabled or m == tc.accumulate - 1) else net.no_sync()
+            with sync:
+                with autocast():  # bf16 forward when training.precision = 'bf16'; the loss in fp32
+                    disp, prob = net(v[sl])
+                disp, prob = disp.float(), None if prob is None else prob.float()
+                loss = loss_fn(disp, prob, t[sl], disparities) / tc.accumulate
+                loss.backward()
+            step_loss += float(loss.detach())
+        return step_loss
+
+    def _log_window(self, window: _Window, bar, si: int, step: int, lr: float, label: str) -> None:
+        """A train entry of metrics.jsonl and a log line: the mean loss and the speed since the last one."""
+        st = self.cfg.stages[si]
+        mean_loss = self.ctx.mean(window.loss / window.n)
+        rate = window.n / max(time.perf_counter() - window.t0, 1e-9)
+        bar.set_postfix(loss=f"{mean_loss:.4f}")
+        self.record({"event": "train", "stage": si + 1, "stage_name": st.name, "step": step,
+                     "global_step": self.global_step, "loss": mean_loss, "lr": lr,
+                     "steps_per_s": rate, "elapsed_s": round(self.elapsed(), 3)})
+        self.log(f"[{label}] step {step}/{st.steps} loss {mean_loss:.5f} ({rate:.2f} steps/s, "
+                 f"{self.elapsed():.0f} s)")
+        window.reset()
+
+    def _after_step(self, model, optimizer, validation: list[ValidationScene], si: int, step: int) -> None:
+        """Validation every validation.every steps, a checkpoint every training.checkpoint_every steps and on a
+        stop signal (then TrainingInterrupted); the stage's end is :meth:`_finish_stage`'s."""
+        cfg = self.cfg
+        steps = cfg.stages[si].steps
+        if cfg.validation.every and step % cfg.validation.every == 0 and step < steps:
+            self.run_validation(model, validation, si, step)
+        stop = self.ctx.any(self.stop.set)
+        if step < steps and (step % cfg.training.checkpoint_every == 0 or stop):
+            self.save_checkpoint(model, optimizer, si, step)
+            if stop:
+                self._interrupted(si, step)
 
     def _interrupted(self, si: int, step: int) -> None:
         self.ctx.barrier()
@@ -718,14 +846,32 @@ class Trainer:
         self.ctx.barrier()
 
 
+class _Window:
+    """The losses summed since the last log line, their count and when the window started."""
+
+    def __init__(self) -> None:
+        self.reset()
+
+    def add(self, loss: float) -> None:
+        self.loss += loss
+        self.n += 1
+
+    def reset(self) -> None:
+        self.loss, self.n, self.t0 = 0.0, 0, time.perf_counter()
+
+
 def train(cfg: TrainConfig, out: str | Path, *, require_checkpoint: bool = False, command: str | None = None,
           progress: bool | None = None, loggers: Sequence[RunLogger] | None = None) -> dict:
     """Train per ``cfg`` into ``out`` (resuming from out/checkpoint.pt when present); returns a summary.
     ``loggers`` see every metrics.jsonl entry and are closed when the run stops (default:
     TensorBoard event files and the PNG learning curve, lfbench.training.curves.default_loggers).
+    The [model] values and the data are checked first (:func:`check_model`, :func:`check_data`): a bad
+    config is one error with nothing generated or written.
 
     Run under torchrun for data-parallel training; every process calls this function.
     """
+    check_model(cfg)
+    check_data(cfg, RunPaths(Path(out)).data)
     retain_freed_memory()  # fewer page faults per step (glibc); results unchanged
     with torch_threads(None):  # the run sets its own thread count; the caller's comes back afterwards
         ctx = setup(cfg.training.device)
@@ -750,8 +896,6 @@ def run_folder_lock(out: Path) -> Iterator[None]:
     """Hold an exclusive lock on the run folder ``out`` (created if needed): a second ``lfbench train``
     into the same folder is refused at once (DataError) instead of interleaving logs and checkpoints.
     The lock is an OS file lock (filelock): it goes away with the process, even after kill -9."""
-    from filelock import FileLock, Timeout
-
     if out.exists() and not out.is_dir():
         raise DataError("output folder is a file", out)
     try:

@@ -1,4 +1,4 @@
-"""Read a TOML file for a config or spec, with one-line errors naming the file.
+"""Read a TOML file for a config or spec, with one-line errors naming the file; write one (tomli-w).
 
 The one TOML reader of lfbench: the file is read with a byte cap (lfbench.utils.readfile: no device,
 FIFO or endless file), and what it holds is bounded before anyone uses it: nesting at most
@@ -13,10 +13,12 @@ import tomllib
 from pathlib import Path
 from typing import Any
 
+import tomli_w
+
 from lfbench.utils.errors import SpecError
 from lfbench.utils.readfile import read_text
 
-__all__ = ["MAX_TOML_BYTES", "MAX_TOML_DEPTH", "TOML_INT_RANGE", "read_toml", "check_toml_values"]
+__all__ = ["MAX_TOML_BYTES", "MAX_TOML_DEPTH", "TOML_INT_RANGE", "read_toml", "check_toml_values", "toml_text"]
 
 MAX_TOML_BYTES = 16 * 1024**2
 MAX_TOML_DEPTH = 32
@@ -60,3 +62,20 @@ def check_toml_values(table: dict[str, Any], path: str | Path | None = None) -> 
                 digits = len(str(abs(value)))
                 raise SpecError(f"{key[:80]}: integer of {digits} digits is outside TOML's 64-bit range "
                                 f"({TOML_INT_RANGE[0]} to {TOML_INT_RANGE[1]})", path)
+
+
+def toml_text(data: dict[str, Any], header: str = "") -> str:
+    """``data`` (plain values: str, bool, int, float, lists, dicts) as TOML text, written by tomli-w, with the
+    ``header`` lines first as comments. None values are left out (TOML has no null; a config reader takes an
+    absent key as its default): ``tomllib.loads(toml_text(d))`` is ``d`` without them."""
+    lines = [f"# {line}" if line else "#" for line in header.splitlines()]
+    body = tomli_w.dumps(_without_none(data))
+    return "\n".join(lines) + ("\n" if lines else "") + body
+
+
+def _without_none(x: Any) -> Any:
+    if isinstance(x, dict):
+        return {k: _without_none(v) for k, v in x.items() if v is not None}
+    if isinstance(x, (list, tuple)):
+        return [_without_none(v) for v in x if v is not None]
+    return x

@@ -39,7 +39,7 @@ def run(args: argparse.Namespace) -> int:
         disparity_grid(args.d_min, args.d_max, args.interval)
     except ValueError as exc:
         raise SpecError(f"bad disparity grid: {exc}") from None
-    from lfbench.runs.outputs import check_output_file
+    from lfbench.utils.outputs import check_output_file
 
     check_output_file(args.out)
     net = load_keras_checkpoint(args.checkpoint, interval=args.interval, d_min=args.d_min, d_max=args.d_max)

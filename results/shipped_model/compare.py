@@ -19,7 +19,7 @@ import pandas as pd
 
 from lfbench.ablation.significance import paired_t
 from lfbench.reports.tables import write_table
-from lfbench.runs.results import Results
+from lfbench.results import Results
 
 HERE = Path(__file__).resolve().parent
 OURS = "subfocal:width=16"

@@ -114,6 +114,13 @@ class OutputSet:
         _roll_forward(self.out, _Journal(self.stage.name, tuple(entries), tuple(journal["remove"]),
                                          journal_name(self.name), manifest_name(self.name)))
 
+    def commit_written(self, paths: Iterable[str | Path], keep: Iterable[str] = ()) -> list[Path]:
+        """:meth:`commit` the top-level entries that hold ``paths`` (files or folders written in the staging
+        folder); returns where ``paths`` land in ``out``, in their order."""
+        paths = [Path(p) for p in paths]
+        self.commit([p.relative_to(self.stage).parts[0] for p in paths], keep)
+        return [self.final(p) for p in paths]
+
     def abort(self) -> None:
         """Drop the staging folder (``out`` stays as it was), unless the commit point was passed: then
         the staging folder and journal stay for the next run to roll forward."""

@@ -1,0 +1,205 @@
+"""Results of a run, the data model every layer above shares: one record per (method, scene, metric),
+written as results.json and results.csv (runs write them, reports and regress read them).
+
+results.csv columns: method, scene, metric, value, resolution. results.json holds the same records
+plus per (method, scene) run information: runtime in s, non-finite pixel count, alignment notes.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import platform
+from dataclasses import asdict, dataclass, field
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+from lfbench import __version__
+from lfbench.utils.atomic import write_text
+from lfbench.utils.errors import DataError
+from lfbench.utils.jsonfile import json_text, read_json
+from lfbench.utils.names import file_names
+from lfbench.utils.outputs import check_complete, check_within
+
+__all__ = ["CSV_COLUMNS", "Record", "Results", "RunInfo", "check_names"]
+
+CSV_COLUMNS = ("method", "scene", "metric", "value", "resolution")
+
+
+@dataclass(frozen=True)
+class Record:
+    """One number: ``value`` of ``metric`` for ``method`` on ``scene``, scored at ``resolution``."""
+
+    method: str
+    scene: str
+    metric: str
+    value: float
+    resolution: str
+
+
+@dataclass
+class RunInfo:
+    """How one method ran on one scene."""
+
+    method: str
+    scene: str
+    runtime_s: float
+    nonfinite_pixels: int = 0
+    aligned_from: list[int] | None = None
+    notes: list[str] = field(default_factory=list)
+
+
+@dataclass
+class Results:
+    records: list[Record] = field(default_factory=list)
+    runs: list[RunInfo] = field(default_factory=list)
+    meta: dict[str, Any] = field(default_factory=dict)
+    files: list[Path] = field(default_factory=list, repr=False, compare=False)  # written by this run; not saved
+
+    # ------------------------------------------------------------------ access
+    @property
+    def methods(self) -> list[str]:
+        return list(dict.fromkeys(r.method for r in self.records))
+
+    @property
+    def scenes(self) -> list[str]:
+        return list(dict.fromkeys(r.scene for r in self.records))
+
+    @property
+    def metrics(self) -> list[str]:
+        return list(dict.fromkeys(r.metric for r in self.records))
+
+    def value(self, method: str, scene: str, metric: str) -> float:
+        for r in self.records:
+            if (r.method, r.scene, r.metric) == (method, scene, metric):
+                return r.value
+        raise KeyError((method, scene, metric))
+
+    def to_frame(self):
+        """A pandas DataFrame with the CSV columns."""
+        import pandas as pd
+
+        return pd.DataFrame([asdict(r) for r in self.records], columns=list(CSV_COLUMNS))
+
+    def extend(self, other: Results) -> None:
+        self.records += other.records
+        self.runs += other.runs
+
+    # ------------------------------------------------------------------ files
+    def to_json_dict(self) -> dict[str, Any]:
+        meta = {"lfbench_version": __version__, "created": datetime.now(UTC).isoformat(timespec="seconds"),
+                "python": platform.python_version(), **self.meta}
+        return {"meta": meta, "records": [asdict(r) for r in self.records], "runs": [asdict(r) for r in self.runs]}
+
+    def write(self, out_dir: str | Path) -> tuple[Path, Path]:
+        """Write results.json (strict JSON: a NaN value is null) and results.csv into ``out_dir``
+        (atomically)."""
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        write_text(out / "results.json", json_text(self.to_json_dict(), indent=2) + "\n")
+        buf = io.StringIO()
+        w = csv.writer(buf, lineterminator="\n")
+        w.writerow(CSV_COLUMNS)
+        for r in self.records:
+            w.writerow([r.method, r.scene, r.metric, repr(float(r.value)), r.resolution])
+        write_text(out / "results.csv", buf.getvalue())
+        return out / "results.json", out / "results.csv"
+
+    @classmethod
+    def read(cls, path: str | Path) -> Results:
+        """Read results.json (or a folder holding one), or a golden/records JSON list.
+
+        Every record needs string method/scene/metric and a numeric (or null) value; every run entry
+        string method/scene and numeric fields; DataError naming the file otherwise."""
+        path = Path(path)
+        if path.is_dir():
+            path = path / "results.json"
+            if path.is_symlink():
+                check_within(path, path.parent, "the results folder")
+        check_complete(path.parent)  # a half-committed run may mix two runs' files
+        data = read_json(path, "results file", allow_nonfinite=True)
+        raw = data if isinstance(data, list) else data.get("records") if isinstance(data, dict) else None
+        if not isinstance(raw, list):
+            raise DataError("expected a list of records or an object with 'records'", path)
+        records = []
+        for i, item in enumerate(raw):
+            try:
+                if not isinstance(item, dict):
+                    raise TypeError("not an object")
+                names = [_text(item[k], k) for k in ("method", "scene", "metric")]
+                records.append(Record(*names, _num(item["value"], "value"),
+                                      _text(item.get("resolution", "lowres"), "resolution")))
+            except KeyError as exc:
+                raise DataError(f"record {i} is malformed (no {exc})", path) from None
+            except (TypeError, ValueError) as exc:
+                raise DataError(f"record {i} is malformed ({exc})", path) from None
+        runs = [_run_info(item, i, path) for i, item in enumerate(_list(data, "runs", path))]
+        meta = data.get("meta", {}) if isinstance(data, dict) else {}
+        if not isinstance(meta, dict):
+            raise DataError("'meta' must be an object", path)
+        results = cls(records=records, runs=runs, meta=meta)
+        check_names(results, path)
+        return results
+
+
+def check_names(results: Results, source: str | Path | None = None) -> None:
+    """DataError (naming ``source``) when ``results`` hold a (method, scene, metric) twice (tables and
+    ranks would merge them), or two methods or two scenes whose names are one file name
+    (lfbench.utils.names: their maps, figures and pages would be one file)."""
+    seen: set[tuple[str, str, str]] = set()
+    for r in results.records:
+        key = (r.method, r.scene, r.metric)
+        if key in seen:
+            raise DataError(f"record {'/'.join(key)} appears twice", source)  # as regress.check_unique says
+        seen.add(key)
+    file_names(results.methods, "method label", source=source)
+    file_names(results.scenes, "scene", source=source)
+
+
+def _list(data: Any, key: str, path: Path) -> list[Any]:
+    value = data.get(key, []) if isinstance(data, dict) else []
+    if not isinstance(value, list):
+        raise DataError(f"{key!r} must be a list", path)
+    return value
+
+
+def _run_info(item: Any, i: int, path: Path) -> RunInfo:
+    """One entry of 'runs', type-checked field by field."""
+    try:
+        if not isinstance(item, dict):
+            raise TypeError("not an object")
+        aligned = item.get("aligned_from")
+        notes = item.get("notes", [])
+        if aligned is not None and not (isinstance(aligned, list) and all(_is_int(a) for a in aligned)):
+            raise TypeError("aligned_from must be a list of integers or null")
+        if not (isinstance(notes, list) and all(isinstance(n, str) for n in notes)):
+            raise TypeError("notes must be a list of strings")
+        nonfinite = item.get("nonfinite_pixels", 0)
+        if not _is_int(nonfinite):
+            raise TypeError("nonfinite_pixels must be an integer")
+        return RunInfo(_text(item["method"], "method"), _text(item["scene"], "scene"),
+                       _num(item.get("runtime_s"), "runtime_s"), nonfinite, aligned, notes)
+    except KeyError as exc:
+        raise DataError(f"run {i} is malformed (no {exc})", path) from None
+    except (TypeError, ValueError) as exc:
+        raise DataError(f"run {i} is malformed ({exc})", path) from None
+
+
+def _is_int(v: Any) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+def _text(v: Any, name: str) -> str:
+    if not isinstance(v, str):
+        raise TypeError(f"{name} must be a string, got {type(v).__name__}")
+    return v
+
+
+def _num(v: Any, name: str = "value") -> float:
+    """A JSON number or null (NaN) as float; strings and booleans are refused."""
+    if v is None:
+        return float("nan")
+    if isinstance(v, bool) or not isinstance(v, int | float):
+        raise TypeError(f"{name} must be a number or null, got {type(v).__name__}")
+    return float(v)
