@@ -27,7 +27,7 @@ def measure(net, scene, crop: int, border: int = 15) -> dict:
     from lfbench_methods.subfocal.inference import infer
 
     from lfbench.scoring.metrics import bad_pix, mse_x100
-    from lfbench.scoring.rules import border_mask
+    from lfbench.scoring.prepare import border_mask
 
     views = scene.gray_views()  # (9, 9, H, W)
     gt = scene.gt_disparity()

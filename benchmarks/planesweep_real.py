@@ -38,7 +38,8 @@ def main(argv: list[str] | None = None) -> int:
 
     from lfbench.data.scene import Benchmark
     from lfbench.method.registry import create_from_spec
-    from lfbench.scoring.rules import ScoringRules, score_scene
+    from lfbench.scoring.rules import ScoringRules
+    from lfbench.scoring.score import score_scene
 
     torch.set_num_threads(args.threads)
     method = create_from_spec(args.method)

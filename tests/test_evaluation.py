@@ -16,7 +16,9 @@ from lfbench.data.scene import Scene
 from lfbench.method.registry import create
 from lfbench.runs.runner import evaluate
 from lfbench.scoring.metrics import GENERAL_METRICS
-from lfbench.scoring.rules import ScoringRules, border_mask, score_scene, upsample_nearest
+from lfbench.scoring.prepare import border_mask, upsample_nearest
+from lfbench.scoring.rules import ScoringRules
+from lfbench.scoring.score import score_scene
 from lfbench.utils.errors import DataError
 
 GENERAL_IDS = ["badpix_0.01", "badpix_0.03", "badpix_0.07", "mse_x100", "q25_x100"]

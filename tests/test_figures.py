@@ -12,7 +12,7 @@ from lfbench.method.base import Prediction
 from lfbench.reports import figures as fig
 from lfbench.reports.plotting import write_image
 from lfbench.scoring.metrics import bad_pix
-from lfbench.scoring.rules import border_mask
+from lfbench.scoring.prepare import border_mask
 from lfbench.utils.errors import DataError
 
 RED = np.array([1.0, 0.0, 0.0], dtype=np.float32)
@@ -204,7 +204,7 @@ def test_malformed_curve_csv_is_a_data_error(tmp_path):
 
 def test_curve_on_a_real_scene_matches_the_scored_badpix(hci_root, tmp_path):
     from lfbench.data.scene import Benchmark
-    from lfbench.scoring.rules import score_scene
+    from lfbench.scoring.score import score_scene
 
     scene = Benchmark.discover(hci_root).select(["backgammon"])[0]
     gt = scene.gt_disparity()

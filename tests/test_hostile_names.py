@@ -236,8 +236,10 @@ def test_training_and_ablation_figures_draw_dollar_labels(tmp_path):
     import pandas as pd
 
     from lfbench.ablation.plots import accuracy_vs_time, beta_curve
-    from lfbench.reports.sweep_table import NAMES, sweep_figure
-    from lfbench.scoring.uncertainty import Sparsification, plot_sparsification
+    from lfbench.reports.sweep_table import sweep_figure
+    from lfbench.reports.uncertainty import plot_sparsification
+    from lfbench.scoring.metrics import get_metric
+    from lfbench.scoring.uncertainty import Sparsification
     from lfbench.training.curves import plot_learning_curve
 
     entries = [{"event": "train", "stage": 1, "stage_name": MATHTEXT_BREAKER, "global_step": s, "loss": 1.0 / (s + 1)}
@@ -255,7 +257,7 @@ def test_training_and_ablation_figures_draw_dollar_labels(tmp_path):
     written.append(beta_curve(frame, records, tmp_path / "beta.png", MATHTEXT_BREAKER))
     written.append(accuracy_vs_time(frame, None, tmp_path / "acc.png", MATHTEXT_BREAKER, MATHTEXT_BREAKER))
     sweep = pd.DataFrame({"interpolation": [MATHTEXT_BREAKER] * 2, "sub-pixel fit": ["$a$", "$a$"],
-                          "interval (px)": [1.0, 0.5], NAMES["badpix_0.07"]: [20.0, 10.0]},
+                          "interval (px)": [1.0, 0.5], get_metric("badpix_0.07").label: [20.0, 10.0]},
                          index=pd.Index([MATHTEXT_BREAKER] * 2, name="scenes"))
     written.append(sweep_figure(sweep, tmp_path / "sweep.png"))
     assert all(Path(p).stat().st_size > 1000 for p in written)

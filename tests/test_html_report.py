@@ -22,7 +22,7 @@ from test_report import write_paper
 
 from lfbench.cli import main
 from lfbench.reports.figures import safe_name
-from lfbench.scoring.rules import upsample_nearest
+from lfbench.scoring.prepare import upsample_nearest
 
 SCENES = ("boxes", "dots")
 SIZE = 40

@@ -25,7 +25,7 @@ from lfbench.scoring.metrics import (
     q25_x100,
     quantile_x100,
 )
-from lfbench.scoring.rules import border_mask
+from lfbench.scoring.prepare import border_mask
 from lfbench.utils.errors import SpecError
 
 # --------------------------------------------------------------------------- toolkit re-statement

@@ -16,7 +16,8 @@ from lfbench_methods.planesweep import estimator as ps
 from lfbench.data.scene import ArrayLightField, Benchmark
 from lfbench.data.shift import angular_offsets, shift_views
 from lfbench.method.registry import create, create_from_spec
-from lfbench.scoring.rules import ScoringRules, score_scene
+from lfbench.scoring.rules import ScoringRules
+from lfbench.scoring.score import score_scene
 from lfbench.utils.errors import DataError, SpecError
 from lfbench.utils.threads import torch_threads
 

@@ -18,11 +18,11 @@ from lfbench.data.params import SceneParameters
 from lfbench.data.pfm import write_pfm
 from lfbench.data.scene import Benchmark, Scene
 from lfbench.scoring.metrics import GENERAL_METRICS, get_metric
+from lfbench.scoring.prepare import read_label_mask
 from lfbench.scoring.region_metrics import (
     REGION_METRICS,
     STRATIFIED_METRICS,
     angular_error_deg,
-    applicable_metrics,
     backgammon_fattening,
     backgammon_thinning,
     bumpiness_map,
@@ -32,10 +32,10 @@ from lfbench.scoring.region_metrics import (
     fine_thinning,
     median_angular_error,
     missed_dots,
-    read_label_mask,
     scharr_derivative,
 )
-from lfbench.scoring.rules import ScoringRules, metric_resolution, score_scene
+from lfbench.scoring.rules import ScoringRules, metric_resolution
+from lfbench.scoring.score import applicable_metrics, score_scene
 from lfbench.utils.errors import DataError
 
 GENERAL_IDS = [m.id for m in GENERAL_METRICS]

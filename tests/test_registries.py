@@ -20,7 +20,7 @@ from lfbench.method.base import Method, content_id
 from lfbench.method.registry import create, create_from_spec, format_spec, list_methods, offline_variants
 from lfbench.runs.runner import evaluate
 from lfbench.scoring.metrics import GENERAL_METRICS, get_metric, list_metrics
-from lfbench.scoring.rules import score_scene
+from lfbench.scoring.score import score_scene
 
 SIZE = 32  # px: the tiny synthetic scene of the method tests
 

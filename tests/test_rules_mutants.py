@@ -12,8 +12,9 @@ from lfbench.data.params import SceneParameters
 from lfbench.data.pfm import write_pfm
 from lfbench.data.scene import Scene
 from lfbench.scoring.metrics import GENERAL_METRICS, Metric, get_metric
-from lfbench.scoring.region_metrics import applicable_metrics
-from lfbench.scoring.rules import ScoringRules, align_prediction, score_scene
+from lfbench.scoring.prepare import align_prediction
+from lfbench.scoring.rules import ScoringRules
+from lfbench.scoring.score import applicable_metrics, score_scene
 from lfbench.utils.errors import DataError
 
 F32 = np.float32

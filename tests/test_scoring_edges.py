@@ -16,6 +16,7 @@ from helpers import scene_parameters
 from scipy import signal
 
 from lfbench.scoring.metrics import bad_pix, bad_pix_curve, mse_x100, nonfinite_count, q25_x100, quantile_x100
+from lfbench.scoring.prepare import border_mask
 from lfbench.scoring.region_metrics import (
     angular_error_deg,
     backgammon_fattening,
@@ -29,7 +30,6 @@ from lfbench.scoring.region_metrics import (
     scharr_derivative,
     toolkit_depth,
 )
-from lfbench.scoring.rules import border_mask
 
 F32 = np.float32
 PARAMS = scene_parameters("s", "training", 16)
@@ -318,7 +318,7 @@ def test_read_label_mask_rules_and_errors(tmp_path):
     losing their message, file or wording ("label mask")."""
     from PIL import Image
 
-    from lfbench.scoring.region_metrics import read_label_mask
+    from lfbench.scoring.prepare import read_label_mask
     from lfbench.utils.errors import DataError
 
     arr = np.array([[0, 1, 2], [3, 0, 8]], dtype=np.uint8)
@@ -458,8 +458,8 @@ def test_every_region_metric_follows_the_scoring_rules_through_score_scene(tmp_p
     from helpers import write_scene
 
     from lfbench.data.scene import Scene
-    from lfbench.scoring.region_metrics import applicable_metrics
-    from lfbench.scoring.rules import ScoringRules, score_scene
+    from lfbench.scoring.rules import ScoringRules
+    from lfbench.scoring.score import applicable_metrics, score_scene
 
     rules = ScoringRules(toolkit=toolkit)
     region = _block(18, 18)  # rows / cols 18..21; the NaN at (20, 20) spoils 9 normals and all 16 Hessians
@@ -519,7 +519,7 @@ def test_a_label_mask_of_the_wrong_size_names_its_file(tmp_path):
 
     from lfbench.data.scene import Scene
     from lfbench.scoring.metrics import get_metric
-    from lfbench.scoring.rules import score_scene
+    from lfbench.scoring.score import score_scene
     from lfbench.utils.errors import DataError
 
     folder = write_scene(tmp_path, "dots", "stratified", size=40, views=False, gt=np.zeros((40, 40), F32))
@@ -537,7 +537,7 @@ def test_slanted_bumpiness_keeps_the_border(tmp_path):
 
     from lfbench.data.scene import Scene
     from lfbench.scoring.metrics import get_metric
-    from lfbench.scoring.rules import score_scene
+    from lfbench.scoring.score import score_scene
 
     pyramids = np.zeros((40, 40), bool)
     pyramids[2:19, 15:19] = True  # rows 2..14 in the border, 15..18 inside
@@ -556,12 +556,15 @@ def test_slanted_bumpiness_keeps_the_border(tmp_path):
 
 def test_bad_metric_definitions_are_refused_with_a_reason():
     """Kills the errors of a bad metric definition (a plugin's) losing their message: an unknown scene
-    aggregate or pixel statistic, a non-Metric registered."""
+    aggregate or pixel statistic, an empty or NaN value range, a non-Metric registered."""
     from lfbench.scoring.metrics import METRICS, Metric, PixelStatistic
 
     with pytest.raises(ValueError, match="^metric 'x': unknown scene_aggregate 'median'; use one of mean$"):
         Metric(id="x", name="x", description="x", unit="%", fn=bad_pix, scene_aggregate="median")
     with pytest.raises(ValueError, match="^unknown pixel statistic 'median': badpix, mse or quantile$"):
         PixelStatistic("median")
+    for bad in ((1.0, 1.0), (2.0, 1.0), (float("nan"), 1.0), (0.0, float("nan"))):  # an empty or NaN range
+        with pytest.raises(ValueError, match=r"^metric 'x': value_range must be \(low, high\) with low < high, got "):
+            Metric(id="x", name="x", description="x", unit="%", fn=bad_pix, value_range=bad)
     with pytest.raises(TypeError, match="^{} registered as metric '\\?' is not a Metric$"):
         METRICS.register({})

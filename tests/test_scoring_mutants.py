@@ -21,7 +21,6 @@ from scipy import ndimage
 from lfbench.data.scene import Scene
 from lfbench.scoring.metrics import bad_pix, bad_pix_curve, get_metric
 from lfbench.scoring.region_metrics import (
-    applicable_metrics,
     backgammon_fattening,
     backgammon_thinning,
     bumpiness_x100,
@@ -30,7 +29,7 @@ from lfbench.scoring.region_metrics import (
     median_angular_error,
     missed_dots,
 )
-from lfbench.scoring.rules import score_scene
+from lfbench.scoring.score import applicable_metrics, score_scene
 
 F32 = np.float32
 

@@ -11,7 +11,7 @@ import torch
 from lfbench.data.scene import Benchmark
 from lfbench.data.synth import write_benchmark
 from lfbench.method.registry import create, offline_variants
-from lfbench.scoring.rules import score_scene
+from lfbench.scoring.score import score_scene
 from lfbench.scoring.uncertainty import scene_sparsification
 
 SubFocal = pytest.importorskip("lfbench_methods.subfocal.method").SubFocal

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from scipy import stats as sps
 
+from lfbench.reports.ci import ci_table
 from lfbench.results import Record, Results
 from lfbench.scoring import stats
 from lfbench.scoring.metrics import bad_pix, mse_x100, q25_x100
@@ -292,7 +293,7 @@ def test_ci_records_and_table():
     assert (scenes["n_pixels"] == 28 * 30).all()
     mean_a = long[(long["method"] == "a") & (long["scene"] == "(mean)") & (long["metric"] == "mse_x100")].iloc[0]
     assert mean_a["value"] == pytest.approx(np.mean([results.value("a", s, "mse_x100") for s in ("s1", "s2", "s3")]))
-    table = stats.ci_table(results, errors, n=200, block=5)
+    table = ci_table(results, errors, n=200, block=5)
     assert list(table.columns) == ["a", "b"]
     assert table.index[0] == ("s1", "badpix_0.07") and table.index[-1] == ("(mean)", "mse_x100")
     cell = table.loc[("s1", "mse_x100"), "a"]

@@ -19,7 +19,7 @@ from lfbench.data.params import read_parameters
 from lfbench.data.pfm import read_pfm
 from lfbench.data.scene import Benchmark, Scene, rgb_to_gray
 from lfbench.data.synth import Affine, Quadric, generate_scene, quantize, view_offsets, write_benchmark
-from lfbench.scoring.rules import score_scene
+from lfbench.scoring.score import score_scene
 from lfbench.utils.errors import SpecError
 
 SIZE = 64

@@ -335,7 +335,7 @@ def test_training_outputs(reference_run, data_root):
     from lfbench_methods.subfocal.network import SubFocalNet
 
     from lfbench.scoring.metrics import bad_pix, mse_x100
-    from lfbench.scoring.rules import border_mask
+    from lfbench.scoring.prepare import border_mask
 
     cfg, out, result = reference_run
     assert result["steps"] == 6

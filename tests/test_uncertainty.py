@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from lfbench.reports.uncertainty import plot_sparsification, write_uncertainty_report
 from lfbench.scoring import uncertainty as U
 from lfbench.scoring.metrics import bad_pix, mse_x100
 
@@ -120,12 +121,12 @@ def test_plot_writes_a_png_atomically(tmp_path):
 
     sp = U.sparsification_from_loss(ERR, UNC)
     other = U.sparsification_from_loss(ERR, ERR)
-    path = U.plot_sparsification({"subfocal": sp, "oracle-like": other}, tmp_path / "fig" / "sparsification.png",
+    path = plot_sparsification({"subfocal": sp, "oracle-like": other}, tmp_path / "fig" / "sparsification.png",
                                  title="4 pixels")
     with Image.open(path) as im:
         assert im.format == "PNG" and im.size[0] > 300
     assert sorted(p.name for p in path.parent.iterdir()) == ["sparsification.png"]  # no temporary left behind
-    single = U.plot_sparsification(sp, tmp_path / "single.png")
+    single = plot_sparsification(sp, tmp_path / "single.png")
     assert single.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
@@ -182,10 +183,10 @@ def test_collector_table_and_report(tmp_path):
     assert mse.loc[("inverted", "average"), "ause"] == pytest.approx(
         (mse.loc[("inverted", "s0"), "ause"] + mse.loc[("inverted", "s1"), "ause"]) / 2)
     assert (mse.n_pixels.loc[[("oracle", "s0")]] == 10 * 10).all()  # 40 px minus the 15 px border
-    written = U.write_uncertainty_report(rater, tmp_path / "out")
+    written = write_uncertainty_report(rater, tmp_path / "out")
     names = sorted(p.relative_to(tmp_path / "out").as_posix() for p in written)
     assert names == ["figures/sparsification_badpix_0.07.png", "figures/sparsification_mse_x100.png",
                      "table_uncertainty.md", "uncertainty.csv"]
     assert "| inverted" in (tmp_path / "out" / "table_uncertainty.md").read_text()
-    assert U.write_uncertainty_report(U.UncertaintyCollector(), tmp_path / "empty") == []
+    assert write_uncertainty_report(U.UncertaintyCollector(), tmp_path / "empty") == []
     assert not (tmp_path / "empty").exists()

@@ -19,7 +19,8 @@ from PIL import Image
 from lfbench.data.scene import Scene
 from lfbench.scoring.metrics import GENERAL_METRICS
 from lfbench.scoring.region_metrics import missed_dots
-from lfbench.scoring.rules import ScoringRules, score_scene
+from lfbench.scoring.rules import ScoringRules
+from lfbench.scoring.score import score_scene
 from lfbench.utils.errors import DataError
 
 N = 40  # low resolution; high resolution is 10 N, border 150 px
@@ -138,7 +139,7 @@ def test_missed_dots_through_score_scene_use_the_valid_mask(tmp_path):
         Image.fromarray(labels).save(folder / name)
     pred = np.zeros((N, N), np.float32)
     pred[12:16, 12:16] = 1.0  # dot 1 missed
-    from lfbench.scoring.region_metrics import applicable_metrics
+    from lfbench.scoring.score import applicable_metrics
 
     scene = Scene(folder)
     assert score_scene(scene, pred, applicable_metrics(scene)).values["missed_dots"] == pytest.approx(50.0)

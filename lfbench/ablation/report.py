@@ -65,6 +65,7 @@ from lfbench.reports.writers import (
     write_outputs,
 )
 from lfbench.results import Results
+from lfbench.scoring.metrics import get_metric
 from lfbench.utils.errors import DataError
 from lfbench.utils.names import file_name
 from lfbench.utils.outputs import check_within
@@ -73,8 +74,6 @@ __all__ = ["AblationFigures", "AblationSite", "AblationTables", "cell_frame", "l
            "run_writers", "saved_map_folders", "spec_reference", "write_report"]
 
 METRICS = ("badpix_0.07", "badpix_0.03", "badpix_0.01", "mse_x100")
-METRIC_NAMES = {"badpix_0.07": "BadPix 0.07 (%)", "badpix_0.03": "BadPix 0.03 (%)", "badpix_0.01": "BadPix 0.01 (%)",
-                "mse_x100": "MSE x100"}
 ERROR_MAPS_DIR = f"{FIGURES_DIR}/error_maps"
 Log = Callable[[str], None]
 _log = logging.getLogger(__name__)
@@ -155,7 +154,7 @@ def cells_table(spec: AblationSpec, frame: pd.DataFrame) -> pd.DataFrame:
     grid_cols = [c for c in frame.columns if c.startswith("grid:")]
     out = frame[grid_cols].rename(columns=lambda c: c[5:]).copy()
     for metric in METRICS:
-        out[f"{METRIC_NAMES[metric]}, {ours_label(spec)}"] = frame[metric]
+        out[f"{get_metric(metric).label}, {ours_label(spec)}"] = frame[metric]
     out["train time (min)"] = frame["train_s"] / 60.0
     out[f"test time (s), {time_label(frame)}"] = frame["test_s"]
     out["scenes"] = frame["scenes"]

@@ -32,12 +32,13 @@ from typing import Any
 import numpy as np
 from PIL import Image
 
-from lfbench.data.scene import LOWRES, LightField
+from lfbench.data.scene import LightField
 from lfbench.data.submission import disp_map_path, read_submission_map
 from lfbench.method.base import Prediction
 from lfbench.reports.plotting import add_colorbar, as_gray, colormap, legend_label, method_colours, pyplot, save_figure
 from lfbench.scoring.metrics import bad_pix_curve, find_metric
-from lfbench.scoring.rules import ScoringRules, align_prediction, evaluation_mask, upsample_nearest
+from lfbench.scoring.prepare import SceneReference, align_prediction
+from lfbench.scoring.rules import ScoringRules
 from lfbench.utils.atomic import write_bytes, write_text
 from lfbench.utils.errors import DataError
 from lfbench.utils.figure_text import plain_text
@@ -179,7 +180,7 @@ def method_panels(label: str, lf: LightField, prediction: Prediction | np.ndarra
     shape = tuple(gt.shape) if gt is not None else tuple(np.asarray(pred.disparity).shape)
     disp, _ = align_prediction(np.asarray(pred.disparity, dtype=np.float32), shape, f"{label} on {lf.name}")
     if mask is None:
-        mask = evaluation_mask(lf, shape, border_px)
+        mask = SceneReference(lf, ScoringRules(border_px=border_px)).evaluation_mask()
     if disp_range is None:
         disp_range = disparity_range(lf, gt, disp)
     unc = unc_rgb = unc_range = None
@@ -315,19 +316,15 @@ class Curve:
 def scene_curve(label: str, scene: LightField, disparity: np.ndarray, rules: ScoringRules = ScoringRules(),
                 thresholds: np.ndarray = CURVE_THRESHOLDS) -> Curve | None:
     """The BadPix series of a prediction under the scene's scoring rule (resolution, border, valid
-    mask), as in lfbench.scoring.rules.score_scene, so BadPix(0.07) equals the table's. None without gt."""
-    res = rules.general_resolution(scene) if hasattr(scene, "has_gt") else LOWRES
-    gt = scene.gt_disparity(res) if hasattr(scene, "has_gt") else scene.gt_disparity()
-    if gt is None:
+    mask), prepared as lfbench.scoring.score.score_scene prepares it (SceneReference.prepare), so
+    BadPix(0.07) equals the table's. None without gt."""
+    reference = SceneReference(scene, rules)
+    res = reference.general_resolution()
+    if not reference.has_gt(res):
         return None
-    h, w = getattr(scene, "spatial_size", None) or np.asarray(disparity).shape
-    pred, _ = align_prediction(np.asarray(disparity, dtype=np.float32), (h, w), f"{label} on {scene.name}")
-    scale = gt.shape[0] // h
-    if scale > 1:
-        pred = upsample_nearest(pred, scale)
-    mask = evaluation_mask(scene, gt.shape, rules.border_px * scale)
+    p = reference.prepare(disparity, res, f"{label} on {scene.name}")
     return Curve(label, scene.name, res, np.asarray(thresholds, dtype=np.float64),
-                 bad_pix_curve(gt, pred, thresholds, mask))
+                 bad_pix_curve(p.gt, p.pred, thresholds, p.mask))
 
 
 def average_curves(curves: Sequence[Curve]) -> dict[str, tuple[np.ndarray, np.ndarray, int]]:

@@ -37,12 +37,13 @@ import pandas as pd
 from lfbench.data.scene import Benchmark
 from lfbench.reports import figures as fig
 from lfbench.reports import toolkit_figures as tk
-from lfbench.reports.leaderboard import all_metric_ranks, metric_info, metric_table, overall_ranks
+from lfbench.reports.leaderboard import all_metric_ranks, metric_table, overall_ranks
 from lfbench.reports.maps import MAPS_DIR, SceneMaps, load_scene_maps, map_folders
 from lfbench.reports.paper import PAPER_RESOLUTION_COLUMN, average_with_paper, paper_column, per_scene_with_paper
 from lfbench.reports.plotting import colormap, method_colours, write_image
 from lfbench.reports.tables import average_table, per_scene_table
 from lfbench.results import Results, check_names
+from lfbench.scoring.metrics import describe_metric, metric_order
 from lfbench.scoring.rules import ScoringRules
 from lfbench.scoring.stats import read_ci_csv
 from lfbench.utils.atomic import fresh_dir, replace_dir, write_text
@@ -138,7 +139,7 @@ def _cell(value: Any, rank: Any = None, resolution: str | None = None, ci: tuple
 
 def _metric_section(results: Results, metric: str, ci: Mapping, scene_pages: Mapping[str, str],
                     method_pages: Mapping[str, str], ranks: Mapping[str, pd.DataFrame]) -> dict[str, Any]:
-    info = metric_info(metric)
+    info = describe_metric(metric)
     table = metric_table(results, metric, ranks=ranks[metric])
     scenes = list(dict.fromkeys(s for s, k in table.columns if s not in ("mean", "average rank")))
     header = []
@@ -184,9 +185,7 @@ def _paper_section(results: Results, metric: str, paper: Any, paper_methods: Seq
 
 def _overview(results: Results, method_pages: Mapping[str, str], paper: Any,
               paper_methods: Sequence[str], metric_ranks: Mapping[str, pd.DataFrame]) -> dict[str, Any]:
-    from lfbench.reports.tables import _metric_order
-
-    metrics = _metric_order(results.metrics)
+    metrics = metric_order(results.metrics)
     ranks = overall_ranks(results, ranks=metric_ranks)
     df = results.to_frame()
     runtime = {}
@@ -195,7 +194,7 @@ def _overview(results: Results, method_pages: Mapping[str, str], paper: Any,
     columns = []
     for m in metrics:
         res = "+".join(sorted(set(df.loc[df["metric"] == m, "resolution"])))
-        columns.append({"id": m, "name": metric_info(m).name, "res": res})
+        columns.append({"id": m, "name": describe_metric(m).name, "res": res})
     means = average_table(results)
     rows = []
     for method in results.methods:
@@ -383,7 +382,7 @@ def _write_site(inputs: SiteInputs, root: Path, threshold: float, pair_threshold
     scene_pages = {s: page_name("scene", s) for s in scene_names}
     method_pages = {m: page_name("method", m) for m in methods}
     ci = _ci_lookup(inputs.ci)
-    metrics = _metric_order(results.metrics)
+    metrics = metric_order(results.metrics)
     ranks = all_metric_ranks(results)  # every table below ranks from these
     orders = {s: _scene_order(results, s, ranks) for s in scene_names}
     sections = [_metric_section(results, m, ci, scene_pages, method_pages, ranks) for m in metrics]
@@ -439,7 +438,7 @@ def _write_site(inputs: SiteInputs, root: Path, threshold: float, pair_threshold
     if radar_ok:
         tk.plot_radar(radar, root / "img" / "radar.png", colours=colours)
         figures["radar"] = "img/radar.png"
-        figures["radar_metrics"] = ", ".join(metric_info(m).name for m in radar.index)
+        figures["radar_metrics"] = ", ".join(describe_metric(m).name for m in radar.index)
 
     common = {"title": inputs.title, "methods": [{"label": m, "href": method_pages[m]} for m in methods],
               "scenes": [{"label": s, "href": scene_pages[s]} for s in scene_names],
@@ -471,12 +470,6 @@ def _write_site(inputs: SiteInputs, root: Path, threshold: float, pair_threshold
             threshold=threshold))
 
 
-def _metric_order(metrics: Sequence[str]) -> list[str]:
-    from lfbench.reports.tables import _metric_order as order
-
-    return order(metrics)
-
-
 def _rules(results: Results) -> ScoringRules:
     """The results' scoring rules; high resolution allowed when any number was scored there (or none is)."""
     highres_used = any(r.resolution == "highres" for r in results.records)
@@ -485,7 +478,7 @@ def _rules(results: Results) -> ScoringRules:
 
 def _scene_order(results: Results, scene: str, metric_ranks: Mapping[str, pd.DataFrame]) -> list[str]:
     """Methods on a scene, best BadPix(0.07) (else first metric) first."""
-    metric = "badpix_0.07" if "badpix_0.07" in results.metrics else _metric_order(results.metrics)[0]
+    metric = "badpix_0.07" if "badpix_0.07" in results.metrics else metric_order(results.metrics)[0]
     ranks = metric_ranks[metric]
     ranks = ranks[ranks["scene"] == scene]
     order = dict(zip(ranks["method"], ranks["rank"].fillna(np.inf), strict=True))
@@ -495,14 +488,14 @@ def _scene_order(results: Results, scene: str, metric_ranks: Mapping[str, pd.Dat
 def _scene_table(results: Results, scene: str, method_pages: Mapping[str, str], ranks: Mapping[str, pd.DataFrame],
                  order: Sequence[str]) -> dict[str, Any]:
     """Rows method (in the scene's ``order``), columns metric: the value with its rank on this scene."""
-    metrics = [m for m in _metric_order(results.metrics)]
+    metrics = [m for m in metric_order(results.metrics)]
     cols, by = [], {}
     for m in metrics:
         long = ranks[m]
         long = long[long["scene"] == scene]
         if long.empty:
             continue
-        cols.append({"id": m, "name": metric_info(m).name, "res": "/".join(sorted(set(long["resolution"])))})
+        cols.append({"id": m, "name": describe_metric(m).name, "res": "/".join(sorted(set(long["resolution"])))})
         for r in long.itertuples(index=False):
             by[(r.method, m)] = (r.value, r.rank)
     rows = []
@@ -518,7 +511,7 @@ def _scene_table(results: Results, scene: str, method_pages: Mapping[str, str], 
 def _method_table(results: Results, method: str, scene_pages: Mapping[str, str], ci: Mapping,
                   ranks: Mapping[str, pd.DataFrame]) -> dict[str, Any]:
     """Rows scene, columns metric: the method's value and rank among all methods on that scene."""
-    metrics = _metric_order(results.metrics)
+    metrics = metric_order(results.metrics)
     by, res = {}, {}
     for m in metrics:
         long = ranks[m]
@@ -526,7 +519,7 @@ def _method_table(results: Results, method: str, scene_pages: Mapping[str, str],
         for r in long[long["method"] == method].itertuples(index=False):
             by[(r.scene, m)] = (r.value, r.rank, int(n.get(r.scene, 0)))
             res[(r.scene, m)] = r.resolution
-    cols = [{"id": m, "name": metric_info(m).name} for m in metrics if any(k[1] == m for k in by)]
+    cols = [{"id": m, "name": describe_metric(m).name} for m in metrics if any(k[1] == m for k in by)]
     rows = []
     for s in results.scenes:
         if not any((s, c["id"]) in by for c in cols):

@@ -12,34 +12,13 @@ mean of its ranks over the scenes (or scene x metric pairs) where it is ranked.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
 
-__all__ = ["MetricInfo", "all_metric_ranks", "metric_info", "metric_ranks", "metric_table", "overall_ranks"]
+from lfbench.scoring.metrics import describe_metric
 
-
-@dataclass(frozen=True)
-class MetricInfo:
-    """What the report says about a metric id."""
-
-    id: str
-    name: str
-    unit: str
-    description: str
-    higher_is_better: bool = False
-
-
-def metric_info(metric_id: str) -> MetricInfo:
-    """Name, unit and direction of a general, region or stratified metric id (the id itself, unit
-    unknown, lower better, for ids lfbench does not define)."""
-    from lfbench.scoring.metrics import find_metric
-
-    m = find_metric(metric_id)
-    if m is None:
-        return MetricInfo(metric_id, metric_id, "", "", False)
-    return MetricInfo(metric_id, m.name, m.unit, m.description, m.higher_is_better)
+__all__ = ["all_metric_ranks", "metric_ranks", "metric_table", "overall_ranks"]
 
 
 def metric_ranks(results, metric: str) -> pd.DataFrame:
@@ -49,7 +28,7 @@ def metric_ranks(results, metric: str) -> pd.DataFrame:
     df = df[df["metric"] == metric][["method", "scene", "value", "resolution"]].copy()
     if df.empty:
         return df.assign(rank=pd.Series(dtype=float))
-    ascending = not metric_info(metric).higher_is_better
+    ascending = not describe_metric(metric).higher_is_better
     finite = df["value"].where(np.isfinite(df["value"].astype(float)))
     df["rank"] = finite.groupby(df["scene"]).rank(method="min", ascending=ascending)
     return df.reset_index(drop=True)

@@ -20,8 +20,9 @@ from lfbench.data.pfm import read_pfm, write_pfm
 from lfbench.data.scene import LightField
 from lfbench.data.submission import check_inside, disp_map_path, read_submission_map, write_submission_map
 from lfbench.method.base import Prediction
-from lfbench.reports.figures import disparity_range, evaluation_mask
-from lfbench.scoring.rules import align_prediction
+from lfbench.reports.figures import disparity_range
+from lfbench.scoring.prepare import SceneReference
+from lfbench.scoring.rules import ScoringRules
 from lfbench.utils.errors import DataError
 from lfbench.utils.names import FileNames, file_names
 from lfbench.utils.outputs import check_within
@@ -90,6 +91,7 @@ class SceneMaps:
 def load_scene_maps(scene: LightField, folders: Mapping[str, str | Path], border_px: int = 15) -> SceneMaps:
     """The scene's ground truth, mask and centre view and the saved map of every method in ``folders``
     that has one for it (methods without are left out)."""
+    reference = SceneReference(scene, ScoringRules(border_px=border_px))
     gt = scene.gt_disparity()
     centre = np.clip(np.asarray(scene.center_view(), dtype=np.float32), 0, 1)
     if centre.ndim == 2:
@@ -99,9 +101,9 @@ def load_scene_maps(scene: LightField, folders: Mapping[str, str | Path], border
     for label, folder in folders.items():
         if disp_map_path(folder, scene.name).is_file():
             disp, _ = read_submission_map(folder, scene.name, max_shape=shape)
-            preds[label], _ = align_prediction(disp, shape, f"{label} on {scene.name}", max_crop=border_px)
+            preds[label], _ = reference.align(disp, f"{label} on {scene.name}")
     first = next(iter(preds.values()), None)
-    return SceneMaps(scene=scene, gt=gt, mask=evaluation_mask(scene, shape, border_px), centre=centre,
+    return SceneMaps(scene=scene, gt=gt, mask=reference.evaluation_mask(), centre=centre,
                      disp_range=disparity_range(scene, gt, first), preds=preds)
 
 

@@ -9,7 +9,8 @@ and read as the numbers of a reference (by default the default reference: the de
 which says which of its methods are shown unless asked otherwise (:attr:`PaperTables.default_methods`).
 
 Resolution: the benchmark (and so the paper) scores backgammon, dots and stripes at high
-resolution, the other scenes at 512x512; the columns added here say so.
+resolution (lfbench.scoring.rules.BENCHMARK_HIGHRES_SCENES), the other scenes at 512x512; the columns
+added here say so.
 """
 
 from __future__ import annotations
@@ -23,12 +24,12 @@ import numpy as np
 import pandas as pd
 
 from lfbench.reports.reference import Reference, default_reference
+from lfbench.scoring.rules import BENCHMARK_HIGHRES_SCENES
 from lfbench.utils.errors import DataError, SpecError
 from lfbench.utils.readfile import read_csv
 
 PAPER_DIR_ENV, HCI_ROOT_ENV = "LFBENCH_PAPER_DIR", "LFBENCH_HCI_ROOT"
 PER_SCENE_FILE, AVERAGE_FILE = "table1_per_scene.csv", "table2_average.csv"
-PAPER_HIGHRES_SCENES = frozenset({"backgammon", "dots", "stripes"})
 PAPER_RESOLUTION_COLUMN = "paper resolution"
 
 
@@ -140,7 +141,7 @@ def load_paper(path: str | Path, reference: Reference | None = None) -> PaperTab
 
 def paper_resolution(scene: str) -> str:
     """How the benchmark (and so the paper) scored ``scene``: 'highres' or 'lowres'."""
-    return "highres" if scene in PAPER_HIGHRES_SCENES else "lowres"
+    return "highres" if scene in BENCHMARK_HIGHRES_SCENES else "lowres"
 
 
 def paper_column(method: str) -> str:

@@ -25,6 +25,7 @@ from lfbench.method.registry import parse_spec
 from lfbench.reports.plotting import INTERPOLATION_COLOURS, pyplot, save_figure
 from lfbench.reports.tables import write_table
 from lfbench.results import Results
+from lfbench.scoring.metrics import get_metric
 from lfbench.utils.errors import DataError, LFBenchError
 from lfbench.utils.figure_text import plain_text
 from lfbench.utils.jsonfile import read_json
@@ -32,8 +33,6 @@ from lfbench.utils.jsonfile import read_json
 __all__ = ["SYNTH_PREFIX", "collect", "main", "scene_group", "sweep_figure", "sweep_table"]
 
 METRICS = ("badpix_0.07", "badpix_0.03", "badpix_0.01", "mse_x100")
-NAMES = {"badpix_0.07": "BadPix 0.07 (%)", "badpix_0.03": "BadPix 0.03 (%)", "badpix_0.01": "BadPix 0.01 (%)",
-         "mse_x100": "MSE x100"}
 SYNTH_PREFIX = "synth_"
 
 
@@ -75,7 +74,7 @@ def sweep_table(frame: pd.DataFrame) -> pd.DataFrame:
     keys = ["scenes", "interpolation", "subpixel", "interval"]
     values = f.pivot_table(index=keys, columns="metric", values="value", aggfunc="mean")
     times = f.drop_duplicates(["label", "scene"]).groupby(keys)["runtime_s"].mean()
-    out = values.reindex(columns=list(METRICS)).rename(columns=NAMES)
+    out = values.reindex(columns=list(METRICS)).rename(columns={m: get_metric(m).label for m in METRICS})
     out["time per scene (s)"] = times
     out = out.reset_index()
     real_first = {g: (g.startswith("synthetic"), g) for g in out["scenes"].unique()}
@@ -98,7 +97,8 @@ def sweep_figure(table: pd.DataFrame, path: Path) -> Path:
         sel = table.loc[[group]]
         for (interp, fit), rows in sel.groupby(["interpolation", "sub-pixel fit"], sort=False):
             xs = rows["interval (px)"].astype(float)
-            ax.plot(xs, rows[NAMES["badpix_0.07"]], marker="o", color=INTERPOLATION_COLOURS.get(interp, "tab:gray"),
+            colour = INTERPOLATION_COLOURS.get(interp, "tab:gray")
+            ax.plot(xs, rows[get_metric("badpix_0.07").label], marker="o", color=colour,
                     linestyle="-" if fit == "equiangular" else "--",
                     label=f"{interp}" + ("" if fit == "equiangular" else f", fit {fit}"))
         ax.set_xscale("log")

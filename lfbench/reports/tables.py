@@ -14,11 +14,9 @@ from tabulate import tabulate
 
 from lfbench.reports import latex
 from lfbench.results import Results
-from lfbench.scoring.metrics import find_metric, list_metrics
+from lfbench.scoring.metrics import find_metric, list_metrics, metric_order
 from lfbench.utils.atomic import write_text
 from lfbench.utils.markdown import markdown_cell
-
-PAPER_METRIC_ORDER = ("badpix_0.07", "badpix_0.03", "badpix_0.01", "mse_x100", "q25_x100")
 
 
 def _header(column: str) -> str:
@@ -34,18 +32,13 @@ def _scene_aggregate(metric_id: str) -> str:
     return metric.scene_aggregate if metric is not None else "mean"
 
 
-def _metric_order(metrics: Sequence[str]) -> list[str]:
-    first = [m for m in PAPER_METRIC_ORDER if m in metrics]
-    return first + [m for m in metrics if m not in first]
-
-
 def per_scene_table(results: Results, metrics: Sequence[str] | None = None) -> pd.DataFrame:
     """Table I: rows (scene, metric), one column per method. Cells scored at high resolution are
     marked in the 'resolution' column (lowres / highres, or mixed)."""
     df = results.to_frame()
     if df.empty:
         return pd.DataFrame()
-    order = _metric_order(metrics or list(dict.fromkeys(df["metric"])))
+    order = metric_order(metrics or list(dict.fromkeys(df["metric"])))
     df = df[df["metric"].isin(order)]
     table = df.pivot_table(index=["scene", "metric"], columns="method", values="value", aggfunc="first", sort=False)
     res = df.groupby(["scene", "metric"], sort=False)["resolution"].agg(lambda s: "/".join(sorted(set(s))))
@@ -63,7 +56,7 @@ def average_table(results: Results, metrics: Sequence[str] | None = None) -> pd.
     df = results.to_frame()
     if df.empty:
         return pd.DataFrame()
-    order = _metric_order(metrics or list(dict.fromkeys(df["metric"])))
+    order = metric_order(metrics or list(dict.fromkeys(df["metric"])))
     how = {m: _scene_aggregate(m) for m in order}  # each metric aggregates over scenes as it defines
     parts = [df[df["metric"].isin([m for m in order if how[m] == agg])]
              .pivot_table(index="method", columns="metric", values="value", aggfunc=agg, sort=False)

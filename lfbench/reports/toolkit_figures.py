@@ -30,7 +30,7 @@ import pandas as pd
 
 from lfbench.reports.maps import load_scene_maps
 from lfbench.reports.plotting import add_colorbar, as_gray, colormap, legend_label, method_colours, pyplot, save_formats
-from lfbench.scoring.metrics import find_metric
+from lfbench.scoring.metrics import describe_metric, find_metric, metric_order
 from lfbench.utils.errors import SpecError
 from lfbench.utils.figure_text import plain_text
 from lfbench.utils.names import FileNames, file_names
@@ -155,11 +155,9 @@ def heatmap_image(values: np.ndarray, vmin: float, vmax: float, cmap: str = HEAT
 def radar_metric_ids(results: Any) -> list[str]:
     """The metrics a radar chart shows: the region and stratified metrics the results hold, else the
     general ones (in the tables' order)."""
-    from lfbench.reports.tables import _metric_order
-
     held = list(dict.fromkeys(r.metric for r in results.records))
     region = [m for m in held if getattr(find_metric(m), "category", "general") in ("region", "stratified")]
-    return region or _metric_order(held)
+    return region or metric_order(held)
 
 
 def radar_scores(results: Any, methods: Sequence[str] | None = None, metrics: Sequence[str] | None = None,
@@ -268,7 +266,7 @@ def radar_figure(scores: pd.DataFrame, *, title: str = "", highlight: str | None
     ax.set_yticks([0.2, 0.4, 0.6, 0.8, 1.0])
     ax.set_yticklabels([])
     ax.set_xticks(angles)
-    names = [(labels or {}).get(m, _metric_name(m)) for m in scores.index]
+    names = [(labels or {}).get(m, describe_metric(m).name) for m in scores.index]
     ax.set_xticklabels([n.replace(": ", ":\n") for n in names], fontsize=8)
     ax.set_thetalim(0, 2 * np.pi)  # set_xticks may have narrowed the view to the ticks
     ax.grid(alpha=0.35)
@@ -299,11 +297,6 @@ def plot_radar(scores: pd.DataFrame, path: str | Path, *, title: str = "", highl
     plotting.method_colours in the columns' order). Needs at least 3 metrics."""
     return save_formats(radar_figure(scores, title=title, highlight=highlight, labels=labels, colours=colours),
                         path, formats)
-
-
-def _metric_name(metric_id: str) -> str:
-    found = find_metric(metric_id)
-    return found.name if found is not None else metric_id
 
 
 def write_toolkit_figures(results: Any, scenes: Sequence[Any], maps: Mapping[str, str | Path], out_dir: str | Path,

@@ -39,6 +39,7 @@ import pandas as pd
 
 from lfbench.data.scene import LightField
 from lfbench.method.base import Prediction
+from lfbench.reports.ci import format_ci_table
 from lfbench.reports.figures import (
     SceneFigureWriter,
     curves_from_records,
@@ -52,10 +53,11 @@ from lfbench.reports.paper import PaperTables, average_with_paper, per_scene_wit
 from lfbench.reports.plotting import method_colours
 from lfbench.reports.tables import TABLE_FORMATS, average_table, per_scene_table, write_table
 from lfbench.reports.toolkit_figures import toolkit_figures_from_scene_maps
+from lfbench.reports.uncertainty import write_uncertainty_report
 from lfbench.results import Results
 from lfbench.scoring.rules import ScoringRules
-from lfbench.scoring.stats import ErrorCollector, ci_records, format_ci_table
-from lfbench.scoring.uncertainty import UncertaintyCollector, write_uncertainty_report
+from lfbench.scoring.stats import ErrorCollector, ci_records
+from lfbench.scoring.uncertainty import UncertaintyCollector
 from lfbench.utils.atomic import write_text
 
 __all__ = ["FIGURES_DIR", "BootstrapCIs", "CIOptions", "CurveFigures", "Maps", "OutputWriter", "RunOutputs",

@@ -373,7 +373,7 @@ def bench_metrics(scenes: int = 12, methods: int = 5, size: int = 512, repeat: i
 
     from lfbench.data.scene import Scene
     from lfbench.scoring.metrics import GENERAL_METRICS
-    from lfbench.scoring.rules import score_scene
+    from lfbench.scoring.score import score_scene
 
     rng = np.random.default_rng(0)
     with tempfile.TemporaryDirectory(prefix="lfbench-bench-") as tmp:

@@ -28,8 +28,8 @@ from lfbench.reports.writers import CIOptions, OutputWriter, RunOutputs, Tables,
 from lfbench.results import Results
 from lfbench.runs.runner import check_names, evaluate
 from lfbench.scoring.metrics import GENERAL_METRICS, RUNTIME_METRICS, Metric
-from lfbench.scoring.region_metrics import applicable_metrics
 from lfbench.scoring.rules import ScoringRules
+from lfbench.scoring.score import applicable_metrics
 from lfbench.utils.outputs import staged_outputs
 
 __all__ = ["CIOptions", "evaluate_to_folder"]

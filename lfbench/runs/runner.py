@@ -13,7 +13,8 @@ from lfbench.data.scene import Scene
 from lfbench.method.base import Method, Prediction
 from lfbench.results import Record, Results, RunInfo
 from lfbench.scoring.metrics import GENERAL_METRICS, Metric
-from lfbench.scoring.rules import ScoringRules, score_scene
+from lfbench.scoring.rules import ScoringRules
+from lfbench.scoring.score import score_scene
 from lfbench.utils.errors import DataError
 from lfbench.utils.names import FileNames
 
@@ -31,7 +32,7 @@ def evaluate(methods: Sequence[Method], scenes: Sequence[Scene], *,
     """Run every method on every scene with ground truth and score it.
 
     ``metrics``: the metrics for every scene, or a function of the scene giving them (e.g.
-    ``lfbench.scoring.region_metrics.applicable_metrics``).
+    ``lfbench.scoring.score.applicable_metrics``).
 
     A (method, scene) pair the method cannot serve (e.g. no stored map) is skipped with a warning
     (logger ``lfbench.runs.runner``); a method that can serve none of the scenes is an error

@@ -1,7 +1,20 @@
-"""Scoring: the benchmark's general metrics and the one metric registry (metrics: :class:`Metric`,
-:data:`METRICS`, :func:`get_metric`), region and stratified metrics (region_metrics), the scoring rules
-that decide border and resolution (rules), bootstrap statistics (stats) and the quality of
-uncertainty maps (uncertainty)."""
+"""Scoring, in layers (each module imports only those above it in this list):
+
+- ``base``: what a metric is (:class:`Metric`, its pixel statistic, the metric registry type);
+- ``general``: the general metrics (BadPix, MSE, Q25 as functions of arrays) and their definitions;
+- ``rules``: the benchmark's scoring rules (:class:`~lfbench.scoring.rules.ScoringRules`: border,
+  resolution of each metric, non-finite rule, the high-resolution scenes);
+- ``prepare``: the one preparation of a prediction for scoring and what a scene gives every prediction
+  (:class:`~lfbench.scoring.prepare.SceneReference`, :class:`~lfbench.scoring.prepare.Prepared`);
+- ``region_metrics``: the region and stratified metrics and their definitions;
+- ``metrics``: every metric by id (:data:`METRICS`, :func:`get_metric`, :func:`list_metrics`) and their
+  display order (:func:`~lfbench.scoring.metrics.metric_order`); the metric functions are imported from here;
+- ``score``: scoring a prediction on a scene (:func:`~lfbench.scoring.score.score_scene`);
+- ``stats``: bootstrap confidence intervals and paired tests; ``uncertainty``: the quality of
+  uncertainty maps (sparsification, AUSE).
+
+Everything here is a function of arrays and scenes; tables, figures and report files are lfbench.reports.
+"""
 
 from lfbench.scoring.metrics import METRICS, Metric, get_metric, list_metrics
 

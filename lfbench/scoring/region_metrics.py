@@ -18,33 +18,22 @@ clip value 0.05 for bumpiness and a 180 degree normal error for MAE; pixels whos
 metrics count NaN as good, bumpiness and MAE leave non-finite values out, a (box, size) pair
 without pixels counts as a missed dot.
 
-Each metric is also a :class:`lfbench.scoring.metrics.Metric` (ids in :data:`REGION_METRICS` and
-:data:`STRATIFIED_METRICS`), registered in :data:`lfbench.scoring.metrics.METRICS` (look one up with
-:func:`lfbench.scoring.metrics.get_metric`), and :func:`applicable_metrics` lists what applies to a scene: the
-general metrics plus those whose mask files exist, so that
-``score_scene(scene, pred, applicable_metrics(scene))`` scores everything the scene supports.
+Each metric is also a :class:`~lfbench.scoring.base.Metric` (ids in :data:`REGION_METRICS` and
+:data:`STRATIFIED_METRICS`; :func:`scene_metrics` says which belong to a scene), registered in
+:data:`lfbench.scoring.metrics.METRICS` (look one up with :func:`lfbench.scoring.metrics.get_metric`).
+Those that read further masks of their scene (missed dots, the pyramids' slanted surfaces) take them from
+the scene's :class:`~lfbench.scoring.prepare.SceneReference` (read once per scene).
 """
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 
 from lfbench.data.params import SceneParameters
-from lfbench.data.scene import Scene, read_png
-from lfbench.scoring.metrics import (
-    GENERAL_METRICS,
-    METRICS,
-    NON_NEGATIVE,
-    PERCENT,
-    Metric,
-    _prepare,
-    bad_pix,
-    mse_x100,
-)
-from lfbench.scoring.rules import ScoringRules, metric_resolution, valid_mask_at
-from lfbench.utils.errors import DataError
+from lfbench.data.scene import Scene
+from lfbench.scoring.base import NON_NEGATIVE, PERCENT, Metric
+from lfbench.scoring.general import bad_pix, check_maps, mse_x100, percent_of
+from lfbench.scoring.prepare import SceneReference
 
 __all__ = [
     "scharr_derivative",
@@ -58,10 +47,10 @@ __all__ = [
     "backgammon_fattening",
     "backgammon_thinning",
     "missed_dots",
-    "read_label_mask",
+    "toolkit_depth",
     "REGION_METRICS",
     "STRATIFIED_METRICS",
-    "applicable_metrics",
+    "scene_metrics",
 ]
 
 BUMPINESS_CLIP = 0.05  # px per px^2 (Scharr response units), the toolkit's clip
@@ -78,18 +67,14 @@ _DIFF = np.array([-1.0, 0.0, 1.0])  # correlation: f[i + 1] - f[i - 1]
 
 # --------------------------------------------------------------------------- shared helpers
 
-def _percentage(total: int, part: int) -> float:
-    return float("nan") if total == 0 else 100.0 * part / float(total)
-
-
 def _percent_bad(bad: np.ndarray, reference: np.ndarray, pred: np.ndarray, mask: np.ndarray, toolkit: bool) -> float:
     """% of scored pixels that are bad. ``bad`` was computed with NaN comparisons False;
     ``reference`` (gt or a value derived from it) must be finite for a pixel to be scored."""
     if toolkit:  # the toolkit: every mask pixel is scored, NaN comparisons are good
-        return _percentage(int(np.count_nonzero(mask)), int(np.count_nonzero(bad & mask)))
+        return percent_of(int(np.count_nonzero(mask)), int(np.count_nonzero(bad & mask)))
     scored = mask & np.isfinite(reference)
     bad = bad | ~np.isfinite(pred)
-    return _percentage(int(np.count_nonzero(scored)), int(np.count_nonzero(bad & scored)))
+    return percent_of(int(np.count_nonzero(scored)), int(np.count_nonzero(bad & scored)))
 
 
 _SCHARR_H = np.array([[3.0, 10.0, 3.0], [0.0, 0.0, 0.0], [-3.0, -10.0, -3.0]]) / 16.0  # scikit-image's HSCHARR
@@ -143,7 +128,7 @@ def bumpiness_map(gt: np.ndarray, pred: np.ndarray, clip: float = BUMPINESS_CLIP
 
     The difference is taken in the inputs' precision (float32 for PFM data), then filtered in
     float64 with reflecting borders; NaN where a non-finite value lies within 2 px."""
-    gt, pred, _ = _prepare(gt, pred, None)
+    gt, pred, _ = check_maps(gt, pred, None)
     with np.errstate(invalid="ignore"):
         diff = (pred - gt).astype(np.float64)
         return np.clip(_hessian_norm(diff), 0.0, clip)
@@ -155,7 +140,7 @@ def bumpiness_x100(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = N
 
     Units: 100 x px / px^2 (Scharr response); 0 for any prediction that differs from gt by a
     constant or a plane; 100 * clip (5) for a very rough one."""
-    gt, pred, mask = _prepare(gt, pred, mask)
+    gt, pred, mask = check_maps(gt, pred, mask)
     bump = bumpiness_map(gt, pred, clip)
     if toolkit:
         scored = mask & np.isfinite(bump)
@@ -220,7 +205,7 @@ def median_angular_error(gt: np.ndarray, pred: np.ndarray, params: SceneParamete
 
     Disparities are converted to depth as the toolkit does (:func:`toolkit_depth`, float32), normals
     from :func:`depth_normals` in float64."""
-    gt, pred, mask = _prepare(gt, pred, mask)
+    gt, pred, mask = check_maps(gt, pred, mask)
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
         n_gt = depth_normals(toolkit_depth(gt, params), params.focal_length_mm, params.sensor_size_mm)
         n_pred = depth_normals(toolkit_depth(pred, params), params.focal_length_mm, params.sensor_size_mm)
@@ -240,7 +225,7 @@ def fine_fattening(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = N
                    threshold: float = FINE_THRESHOLD, *, toolkit: bool = False) -> float:
     """Fine fattening: % of scored pixels with gt - pred < -threshold (px), i.e. the prediction
     is nearer than the ground truth (scored on mask_fine_surrounding)."""
-    gt, pred, mask = _prepare(gt, pred, mask)
+    gt, pred, mask = check_maps(gt, pred, mask)
     with np.errstate(invalid="ignore"):
         bad = (gt - pred) < -threshold
     return _percent_bad(bad, gt, pred, mask, toolkit)
@@ -250,7 +235,7 @@ def fine_thinning(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = No
                   threshold: float = FINE_THRESHOLD, *, toolkit: bool = False) -> float:
     """Fine thinning: % of scored pixels with gt - pred > threshold (px), i.e. the prediction is
     farther than the ground truth (scored on mask_fine)."""
-    gt, pred, mask = _prepare(gt, pred, mask)
+    gt, pred, mask = check_maps(gt, pred, mask)
     with np.errstate(invalid="ignore"):
         bad = (gt - pred) > threshold
     return _percent_bad(bad, gt, pred, mask, toolkit)
@@ -267,7 +252,7 @@ def backgammon_fattening(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | No
     """Backgammon fattening: % of scored pixels with pred > (gt + fg) / 2, where fg (per row) is
     the gt at column ``fg_column`` (the foreground extrapolated along each row): the prediction
     is nearer to the foreground than to the true (background) disparity."""
-    gt, pred, mask = _prepare(gt, pred, mask)
+    gt, pred, mask = check_maps(gt, pred, mask)
     half = _halfway_to_column(gt, fg_column)
     with np.errstate(invalid="ignore"):
         bad = pred > half
@@ -279,7 +264,7 @@ def backgammon_thinning(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | Non
     """Backgammon thinning: % of scored pixels with pred < (gt + bg) / 2, where bg (per row) is
     the gt at column ``bg_column`` (the background extrapolated along each row): the prediction
     is nearer to the background than to the true (foreground) disparity."""
-    gt, pred, mask = _prepare(gt, pred, mask)
+    gt, pred, mask = check_maps(gt, pred, mask)
     half = _halfway_to_column(gt, bg_column)
     with np.errstate(invalid="ignore"):
         bad = pred < half
@@ -303,7 +288,7 @@ def missed_dots(gt: np.ndarray, pred: np.ndarray, boxes: np.ndarray, dots_by_siz
     (the toolkit's NaN < 50 is False). ``valid`` (H, W) bool, the scene's valid mask (lfbench's, not the
     toolkit's): pixels outside it are not scored, and a dot with no valid pixel is no dot, in both modes.
     """
-    gt, pred, _ = _prepare(gt, pred, None)
+    gt, pred, _ = check_maps(gt, pred, None)
     boxes = np.asarray(boxes)
     dots_by_size = np.asarray(dots_by_size)
     if boxes.shape != gt.shape or dots_by_size.shape != gt.shape:
@@ -341,8 +326,8 @@ def missed_dots(gt: np.ndarray, pred: np.ndarray, boxes: np.ndarray, dots_by_siz
         dot_bad_pix = 100.0 * n_bad / n
     missed = (n > 0) & (dot_bad_pix >= missed_percent)
     if toolkit:
-        return _percentage(n_pairs - dropped, int(np.count_nonzero(missed | (n == 0))) - dropped)
-    return _percentage(int(np.count_nonzero(n > 0)), int(np.count_nonzero(missed)))
+        return percent_of(n_pairs - dropped, int(np.count_nonzero(missed | (n == 0))) - dropped)
+    return percent_of(int(np.count_nonzero(n > 0)), int(np.count_nonzero(missed)))
 
 
 def _first_labels(labels: np.ndarray, highest: int) -> np.ndarray:
@@ -365,21 +350,9 @@ def _label_lut(labels: np.ndarray, lowest: int, highest: int | None) -> np.ndarr
     return np.where(present, np.cumsum(present) - 1, -1)
 
 
-def read_label_mask(path: str | Path) -> np.ndarray:
-    """A label PNG (e.g. mask_boxes, mask_dots_by_size) as int32 (H, W): the gray value of each
-    pixel. An RGB(A) image is accepted when its colour channels are equal."""
-    path = Path(path)
-    arr = read_png(path, "label mask")
-    if arr.ndim == 3:
-        rgb = arr[..., :3]
-        if not (rgb == rgb[..., :1]).all():
-            raise DataError("label mask must be gray (its colour channels differ)", path)
-        arr = rgb[..., 0]
-    return arr.astype(np.int32)
-
-
 # --------------------------------------------------------------------------- metric descriptors
-# Metrics with needs_scene get scene= and resolution= from score_scene (lfbench.scoring.rules).
+# Metrics with needs_scene get scene= (the scene's SceneReference, or a Scene) and resolution= from
+# score_scene (lfbench.scoring.score).
 
 def _scale(scene: Scene, gt: np.ndarray) -> int:
     return max(1, gt.shape[1] // scene.spatial_size[1])
@@ -416,31 +389,21 @@ def _bg_thin_fn(gt, pred, mask=None, *, toolkit=False, scene: Scene, resolution:
     return backgammon_thinning(gt, pred, mask, bg_column=gt.shape[1] - BACKGAMMON_BG_FROM_RIGHT, toolkit=toolkit)
 
 
-def _missed_dots_fn(gt, pred, mask=None, *, toolkit=False, scene: Scene, resolution: str):
-    boxes = read_label_mask(scene.path / f"mask_boxes_{resolution}.png")
-    dots = read_label_mask(scene.path / f"mask_dots_by_size_{resolution}.png")
-    for name, arr in (("mask_boxes", boxes), ("mask_dots_by_size", dots)):
-        if arr.shape != gt.shape:
-            raise DataError(f"mask is {arr.shape[1]}x{arr.shape[0]}, ground truth is {gt.shape[1]}x{gt.shape[0]}",
-                            scene.path / f"{name}_{resolution}.png")
-    return missed_dots(gt, pred, boxes, dots, toolkit=toolkit, valid=valid_mask_at(scene, gt.shape))
+def _missed_dots_fn(gt, pred, mask=None, *, toolkit=False, scene: Scene | SceneReference, resolution: str):
+    reference = SceneReference.of(scene)
+    boxes = reference.label_mask("mask_boxes", resolution, gt.shape)
+    dots = reference.label_mask("mask_dots_by_size", resolution, gt.shape)
+    return missed_dots(gt, pred, boxes, dots, toolkit=toolkit, valid=reference.valid_mask(resolution))
 
 
 _SLANTED_MASKS = ("mask_sphere_in", "mask_sphere_out", "mask_pyramids")
 
 
-def _scene_mask(scene: Scene, name: str, resolution: str, shape: tuple[int, ...]) -> np.ndarray:
-    mask = scene.mask(name, resolution)
-    if mask.shape != shape:
-        raise DataError(f"mask is {mask.shape[1]}x{mask.shape[0]}, ground truth is {shape[1]}x{shape[0]}",
-                        scene.path / f"{name}_{resolution}.png")
-    return mask
-
-
-def _slanted_fn(gt, pred, mask=None, *, toolkit=False, scene: Scene, resolution: str):
+def _slanted_fn(gt, pred, mask=None, *, toolkit=False, scene: Scene | SceneReference, resolution: str):
+    reference = SceneReference.of(scene)
     union = np.zeros(gt.shape, dtype=bool)
     for name in _SLANTED_MASKS:
-        union |= _scene_mask(scene, name, resolution, gt.shape)
+        union |= reference.mask(name, resolution, gt.shape)
     return bumpiness_x100(gt, pred, union if mask is None else mask & union, toolkit=toolkit)
 
 
@@ -540,13 +503,3 @@ def scene_metrics(scene: Scene) -> tuple[Metric, ...]:
     """The region or stratified metrics defined for a scene, whether or not its masks exist:
     a stratified scene's own metrics, the region metrics for every other (photorealistic) scene."""
     return STRATIFIED_METRICS.get(scene.name, REGION_METRICS)
-
-
-def applicable_metrics(scene: Scene, rules: ScoringRules = ScoringRules()) -> list[Metric]:
-    """The general metrics plus the region / stratified metrics whose mask files exist for ``scene``
-    (at a resolution :func:`lfbench.scoring.rules.metric_resolution` can score them at)."""
-    return list(GENERAL_METRICS) + [m for m in scene_metrics(scene) if metric_resolution(scene, m, rules) is not None]
-
-
-for _m in REGION_METRICS + tuple(m for ms in STRATIFIED_METRICS.values() for m in ms):
-    METRICS.register(_m)

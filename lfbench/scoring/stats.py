@@ -27,24 +27,36 @@ the resampled order statistic (both equal in distribution to index resampling, a
 index resampling in chunks (O(n x resamples): ~2 s for 1000 resamples of a 482 x 482 mask on one core);
 the block bootstrap works on per-tile sums (~0.1-0.2 s for any metric).
 
-For tables: :class:`ErrorCollector` (a ``runner.evaluate`` prediction hook, scoring pixels exactly as
-``evaluation.score_scene``) gathers per-pixel errors; :func:`ci_records` / :func:`ci_table` turn a
-Results plus those errors into CI tables ('value [low, high]' cells, '(mean)' rows over scenes).
+From scenes and runs: :func:`scene_errors` takes the per-pixel errors of a prediction on exactly the pixels
+the general metrics score (:meth:`lfbench.scoring.prepare.SceneReference.prepare`); :class:`ErrorCollector`
+(a ``runner.evaluate`` prediction hook) gathers them for every run; :func:`ci_records` turns a Results plus
+those errors into a long frame of intervals ('(mean)' rows over scenes), which
+:func:`lfbench.reports.ci.format_ci_table` lays out as a table.
 """
 
 from __future__ import annotations
 
 import itertools
 import math
+import sys
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
+import pandas as pd
+import scipy.stats
+from tqdm import tqdm
 
-from lfbench.scoring.metrics import Metric, get_metric, list_metrics
-from lfbench.scoring.metrics import PixelStatistic as _Kind
-from lfbench.utils.errors import SpecError
+from lfbench.data.scene import Scene
+from lfbench.scoring.base import Metric, PixelStatistic
+from lfbench.scoring.general import check_maps
+from lfbench.scoring.metrics import get_metric, list_metrics
+from lfbench.scoring.prepare import Prepared, SceneReference
+from lfbench.scoring.rules import ScoringRules
+from lfbench.utils.errors import DataError, SpecError
+from lfbench.utils.readfile import read_csv
 
 __all__ = [
     "CI",
@@ -64,8 +76,6 @@ __all__ = [
     "ErrorCollector",
     "CI_COLUMNS",
     "ci_records",
-    "ci_table",
-    "format_ci_table",
     "read_ci_csv",
 ]
 
@@ -107,7 +117,7 @@ class PairedTest:
 
 # --------------------------------------------------------------------------- metric kinds
 
-def _kind_of(metric: str | Metric) -> tuple[str, _Kind]:
+def _kind_of(metric: str | Metric) -> tuple[str, PixelStatistic]:
     """(canonical id, pixel statistic) of a metric id or definition; SpecError when it has no bootstrap."""
     m = metric if isinstance(metric, Metric) else get_metric(str(metric))
     if m.bootstrap is None:
@@ -119,17 +129,10 @@ def _kind_of(metric: str | Metric) -> tuple[str, _Kind]:
 # --------------------------------------------------------------------------- per-pixel errors
 
 def _scored(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None, toolkit: bool) -> tuple[np.ndarray, np.ndarray]:
-    gt = np.asarray(gt)
-    pred = np.asarray(pred)
-    if gt.shape != pred.shape:
-        raise ValueError(f"gt {gt.shape} and pred {pred.shape} differ in shape")
-    mask = np.ones(gt.shape, bool) if mask is None else np.asarray(mask, dtype=bool)
-    if mask.shape != gt.shape:
-        raise ValueError(f"mask {mask.shape} and gt {gt.shape} differ in shape")
-    dtype = np.result_type(gt.dtype, pred.dtype, np.float32)  # the metrics' precision
+    gt, pred, mask = check_maps(gt, pred, mask)  # the metrics' shapes and precision
     scored = mask if toolkit else mask & np.isfinite(gt)
     with np.errstate(invalid="ignore"):
-        err = pred.astype(dtype, copy=False)[scored] - gt.astype(dtype, copy=False)[scored]
+        err = pred[scored] - gt[scored]
     return err, scored
 
 
@@ -164,6 +167,15 @@ class ScoredErrors:
         err, scored = _scored(gt, pred, mask, toolkit)
         return cls(err, np.flatnonzero(scored).astype(np.int64), tuple(np.shape(gt)), toolkit)
 
+    @classmethod
+    def from_prepared(cls, prepared: Prepared, *, toolkit: bool = False) -> ScoredErrors:
+        """The errors of a prepared prediction on its scored pixels (float32 errors; int32 positions
+        while they fit), with its scale."""
+        err, scored = _scored(prepared.gt, prepared.pred, prepared.mask, toolkit)
+        index = np.flatnonzero(scored)
+        index = index.astype(np.int32 if scored.size < 2**31 else np.int64)
+        return cls(err.astype(np.float32, copy=False), index, tuple(prepared.gt.shape), toolkit, prepared.scale)
+
     def groups(self, block: int | None) -> np.ndarray | None:
         """Tile id of each pixel for tiles of block x block *prediction* pixels (block * scale scored
         pixels a side, so high-res scoring keeps the same tiles), or None for block None/0/1."""
@@ -193,7 +205,7 @@ def _badpix_flags(errors: np.ndarray, threshold: float, toolkit: bool) -> np.nda
     return bad if toolkit else bad | ~np.isfinite(errors)
 
 
-def _sample(errors: np.ndarray, kind: _Kind, toolkit: bool) -> tuple[np.ndarray, np.ndarray]:
+def _sample(errors: np.ndarray, kind: PixelStatistic, toolkit: bool) -> tuple[np.ndarray, np.ndarray]:
     """(values, keep): the per-pixel values the metric averages / ranks, and which errors they came from."""
     errors = np.asarray(errors)
     if kind.name == "badpix":
@@ -209,7 +221,7 @@ def _sample(errors: np.ndarray, kind: _Kind, toolkit: bool) -> tuple[np.ndarray,
     return np.where(np.isfinite(diffs), diffs, np.inf), np.ones(errors.shape, bool)
 
 
-def _estimate(values: np.ndarray, kind: _Kind) -> float:
+def _estimate(values: np.ndarray, kind: PixelStatistic) -> float:
     if values.size == 0:
         return float("nan")
     if kind.name == "badpix":
@@ -248,11 +260,9 @@ def _order_stat_replicates(values: np.ndarray, k: int, n: int, rng: np.random.Ge
     Exact: with sorted values x_(0..N-1), the resampled k-th order statistic has rank <= j when at
     least k+1 of the N draws have rank <= j, i.e. P = P(Binomial(N, (j+1)/N) >= k+1).
     """
-    from scipy import stats
-
     x = np.sort(values)
     size = x.size
-    cdf = stats.binom.sf(k, size, np.arange(1, size + 1) / size)
+    cdf = scipy.stats.binom.sf(k, size, np.arange(1, size + 1) / size)
     cdf[-1] = 1.0
     ranks = np.searchsorted(cdf, rng.random(n), side="left")
     return x[np.minimum(ranks, size - 1)].astype(np.float64)
@@ -479,13 +489,11 @@ def paired_pixel_test(gt: np.ndarray, pred_a: np.ndarray, pred_b: np.ndarray, ma
         return PairedTest(float("nan"), float("nan"), float("nan"), float("nan"), 0, mid, "no common scored pixels")
     diff = float(d.mean())
     if groups is None and mid.startswith("badpix"):
-        from scipy import stats
-
         worse, better = int(np.count_nonzero(d > 0)), int(np.count_nonzero(d < 0))
         probs = np.array([worse, d.size - worse - better, better], dtype=np.float64) / d.size
         counts = rng.multinomial(d.size, probs, size=n)
         reps = 100.0 * (counts[:, 0] - counts[:, 2]) / d.size
-        p = 1.0 if worse + better == 0 else float(stats.binomtest(worse, worse + better, 0.5).pvalue)
+        p = 1.0 if worse + better == 0 else float(scipy.stats.binomtest(worse, worse + better, 0.5).pvalue)
         test = (f"exact McNemar (two-sided binomial) on {worse + better} discordant pixels "
                 f"({worse} bad only in a, {better} bad only in b); paired bootstrap CI over {d.size} pixels")
     elif groups is None:
@@ -529,9 +537,7 @@ def paired_scene_test(values_a: Sequence[float] | np.ndarray, values_b: Sequence
     if np.all(d == 0):
         p_w = 1.0
     else:
-        from scipy import stats
-
-        p_w = float(stats.wilcoxon(d).pvalue)
+        p_w = float(scipy.stats.wilcoxon(d).pvalue)
     exact = "exact" if d.size <= _EXACT_FLIPS_MAX else f"{n} random"
     return PairedTest(float(d.mean()), ci.low, ci.high, float(p), int(d.size), measure,
                       f"{exact} sign-flip permutation test over {d.size} scenes; bootstrap CI over scenes", p_w)
@@ -539,31 +545,18 @@ def paired_scene_test(values_a: Sequence[float] | np.ndarray, values_b: Sequence
 
 # --------------------------------------------------------------------------- from scenes and runs
 
-def scene_errors(scene, pred: np.ndarray, rules=None, source: str = "prediction") -> ScoredErrors:
-    """Per-pixel errors of a prediction (H, W) on a :class:`lfbench.data.scene.Scene`, scored exactly as
-    ``evaluation.score_scene`` scores the general metrics (alignment of cropped maps, the scene's
-    resolution with nearest upsampling, border and valid masks, the rules' non-finite handling).
+def scene_errors(scene: Scene, pred: np.ndarray, rules: ScoringRules | None = None, source: str = "prediction", *,
+                 reference: SceneReference | None = None) -> ScoredErrors:
+    """Per-pixel errors of a prediction (H, W) on a :class:`lfbench.data.scene.Scene`, on exactly the pixels
+    :func:`lfbench.scoring.score.score_scene` scores the general metrics on (the scene's resolution, the
+    prediction prepared by :meth:`~lfbench.scoring.prepare.SceneReference.prepare`: alignment, the
+    toolkit's upsampling, border and valid masks; the rules' non-finite handling). ``reference``: the
+    scene's SceneReference (its rules are used), made from ``scene`` and ``rules`` when None.
     Memory: ~8 bytes per scored pixel (2 MB at 512 x 512, ~200 MB for a 5120 x 5120 high-res scene)."""
-    from lfbench.scoring.rules import ScoringRules, align_prediction, evaluation_mask, upsample_nearest
-
-    rules = rules or ScoringRules()
-    h, w = scene.spatial_size
-    pred, _ = align_prediction(pred, (h, w), source)
-    pred = pred.astype(np.float32, copy=False)
-    res = rules.general_resolution(scene)
-    gt = scene.gt_disparity(res)
-    if gt is None:
-        from lfbench.utils.errors import DataError
-
-        raise DataError("no ground truth (gt_disp_lowres.pfm) to score against", scene.path)
-    scale = gt.shape[0] // h
-    if scale != 1:
-        pred = upsample_nearest(pred, scale)
-    mask = evaluation_mask(scene, gt.shape, rules.border_px * scale)
-    err, scored = _scored(gt, pred, mask, rules.toolkit)
-    index = np.flatnonzero(scored)
-    index = index.astype(np.int32 if scored.size < 2**31 else np.int64)
-    return ScoredErrors(err.astype(np.float32, copy=False), index, tuple(gt.shape), rules.toolkit, scale)
+    if reference is None:
+        reference = SceneReference(scene, rules or ScoringRules())
+    prepared = reference.prepare(pred, reference.general_resolution(), source)
+    return ScoredErrors.from_prepared(prepared, toolkit=reference.rules.toolkit)
 
 
 class ErrorCollector:
@@ -598,11 +591,6 @@ def ci_records(results, errors: Mapping[tuple[str, str], ErrorsLike], metrics: S
     scene '(mean)': the mean over scenes (as the average table) with a bootstrap over scenes.
     ``block``: tile size in prediction pixels for the spatial block bootstrap (None = i.i.d. pixels).
     """
-    import sys
-
-    import pandas as pd
-    from tqdm import tqdm
-
     df = results.to_frame()
     rows = []
     for rec in tqdm(list(df.itertuples(index=False)), desc="bootstrap", unit="number", file=sys.stderr,
@@ -641,11 +629,6 @@ def read_ci_csv(path):
     """A ci.csv read back (an untrusted file): a DataFrame with method, scene and metric as text and
     value, low and high as float (an empty cell is NaN). DataError naming the file, and the line and
     column, when it is not a CSV table, lacks a column or holds a number that is not one."""
-    from pathlib import Path
-
-    from lfbench.utils.errors import DataError
-    from lfbench.utils.readfile import read_csv
-
     path = Path(path)
     ci = read_csv(path, "ci.csv", dtype=str, keep_default_na=False)
     missing = [c for c in ("method", "scene", "metric", "low", "high") if c not in ci.columns]
@@ -662,38 +645,3 @@ def read_ci_csv(path):
                 raise DataError(f"line {line}: {column} is not a number", path) from None
         ci[column] = np.array(numbers, dtype=np.float64)
     return ci
-
-
-def ci_table(results, errors: Mapping[tuple[str, str], ErrorsLike], metrics: Sequence[str] | None = None,
-             n: int = DEFAULT_RESAMPLES, seed: int = 0, level: float = DEFAULT_LEVEL, *, block: int | None = None,
-             floatfmt: str = ".3f"):
-    """Per-scene table like ``report.tables.per_scene_table`` (rows (scene, metric), a column per
-    method) whose cells read 'value [low, high]'; the '(mean)' rows carry the bootstrap over scenes.
-    Renders with ``report.tables.render`` (string cells pass through)."""
-    return format_ci_table(ci_records(results, errors, metrics, n, seed, level, block=block), floatfmt)
-
-
-def format_ci_table(long, floatfmt: str = ".3f"):
-    """The wide 'value [low, high]' table of :func:`ci_table` from :func:`ci_records` output."""
-    long = long.copy()
-    if long.empty:
-        import pandas as pd
-
-        return pd.DataFrame()
-
-    def cell(r) -> str:
-        if math.isnan(r.value):
-            return "-"
-        v = format(r.value, floatfmt)
-        return v if math.isnan(r.low) else f"{v} [{format(r.low, floatfmt)}, {format(r.high, floatfmt)}]"
-
-    long["cell"] = [cell(r) for r in long.itertuples(index=False)]
-    table = long.pivot_table(index=["scene", "metric"], columns="method", values="cell", aggfunc="first", sort=False)
-    table = table.reindex(columns=list(dict.fromkeys(long["method"])))
-    from lfbench.reports.tables import PAPER_METRIC_ORDER
-
-    metric_ids = list(dict.fromkeys(long["metric"]))
-    order = [m for m in PAPER_METRIC_ORDER if m in metric_ids] + [m for m in metric_ids if m not in PAPER_METRIC_ORDER]
-    scenes = list(dict.fromkeys(long["scene"]))
-    idx = [(s, m) for s in scenes for m in order if (s, m) in table.index]
-    return table.loc[idx].fillna("-")

@@ -18,21 +18,27 @@ loss is replaced by the mean loss of its tie group, which is the expectation ove
 :func:`lfbench.scoring.stats.pixel_loss`): 'abs' (EPE, px, default), 'mse_x100' (px^2 x 100) and
 'badpix_<t>' (%). Non-finite predictions are left out for abs/mse_x100 and are bad pixels for BadPix;
 non-finite uncertainties are treated as the most uncertain (removed first).
+
+On a scene (:func:`scene_sparsifications`), the pixels and their errors are those of the general metrics
+(:meth:`lfbench.scoring.prepare.SceneReference.prepare`, the uncertainty aligned and upsampled as the
+disparity); :class:`UncertaintyCollector` rates every run of an evaluation and :func:`uncertainty_table`
+tabulates the ratings. The report (table file and figures) is :mod:`lfbench.reports.uncertainty`.
 """
 
 from __future__ import annotations
 
-import io
+import dataclasses
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
+import pandas as pd
 
+from lfbench.data.scene import Scene
 from lfbench.scoring.metrics import find_metric
-from lfbench.scoring.stats import pixel_loss
-from lfbench.utils.atomic import write_bytes, write_text
-from lfbench.utils.figure_text import plain_text
+from lfbench.scoring.prepare import SceneReference
+from lfbench.scoring.rules import ScoringRules
+from lfbench.scoring.stats import ScoredErrors, pixel_loss
 
 __all__ = [
     "DEFAULT_FRACTIONS",
@@ -46,10 +52,9 @@ __all__ = [
     "average_sparsification",
     "scene_sparsification",
     "scene_sparsifications",
+    "REPORT_MEASURES",
     "UncertaintyCollector",
     "uncertainty_table",
-    "write_uncertainty_report",
-    "plot_sparsification",
 ]
 
 DEFAULT_FRACTIONS = np.round(np.arange(100) * 0.01, 2)  # 0, 0.01, ..., 0.99 removed
@@ -188,37 +193,31 @@ def sparsification(gt: np.ndarray, pred: np.ndarray, uncertainty: np.ndarray, ma
     return sparsification_from_loss(loss[keep], unc[scored][keep], mid, unit, fractions, normalize)
 
 
-def scene_sparsification(scene, prediction, rules=None, measure: str = "abs",
-                         fractions: Sequence[float] | np.ndarray = DEFAULT_FRACTIONS,
+def scene_sparsification(scene: Scene, prediction, rules: ScoringRules | None = None,
+                         measure: str = "abs", fractions: Sequence[float] | np.ndarray = DEFAULT_FRACTIONS,
                          normalize: bool = False) -> Sparsification | None:
     """Sparsification of a method's :class:`lfbench.method.base.Prediction` on a :class:`lfbench.data.scene.Scene`,
-    scored on exactly the pixels of the general metrics (``lfbench.scoring.stats.scene_errors``: alignment,
-    resolution, border and valid masks; the uncertainty is aligned and upsampled like the disparity).
+    scored on exactly the pixels of the general metrics (:meth:`lfbench.scoring.prepare.SceneReference.prepare`:
+    alignment, resolution, border and valid masks; the uncertainty is aligned and upsampled like the disparity).
     The default non-finite rules apply even under toolkit rules. None when the prediction has no
     uncertainty map."""
     found = scene_sparsifications(scene, prediction, rules, (measure,), fractions, normalize)
     return next(iter(found.values())) if found else None
 
 
-def scene_sparsifications(scene, prediction, rules=None, measures: Sequence[str] = ("abs",),
+def scene_sparsifications(scene: Scene, prediction, rules: ScoringRules | None = None,
+                          measures: Sequence[str] = ("abs",),
                           fractions: Sequence[float] | np.ndarray = DEFAULT_FRACTIONS,
                           normalize: bool = False) -> dict[str, Sparsification]:
-    """:func:`scene_sparsification` for several measures, scoring the prediction once: canonical
+    """:func:`scene_sparsification` for several measures, preparing the prediction once: canonical
     measure id -> Sparsification (empty when the prediction has no uncertainty map)."""
-    import dataclasses
-
-    from lfbench.scoring.rules import ScoringRules, align_prediction, upsample_nearest
-    from lfbench.scoring.stats import scene_errors
-
     if prediction.uncertainty is None:
         return {}
-    rules = dataclasses.replace(rules or ScoringRules(), toolkit=False)
-    se = scene_errors(scene, prediction.disparity, rules)
-    unc, _ = align_prediction(np.asarray(prediction.uncertainty), scene.spatial_size, "uncertainty")
-    scale = se.shape[0] // scene.spatial_size[0]
-    if scale != 1:
-        unc = upsample_nearest(unc, scale)
-    scored_unc = unc.ravel()[se.flat_index]
+    reference = SceneReference(scene, dataclasses.replace(rules or ScoringRules(), toolkit=False))
+    prepared = reference.prepare(prediction.disparity, reference.general_resolution(),
+                                 uncertainty=prediction.uncertainty)
+    se = ScoredErrors.from_prepared(prepared)
+    scored_unc = prepared.uncertainty.ravel()[se.flat_index]
     out = {}
     for measure in measures:
         loss, mid, unit = pixel_loss(se.errors, measure)
@@ -242,57 +241,7 @@ def average_sparsification(items: Sequence[Sparsification]) -> Sparsification:
                           int(sum(it.n_pixels for it in items)), first.normalized)
 
 
-_MEASURE_LABEL = {"abs": "mean abs. error (EPE)", "mse_x100": "MSE x100"}
-
-
-def _measure_label(sp: Sparsification) -> str:
-    name = _MEASURE_LABEL.get(sp.measure, sp.measure.replace("badpix_", "BadPix "))
-    suffix = " (relative)" if sp.normalized else f" [{sp.unit}]" if sp.unit else ""
-    return f"{name} of remaining pixels{suffix}"
-
-
-@plain_text
-def plot_sparsification(results: Sparsification | Mapping[str, Sparsification], path: str | Path,
-                        title: str | None = None, dpi: int = 110) -> Path:
-    """Draw sparsification (solid), oracle (dashed) and random (dotted) curves with AUSE/AURG in the
-    legend, one colour per entry of ``results`` (label -> Sparsification); writes a PNG atomically."""
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-
-    items = {"": results} if isinstance(results, Sparsification) else dict(results)
-    if not items:
-        raise ValueError("nothing to plot")
-    fig, ax = plt.subplots(figsize=(5.6, 4.0))
-    try:
-        colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-        for i, (label, sp) in enumerate(items.items()):
-            c = colours[i % len(colours)]
-            prefix = f"{label}: " if label else ""
-            ax.plot(sp.fractions, sp.curve, color=c, lw=1.8,
-                    label=f"{prefix}uncertainty (AUSE {sp.ause:.4g}, AURG {sp.aurg:.4g})")
-            ax.plot(sp.fractions, sp.oracle, color=c, lw=1.2, ls="--", label=f"{prefix}oracle")
-            ax.plot(sp.fractions, sp.random, color=c, lw=1.0, ls=":", label=f"{prefix}random")
-        first = next(iter(items.values()))
-        ax.set_xlabel("fraction of pixels removed (most uncertain first)")
-        ax.set_ylabel(_measure_label(first))
-        ax.set_xlim(0, 1)
-        ax.set_ylim(bottom=0)
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=7, loc="best")
-        if title:
-            ax.set_title(title, fontsize=9)
-        fig.tight_layout()
-        buf = io.BytesIO()
-        fig.savefig(buf, format="png", dpi=dpi)
-    finally:
-        plt.close(fig)
-    write_bytes(path, buf.getvalue())
-    return Path(path)
-
-
-# --------------------------------------------------------------------------- evaluation hook and report
+# --------------------------------------------------------------------------- evaluation hook and table
 
 REPORT_MEASURES: tuple[str, ...] = ("abs", "badpix_0.07")
 
@@ -322,8 +271,6 @@ def uncertainty_table(items: Mapping[tuple[str, str, str], Sparsification]):
     """Long DataFrame with columns method, scene, measure, unit, ause, aurg, full (the measure on all
     pixels), oracle_half (the measure after removing the worst half by true error), n_pixels; a scene
     ``average`` per (method, measure) averages the curves over scenes (equal weights)."""
-    import pandas as pd
-
     rows = []
 
     def row(method: str, scene: str, sp: Sparsification) -> dict:
@@ -341,32 +288,3 @@ def uncertainty_table(items: Mapping[tuple[str, str, str], Sparsification]):
             rows.append(row(method, "average", average_sparsification(sps)))
     return pd.DataFrame(rows, columns=["method", "scene", "measure", "unit", "ause", "aurg", "full", "oracle_half",
                                        "n_pixels"])
-
-
-def write_uncertainty_report(collector: UncertaintyCollector, out: str | Path) -> list[Path]:
-    """OUT/uncertainty.csv (see :func:`uncertainty_table`), OUT/table_uncertainty.md and one figure per
-    measure, OUT/figures/sparsification_<measure>.png (curves averaged over scenes, one colour per
-    method). Returns the written paths (none when no method predicted an uncertainty)."""
-    out = Path(out)
-    if not collector.items:
-        return []
-    table = uncertainty_table(collector.items)
-    write_text(out / "uncertainty.csv", table.to_csv(index=False))
-    shown = table.assign(ause=table.ause.map("{:.4g}".format), aurg=table.aurg.map("{:.4g}".format),
-                         full=table.full.map("{:.4g}".format), oracle_half=table.oracle_half.map("{:.4g}".format))
-    lines = ["Uncertainty quality: sparsification of each method's uncertainty map against its error "
-             "(AUSE: 0 = ranks pixels like the true error; AURG > 0: better than a random ranking).", "",
-             shown.to_markdown(index=False), ""]
-    write_text(out / "table_uncertainty.md", "\n".join(lines))
-    written = [out / "uncertainty.csv", out / "table_uncertainty.md"]
-    for measure in collector.measures:
-        curves: dict[str, Sparsification] = {}
-        for method in dict.fromkeys(m for m, _, _ in collector.items):
-            sps = [sp for (m, _, me), sp in collector.items.items() if m == method and me == measure]
-            if sps:
-                curves[method] = average_sparsification(sps)
-        if curves:
-            path = out / "figures" / f"sparsification_{measure}.png"
-            n = len({s for _, s, _ in collector.items})
-            written.append(plot_sparsification(curves, path, title=f"sparsification, mean of {n} scene(s)"))
-    return written

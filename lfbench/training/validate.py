@@ -1,6 +1,7 @@
 """Validation during training: whole-image inference on chosen scenes, BadPix and MSE x100
 (lfbench.scoring.metrics) inside a border mask, per scene and pooled over the pixels of all scenes (as
-the authors' validation pools its 8 scenes)."""
+the authors' validation pools its 8 scenes). Each prediction is prepared for scoring as every score is
+(lfbench.scoring.prepare.SceneReference.prepare), at low resolution, on the validation crop."""
 
 from __future__ import annotations
 
@@ -10,9 +11,10 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from lfbench.data.scene import Scene
+from lfbench.data.scene import LOWRES, Scene
 from lfbench.scoring.metrics import bad_pix, mse_x100
-from lfbench.scoring.rules import border_mask
+from lfbench.scoring.prepare import SceneReference
+from lfbench.scoring.rules import ScoringRules
 from lfbench.training.data import ValidationScene, validation_size
 from lfbench.utils.errors import SpecError
 
@@ -46,12 +48,14 @@ def validate(model: torch.nn.Module, scenes: Sequence[ValidationScene], device: 
     """``{"badpix": %, "mse_x100": ..., "pixels": n, "scenes": {name: {...}}}``; badpix at ``threshold`` px."""
     per_scene: dict[str, dict[str, float]] = {}
     gts, preds = [], []
+    rules = ScoringRules(border_px=border)
     for s in scenes:
-        pred = predict_disparity(model, s.views, device)
-        mask = border_mask(s.gt.shape, border) & np.isfinite(s.gt)
-        per_scene[s.name] = {"badpix": bad_pix(s.gt, pred, threshold, mask), "mse_x100": mse_x100(s.gt, pred, mask)}
-        gts.append(s.gt[mask])
-        preds.append(pred[mask])
+        p = SceneReference.of_ground_truth(s.gt, rules, s.name).prepare(predict_disparity(model, s.views, device),
+                                                                        LOWRES, f"validation on {s.name}")
+        mask = p.mask & np.isfinite(p.gt)
+        per_scene[s.name] = {"badpix": bad_pix(p.gt, p.pred, threshold, mask), "mse_x100": mse_x100(p.gt, p.pred, mask)}
+        gts.append(p.gt[mask])
+        preds.append(p.pred[mask])
     gt, pred = np.concatenate(gts), np.concatenate(preds)
     return {"badpix": bad_pix(gt, pred, threshold), "mse_x100": mse_x100(gt, pred), "threshold": threshold,
             "pixels": int(gt.size), "scenes": per_scene}

@@ -32,7 +32,7 @@ _SEEN_AT = "lfbench."
 REASONS: dict[str, tuple[str, ...]] = {
     "equivalent: NumPy comparisons raise no floating-point exception (NaN compares False silently), so "
     "ignoring `invalid` around a comparison changes nothing": (
-        "scoring.metrics.x_bad_pix__mutmut_16", "scoring.metrics.x_bad_pix__mutmut_33",
+        "scoring.general.x_bad_pix__mutmut_16", "scoring.general.x_bad_pix__mutmut_33",
         "scoring.region_metrics.x_backgammon_fattening__mutmut_14",
         "scoring.region_metrics.x_backgammon_thinning__mutmut_14"),
     "equivalent: the floating-point exception this `errstate` entry silences cannot occur there: `divide` "
@@ -40,13 +40,13 @@ REASONS: dict[str, tuple[str, ...]] = {
     "1 / d with 0 < |d| < 3e-39 in disp2depth, whose float32 denominator is 0 or >= ~1e-9; the gt-finiteness "
     "map is 0 or NaN, whose filtering raises nothing": (
         "scoring.region_metrics.x_depth_normals__mutmut_63", "scoring.region_metrics.x_depth_normals__mutmut_65",
-        "scoring.region_metrics.x_missed_dots__mutmut_89", "scoring.region_metrics.x_missed_dots__mutmut_91",
+        "scoring.region_metrics.x_missed_dots__mutmut_118", "scoring.region_metrics.x_missed_dots__mutmut_120",
         "scoring.region_metrics.x_median_angular_error__mutmut_11",
         "scoring.region_metrics.x_median_angular_error__mutmut_14",
         "scoring.region_metrics.x_bumpiness_x100__mutmut_19"),
     "equivalent: a default that is never used: every metric is called through Metric.__call__, which always "
     "passes `toolkit=`; mse_x100 ignores `toolkit` (MSE has one rule)": (
-        "scoring.metrics.x_mse_x100__mutmut_1", "scoring.metrics.x__bad_pix_metric__mutmut_1",
+        "scoring.general.x_mse_x100__mutmut_1", "scoring.general.x_bad_pix_metric__mutmut_3",
         "scoring.region_metrics.x__bad_pix_fn__mutmut_1", "scoring.region_metrics.x__bump_fn__mutmut_1",
         "scoring.region_metrics.x__mae_fn__mutmut_1", "scoring.region_metrics.x__fine_fat_fn__mutmut_1",
         "scoring.region_metrics.x__fine_thin_fn__mutmut_1", "scoring.region_metrics.x__bg_fat_fn__mutmut_1",
@@ -62,7 +62,7 @@ REASONS: dict[str, tuple[str, ...]] = {
         "scoring.region_metrics.x_depth_normals__mutmut_3", "scoring.region_metrics.x_depth_normals__mutmut_5",
         "scoring.region_metrics.x__first_labels__mutmut_13", "scoring.region_metrics.x__first_labels__mutmut_16",
         "scoring.region_metrics.x__label_lut__mutmut_13", "scoring.region_metrics.x__label_lut__mutmut_15",
-        "scoring.rules.x_align_prediction__mutmut_53"),
+        "scoring.prepare.x_align_prediction__mutmut_53"),
     "equivalent: scharr_derivative treats every axis other than 0 as 1 (axis=None or 2 is the `else` branch)": (
         "scoring.region_metrics.x__hessian_norm__mutmut_3", "scoring.region_metrics.x__hessian_norm__mutmut_6",
         "scoring.region_metrics.x__hessian_norm__mutmut_15", "scoring.region_metrics.x__hessian_norm__mutmut_18",
@@ -85,29 +85,39 @@ REASONS: dict[str, tuple[str, ...]] = {
     "reading mask names when none is needed changes nothing, ndimage.convolve's default mode is the "
     "default 'reflect'": (
         "scoring.region_metrics.x_bumpiness_map__mutmut_14", "scoring.region_metrics.x_bumpiness_x100__mutmut_27",
-        "scoring.region_metrics.x_bumpiness_x100__mutmut_32", "scoring.region_metrics.x_missed_dots__mutmut_102",
-        "scoring.region_metrics.x__scale__mutmut_6", "scoring.rules.x_score_scene__mutmut_60",
-        "scoring.rules.x_score_scene__mutmut_64", "scoring.rules.x_align_prediction__mutmut_34",
-        "scoring.region_metrics.x_read_label_mask__mutmut_24", "scoring.metrics.x__badpix_family__mutmut_19",
-        "runs.regress.x_make_golden__mutmut_52", "runs.regress.x_make_golden__mutmut_55",
-        "runs.regress.x_make_golden__mutmut_57", "runs.regress.x_tolerance_for__mutmut_14",
-        "scoring.metrics.x_bad_pix_curve__mutmut_29", "scoring.rules.x_metric_resolution__mutmut_8",
+        "scoring.region_metrics.x_bumpiness_x100__mutmut_32", "scoring.region_metrics.x_missed_dots__mutmut_131",
+        "scoring.region_metrics.x__scale__mutmut_6", "scoring.prepare.x_align_prediction__mutmut_34",
+        "scoring.prepare.x_read_label_mask__mutmut_24", "scoring.general.x_badpix_family__mutmut_19",
+        "runs.regress.x_make_golden__mutmut_94", "runs.regress.x_make_golden__mutmut_97",
+        "runs.regress.x_make_golden__mutmut_99", "runs.regress.x_tolerance_for__mutmut_14",
+        "scoring.prepare.xǁSceneReferenceǁprepare__mutmut_26", "scoring.prepare.xǁSceneReferenceǁprepare__mutmut_48",
+        "scoring.prepare.xǁSceneReferenceǁvalid_mask__mutmut_21",
+        "scoring.general.x_bad_pix_curve__mutmut_29", "scoring.rules.x_metric_resolution__mutmut_8",
         "scoring.region_metrics.x_scharr_derivative__mutmut_15"),
     "equivalent for every valid id: `badpix_<t>` ids have one '_'; the split differs only for malformed ids "
     "with a second one": (
-        "scoring.metrics.x__badpix_family__mutmut_9", "scoring.metrics.x__badpix_family__mutmut_10",
-        "scoring.metrics.x__badpix_family__mutmut_12"),
+        "scoring.general.x_badpix_family__mutmut_9", "scoring.general.x_badpix_family__mutmut_10",
+        "scoring.general.x_badpix_family__mutmut_12"),
     "unreachable (defensive) code: Scene.mask reads a mask with its expected size and refuses any other "
-    "(lfbench.data.scene.read_mask) before this check; "
-    "metric_resolution returns high resolution only when the high-res gt exists and a pyramids metric only "
-    "at low resolution (the default of Scene.mask)": (
-        *(f"scoring.rules.x_score_scene__mutmut_{i}" for i in (52, 97, 98, 99, 100, 101, 102, 103, 104, 105, 106)),
-        *(f"scoring.region_metrics.x__scene_mask__mutmut_{i}" for i in range(5, 16) if i != 6),
+    "(lfbench.data.scene.read_mask) before this check (SceneReference.mask's shape check serves light fields "
+    "whose masks are not read by Scene); Scene.valid_mask refuses any size but the scene's, and a high-res "
+    "ground truth is read with its size checked, so the valid mask always scales by an integer; "
+    "metric_resolution returns high resolution only when the high-res gt exists": (
+        "scoring.score.x_score_scene__mutmut_43", "scoring.score.x_score_scene__mutmut_61",
+        "scoring.score.x_score_scene__mutmut_64", "scoring.region_metrics.x__slanted_fn__mutmut_13",
+        "scoring.region_metrics.x__slanted_fn__mutmut_16",
+        *(f"scoring.prepare.xǁSceneReferenceǁmask__mutmut_{i}" for i in (10, 11, 12)),
+        *(f"scoring.prepare.xǁSceneReferenceǁvalid_mask__mutmut_{i}" for i in (23, 24, 25, 29, 30, 31)),
     ),
-    "equivalent: MetricRegistry.register looks up `key` even when it is None; no alias is None, so the "
-    "owner is None either way": ("scoring.metrics.xǁMetricRegistryǁregister__mutmut_6",),
+    "equivalent: score_scene aligns the prediction (and refuses it, naming its source) before it prepares "
+    "it: the source given to prepare names a prediction that can no longer fail": (
+        "scoring.score.x_score_scene__mutmut_47", "scoring.score.x_score_scene__mutmut_50"),
+    "equivalent: a comparison with NaN is False, so `not low < high` alone already refuses a NaN end of "
+    "value_range": ("scoring.base.xǁMetricǁ__post_init____mutmut_7",),
+    "equivalent: NumPy sets a flag to the truth value it is given (`writeable = None` is False)": (
+        "scoring.prepare.x__kept__mutmut_4",),
     "equivalent while SCENE_AGGREGATES has one entry ('mean'): the separator of a one-item join never "
-    "appears in the message": ("scoring.metrics.xǁMetricǁ__post_init____mutmut_4",),
+    "appears in the message": ("scoring.base.xǁMetricǁ__post_init____mutmut_4",),
 }
 
 _FIELDS = re.compile(r"\b(name|description|vmin|vmax|cmap)=(f?\"[^\"]*\"|[^,)\n]*)\s*,?")

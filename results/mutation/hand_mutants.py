@@ -27,8 +27,11 @@ ROOT = Path(__file__).resolve().parents[2]
 OLD_TESTS = ("tests/test_metrics.py", "tests/test_region_metrics.py", "tests/test_toolkit_fidelity.py",
              "tests/test_regress.py")
 S, G = "tests/test_scoring_mutants.py", "tests/test_gate_mutants.py"
-METRICS, RULES, REGION, REGRESS = ("lfbench/scoring/metrics.py", "lfbench/scoring/rules.py",
-                                   "lfbench/scoring/region_metrics.py", "lfbench/runs/regress.py")
+# where the mutated code lives (the issue named lfbench/scoring/metrics.py and rules.py; since issue 21 the
+# general metrics are in general.py, the preparation of a prediction in prepare.py, score_scene in score.py)
+GENERAL, PREPARE, SCORE, REGION, REGRESS = ("lfbench/scoring/general.py", "lfbench/scoring/prepare.py",
+                                            "lfbench/scoring/score.py", "lfbench/scoring/region_metrics.py",
+                                            "lfbench/runs/regress.py")
 
 
 @dataclass(frozen=True)
@@ -42,13 +45,13 @@ class Mutation:
 
 
 MUTATIONS = (
-    Mutation("badpix_toolkit_ge", "1", METRICS, "bad = err > threshold  # NaN", "bad = err >= threshold  # NaN",
+    Mutation("badpix_toolkit_ge", "1", GENERAL, "bad = err > threshold  # NaN", "bad = err >= threshold  # NaN",
              (f"{S}::test_bad_pix_error_equal_to_the_threshold_is_good",)),
-    Mutation("badpix_default_ge", "1", METRICS, "bad = (err > threshold) |", "bad = (err >= threshold) |",
+    Mutation("badpix_default_ge", "1", GENERAL, "bad = (err > threshold) |", "bad = (err >= threshold) |",
              (f"{S}::test_bad_pix_error_equal_to_the_threshold_is_good",)),
-    Mutation("badpix_curve_left", "1", METRICS, 'side="right"', 'side="left"',
+    Mutation("badpix_curve_left", "1", GENERAL, 'side="right"', 'side="left"',
              (f"{S}::test_bad_pix_curve_counts_a_tie_as_good",)),
-    Mutation("badpix_default_07", "1", METRICS, "threshold: float = 0.07,", "threshold: float = 0.7,",
+    Mutation("badpix_default_07", "1", GENERAL, "threshold: float = 0.07,", "threshold: float = 0.7,",
              (f"{S}::test_public_bad_pix_default_threshold_is_007",)),
     Mutation("fine_thinning_ge", "1", REGION, "bad = (gt - pred) > threshold", "bad = (gt - pred) >= threshold",
              (f"{S}::test_fine_thinning_tie_is_good",)),
@@ -60,19 +63,19 @@ MUTATIONS = (
              (f"{S}::test_backgammon_prediction_exactly_half_way_is_neither_fattening_nor_thinning",)),
     Mutation("bg_thinning_le", "1", REGION, "bad = pred < half", "bad = pred <= half",
              (f"{S}::test_backgammon_prediction_exactly_half_way_is_neither_fattening_nor_thinning",)),
-    Mutation("score_scene_float64", "2", RULES, "pred = pred.astype(np.float32, copy=False)",
+    Mutation("score_scene_float64", "2", PREPARE, "pred = pred.astype(np.float32, copy=False)",
              "pred = pred.astype(np.float64, copy=False)", (f"{S}::test_score_scene_scores_in_float32",)),
-    Mutation("score_scene_no_cast", "2", RULES, "pred = pred.astype(np.float32, copy=False)", "pred = pred",
+    Mutation("score_scene_no_cast", "2", PREPARE, "pred = pred.astype(np.float32, copy=False)", "pred = pred",
              (f"{S}::test_score_scene_scores_in_float32",)),
     Mutation("bumpiness_diff_float64", "2", REGION, "diff = (pred - gt).astype(np.float64)",
              "diff = pred.astype(np.float64) - gt.astype(np.float64)",
              (f"{S}::test_bumpiness_takes_the_difference_in_float32",)),
-    Mutation("region_replaces_mask", "3", RULES, "mask &= region", "mask = region",
+    Mutation("region_replaces_mask", "3", SCORE, "mask = mask & reference.mask(", "mask = reference.mask(",
              (f"{S}::test_region_mask_is_combined_with_the_border_and_the_valid_mask",)),
-    Mutation("valid_mask_dropped", "3", RULES, "mask &= valid", "pass",
+    Mutation("valid_mask_dropped", "3", PREPARE, "mask &= valid", "pass",
              (f"{S}::test_region_mask_is_combined_with_the_border_and_the_valid_mask",)),
-    Mutation("border_not_scaled", "4", RULES, "border_mask(gt.shape, rules.border_px * scale)",
-             "border_mask(gt.shape, rules.border_px)", (f"{S}::test_backgammon_metrics_at_high_resolution",)),
+    Mutation("border_not_scaled", "4", PREPARE, "self.rules.border_px * self.scale(resolution))",
+             "self.rules.border_px)", (f"{S}::test_backgammon_metrics_at_high_resolution",)),
     Mutation("bg_fg_column_unscaled", "4", REGION, "fg_column=int(BACKGAMMON_FG_COLUMN * _scale(scene, gt))",
              "fg_column=BACKGAMMON_FG_COLUMN", (f"{S}::test_backgammon_metrics_at_high_resolution",)),
     Mutation("bg_fg_column_rows", "4", REGION, "return max(1, gt.shape[1] // scene.spatial_size[1])",

@@ -25,9 +25,11 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
 MUTANTS = ROOT / "mutants"
-MODULES = ("lfbench.scoring.metrics", "lfbench.scoring.rules", "lfbench.scoring.region_metrics", "lfbench.runs.regress")
+MODULES = ("lfbench.scoring.base", "lfbench.scoring.general", "lfbench.scoring.rules", "lfbench.scoring.prepare",
+           "lfbench.scoring.region_metrics", "lfbench.scoring.metrics", "lfbench.scoring.score", "lfbench.runs.regress")
 # the tests of the metric definitions and the registry (what runs at import), the definitions table first
-TESTS = ("tests/test_scoring_edges.py", "tests/test_metrics.py", "tests/test_region_metrics.py")
+TESTS = ("tests/test_scoring_edges.py", "tests/test_metrics.py", "tests/test_region_metrics.py",
+         "tests/test_prepare.py")
 DESELECT = ("tests/test_region_metrics.py::test_cli_evaluate_all_metrics",)  # a subprocess: imports unmutated code
 SURVIVED = 0
 

@@ -1,0 +1,222 @@
+"""What a metric is: :class:`Metric` (the one definition of a metric: what it computes, its unit,
+direction, label and display order, plot settings, how it aggregates over scenes and how it bootstraps),
+:class:`PixelStatistic` and :class:`MetricRegistry` (the generic registry of metrics).
+
+The metrics themselves are defined beside their functions (:mod:`lfbench.scoring.general`,
+:mod:`lfbench.scoring.region_metrics`) and registered in :mod:`lfbench.scoring.metrics`; the scoring
+rules (:mod:`lfbench.scoring.rules`) need only this type.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from lfbench.utils.registry import Registry
+
+__all__ = [
+    "ANY_VALUE",
+    "Metric",
+    "MetricFn",
+    "MetricRegistry",
+    "NON_NEGATIVE",
+    "PERCENT",
+    "PixelStatistic",
+    "SCENE_AGGREGATES",
+]
+
+MetricFn = Callable[..., float]
+
+#: Value ranges (low, high) a metric declares: every value it can take lies in [low, high].
+PERCENT: tuple[float, float] = (0.0, 100.0)
+NON_NEGATIVE: tuple[float, float] = (0.0, math.inf)
+ANY_VALUE: tuple[float, float] = (-math.inf, math.inf)
+
+
+def _not_defined(*args, **kwargs) -> float:
+    raise TypeError("this metric id is not defined by lfbench: it has nothing to compute")
+
+
+def _mean_of_finite(values: np.ndarray) -> float:
+    v = values[~np.isnan(values)]
+    return float(v.mean()) if v.size else float("nan")
+
+
+#: How a metric's per-scene values are combined into one number per method (average tables, the
+#: '(mean)' rows of CI tables): name -> reduction of a float64 array (NaN scenes are left out).
+SCENE_AGGREGATES: dict[str, Callable[[np.ndarray], float]] = {"mean": _mean_of_finite}
+
+
+@dataclass(frozen=True)
+class PixelStatistic:
+    """What a metric is as a statistic of the per-pixel errors, which is how it bootstraps.
+
+    ``name``: 'badpix' (percentage of |error| > ``param`` px, non-finite = bad), 'mse' (100 x the mean
+    squared error over finite errors) or 'quantile' (100 x the |error| at index int(n * ``param`` / 100)
+    of the sorted errors). :mod:`lfbench.scoring.stats` resamples the per-pixel values accordingly.
+    """
+
+    name: str
+    param: float = 0.0
+
+    def __post_init__(self) -> None:
+        if self.name not in ("badpix", "mse", "quantile"):
+            raise ValueError(f"unknown pixel statistic {self.name!r}: badpix, mse or quantile")
+
+
+@dataclass(frozen=True)
+class Metric:
+    """The one definition of a metric: what it computes, its unit and direction, its label and place in
+    tables, how it is drawn, how its per-scene values aggregate and how it bootstraps.
+
+    ``fn(gt, pred, mask, toolkit=...)`` returns the score in ``unit``. ``mask_name`` is the evaluation
+    mask the metric needs (None = general metric, scored under the border mask); ``resolution`` is
+    'scene' (the scene's rule), 'lowres' or 'highres'. Region / stratified metrics
+    (lfbench.scoring.region_metrics) may also need ``extra_masks`` (further mask files the metric reads
+    itself; it is skipped unless all exist) and, with ``needs_scene``, are called with the keywords
+    ``scene`` and ``resolution`` too: scoring passes the scene's
+    :class:`~lfbench.scoring.prepare.SceneReference`, which answers ``name``, ``path``, ``params``,
+    ``spatial_size``, ``mask`` and ``mask_names`` as the scene does, from its caches (the scene itself
+    is its ``.scene``). ``category``: 'general', 'region' or 'stratified'.
+    ``vmin``/``vmax``/``cmap``: plot settings. ``scene_aggregate``: a key of :data:`SCENE_AGGREGATES`.
+    ``bootstrap``: the metric as a :class:`PixelStatistic` of the general scoring's per-pixel errors,
+    or None when it cannot be resampled from them (region metrics score other pixels).
+    ``value_range``: (low, high), every value the metric can take (e.g. (0, 100) for a percentage;
+    infinite ends where it has no bound): it bounds regression tolerances and golden values.
+    ``short_label``: the header of a table column that holds the metric with its unit ('BadPix 0.07 (%)'
+    in the ablation and sweep tables; None: the name, see :attr:`label`). ``order``: the metric's place
+    in tables and reports: metrics with an order come first, by it (the paper's BadPix 0.07, 0.03,
+    0.01, MSE x100, Q25), the others after them in the order they come
+    (:func:`lfbench.scoring.metrics.metric_order`).
+    Category 'runtime' (:data:`lfbench.scoring.general.RUNTIME_METRICS`): ``fn(runtime_s)`` of the runtime
+    a method reports for a scene (no maps, no masks, no resolution of its own; see
+    :func:`lfbench.scoring.score.score_scene`).
+    """
+
+    id: str
+    name: str
+    description: str
+    unit: str
+    fn: MetricFn = field(repr=False, compare=False)
+    toolkit_id: str | None = None
+    mask_name: str | None = None
+    resolution: str = "scene"
+    vmin: float = 0.0
+    vmax: float = 1.0
+    cmap: str = "viridis"
+    higher_is_better: bool = False
+    category: str = "general"
+    extra_masks: tuple[str, ...] = ()
+    needs_scene: bool = False
+    scene_aggregate: str = "mean"
+    bootstrap: PixelStatistic | None = None
+    value_range: tuple[float, float] = NON_NEGATIVE
+    short_label: str | None = None
+    order: int | None = None
+
+    def __post_init__(self) -> None:
+        if self.scene_aggregate not in SCENE_AGGREGATES:
+            raise ValueError(f"metric {self.id!r}: unknown scene_aggregate {self.scene_aggregate!r}; "
+                             f"use one of {', '.join(SCENE_AGGREGATES)}")
+        low, high = self.value_range
+        if math.isnan(low) or math.isnan(high) or not low < high:
+            raise ValueError(f"metric {self.id!r}: value_range must be (low, high) with low < high, "
+                             f"got {self.value_range}")
+
+    @classmethod
+    def undefined(cls, metric_id: str) -> Metric:
+        """What lfbench can say about a metric id it does not define (e.g. a plugin's own results column):
+        named by its id, no unit or description, lower is better; it cannot be computed."""
+        return cls(id=metric_id, name=metric_id, description="", unit="", fn=_not_defined, category="undefined")
+
+    @property
+    def label(self) -> str:
+        """The metric's table-column header: :attr:`short_label`, else its name."""
+        return self.short_label or self.name
+
+    @property
+    def span(self) -> float:
+        """high - low of :attr:`value_range` (inf when a side is unbounded): no change of the metric's
+        value is larger, so a regression tolerance of this much or more accepts anything."""
+        low, high = self.value_range
+        return high - low
+
+    @property
+    def is_runtime(self) -> bool:
+        """Scored from the runtime a method reports for a scene, not from its disparity map."""
+        return self.category == "runtime"
+
+    @property
+    def lower_is_better(self) -> bool:
+        return not self.higher_is_better
+
+    @property
+    def required_masks(self) -> tuple[str, ...]:
+        """Every mask file (``<name>_<resolution>.png``) the metric needs."""
+        return ((self.mask_name,) if self.mask_name else ()) + self.extra_masks
+
+    def score_runtime(self, runtime_s: float | None) -> float | None:
+        """A runtime metric's value for the runtime ``runtime_s`` (s) a method reports for a scene, or None
+        (no record) when it reports none (None, NaN) or one that is not a positive finite number."""
+        if not self.is_runtime:
+            raise TypeError(f"metric {self.id!r} is scored from maps, not from a runtime")
+        if runtime_s is None or not math.isfinite(runtime_s) or runtime_s <= 0:
+            return None
+        return float(self.fn(runtime_s))
+
+    def aggregate(self, values: Sequence[float] | np.ndarray) -> float:
+        """The per-scene ``values`` combined as the metric says (NaN scenes left out)."""
+        return SCENE_AGGREGATES[self.scene_aggregate](np.asarray(values, dtype=np.float64))
+
+    def __call__(self, gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = None, *,
+                 toolkit: bool = False, **context) -> float:
+        if self.is_runtime:
+            raise TypeError(f"metric {self.id!r} is scored from a runtime (score_runtime), not from maps")
+        return self.fn(gt, pred, mask, toolkit=toolkit, **context)
+
+
+class MetricRegistry(Registry[Metric]):
+    """Every metric by id (and by the toolkit's id), plus parametrised families such as ``badpix_<t>``: the
+    generic :class:`~lfbench.utils.registry.Registry` of :class:`Metric`.
+
+    ``register`` refuses anything but a :class:`Metric` and a second metric under a taken id;
+    ``get`` raises :class:`~lfbench.utils.errors.SpecError` "Unknown metric X. Available: ...".
+    """
+
+    def __init__(self) -> None:
+        super().__init__("metric", Metric)
+        self._families: list[tuple[str, Callable[[str], Metric | None]]] = []
+
+    def register(self, metric: Metric) -> Metric:
+        self.check(str(getattr(metric, "id", "?")), metric)
+        self.add(metric.id, metric, aliases=(metric.toolkit_id,) if metric.toolkit_id else ())
+        return metric
+
+    def register_family(self, pattern: str, make: Callable[[str], Metric | None]) -> None:
+        """A parametrised family: ``make(id)`` returns the metric for an id it understands, else None;
+        ``pattern`` (e.g. 'badpix_<t>') is what the 'Available' list shows."""
+        self._families.append((pattern, make))
+
+    def find(self, metric_id: str) -> Metric | None:
+        """The metric with this id or toolkit id (or from a family), or None."""
+        metric = super().find(str(metric_id))
+        if metric is not None:
+            return metric
+        for _, make in self._families:
+            metric = make(str(metric_id))
+            if metric is not None:
+                return metric
+        return None
+
+    def get(self, metric_id: str) -> Metric:
+        metric = self.find(metric_id)
+        if metric is None:
+            raise self.unknown(metric_id, [*self.registered(), *(p for p, _ in self._families)])
+        return metric
+
+    def all(self, category: str | None = None) -> tuple[Metric, ...]:
+        """The registered metrics (families excluded), in registration order, optionally of one category."""
+        return tuple(m for m in map(self.get, self.registered()) if category is None or m.category == category)

@@ -1,0 +1,247 @@
+"""The general metrics of the HCI 4D Light Field Benchmark, as pure functions of arrays, and their definitions.
+
+All functions take ``gt`` and ``pred``: disparity in px per view step, (H, W) float arrays of the
+same shape, and an optional boolean ``mask`` (H, W) of the pixels to score (None = all).
+Arithmetic follows the official toolkit exactly: the difference is taken in the inputs' precision
+(float32 for PFM data), MSE is the plain mean of squares, Q25 the element at index
+``int(0.25 * n)`` of the sorted absolute errors.
+
+Non-finite predictions (NaN, +-inf), default (``toolkit=False``): a bad pixel for BadPix, an
+infinite error for Q25, left out of MSE (where no finite stand-in exists); count them with
+:func:`nonfinite_count` and report it. ``toolkit=True`` reproduces the toolkit bit for bit,
+including its inconsistency: BadPix counts NaN as good, MSE and Q25 drop non-finite pixels.
+Pixels whose ground truth is non-finite are never scored (the toolkit's BadPix scores them as
+good; ``toolkit=True`` does too).
+
+Their :class:`~lfbench.scoring.base.Metric` definitions: :data:`GENERAL_METRICS` (BadPix 0.01 / 0.03 / 0.07,
+MSE x100, Q25, in the paper's table order 0.07, 0.03, 0.01, MSE, Q25), :data:`RUNTIME_METRICS` and the
+families ``badpix_<t>`` (:func:`badpix_family`) and ``q<p>_x100`` (:func:`quantile_family`), registered by
+:mod:`lfbench.scoring.metrics`. :func:`check_maps` is the input check every metric function starts with.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Sequence
+
+import numpy as np
+
+from lfbench.scoring.base import ANY_VALUE, PERCENT, Metric, PixelStatistic
+
+__all__ = [
+    "GENERAL_METRICS",
+    "RUNTIME_METRICS",
+    "bad_pix",
+    "bad_pix_curve",
+    "bad_pix_metric",
+    "badpix_family",
+    "check_maps",
+    "mse_x100",
+    "nonfinite_count",
+    "percent_of",
+    "q25_x100",
+    "quantile_family",
+    "quantile_x100",
+]
+
+
+def check_maps(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(gt, pred, mask)`` as every metric takes them: ``gt`` and ``pred`` (H, W) of one shape in their common
+    precision (at least float32, no copy when they have it already), ``mask`` bool (H, W) (all True for None).
+    ValueError when the shapes differ."""
+    gt = np.asarray(gt)
+    pred = np.asarray(pred)
+    if gt.shape != pred.shape:
+        raise ValueError(f"gt {gt.shape} and pred {pred.shape} differ in shape")
+    if mask is None:
+        mask = np.ones(gt.shape, dtype=bool)
+    else:
+        mask = np.asarray(mask, dtype=bool)
+        if mask.shape != gt.shape:
+            raise ValueError(f"mask {mask.shape} and gt {gt.shape} differ in shape")
+    dtype = np.result_type(gt.dtype, pred.dtype, np.float32)
+    return gt.astype(dtype, copy=False), pred.astype(dtype, copy=False), mask
+
+
+def percent_of(total: int, part: int) -> float:
+    """100 x part / total (NaN when nothing was scored)."""
+    return float("nan") if total == 0 else 100.0 * part / float(total)
+
+
+def nonfinite_count(pred: np.ndarray, mask: np.ndarray | None = None) -> int:
+    """Number of NaN/inf predictions inside ``mask``."""
+    bad = ~np.isfinite(np.asarray(pred))
+    return int(np.count_nonzero(bad if mask is None else bad & np.asarray(mask, dtype=bool)))
+
+
+def bad_pix(gt: np.ndarray, pred: np.ndarray, threshold: float = 0.07, mask: np.ndarray | None = None,
+            *, toolkit: bool = False) -> float:
+    """BadPix(t): percentage (0-100) of scored pixels with |gt - pred| > t (t in px)."""
+    gt, pred, mask = check_maps(gt, pred, mask)
+    with np.errstate(invalid="ignore"):
+        err = np.abs(pred - gt)
+    if toolkit:
+        with np.errstate(invalid="ignore"):
+            bad = err > threshold  # NaN compares False: counted as good
+        return percent_of(int(np.count_nonzero(mask)), int(np.count_nonzero(bad & mask)))
+    scored = mask & np.isfinite(gt)
+    with np.errstate(invalid="ignore"):
+        bad = (err > threshold) | ~np.isfinite(pred)
+    return percent_of(int(np.count_nonzero(scored)), int(np.count_nonzero(bad & scored)))
+
+
+def bad_pix_curve(gt: np.ndarray, pred: np.ndarray, thresholds: Sequence[float] | np.ndarray,
+                  mask: np.ndarray | None = None) -> np.ndarray:
+    """BadPix for many thresholds at once (one sort): float64 array of percentages."""
+    gt, pred, mask = check_maps(gt, pred, mask)
+    scored = mask & np.isfinite(gt)
+    err = np.abs(pred - gt)[scored]
+    err = np.where(np.isfinite(err), err, np.inf)
+    err.sort()
+    n = err.size
+    t = np.asarray(thresholds, dtype=err.dtype if n else np.float64)
+    if n == 0:
+        return np.full(t.shape, np.nan)
+    good = np.searchsorted(err, t, side="right")  # count of err <= t
+    return 100.0 * (n - good) / float(n)
+
+
+def mse_x100(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = None, *, toolkit: bool = False) -> float:
+    """100 x mean squared error (px^2) over scored pixels with finite gt and prediction."""
+    gt, pred, mask = check_maps(gt, pred, mask)
+    scored = mask & np.isfinite(gt) & np.isfinite(pred)
+    if not scored.any():
+        return float("nan")
+    diff = np.square(gt - pred)[scored]
+    # the toolkit (numpy 1.x) multiplied the float32 mean by 100 in float64; do the same under numpy 2
+    return float(np.average(diff)) * 100
+
+
+def quantile_x100(gt: np.ndarray, pred: np.ndarray, percentage: float = 25, mask: np.ndarray | None = None,
+                  *, toolkit: bool = False) -> float:
+    """100 x the absolute error at index int(n * percentage / 100) of the sorted errors (px x 100)."""
+    gt, pred, mask = check_maps(gt, pred, mask)
+    with np.errstate(invalid="ignore"):
+        diffs = np.abs(pred - gt) * 100
+    if toolkit:
+        scored = mask & np.isfinite(diffs) & np.isfinite(pred)
+    else:
+        scored = mask & np.isfinite(gt)
+        diffs = np.where(np.isfinite(pred), diffs, np.inf)
+    values = np.sort(diffs[scored])
+    if values.size == 0:
+        return float("nan")
+    return float(values[int(values.size * percentage / 100.0)])
+
+
+def q25_x100(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = None, *, toolkit: bool = False) -> float:
+    """Q25: 100 x the 25th-percentile absolute error, the benchmark's definition."""
+    return quantile_x100(gt, pred, 25, mask, toolkit=toolkit)
+
+
+# --------------------------------------------------------------------------- definitions
+
+def bad_pix_metric(threshold: float, *, order: int | None = None) -> Metric:
+    """The BadPix metric for any threshold (px); ``order``: its place in tables (the paper's three have one)."""
+    t = float(threshold)
+
+    def fn(gt, pred, mask=None, *, toolkit=False):
+        return bad_pix(gt, pred, t, mask, toolkit=toolkit)
+
+    return Metric(
+        id=f"badpix_{t:g}", name=f"BadPix({t:g})",
+        description=f"Percentage of pixels with |gt - pred| > {t:g} px (non-finite predictions count as bad).",
+        unit="%", fn=fn, toolkit_id=("badpix_%0.3f" % t).replace(".", ""), vmin=0, vmax=1, cmap="RdYlGn_r",
+        bootstrap=PixelStatistic("badpix", t), value_range=PERCENT, short_label=f"BadPix {t:g} (%)", order=order,
+    )
+
+
+def _mse_metric() -> Metric:
+    return Metric(
+        id="mse_x100", name="MSE x100", description="Mean squared disparity error (px^2) multiplied by 100.",
+        unit="px^2 x 100", fn=mse_x100, toolkit_id="mse_100", vmin=-0.2, vmax=0.2, cmap="seismic",
+        bootstrap=PixelStatistic("mse"), short_label="MSE x100", order=3,
+    )
+
+
+def _ordinal(p: float) -> str:
+    if p != int(p):
+        return f"{p:g}th"
+    n = int(p)
+    suffix = "th" if 10 <= n % 100 <= 20 else {1: "st", 2: "nd", 3: "rd"}.get(n % 10, "th")
+    return f"{n}{suffix}"
+
+
+def _quantile_metric(p: float) -> Metric:
+    """Quantile(p): 100 x the |error| at index int(n * p / 100) of the n sorted errors, 0 <= p < 100."""
+    def fn(gt, pred, mask=None, *, toolkit=False):
+        return quantile_x100(gt, pred, p, mask, toolkit=toolkit)
+
+    return Metric(
+        id=f"q{p:g}_x100", name=f"Q{p:g}",
+        description=f"{_ordinal(p)} percentile of the absolute disparity error, x100.",
+        unit="px x 100", fn=fn, toolkit_id=f"q_{p:g}_100" if p == int(p) else None, vmin=0, vmax=0.5,
+        cmap="YlOrRd", bootstrap=PixelStatistic("quantile", p),
+    )
+
+
+def _q25_metric() -> Metric:
+    return Metric(
+        id="q25_x100", name="Q25", description="25th percentile of the absolute disparity error, x100.",
+        unit="px x 100", fn=q25_x100, toolkit_id="q_25_100", vmin=0, vmax=0.5, cmap="YlOrRd",
+        bootstrap=PixelStatistic("quantile", 25.0), order=4,
+    )
+
+
+#: The benchmark's general metrics (registration order); ``order`` puts them in the paper's table order.
+GENERAL_METRICS: tuple[Metric, ...] = (
+    bad_pix_metric(0.01, order=2), bad_pix_metric(0.03, order=1), bad_pix_metric(0.07, order=0), _mse_metric(),
+    _q25_metric(),
+)
+
+
+def _runtime_s(runtime_s: float) -> float:
+    """The runtime in s, as reported."""
+    return float(runtime_s)
+
+
+def _runtime_log10(runtime_s: float) -> float:
+    """log10 of the runtime in s (negative below 1 s)."""
+    return math.log10(runtime_s)
+
+
+#: The toolkit's runtime metrics: the runtime a method reports for a scene (a submission's
+#: runtimes/<scene>.txt, or the wall time lfbench measured around ``predict``), not scored from maps.
+RUNTIME_METRICS: tuple[Metric, ...] = (
+    Metric(id="runtime", name="Runtime", description="The runtime in seconds, as the method reports it.",
+           unit="s", fn=_runtime_s, toolkit_id="runtime", category="runtime", vmin=0, vmax=1, cmap="YlOrRd"),
+    Metric(id="runtime_log", name="Runtime (log10)",
+           description="Decadic logarithm of the runtime in seconds, as the method reports it (negative below 1 s).",
+           unit="log10 s", fn=_runtime_log10, toolkit_id="runtime_log", category="runtime", vmin=0, vmax=1,
+           cmap="YlOrRd", value_range=ANY_VALUE),
+)
+
+
+def badpix_family(metric_id: str) -> Metric | None:
+    """``badpix_<t>`` for any threshold t in px ('badpix_0.04'); the toolkit's 'badpix_0040' is t x 1000."""
+    if not metric_id.startswith("badpix_"):
+        return None
+    text = metric_id.split("_", 1)[1]
+    try:
+        t = float(text) if "." in text or not text.isdigit() else int(text) / 1000.0
+    except ValueError:
+        return None
+    return bad_pix_metric(t) if np.isfinite(t) and t >= 0 else None
+
+
+_QUANTILE_ID = re.compile(r"q(?P<p>\d{1,2}(?:\.\d{1,6})?)_x100|q_(?P<tk>\d{1,2})_100")
+
+
+def quantile_family(metric_id: str) -> Metric | None:
+    """``q<p>_x100`` for a percentage 0 <= p < 100 ('q50_x100', 'q2.5_x100'); the toolkit's 'q_50_100'."""
+    m = _QUANTILE_ID.fullmatch(metric_id)
+    if m is None:
+        return None
+    p = float(m["p"] if m["p"] is not None else m["tk"])
+    return _quantile_metric(p) if f"q{p:g}_x100" == metric_id or m["tk"] is not None else None

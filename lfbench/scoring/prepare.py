@@ -1,0 +1,321 @@
+"""One preparation of a prediction for scoring, and what a scene gives every prediction it scores.
+
+:meth:`SceneReference.prepare` is the only place where a disparity map is made ready to be compared with
+the ground truth; every scorer goes through it (:func:`lfbench.scoring.score.score_scene`, the per-pixel
+errors of the bootstrap :func:`lfbench.scoring.stats.scene_errors`, the uncertainty sparsification
+:func:`lfbench.scoring.uncertainty.scene_sparsifications`, the BadPix-series curves of the figures and
+the validation during training). The steps, the toolkit's rules (docs/benchmark-rules.md):
+
+1. alignment: a map cropped by a symmetric border (482x482, 490x490 of 512x512) is placed at the centre
+   of a NaN canvas of the scene's size (:func:`align_prediction`; a crop wider than the evaluation
+   border is refused);
+2. precision: float32, as the toolkit computes;
+3. resolution: at high resolution the map is upsampled by the scale s of the high-resolution ground
+   truth (10 for HCI) exactly as the toolkit's ``scipy.ndimage.zoom(order=0)`` (:func:`upsample_nearest`,
+   which is not a plain repeat);
+4. the pixels scored: all but ``border_px * s`` on each side (:func:`border_mask`), and the scene's
+   valid_mask.png upsampled as the map is.
+
+A :class:`SceneReference` holds what does not depend on the method: the ground truth at each resolution,
+the valid and evaluation masks, the region and label masks and the mask names, each computed on first use
+and kept, so that one reference serves every method (and metric) scored on its scene. Cached arrays are
+read-only. Disparity is in px per view step; shapes are (H, W) at low resolution, (H s, W s) at high.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from lfbench.data.scene import LOWRES, LightField, read_png
+from lfbench.scoring.base import Metric
+from lfbench.scoring.rules import ScoringRules, metric_resolution
+from lfbench.utils.errors import DataError
+
+__all__ = [
+    "GroundTruth",
+    "Prepared",
+    "SceneReference",
+    "align_prediction",
+    "border_mask",
+    "read_label_mask",
+    "upsample_nearest",
+]
+
+
+def border_mask(shape: tuple[int, int], border: int) -> np.ndarray:
+    """Bool (H, W): True everywhere except ``border`` px on each side."""
+    mask = np.zeros(shape, dtype=bool)
+    h, w = shape
+    mask[border:h - border, border:w - border] = True
+    return mask
+
+
+def align_prediction(pred: np.ndarray, shape: tuple[int, int], source: str = "prediction",
+                     max_crop: int | None = None) -> tuple[np.ndarray, tuple[int, int] | None]:
+    """Place a prediction cropped by a symmetric border (e.g. 482x482 of 512x512) at the centre of a
+    NaN canvas of ``shape``. Returns (aligned, original shape or None if nothing was done).
+
+    A crop wider than ``max_crop`` px per side (the evaluation border) is refused: the uncovered
+    pixels would be scored, so such a map is the wrong size rather than a cropped one.
+    """
+    pred = np.asarray(pred)
+    if pred.ndim != 2:
+        raise DataError(f"disparity must be a 2-D map, got shape {pred.shape}", source)
+    if pred.shape == tuple(shape):
+        return pred, None
+    dh, dw = shape[0] - pred.shape[0], shape[1] - pred.shape[1]
+    if dh < 0 or dw < 0 or dh % 2 or dw % 2 or (max_crop is not None and max(dh, dw) // 2 > max_crop):
+        raise DataError(f"prediction is {pred.shape[1]}x{pred.shape[0]}, scene is {shape[1]}x{shape[0]} "
+                        "(only a symmetric crop of at most the evaluation border can be aligned)", source)
+    out = np.full(shape, np.nan, dtype=np.float32)
+    out[dh // 2:dh // 2 + pred.shape[0], dw // 2:dw // 2 + pred.shape[1]] = pred
+    return out, (int(pred.shape[0]), int(pred.shape[1]))
+
+
+def upsample_nearest(pred: np.ndarray, factor: int) -> np.ndarray:
+    """Nearest-neighbour upsampling exactly as the toolkit: scipy.ndimage.zoom(pred, factor, order=0)."""
+    from scipy import ndimage  # imported when a prediction is scored, not by lfbench regress's start-up
+
+    return ndimage.zoom(pred, factor, order=0)
+
+
+def read_label_mask(path: str | Path) -> np.ndarray:
+    """A label PNG (e.g. mask_boxes, mask_dots_by_size) as int32 (H, W): the gray value of each
+    pixel. An RGB(A) image is accepted when its colour channels are equal."""
+    path = Path(path)
+    arr = read_png(path, "label mask")
+    if arr.ndim == 3:
+        rgb = arr[..., :3]
+        if not (rgb == rgb[..., :1]).all():
+            raise DataError("label mask must be gray (its colour channels differ)", path)
+        arr = rgb[..., 0]
+    return arr.astype(np.int32)
+
+
+def _kept(arr: np.ndarray | None) -> np.ndarray | None:
+    """A read-only view of ``arr`` (None stays None): kept by a reference and shared by every prediction it
+    scores, so no scorer may write into it (the array itself, e.g. a light field's own, stays as it was)."""
+    if arr is None:
+        return None
+    view = np.asarray(arr).view()
+    view.flags.writeable = False
+    return view
+
+
+@dataclass
+class GroundTruth(LightField):
+    """A ground truth (H, W) px held in memory, without views or masks (:meth:`SceneReference.of_ground_truth`)."""
+
+    name: str
+    gt: np.ndarray
+
+    @property
+    def spatial_size(self) -> tuple[int, int]:
+        return tuple(self.gt.shape)
+
+    def gt_disparity(self) -> np.ndarray:
+        return self.gt
+
+
+@dataclass(frozen=True)
+class Prepared:
+    """A prediction made ready to be compared with the ground truth at one resolution.
+
+    gt: (H s, W s) float32 ground-truth disparity (px); pred: (H s, W s) float32 prediction (px),
+    aligned and upsampled; mask: (H s, W s) bool, the pixels scored (the border of ``border_px * s``
+    and the valid mask; region masks are the metrics' own); scale: s, 1 at low resolution (10 for HCI
+    at high); resolution: 'lowres' or 'highres'; aligned_from: (h, w) of a cropped prediction placed at
+    the centre, else None; uncertainty: the prediction's uncertainty map aligned and upsampled as the
+    disparity (in its own dtype), or None. ``gt`` and ``mask`` belong to the scene's reference: read-only.
+    """
+
+    gt: np.ndarray
+    pred: np.ndarray
+    mask: np.ndarray
+    scale: int
+    resolution: str
+    aligned_from: tuple[int, int] | None = None
+    uncertainty: np.ndarray | None = None
+
+
+class SceneReference:
+    """What scoring needs of one scene, whatever the method: computed on first use, then kept.
+
+    ``scene``: a :class:`~lfbench.data.scene.Scene` (or any light field with ground truth); ``rules``: the
+    scoring rules (border, resolutions). A reference answers what scoring asks of a scene the way the
+    scene does (``name``, ``path``, ``params``, ``spatial_size``, ``has_gt``, ``mask_names``, ``mask``,
+    ``valid_mask``), from its caches, and adds the prepared forms: the ground truth at a resolution
+    (:meth:`gt`), the scale and shape of a resolution, the evaluation mask (:meth:`evaluation_mask`), label
+    masks (:meth:`label_mask`), and :meth:`prepare` for each prediction. Memory: what it has been asked for
+    (at HCI high resolution ~100 MB for the ground truth, ~26 MB per mask).
+    """
+
+    def __init__(self, scene: LightField, rules: ScoringRules = ScoringRules()) -> None:
+        self.scene = scene
+        self.rules = rules
+        self._gt: dict[str, np.ndarray | None] = {}
+        self._valid: dict[str, np.ndarray | None] = {}
+        self._evaluation: dict[str, np.ndarray] = {}
+        self._mask_names: dict[str, list[str]] = {}
+        self._masks: dict[tuple[str, str], np.ndarray] = {}
+        self._labels: dict[tuple[str, str], np.ndarray] = {}
+        self._spatial_size: tuple[int, int] | None = None
+
+    @classmethod
+    def of(cls, scene: LightField | SceneReference) -> SceneReference:
+        """``scene`` itself when it is a reference (what scoring passes to a metric), else a new one."""
+        return scene if isinstance(scene, SceneReference) else cls(scene)
+
+    @classmethod
+    def of_ground_truth(cls, gt: np.ndarray, rules: ScoringRules, name: str) -> SceneReference:
+        """A reference to a low-resolution ground truth (H, W) px held in memory, without views or masks
+        (e.g. a validation crop during training), named ``name``: scored inside the rules' border."""
+        return cls(GroundTruth(name, np.asarray(gt)), rules)
+
+    def __repr__(self) -> str:
+        return f"SceneReference({self.scene!r}, {self.rules!r})"
+
+    # ------------------------------------------------------------------ the scene, as scoring asks it
+
+    @property
+    def name(self) -> str:
+        return self.scene.name
+
+    @property
+    def path(self) -> Path | None:
+        return getattr(self.scene, "path", None)
+
+    @property
+    def params(self) -> Any:
+        return self.scene.params
+
+    @property
+    def spatial_size(self) -> tuple[int, int]:
+        """(H, W) at low resolution: the scene's own size (a light field's: of its views)."""
+        if self._spatial_size is None:
+            size = getattr(self.scene, "spatial_size", None)
+            self._spatial_size = tuple(size) if size is not None else tuple(self.scene.gray_views().shape[2:4])
+        return self._spatial_size
+
+    def has_gt(self, resolution: str = LOWRES) -> bool:
+        if resolution in self._gt:
+            return self._gt[resolution] is not None
+        if hasattr(self.scene, "has_gt"):
+            return self.scene.has_gt(resolution)
+        return resolution == LOWRES and self.scene.gt_disparity() is not None
+
+    def mask_names(self, resolution: str = LOWRES) -> list[str]:
+        """The names of the scene's evaluation masks at ``resolution`` (none for a light field without)."""
+        if resolution not in self._mask_names:
+            names = getattr(self.scene, "mask_names", None)
+            self._mask_names[resolution] = list(names(resolution)) if callable(names) else []
+        return self._mask_names[resolution]
+
+    def mask(self, name: str, resolution: str = LOWRES, shape: tuple[int, ...] | None = None) -> np.ndarray:
+        """Evaluation mask ``<name>_<resolution>.png`` as bool (read-only). ``shape``: the ground truth's
+        (H, W), which the mask must have (DataError naming the file otherwise)."""
+        key = (name, resolution)
+        if key not in self._masks:
+            self._masks[key] = _kept(self.scene.mask(name, resolution))
+        return self._checked(self._masks[key], name, resolution, shape)
+
+    def label_mask(self, name: str, resolution: str = LOWRES, shape: tuple[int, ...] | None = None) -> np.ndarray:
+        """Label mask ``<name>_<resolution>.png`` (:func:`read_label_mask`, int32, read-only), checked against
+        ``shape`` as :meth:`mask` does."""
+        key = (name, resolution)
+        if key not in self._labels:
+            self._labels[key] = _kept(read_label_mask(self.path / f"{name}_{resolution}.png"))
+        return self._checked(self._labels[key], name, resolution, shape)
+
+    def _checked(self, mask: np.ndarray, name: str, resolution: str, shape: tuple[int, ...] | None) -> np.ndarray:
+        if shape is not None and mask.shape != tuple(shape):
+            raise DataError(f"mask is {mask.shape[1]}x{mask.shape[0]}, ground truth is {shape[1]}x{shape[0]}",
+                            self.path / f"{name}_{resolution}.png")
+        return mask
+
+    # ------------------------------------------------------------------ what every prediction is scored against
+
+    def gt(self, resolution: str = LOWRES) -> np.ndarray:
+        """Ground-truth disparity at ``resolution`` (float32 px, read-only). DataError when the scene has none."""
+        if resolution not in self._gt:
+            read = self.scene.gt_disparity
+            self._gt[resolution] = _kept(read() if resolution == LOWRES else read(resolution))
+        gt = self._gt[resolution]
+        if gt is None:
+            raise DataError(f"no ground truth (gt_disp_{resolution}.pfm) to score against", self.path)
+        return gt
+
+    def shape(self, resolution: str = LOWRES) -> tuple[int, int]:
+        """(H, W) at low resolution; at high resolution the shape of the high-resolution ground truth."""
+        return self.spatial_size if resolution == LOWRES else tuple(self.gt(resolution).shape)
+
+    def scale(self, resolution: str = LOWRES) -> int:
+        """How many pixels of ``resolution`` one low-resolution pixel spans per axis (1 at low resolution)."""
+        return self.shape(resolution)[0] // self.spatial_size[0]
+
+    def valid_mask(self, resolution: str = LOWRES) -> np.ndarray | None:
+        """The scene's valid_mask.png (True = may be scored) at ``resolution`` (read-only): its own low
+        resolution, upsampled as predictions are (:func:`upsample_nearest`, the toolkit's ``zoom(order=0)``),
+        so each high-resolution pixel is valid where the low-resolution pixel its prediction comes from
+        is. None without a valid mask (or for a light field that has none)."""
+        if resolution not in self._valid:
+            read = getattr(self.scene, "valid_mask", None)
+            valid = read() if callable(read) else None
+            shape = self.shape(resolution)
+            if valid is not None and valid.shape != shape:
+                h, w = valid.shape
+                scale = shape[0] // h
+                if scale < 1 or shape != (h * scale, w * scale):
+                    raise ValueError(f"valid mask {w}x{h} does not scale to {shape[1]}x{shape[0]}")
+                valid = upsample_nearest(valid.view(np.uint8), scale).astype(bool)
+            self._valid[resolution] = _kept(valid)
+        return self._valid[resolution]
+
+    def evaluation_mask(self, resolution: str = LOWRES) -> np.ndarray:
+        """Bool (read-only), the pixels scored at ``resolution``: all but the rules' border (scaled to
+        the resolution) on each side, and the valid mask where the scene has one."""
+        if resolution not in self._evaluation:
+            mask = border_mask(self.shape(resolution), self.rules.border_px * self.scale(resolution))
+            valid = self.valid_mask(resolution)
+            if valid is not None:
+                mask &= valid
+            self._evaluation[resolution] = _kept(mask)
+        return self._evaluation[resolution]
+
+    def general_resolution(self) -> str:
+        """The resolution of the general metrics on this scene (:meth:`ScoringRules.general_resolution`)."""
+        return self.rules.general_resolution(self)
+
+    def metric_resolution(self, metric: Metric) -> str | None:
+        """The resolution ``metric`` is scored at on this scene, or None (:func:`metric_resolution`)."""
+        return metric_resolution(self, metric, self.rules)
+
+    # ------------------------------------------------------------------ one prediction
+
+    def align(self, pred: np.ndarray, source: str = "prediction") -> tuple[np.ndarray, tuple[int, int] | None]:
+        """(the prediction at the scene's low-resolution size in float32, its own (h, w) when it was a
+        cropped map placed at the centre, else None); a crop wider than the rules' border is refused."""
+        pred, aligned_from = align_prediction(pred, self.spatial_size, source, max_crop=self.rules.border_px)
+        pred = pred.astype(np.float32, copy=False)
+        return pred, aligned_from
+
+    def prepare(self, pred: np.ndarray, resolution: str, source: str = "prediction", *,
+                uncertainty: np.ndarray | None = None) -> Prepared:
+        """The prediction ``pred`` (H, W) px (or a symmetric crop of it) made ready to be scored at
+        ``resolution``: aligned, float32, upsampled as the toolkit does, with the ground truth and the
+        evaluation mask at that resolution. ``uncertainty`` (same shape as ``pred``), when given, is
+        aligned and upsampled the same way. ``source`` names the prediction in errors."""
+        gt = self.gt(resolution)
+        aligned, aligned_from = self.align(pred, source)
+        scale = gt.shape[0] // self.spatial_size[0]
+        if uncertainty is not None:
+            uncertainty, _ = align_prediction(np.asarray(uncertainty), self.spatial_size, f"{source} uncertainty",
+                                              max_crop=self.rules.border_px)
+            uncertainty = uncertainty if scale == 1 else upsample_nearest(uncertainty, scale)
+        return Prepared(gt=gt, pred=aligned if scale == 1 else upsample_nearest(aligned, scale),
+                        mask=self.evaluation_mask(resolution), scale=scale, resolution=resolution,
+                        aligned_from=aligned_from, uncertainty=uncertainty)

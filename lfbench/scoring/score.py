@@ -1,0 +1,95 @@
+"""Scoring a disparity map on a scene under the benchmark's rules: :func:`score_scene`.
+
+Each metric is scored at the resolution the rules give it (:func:`lfbench.scoring.rules.metric_resolution`)
+on the prediction as :meth:`lfbench.scoring.prepare.SceneReference.prepare` makes it ready (alignment of a
+cropped map, float32, the toolkit's upsampling, border and valid mask), prepared once per resolution; a
+region metric adds its own mask. :func:`applicable_metrics` lists what a scene supports.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from lfbench.data.scene import HIGHRES, LOWRES, Scene
+from lfbench.scoring.base import Metric
+from lfbench.scoring.general import GENERAL_METRICS, nonfinite_count
+from lfbench.scoring.prepare import Prepared, SceneReference
+from lfbench.scoring.region_metrics import scene_metrics
+from lfbench.scoring.rules import ScoringRules, metric_resolution
+
+__all__ = ["SceneScore", "applicable_metrics", "score_scene"]
+
+
+@dataclass
+class SceneScore:
+    """Scores of one prediction on one scene: metric id -> value, and how it was scored."""
+
+    scene: str
+    values: dict[str, float]
+    resolution: dict[str, str]
+    nonfinite_pixels: int
+    aligned_from: tuple[int, int] | None = None
+    notes: list[str] = field(default_factory=list)
+
+
+def applicable_metrics(scene: Scene, rules: ScoringRules = ScoringRules()) -> list[Metric]:
+    """The general metrics plus the region / stratified metrics whose mask files exist for ``scene``
+    (at a resolution :func:`lfbench.scoring.rules.metric_resolution` can score them at), so that
+    ``score_scene(scene, pred, applicable_metrics(scene))`` scores everything the scene supports."""
+    return list(GENERAL_METRICS) + [m for m in scene_metrics(scene) if metric_resolution(scene, m, rules) is not None]
+
+
+def score_scene(scene: Scene, pred: np.ndarray, metrics: Sequence[Metric] = GENERAL_METRICS,
+                rules: ScoringRules = ScoringRules(), source: str = "prediction", *,
+                runtime_s: float | None = None, reference: SceneReference | None = None) -> SceneScore:
+    """Score ``pred`` (H, W) disparity on ``scene`` with the benchmark's masks and resolution rules.
+
+    ``reference``: the scene's :class:`~lfbench.scoring.prepare.SceneReference` under ``rules`` (what does
+    not depend on the method, kept for every method scored on the scene); made here when None.
+    Runtime metrics (``Metric.is_runtime``) take ``runtime_s``, the runtime in s the method reports for
+    this scene; they give no value (no record) when it reports none (None or NaN) or one that is not a
+    positive number (noted), and are recorded at low resolution (the resolution of the map timed)."""
+    if reference is None:
+        reference = SceneReference(scene, rules)
+    elif reference.scene is not scene or reference.rules != rules:
+        raise ValueError(f"the reference is of {reference.scene!r} under {reference.rules}, not of the scene scored")
+    h, w = reference.spatial_size
+    pred, aligned_from = reference.align(pred, source)
+    notes = []
+    if aligned_from is not None:
+        notes.append(f"{aligned_from[1]}x{aligned_from[0]} prediction aligned to the centre of {w}x{h}")
+    values: dict[str, float] = {}
+    resolution: dict[str, str] = {}
+    prepared: dict[str, Prepared] = {}  # the prediction at each resolution a metric asks for
+    nonfinite = nonfinite_count(pred, reference.evaluation_mask(LOWRES))
+    for metric in metrics:
+        if metric.is_runtime:
+            continue
+        res = reference.metric_resolution(metric)
+        if res is None:  # a mask file the metric needs is absent: it does not apply to this scene
+            continue
+        if res not in prepared:
+            if res == HIGHRES and not reference.has_gt(HIGHRES):  # a high-res-only metric without high-res gt
+                continue
+            prepared[res] = reference.prepare(pred, res, source)
+        p = prepared[res]
+        mask = p.mask
+        if metric.mask_name is not None:
+            if metric.mask_name not in reference.mask_names(res):
+                continue
+            mask = mask & reference.mask(metric.mask_name, res, mask.shape)
+        context = {"scene": reference, "resolution": res} if metric.needs_scene else {}
+        values[metric.id] = metric(p.gt, p.pred, mask, toolkit=rules.toolkit, **context)
+        resolution[metric.id] = res
+    timed = [m for m in metrics if m.is_runtime]
+    for metric in timed:
+        value = metric.score_runtime(runtime_s)
+        if value is not None:
+            values[metric.id], resolution[metric.id] = value, LOWRES
+    if timed and runtime_s is not None and not np.isnan(runtime_s) and timed[0].score_runtime(runtime_s) is None:
+        notes.append(f"runtime {runtime_s:g} s is not a positive number: no runtime record")
+    return SceneScore(scene=scene.name, values=values, resolution=resolution, nonfinite_pixels=nonfinite,
+                      aligned_from=aligned_from, notes=notes)
