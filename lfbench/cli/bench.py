@@ -347,7 +347,7 @@ def _check_networks(args: argparse.Namespace, cases: list[tuple[str, dict]]) -> 
 
 
 def _line(record: dict) -> str:
-    from lfbench.runs.bench import _fmt
+    from lfbench.runs.bench import format_value
 
     if "error" in record:
         return f"[{record.get('bench')}] error: {record['error']}"
@@ -358,7 +358,7 @@ def _line(record: dict) -> str:
                         "peak_memory_gb", "gflops_per_s", "gb_per_s", "steps_per_s", "cpu_seconds", "scores_per_s")
             if k in record]
     load = (record.get("machine") or {}).get("load_average")
-    return f"[{record['bench']}] " + ", ".join(f"{k} {_fmt(record[k])}" for k in dict.fromkeys(keys)) + \
+    return f"[{record['bench']}] " + ", ".join(f"{k} {format_value(record[k])}" for k in dict.fromkeys(keys)) + \
         f" (load {load})"
 
 

@@ -518,11 +518,12 @@ _COLUMNS = {
 }
 
 
-def _fmt(value) -> str:
+def format_value(value: object) -> str:
+    """A bench record's value as table text: 3 significant digits, phases as "name seconds", shapes as AxB."""
     if isinstance(value, float):
         return f"{value:.3g}" if abs(value) < 1000 else f"{value:.0f}"
     if isinstance(value, dict):
-        return " ".join(f"{k.removesuffix('_s')} {_fmt(v)}" for k, v in value.items())
+        return " ".join(f"{k.removesuffix('_s')} {format_value(v)}" for k, v in value.items())
     if isinstance(value, list):
         return "x".join(str(v) for v in value)
     return "" if value is None else str(value)
@@ -535,7 +536,7 @@ def _cell(record: dict, column: str) -> str:
         precision = column.removeprefix("ratio_to_").removesuffix("_cpu").removesuffix("_floor")
         if f"{precision}_floor_skipped" in record:
             return "skipped"
-    return _fmt(record.get(column))
+    return format_value(record.get(column))
 
 
 def _columns(bench: str, rows: Sequence[dict]) -> list[str]:
@@ -561,7 +562,7 @@ def table(records: Sequence[dict]) -> str:
         if not rows:
             continue
         cols = _columns(bench, rows)
-        body = [[_cell(r, c) for c in cols] + [_fmt((r.get("machine") or {}).get("load_average")),
+        body = [[_cell(r, c) for c in cols] + [format_value((r.get("machine") or {}).get("load_average")),
                                                   r.get("error", "") or (f"skipped: {r['skipped']}" if "skipped" in r
                                                                          else "")] for r in rows]
         models = ", ".join(dict.fromkeys(str(r["model"]) for r in rows if r.get("model")))

@@ -40,7 +40,7 @@ LAST_BLOCK = 4096  # voxels per matrix product of the last 3D convolution (float
 # --------------------------------------------------------------------------- fused convolutions
 
 @functools.cache
-def _fused_ops_work() -> bool:
+def fused_ops_work() -> bool:
     """True when oneDNN's fused convolution ops (conv + ReLU, conv + in-place add) run here."""
     try:
         ops = torch.ops.mkldnn
@@ -59,7 +59,7 @@ def conv(x: torch.Tensor, weight: torch.Tensor, bias: torch.Tensor | None, paddi
     (returning ``add_to``). oneDNN fuses both on the CPU; elsewhere they are separate ops."""
     dims = x.dim() - 2
     dil = [dilation] * dims
-    if x.device.type == "cpu" and _fused_ops_work():
+    if x.device.type == "cpu" and fused_ops_work():
         ops = torch.ops.mkldnn
         if add_to is not None:  # the binary op wants the bias in the input's dtype
             b = None if bias is None else bias.to(x.dtype)

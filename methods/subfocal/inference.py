@@ -74,7 +74,7 @@ def estimate_tile_bytes(net: SubFocalNet, rows: int, cols: int, precision: str =
     ``width``-channel activations (three without oneDNN's in-place add), or the last activation and its
     27 float32 taps. The interpolated maps the volume is gathered from are :func:`gather_bytes`. ``device``
     (default: the CPU) decides whether oneDNN's in-place add runs."""
-    from lfbench_methods.subfocal.fast import LAST_BLOCK, _fused_ops_work
+    from lfbench_methods.subfocal.fast import LAST_BLOCK, fused_ops_work
 
     d = net.disparities.numel()
     n = net.angular ** 2
@@ -83,7 +83,7 @@ def estimate_tile_bytes(net: SubFocalNet, rows: int, cols: int, precision: str =
     plane = rows * cols
     act = width * item
     first = d * plane * act + (_SLAB + 2) * plane * channels * item + _SLAB * plane * act + (_SLAB + 1) * plane * n * 4
-    live = 2 if _is_cpu(device) and _fused_ops_work() else 3
+    live = 2 if _is_cpu(device) and fused_ops_work() else 3
     rest = d * plane * max(live * act, act + 27 * 4) + LAST_BLOCK * width * 4
     return int(1.1 * max(first, rest))
 
