@@ -288,3 +288,44 @@ def test_scale_benchmark_quick_run(tmp_path):
     assert [m["methods"] for m in record["methods"]] == [1, 2] and record["jobs"]["identical"] is True
     assert record["floor"]["per_method_s"] > 0 and record["data"]["scenes_issue"] == 9
     assert (tmp_path / "out" / "scoring_scale.md").read_text().startswith("# Scoring at scale")
+
+
+def test_training_validation_scores_as_the_formulas():
+    """Validation during training scores through the same errors: per scene and pooled over the pixels of
+    every scene inside the border, BadPix and MSE as written out (non-finite gt pixels left out)."""
+    import torch
+
+    from lfbench.training.data import ValidationScene
+    from lfbench.training.validate import validate
+
+    rng = np.random.default_rng(5)
+    preds = {}
+
+    class Fixed(torch.nn.Module):  # returns the prediction stored for the scene whose views it is given
+        def forward(self, views):
+            return torch.from_numpy(preds[float(views[0, 0, 0, 0])])[None], None
+
+    scenes = []
+    for k, shape in enumerate(((30, 34), (28, 28))):
+        gt = rng.uniform(-1, 1, shape).astype(np.float32)
+        gt[10, 10] = np.nan
+        pred = (gt + rng.normal(0, 0.08, shape)).astype(np.float32)
+        pred[12, 12] = np.inf
+        views = np.full((9, *shape), k, np.float32)
+        preds[float(k)] = pred
+        scenes.append(ValidationScene(name=f"s{k}", views=views, gt=gt))
+    out = validate(Fixed(), scenes, torch.device("cpu"), border=4, threshold=0.07)
+    gts, ps = [], []
+    for s in scenes:
+        mask = np.zeros(s.gt.shape, bool)
+        mask[4:-4, 4:-4] = True
+        mask &= np.isfinite(s.gt)
+        pred = preds[float(s.views[0, 0, 0])]
+        assert out["scenes"][s.name]["badpix"] == _old_bad_pix(s.gt, pred, 0.07, mask, False)
+        assert out["scenes"][s.name]["mse_x100"] == _old_mse(s.gt, pred, mask)
+        gts.append(s.gt[mask])
+        ps.append(pred[mask])
+    gt, pred = np.concatenate(gts), np.concatenate(ps)
+    everything = np.ones(gt.shape, bool)
+    assert out["badpix"] == _old_bad_pix(gt, pred, 0.07, everything, False)
+    assert out["mse_x100"] == _old_mse(gt, pred, everything) and out["pixels"] == gt.size == 22 * 26 + 20 * 20 - 2
