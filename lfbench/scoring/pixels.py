@@ -59,12 +59,11 @@ class PixelSet:
         """The ground truth at the pixels (1-D, the map's dtype, read-only)."""
         return _read_only(self.gt_map.ravel() if self.mask is None else self.gt_map[self.mask])
 
-    @functools.cached_property
-    def rows(self) -> np.ndarray:
-        """The row of each pixel (intp)."""
+    def per_row(self, values: np.ndarray) -> np.ndarray:
+        """``values`` (one per row of the map) at each pixel: the value of its row (raster order is row by row)."""
         h, w = self.shape
         counts = np.full(h, w) if self.mask is None else np.count_nonzero(self.mask, axis=1)
-        return _read_only(np.repeat(np.arange(h, dtype=np.intp), counts))  # raster order: row by row
+        return np.repeat(values, counts)
 
     @functools.cached_property
     def size(self) -> int:

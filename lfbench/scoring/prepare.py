@@ -162,7 +162,7 @@ class Prepared:
                  aligned_from: tuple[int, int] | None = None, uncertainty: np.ndarray | None = None) -> None:
         self.reference = reference
         self.resolution = resolution
-        self.aligned = aligned
+        self.aligned = _kept(aligned)
         self.aligned_from = aligned_from
         self.uncertainty = uncertainty
         self.gt = reference.gt(resolution)
@@ -172,7 +172,8 @@ class Prepared:
 
     @functools.cached_property
     def pred(self) -> np.ndarray:
-        return self.reference.upsample(self.aligned, self.resolution)
+        """Read-only."""
+        return _kept(self.reference.upsample(self.aligned, self.resolution))
 
     def errors(self, mask_name: str | None = None) -> PixelErrors:
         """The prediction's errors (:class:`~lfbench.scoring.pixels.PixelErrors`) at the pixels of the
@@ -209,6 +210,7 @@ class SceneReference:
         self._pixels: dict[tuple[str, str | None], PixelSet] = {}
         self._scored: dict[tuple[str, str], np.ndarray] = {}
         self._memo: dict[Any, Any] = {}
+        self._per_prediction: dict[Any, tuple[np.ndarray, Any]] = {}
 
     @classmethod
     def of(cls, scene: LightField | SceneReference) -> SceneReference:
@@ -391,6 +393,15 @@ class SceneReference:
         if key not in self._memo:
             self._memo[key] = compute()
         return self._memo[key]
+
+    def per_prediction(self, key: Any, pred: np.ndarray, compute: Callable[[], Any]) -> Any:
+        """What a metric keeps of one prepared prediction (e.g. a map two metrics of different masks share):
+        ``compute()`` once while ``pred`` is the same (read-only) array object, kept until another
+        prediction replaces it under ``key``."""
+        slot = self._per_prediction.get(key)
+        if slot is None or slot[0] is not pred:
+            slot = self._per_prediction[key] = (pred, compute())
+        return slot[1]
 
     def general_resolution(self) -> str:
         """The resolution of the general metrics on this scene (:meth:`ScoringRules.general_resolution`)."""

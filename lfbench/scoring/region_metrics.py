@@ -43,6 +43,7 @@ __all__ = [
     "depth_normals",
     "angular_error_deg",
     "median_angular_error",
+    "disparity_normals",
     "fine_fattening",
     "fine_thinning",
     "backgammon_fattening",
@@ -207,10 +208,18 @@ def median_angular_error(gt: np.ndarray, pred: np.ndarray, params: SceneParamete
     Disparities are converted to depth as the toolkit does (:func:`toolkit_depth`, float32), normals
     from :func:`depth_normals` in float64."""
     gt, pred, mask = check_maps(gt, pred, mask)
+    n_gt = disparity_normals(gt, params)
+    return _median_angle(angular_error_deg(n_gt, disparity_normals(pred, params)), n_gt, pred, mask, toolkit)
+
+
+def disparity_normals(disparity: np.ndarray, params: SceneParameters) -> np.ndarray:
+    """Unit normals (H, W, 3) of a disparity map's surface: :func:`depth_normals` of :func:`toolkit_depth`."""
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-        n_gt = depth_normals(toolkit_depth(gt, params), params.focal_length_mm, params.sensor_size_mm)
-        n_pred = depth_normals(toolkit_depth(pred, params), params.focal_length_mm, params.sensor_size_mm)
-    angle = angular_error_deg(n_gt, n_pred)
+        return depth_normals(toolkit_depth(disparity, params), params.focal_length_mm, params.sensor_size_mm)
+
+
+def _median_angle(angle: np.ndarray, n_gt: np.ndarray, pred: np.ndarray, mask: np.ndarray, toolkit: bool) -> float:
+    """The median of the angles (H, W) over the mask, under the non-finite rule of :func:`median_angular_error`."""
     if toolkit:
         scored = mask & np.isfinite(pred) & np.isfinite(angle)
     else:  # a normal the prediction cannot give is the worst angle; gt without a normal is not scored
@@ -257,8 +266,10 @@ def _halfway_of(px: PixelErrors, column: int) -> np.ndarray:
     pixels = px.pixels
 
     def compute() -> np.ndarray:
-        extrapolated = pixels.gt_map[:, column].astype(px.gt.dtype).astype(np.float64)
-        return 0.5 * (extrapolated[pixels.rows] + pixels.gt.astype(px.gt.dtype))
+        extrapolated = pixels.per_row(pixels.gt_map[:, column].astype(px.gt.dtype).astype(np.float64))
+        extrapolated += pixels.gt.astype(px.gt.dtype)
+        extrapolated *= 0.5
+        return extrapolated
 
     return pixels.memo(("halfway", column, px.gt.dtype.str), compute)
 
@@ -428,8 +439,17 @@ def _bump_fn(gt, pred, mask=None, *, toolkit=False):
     return bumpiness_x100(gt, pred, mask, toolkit=toolkit)
 
 
-def _mae_fn(gt, pred, mask=None, *, toolkit=False, scene: Scene, resolution: str):
-    return median_angular_error(gt, pred, scene.params, mask, toolkit=toolkit)
+def _mae_fn(gt, pred, mask=None, *, toolkit=False, scene: Scene | SceneReference, resolution: str):
+    reference = SceneReference.of(scene)
+    if gt is not reference.gt(resolution) or np.asarray(pred).flags.writeable:
+        return median_angular_error(gt, pred, reference.params, mask, toolkit=toolkit)
+    # the scene's own gt and a prepared (read-only) prediction: gt normals kept for the scene, the angles for
+    # the prediction (MAE of planes and of smooth surfaces share them)
+    gt, pred, mask = check_maps(gt, pred, mask)
+    n_gt = reference.memo(("gt_normals", resolution, gt.dtype.str), lambda: disparity_normals(gt, reference.params))
+    angle = reference.per_prediction(("mae_angle", resolution), pred,
+                                     lambda: angular_error_deg(n_gt, disparity_normals(pred, reference.params)))
+    return _median_angle(angle, n_gt, pred, mask, toolkit)
 
 
 def _fine_fat_fn(gt, pred, mask=None, *, toolkit=False):
