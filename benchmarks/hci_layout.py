@@ -18,6 +18,7 @@ training scenes and antinous with every region mask at low resolution); ``"full"
 
 from __future__ import annotations
 
+import zlib
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -187,10 +188,11 @@ def write_benchmark(root: str | Path, scene_set: str = "issue", size: int = 512,
     chosen = _ISSUE if scene_set == "issue" else CATEGORIES
     highres_categories = ("stratified",) if scene_set == "issue" else ("stratified", "training")
     folders = []
-    for i, (category, names) in enumerate((c, n) for c, n in chosen.items()):
-        for j, name in enumerate(names):
+    for category, names in chosen.items():
+        for name in names:  # a scene is the same in every set (its seed is its name's)
             folder = Path(root) / category / name
-            _write_scene(folder, name, category, size, scale, category in highres_categories, seed=100 * i + j)
+            _write_scene(folder, name, category, size, scale, category in highres_categories,
+                         seed=zlib.crc32(name.encode()))
             folders.append(folder)
     return folders
 
