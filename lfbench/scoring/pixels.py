@@ -2,8 +2,8 @@
 
 A pixel-wise metric (BadPix, MSE, the quantiles, and the region metrics that count pixels of a mask) depends
 only on the (ground truth, prediction) pairs of the pixels it scores, in raster order, not on where they lie.
-So scoring keeps, per scene, each set of scored pixels once (:class:`PixelSet`: their flat indices, where
-each one's prediction comes from in the low-resolution map, their ground truth), and per prediction gathers
+So scoring keeps, per scene, each set of scored pixels once (:class:`PixelSet`: their mask, how a
+low-resolution prediction reaches them, their ground truth), and per prediction gathers
 its values at those pixels once (:class:`PixelErrors`) and computes the absolute error, the finite masks
 and anything else its metrics ask for once, for every metric of that set.
 
@@ -38,19 +38,19 @@ class PixelSet:
     """Pixels a metric scores on one scene at one resolution, whatever the method (kept by the scene's
     :class:`~lfbench.scoring.prepare.SceneReference`).
 
-    ``mask``: bool (H, W), the pixels; ``gt_map``: the ground truth (H, W); ``source``: for each pixel (in
-    raster order), the flat index into the low-resolution prediction its value comes from (the toolkit's
-    upsampling), or None when predictions are given at (H, W) already. ``low_width``: the width of the
-    low-resolution map (the scene's; W when the maps are at it). :meth:`memo` keeps further
-    method-independent arrays of the set (e.g. a metric's per-pixel reference values).
+    ``mask``: bool (H, W), the pixels; ``gt_map``: the ground truth (H, W); ``upsample``: (rows, cols), the
+    low-resolution row of each of the H rows and column of each of the W columns (the toolkit's upsampling,
+    lfbench.scoring.prepare.upsample_index) when predictions come at low resolution, else None.
+    ``low_width``: the width of the low-resolution map (the scene's; W when the maps are at it).
+    :meth:`memo` keeps further method-independent arrays of the set (e.g. a metric's per-pixel reference values).
     """
 
-    def __init__(self, mask: np.ndarray | None, gt_map: np.ndarray, *, source: np.ndarray | None = None,
-                 low_width: int | None = None) -> None:
+    def __init__(self, mask: np.ndarray | None, gt_map: np.ndarray, *,
+                 upsample: tuple[np.ndarray, np.ndarray] | None = None, low_width: int | None = None) -> None:
         self.mask = mask
         self.gt_map = gt_map
         self.shape: tuple[int, ...] = tuple(gt_map.shape)
-        self.source = None if source is None else _read_only(source)
+        self.upsample = upsample
         self.low_width = int(self.shape[-1] if low_width is None else low_width)
         self._memo: dict[Any, Any] = {}
 
@@ -75,13 +75,22 @@ class PixelSet:
             self._memo[key] = compute()
         return self._memo[key]
 
-    def values(self, pred: np.ndarray) -> np.ndarray:
-        """A prediction's values at the pixels: ``pred`` is the low-resolution map when the set has
-        sources, else a map of ``shape``."""
+    def values(self, pred: np.ndarray, rows_per_block: int = 256) -> np.ndarray:
+        """A prediction's values at the pixels, in raster order: ``pred`` is the low-resolution map when the
+        set upsamples (taken to the set's resolution a block of rows at a time, never whole), else a map of
+        ``shape``."""
         pred = np.asarray(pred)
-        if self.source is not None:
-            return pred.ravel().take(self.source)
-        return pred.ravel() if self.mask is None else pred[self.mask]
+        if self.upsample is None:
+            return pred.ravel() if self.mask is None else pred[self.mask]
+        rows, cols = self.upsample
+        mask = np.ones(self.shape, bool) if self.mask is None else self.mask
+        out = np.empty(self.size, dtype=pred.dtype)
+        at = 0
+        for r in range(0, self.shape[0], rows_per_block):
+            block = pred.take(rows[r:r + rows_per_block], axis=0).take(cols, axis=1)[mask[r:r + rows_per_block]]
+            out[at:at + block.size] = block
+            at += block.size
+        return out
 
 
 class PixelErrors:

@@ -365,27 +365,15 @@ class SceneReference:
 
     def pixels(self, resolution: str, mask_name: str | None = None) -> PixelSet:
         """The pixels scored at ``resolution`` (:meth:`scored_mask`) as a :class:`~lfbench.scoring.pixels.PixelSet`
-        whose sources are the upsampling's: what every pixel-wise metric of that region computes on."""
+        that takes predictions there by the toolkit's upsampling: what every pixel-wise metric of that region
+        computes on."""
         key = (resolution, mask_name)
         if key not in self._pixels:
             gt = self.gt(resolution)
             mask = self.scored_mask(resolution, mask_name)
-            source = self._sources(mask, resolution) if self.scale(resolution) > 1 else None
-            self._pixels[key] = PixelSet(mask, gt, source=source, low_width=self.spatial_size[1])
+            upsample = self.upsample_index(resolution) if self.scale(resolution) > 1 else None
+            self._pixels[key] = PixelSet(mask, gt, upsample=upsample, low_width=self.spatial_size[1])
         return self._pixels[key]
-
-    def _sources(self, mask: np.ndarray, resolution: str, rows_per_block: int = 256) -> np.ndarray:
-        """Intp, for each pixel of ``mask`` (raster order): the flat index of the low-resolution pixel its
-        upsampled value comes from (:meth:`upsample_index`); built a block of rows at a time."""
-        rows, cols = self.upsample_index(resolution)
-        starts = rows * self.spatial_size[1]
-        out = np.empty(int(np.count_nonzero(mask)), dtype=np.intp)
-        at = 0
-        for r in range(0, mask.shape[0], rows_per_block):
-            block = np.add.outer(starts[r:r + rows_per_block], cols)[mask[r:r + rows_per_block]]
-            out[at:at + block.size] = block
-            at += block.size
-        return out
 
     def memo(self, key: Any, compute: Callable[[], Any]) -> Any:
         """What a metric keeps of this scene (method-independent): ``compute()`` the first time ``key`` is asked
