@@ -51,6 +51,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="also rate each method's uncertainty map (SubFocal: std of its distribution): "
                         "sparsification curves and AUSE/AURG in OUT/uncertainty.csv, OUT/table_uncertainty.md "
                         "and OUT/figures/sparsification_*.png")
+    p.add_argument("--jobs", type=int_range(1, 256), default=1, metavar="N",
+                   help="score in N worker processes, scene by scene (the numbers are the same for any N; memory "
+                        "grows with N scenes, not with the number of methods)")
     add_method_device(p)
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
@@ -85,7 +88,7 @@ def run(args: argparse.Namespace) -> int:
                *([w.UncertaintyRatings()] if args.uncertainty else []), *([w.Site()] if args.html else [])]
     meta = {"data_root": str(args.data), "methods": {m.label: m.provenance() for m in methods}}
     results = evaluate_to_folder(methods, scenes, args.out, rules=rules, all_metrics=args.all_metrics, writers=writers,
-                                 meta=meta, progress=not args.no_progress)
+                                 meta=meta, progress=not args.no_progress, jobs=args.jobs)
     if args.out / "table_uncertainty.md" in results.files:
         print((args.out / "table_uncertainty.md").read_text(encoding="utf-8"))
     print(render(per_scene_table(results), "markdown"), end="")

@@ -1,5 +1,6 @@
-"""Runs: methods run on scenes and scored (runner) into a folder with the chosen output writers
-(folder: ``evaluate_to_folder``), golden regression checks (regress), the offline demo (demo) and
-speed/memory benchmarks (bench). Import from the modules (``lfbench.runs.folder.evaluate_to_folder``):
-the package itself imports nothing, since the command line reads the demo's defaults at start-up. The
-results data model is :mod:`lfbench.results` (also importable as ``lfbench.runs.results``)."""
+"""Runs: methods run on scenes and scored scene by scene (runner; in worker processes: pool) into a folder
+with the chosen output writers (folder: ``evaluate_to_folder``), golden regression checks (regress), the
+offline demo (demo) and speed/memory benchmarks (bench). Import from the modules
+(``lfbench.runs.folder.evaluate_to_folder``): the package itself imports nothing, since the command line
+reads the demo's defaults at start-up. The results data model is :mod:`lfbench.results` (also importable
+as ``lfbench.runs.results``)."""

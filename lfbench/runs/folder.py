@@ -40,7 +40,7 @@ def evaluate_to_folder(methods: Sequence[Method], scenes: Sequence[Scene], out: 
                        all_metrics: bool = False,
                        more: Sequence[tuple[Sequence[Method], Sequence[Scene]]] = (),
                        label: str | None = None, writers: Sequence[OutputWriter] = (Tables(),),
-                       meta: Mapping[str, Any] | None = None, progress: bool = True) -> Results:
+                       meta: Mapping[str, Any] | None = None, progress: bool = True, jobs: int = 1) -> Results:
     """Run every method on every scene, score and write the run into ``out``; returns the Results.
 
     metrics: the metrics of every scene (default the general ones); all_metrics: also the region and
@@ -49,7 +49,8 @@ def evaluate_to_folder(methods: Sequence[Method], scenes: Sequence[Scene], out: 
     the same rules into the same results (e.g. stored maps on real scenes beside a synthetic run).
     label: the name the records get instead of the method's label (one method only). writers: the
     outputs besides results.json and results.csv (lfbench.reports.writers; default the tables), each
-    seeing every prediction, in order (the site last). meta: added to results.meta. ``results.files``
+    seeing every prediction, in order (the site last). meta: added to results.meta. jobs: worker
+    processes that score (lfbench.runs.pool; the results are the same for any number). ``results.files``
     lists every file and folder written.
     """
     out = Path(out)
@@ -70,7 +71,7 @@ def evaluate_to_folder(methods: Sequence[Method], scenes: Sequence[Scene], out: 
         if all_metrics:
             chosen = functools.partial(_all_metrics, rules=rules)
         score = functools.partial(evaluate, metrics=chosen, rules=rules, on_prediction=each_prediction,
-                                  progress=progress)
+                                  progress=progress, jobs=jobs)
         run.results = results = score(methods, scenes)
         for group_methods, group_scenes in more:
             results.extend(score(group_methods, group_scenes))

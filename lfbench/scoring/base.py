@@ -91,6 +91,11 @@ class Metric:
     in tables and reports: metrics with an order come first, by it (the paper's BadPix 0.07, 0.03,
     0.01, MSE x100, Q25), the others after them in the order they come
     (:func:`lfbench.scoring.metrics.metric_order`).
+    ``pixel_fn(px, toolkit=...)``: the same metric as a function of a
+    :class:`~lfbench.scoring.pixels.PixelErrors` (the prediction's errors at the pixels of ``mask_name``
+    inside the evaluation mask), for metrics that depend only on those pixels' values (pixel-wise): scoring
+    then gathers each prediction once per set of pixels and computes |error| once for all of its metrics
+    (:func:`lfbench.scoring.score.score_scene`); ``fn`` must give the same value bit for bit. None: ``fn``.
     Category 'runtime' (:data:`lfbench.scoring.general.RUNTIME_METRICS`): ``fn(runtime_s)`` of the runtime
     a method reports for a scene (no maps, no masks, no resolution of its own; see
     :func:`lfbench.scoring.score.score_scene`).
@@ -116,6 +121,7 @@ class Metric:
     value_range: tuple[float, float] = NON_NEGATIVE
     short_label: str | None = None
     order: int | None = None
+    pixel_fn: MetricFn | None = field(default=None, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if self.scene_aggregate not in SCENE_AGGREGATES:
@@ -176,6 +182,13 @@ class Metric:
         if self.is_runtime:
             raise TypeError(f"metric {self.id!r} is scored from a runtime (score_runtime), not from maps")
         return self.fn(gt, pred, mask, toolkit=toolkit, **context)
+
+    def score_pixels(self, px, *, toolkit: bool = False) -> float:
+        """The metric of the errors ``px`` (:class:`~lfbench.scoring.pixels.PixelErrors`) through
+        :attr:`pixel_fn` (TypeError for a metric without one)."""
+        if self.pixel_fn is None:
+            raise TypeError(f"metric {self.id!r} is not pixel-wise: score it from maps")
+        return self.pixel_fn(px, toolkit=toolkit)
 
 
 class MetricRegistry(Registry[Metric]):

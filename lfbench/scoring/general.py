@@ -28,6 +28,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from lfbench.scoring.base import ANY_VALUE, PERCENT, Metric, PixelStatistic
+from lfbench.scoring.pixels import PixelErrors
 
 __all__ = [
     "GENERAL_METRICS",
@@ -35,14 +36,17 @@ __all__ = [
     "bad_pix",
     "bad_pix_curve",
     "bad_pix_metric",
+    "bad_pix_of",
     "badpix_family",
     "check_maps",
     "mse_x100",
+    "mse_x100_of",
     "nonfinite_count",
     "percent_of",
     "q25_x100",
     "quantile_family",
     "quantile_x100",
+    "quantile_x100_of",
 ]
 
 
@@ -78,16 +82,17 @@ def nonfinite_count(pred: np.ndarray, mask: np.ndarray | None = None) -> int:
 def bad_pix(gt: np.ndarray, pred: np.ndarray, threshold: float = 0.07, mask: np.ndarray | None = None,
             *, toolkit: bool = False) -> float:
     """BadPix(t): percentage (0-100) of scored pixels with |gt - pred| > t (t in px)."""
-    gt, pred, mask = check_maps(gt, pred, mask)
+    return bad_pix_of(PixelErrors.of_maps(gt, pred, mask), threshold, toolkit=toolkit)
+
+
+def bad_pix_of(px: PixelErrors, threshold: float = 0.07, *, toolkit: bool = False) -> float:
+    """:func:`bad_pix` of the errors ``px`` (lfbench.scoring.pixels) at the pixels they hold."""
     with np.errstate(invalid="ignore"):
-        err = np.abs(pred - gt)
-    if toolkit:
-        with np.errstate(invalid="ignore"):
-            bad = err > threshold  # NaN compares False: counted as good
-        return percent_of(int(np.count_nonzero(mask)), int(np.count_nonzero(bad & mask)))
-    scored = mask & np.isfinite(gt)
-    with np.errstate(invalid="ignore"):
-        bad = (err > threshold) | ~np.isfinite(pred)
+        bad = px.err > threshold  # NaN compares False
+    if toolkit:  # counted as good
+        return percent_of(px.size, int(np.count_nonzero(bad)))
+    scored = px.gt_finite
+    bad |= ~px.pred_finite
     return percent_of(int(np.count_nonzero(scored)), int(np.count_nonzero(bad & scored)))
 
 
@@ -109,11 +114,15 @@ def bad_pix_curve(gt: np.ndarray, pred: np.ndarray, thresholds: Sequence[float] 
 
 def mse_x100(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = None, *, toolkit: bool = False) -> float:
     """100 x mean squared error (px^2) over scored pixels with finite gt and prediction."""
-    gt, pred, mask = check_maps(gt, pred, mask)
-    scored = mask & np.isfinite(gt) & np.isfinite(pred)
+    return mse_x100_of(PixelErrors.of_maps(gt, pred, mask), toolkit=toolkit)
+
+
+def mse_x100_of(px: PixelErrors, *, toolkit: bool = False) -> float:
+    """:func:`mse_x100` of the errors ``px`` at the pixels they hold (|e|^2 = e^2 exactly)."""
+    scored = px.finite
     if not scored.any():
         return float("nan")
-    diff = np.square(gt - pred)[scored]
+    diff = np.square(px.err if scored.all() else px.err[scored])  # all kept: the same elements, no copy
     # the toolkit (numpy 1.x) multiplied the float32 mean by 100 in float64; do the same under numpy 2
     return float(np.average(diff)) * 100
 
@@ -121,18 +130,27 @@ def mse_x100(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = None, *
 def quantile_x100(gt: np.ndarray, pred: np.ndarray, percentage: float = 25, mask: np.ndarray | None = None,
                   *, toolkit: bool = False) -> float:
     """100 x the absolute error at index int(n * percentage / 100) of the sorted errors (px x 100)."""
-    gt, pred, mask = check_maps(gt, pred, mask)
-    with np.errstate(invalid="ignore"):
-        diffs = np.abs(pred - gt) * 100
+    return quantile_x100_of(PixelErrors.of_maps(gt, pred, mask), percentage, toolkit=toolkit)
+
+
+def _where(values: np.ndarray, keep: np.ndarray) -> np.ndarray:
+    """``values[keep]`` (1-D), itself when every element is kept."""
+    return values if keep.all() else values[keep]
+
+
+def quantile_x100_of(px: PixelErrors, percentage: float = 25, *, toolkit: bool = False) -> float:
+    """:func:`quantile_x100` of the errors ``px`` at the pixels they hold (the element at that index of
+    the sorted errors, found by a partition: the same value as a full sort's)."""
+    with np.errstate(over="ignore"):
+        diffs = px.err * 100
     if toolkit:
-        scored = mask & np.isfinite(diffs) & np.isfinite(pred)
+        values = _where(diffs, np.isfinite(diffs) & px.pred_finite)
     else:
-        scored = mask & np.isfinite(gt)
-        diffs = np.where(np.isfinite(pred), diffs, np.inf)
-    values = np.sort(diffs[scored])
+        values = _where(diffs if px.pred_finite.all() else np.where(px.pred_finite, diffs, np.inf), px.gt_finite)
     if values.size == 0:
         return float("nan")
-    return float(values[int(values.size * percentage / 100.0)])
+    k = int(values.size * percentage / 100.0)
+    return float(np.partition(values, k)[k])
 
 
 def q25_x100(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = None, *, toolkit: bool = False) -> float:
@@ -149,11 +167,15 @@ def bad_pix_metric(threshold: float, *, order: int | None = None) -> Metric:
     def fn(gt, pred, mask=None, *, toolkit=False):
         return bad_pix(gt, pred, t, mask, toolkit=toolkit)
 
+    def pixel_fn(px, *, toolkit=False):
+        return bad_pix_of(px, t, toolkit=toolkit)
+
     return Metric(
         id=f"badpix_{t:g}", name=f"BadPix({t:g})",
         description=f"Percentage of pixels with |gt - pred| > {t:g} px (non-finite predictions count as bad).",
         unit="%", fn=fn, toolkit_id=("badpix_%0.3f" % t).replace(".", ""), vmin=0, vmax=1, cmap="RdYlGn_r",
         bootstrap=PixelStatistic("badpix", t), value_range=PERCENT, short_label=f"BadPix {t:g} (%)", order=order,
+        pixel_fn=pixel_fn,
     )
 
 
@@ -161,7 +183,7 @@ def _mse_metric() -> Metric:
     return Metric(
         id="mse_x100", name="MSE x100", description="Mean squared disparity error (px^2) multiplied by 100.",
         unit="px^2 x 100", fn=mse_x100, toolkit_id="mse_100", vmin=-0.2, vmax=0.2, cmap="seismic",
-        bootstrap=PixelStatistic("mse"), short_label="MSE x100", order=3,
+        bootstrap=PixelStatistic("mse"), short_label="MSE x100", order=3, pixel_fn=mse_x100_of,
     )
 
 
@@ -178,11 +200,14 @@ def _quantile_metric(p: float) -> Metric:
     def fn(gt, pred, mask=None, *, toolkit=False):
         return quantile_x100(gt, pred, p, mask, toolkit=toolkit)
 
+    def pixel_fn(px, *, toolkit=False):
+        return quantile_x100_of(px, p, toolkit=toolkit)
+
     return Metric(
         id=f"q{p:g}_x100", name=f"Q{p:g}",
         description=f"{_ordinal(p)} percentile of the absolute disparity error, x100.",
         unit="px x 100", fn=fn, toolkit_id=f"q_{p:g}_100" if p == int(p) else None, vmin=0, vmax=0.5,
-        cmap="YlOrRd", bootstrap=PixelStatistic("quantile", p),
+        cmap="YlOrRd", bootstrap=PixelStatistic("quantile", p), pixel_fn=pixel_fn,
     )
 
 
@@ -190,8 +215,12 @@ def _q25_metric() -> Metric:
     return Metric(
         id="q25_x100", name="Q25", description="25th percentile of the absolute disparity error, x100.",
         unit="px x 100", fn=q25_x100, toolkit_id="q_25_100", vmin=0, vmax=0.5, cmap="YlOrRd",
-        bootstrap=PixelStatistic("quantile", 25.0), order=4,
+        bootstrap=PixelStatistic("quantile", 25.0), order=4, pixel_fn=_q25_of,
     )
+
+
+def _q25_of(px: PixelErrors, *, toolkit: bool = False) -> float:
+    return quantile_x100_of(px, 25, toolkit=toolkit)
 
 
 #: The benchmark's general metrics (registration order); ``order`` puts them in the paper's table order.

@@ -17,13 +17,21 @@ the validation during training). The steps, the toolkit's rules (docs/benchmark-
    valid_mask.png upsampled as the map is.
 
 A :class:`SceneReference` holds what does not depend on the method: the ground truth at each resolution,
-the valid and evaluation masks, the region and label masks and the mask names, each computed on first use
-and kept, so that one reference serves every method (and metric) scored on its scene. Cached arrays are
-read-only. Disparity is in px per view step; shapes are (H, W) at low resolution, (H s, W s) at high.
+the valid and evaluation masks, the region and label masks and the mask names, the upsampling index (which
+low-resolution pixel each high-resolution pixel takes, :func:`upsample_index`), the scored pixels of each
+mask (:meth:`SceneReference.pixels`) and whatever a metric keeps per scene (:meth:`SceneReference.memo`),
+each computed on first use and kept, so that one reference serves every method (and metric) scored on its
+scene: the scoring engine's per-scene cache, owned by whoever scores (a run keeps one per scene while it
+scores that scene). A :class:`Prepared` prediction is the per-method half: the map aligned once, upsampled
+on first use, and its errors at each set of scored pixels gathered once (:meth:`Prepared.errors`). Cached
+arrays are read-only. Disparity is in px per view step; shapes are (H, W) at low resolution, (H s, W s) at
+high.
 """
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -32,6 +40,7 @@ import numpy as np
 
 from lfbench.data.scene import LOWRES, LightField, read_png
 from lfbench.scoring.base import Metric
+from lfbench.scoring.pixels import PixelErrors, PixelSet
 from lfbench.scoring.rules import ScoringRules, metric_resolution
 from lfbench.utils.errors import DataError
 
@@ -42,6 +51,7 @@ __all__ = [
     "align_prediction",
     "border_mask",
     "read_label_mask",
+    "upsample_index",
     "upsample_nearest",
 ]
 
@@ -83,9 +93,21 @@ def upsample_nearest(pred: np.ndarray, factor: int) -> np.ndarray:
     return ndimage.zoom(pred, factor, order=0)
 
 
+def upsample_index(shape: tuple[int, int], factor: int) -> tuple[np.ndarray, np.ndarray]:
+    """(rows, cols), intp: the low-resolution row of each of the ``h factor`` output rows and the column of
+    each of the ``w factor`` output columns of :func:`upsample_nearest` on an (h, w) map, so that
+    ``pred[rows][:, cols]`` is ``upsample_nearest(pred, factor)`` bit for bit. Order-0 zoom maps each axis
+    on its own; the index is the toolkit's zoom applied to the row and column numbers themselves."""
+    h, w = shape
+    rows = upsample_nearest(np.repeat(np.arange(h, dtype=np.float64)[:, None], 2, axis=1), factor)[:, 0]
+    cols = upsample_nearest(np.repeat(np.arange(w, dtype=np.float64)[None, :], 2, axis=0), factor)[0]
+    return rows.astype(np.intp), cols.astype(np.intp)
+
+
 def read_label_mask(path: str | Path) -> np.ndarray:
-    """A label PNG (e.g. mask_boxes, mask_dots_by_size) as int32 (H, W): the gray value of each
-    pixel. An RGB(A) image is accepted when its colour channels are equal."""
+    """A label PNG (e.g. mask_boxes, mask_dots_by_size) as (H, W) non-negative integers in the image's own
+    type (uint8 for 8-bit, uint16 or int32 for 16-bit PNGs): the gray value of each pixel. An RGB(A) image
+    is accepted when its colour channels are equal."""
     path = Path(path)
     arr = read_png(path, "label mask")
     if arr.ndim == 3:
@@ -93,7 +115,9 @@ def read_label_mask(path: str | Path) -> np.ndarray:
         if not (rgb == rgb[..., :1]).all():
             raise DataError("label mask must be gray (its colour channels differ)", path)
         arr = rgb[..., 0]
-    return arr.astype(np.int32)
+    if not np.issubdtype(arr.dtype, np.integer) or (arr.dtype.kind == "i" and arr.size and arr.min() < 0):
+        arr = arr.astype(np.int32)
+    return np.ascontiguousarray(arr)
 
 
 def _kept(arr: np.ndarray | None) -> np.ndarray | None:
@@ -121,25 +145,43 @@ class GroundTruth(LightField):
         return self.gt
 
 
-@dataclass(frozen=True)
 class Prepared:
-    """A prediction made ready to be compared with the ground truth at one resolution.
+    """A prediction made ready to be compared with the ground truth at one resolution (:meth:`SceneReference.prepare`).
 
     gt: (H s, W s) float32 ground-truth disparity (px); pred: (H s, W s) float32 prediction (px),
-    aligned and upsampled; mask: (H s, W s) bool, the pixels scored (the border of ``border_px * s``
-    and the valid mask; region masks are the metrics' own); scale: s, 1 at low resolution (10 for HCI
-    at high); resolution: 'lowres' or 'highres'; aligned_from: (h, w) of a cropped prediction placed at
-    the centre, else None; uncertainty: the prediction's uncertainty map aligned and upsampled as the
-    disparity (in its own dtype), or None. ``gt`` and ``mask`` belong to the scene's reference: read-only.
+    aligned and upsampled (on first use); aligned: the prediction aligned at low resolution (H, W) float32;
+    mask: (H s, W s) bool, the pixels scored (the border of ``border_px * s`` and the valid mask; region
+    masks are the metrics' own); scale: s, 1 at low resolution (10 for HCI at high); resolution: 'lowres'
+    or 'highres'; aligned_from: (h, w) of a cropped prediction placed at the centre, else None;
+    uncertainty: the prediction's uncertainty map aligned and upsampled as the disparity (in its own
+    dtype), or None. ``gt`` and ``mask`` belong to the scene's reference: read-only. :meth:`errors`: the
+    prediction's errors at the scored pixels of a region (gathered once per region).
     """
 
-    gt: np.ndarray
-    pred: np.ndarray
-    mask: np.ndarray
-    scale: int
-    resolution: str
-    aligned_from: tuple[int, int] | None = None
-    uncertainty: np.ndarray | None = None
+    def __init__(self, reference: SceneReference, resolution: str, aligned: np.ndarray,
+                 aligned_from: tuple[int, int] | None = None, uncertainty: np.ndarray | None = None) -> None:
+        self.reference = reference
+        self.resolution = resolution
+        self.aligned = _kept(aligned)
+        self.aligned_from = aligned_from
+        self.uncertainty = uncertainty
+        self.gt = reference.gt(resolution)
+        self.mask = reference.evaluation_mask(resolution)
+        self.scale = reference.scale(resolution)
+        self._errors: dict[str | None, PixelErrors] = {}
+
+    @functools.cached_property
+    def pred(self) -> np.ndarray:
+        """Read-only."""
+        return _kept(self.reference.upsample(self.aligned, self.resolution))
+
+    def errors(self, mask_name: str | None = None) -> PixelErrors:
+        """The prediction's errors (:class:`~lfbench.scoring.pixels.PixelErrors`) at the pixels of the
+        evaluation mask (and of the region mask ``mask_name``): :meth:`SceneReference.pixels`."""
+        if mask_name not in self._errors:
+            pixels = self.reference.pixels(self.resolution, mask_name)
+            self._errors[mask_name] = PixelErrors(pixels, pixels.values(self.aligned))
+        return self._errors[mask_name]
 
 
 class SceneReference:
@@ -164,6 +206,11 @@ class SceneReference:
         self._masks: dict[tuple[str, str], np.ndarray] = {}
         self._labels: dict[tuple[str, str], np.ndarray] = {}
         self._spatial_size: tuple[int, int] | None = None
+        self._index: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        self._pixels: dict[tuple[str, str | None], PixelSet] = {}
+        self._scored: dict[tuple[str, str], np.ndarray] = {}
+        self._memo: dict[Any, Any] = {}
+        self._per_prediction: dict[Any, tuple[np.ndarray, Any]] = {}
 
     @classmethod
     def of(cls, scene: LightField | SceneReference) -> SceneReference:
@@ -224,7 +271,7 @@ class SceneReference:
         return self._checked(self._masks[key], name, resolution, shape)
 
     def label_mask(self, name: str, resolution: str = LOWRES, shape: tuple[int, ...] | None = None) -> np.ndarray:
-        """Label mask ``<name>_<resolution>.png`` (:func:`read_label_mask`, int32, read-only), checked against
+        """Label mask ``<name>_<resolution>.png`` (:func:`read_label_mask`, integers, read-only), checked against
         ``shape`` as :meth:`mask` does."""
         key = (name, resolution)
         if key not in self._labels:
@@ -271,7 +318,7 @@ class SceneReference:
                 scale = shape[0] // h
                 if scale < 1 or shape != (h * scale, w * scale):
                     raise ValueError(f"valid mask {w}x{h} does not scale to {shape[1]}x{shape[0]}")
-                valid = upsample_nearest(valid.view(np.uint8), scale).astype(bool)
+                valid = self.upsample(valid, resolution)
             self._valid[resolution] = _kept(valid)
         return self._valid[resolution]
 
@@ -285,6 +332,64 @@ class SceneReference:
                 mask &= valid
             self._evaluation[resolution] = _kept(mask)
         return self._evaluation[resolution]
+
+    def scored_mask(self, resolution: str, mask_name: str | None = None) -> np.ndarray:
+        """The evaluation mask at ``resolution`` and, when given, the region mask ``mask_name`` there (read-only)."""
+        if mask_name is None:
+            return self.evaluation_mask(resolution)
+        key = (resolution, mask_name)
+        if key not in self._scored:
+            mask = self.evaluation_mask(resolution)
+            self._scored[key] = _kept(mask & self.mask(mask_name, resolution, mask.shape))
+        return self._scored[key]
+
+    def upsample_index(self, resolution: str) -> tuple[np.ndarray, np.ndarray]:
+        """(rows, cols) of :func:`upsample_index` from the scene's size to ``resolution``'s."""
+        if resolution not in self._index:
+            h, w = self.spatial_size
+            scale = self.scale(resolution)
+            shape = self.shape(resolution)
+            if shape != (h * scale, w * scale):
+                raise DataError(f"the {resolution} ground truth is {shape[1]}x{shape[0]}, not {scale} x the scene's "
+                                f"{w}x{h}", self.path)
+            self._index[resolution] = upsample_index((h, w), scale)
+        return self._index[resolution]
+
+    def upsample(self, arr: np.ndarray, resolution: str) -> np.ndarray:
+        """A low-resolution (H, W) map at ``resolution`` as the toolkit upsamples (``zoom(order=0)``, through
+        :meth:`upsample_index`); itself at low resolution."""
+        if self.scale(resolution) == 1:
+            return arr
+        rows, cols = self.upsample_index(resolution)
+        return np.take(np.take(arr, rows, axis=0), cols, axis=1)
+
+    def pixels(self, resolution: str, mask_name: str | None = None) -> PixelSet:
+        """The pixels scored at ``resolution`` (:meth:`scored_mask`) as a :class:`~lfbench.scoring.pixels.PixelSet`
+        that takes predictions there by the toolkit's upsampling: what every pixel-wise metric of that region
+        computes on."""
+        key = (resolution, mask_name)
+        if key not in self._pixels:
+            gt = self.gt(resolution)
+            mask = self.scored_mask(resolution, mask_name)
+            upsample = self.upsample_index(resolution) if self.scale(resolution) > 1 else None
+            self._pixels[key] = PixelSet(mask, gt, upsample=upsample, low_width=self.spatial_size[1])
+        return self._pixels[key]
+
+    def memo(self, key: Any, compute: Callable[[], Any]) -> Any:
+        """What a metric keeps of this scene (method-independent): ``compute()`` the first time ``key`` is asked
+        for, then the same value."""
+        if key not in self._memo:
+            self._memo[key] = compute()
+        return self._memo[key]
+
+    def per_prediction(self, key: Any, pred: np.ndarray, compute: Callable[[], Any]) -> Any:
+        """What a metric keeps of one prepared prediction (e.g. a map two metrics of different masks share):
+        ``compute()`` once while ``pred`` is the same (read-only) array object, kept until another
+        prediction replaces it under ``key``."""
+        slot = self._per_prediction.get(key)
+        if slot is None or slot[0] is not pred:
+            slot = self._per_prediction[key] = (pred, compute())
+        return slot[1]
 
     def general_resolution(self) -> str:
         """The resolution of the general metrics on this scene (:meth:`ScoringRules.general_resolution`)."""
@@ -309,13 +414,10 @@ class SceneReference:
         ``resolution``: aligned, float32, upsampled as the toolkit does, with the ground truth and the
         evaluation mask at that resolution. ``uncertainty`` (same shape as ``pred``), when given, is
         aligned and upsampled the same way. ``source`` names the prediction in errors."""
-        gt = self.gt(resolution)
+        self.gt(resolution)  # DataError without ground truth there, before the prediction is looked at
         aligned, aligned_from = self.align(pred, source)
-        scale = gt.shape[0] // self.spatial_size[0]
         if uncertainty is not None:
             uncertainty, _ = align_prediction(np.asarray(uncertainty), self.spatial_size, f"{source} uncertainty",
                                               max_crop=self.rules.border_px)
-            uncertainty = uncertainty if scale == 1 else upsample_nearest(uncertainty, scale)
-        return Prepared(gt=gt, pred=aligned if scale == 1 else upsample_nearest(aligned, scale),
-                        mask=self.evaluation_mask(resolution), scale=scale, resolution=resolution,
-                        aligned_from=aligned_from, uncertainty=uncertainty)
+            uncertainty = self.upsample(uncertainty, resolution)
+        return Prepared(self, resolution, aligned, aligned_from, uncertainty)

@@ -32,7 +32,8 @@ import numpy as np
 from lfbench.data.params import SceneParameters
 from lfbench.data.scene import Scene
 from lfbench.scoring.base import NON_NEGATIVE, PERCENT, Metric
-from lfbench.scoring.general import bad_pix, check_maps, mse_x100, percent_of
+from lfbench.scoring.general import bad_pix, bad_pix_of, check_maps, mse_x100, mse_x100_of, percent_of
+from lfbench.scoring.pixels import PixelErrors
 from lfbench.scoring.prepare import SceneReference
 
 __all__ = [
@@ -42,11 +43,13 @@ __all__ = [
     "depth_normals",
     "angular_error_deg",
     "median_angular_error",
+    "disparity_normals",
     "fine_fattening",
     "fine_thinning",
     "backgammon_fattening",
     "backgammon_thinning",
     "missed_dots",
+    "DotLayout",
     "toolkit_depth",
     "REGION_METRICS",
     "STRATIFIED_METRICS",
@@ -67,14 +70,13 @@ _DIFF = np.array([-1.0, 0.0, 1.0])  # correlation: f[i + 1] - f[i - 1]
 
 # --------------------------------------------------------------------------- shared helpers
 
-def _percent_bad(bad: np.ndarray, reference: np.ndarray, pred: np.ndarray, mask: np.ndarray, toolkit: bool) -> float:
-    """% of scored pixels that are bad. ``bad`` was computed with NaN comparisons False;
-    ``reference`` (gt or a value derived from it) must be finite for a pixel to be scored."""
-    if toolkit:  # the toolkit: every mask pixel is scored, NaN comparisons are good
-        return percent_of(int(np.count_nonzero(mask)), int(np.count_nonzero(bad & mask)))
-    scored = mask & np.isfinite(reference)
-    bad = bad | ~np.isfinite(pred)
-    return percent_of(int(np.count_nonzero(scored)), int(np.count_nonzero(bad & scored)))
+def _percent_bad_of(bad: np.ndarray, reference_finite: np.ndarray, px: PixelErrors, toolkit: bool) -> float:
+    """% of the pixels of ``px`` that are bad. ``bad`` was computed with NaN comparisons False;
+    the reference (gt or a value derived from it) must be finite (``reference_finite``) for a pixel to be scored."""
+    if toolkit:  # the toolkit: every pixel is scored, NaN comparisons are good
+        return percent_of(px.size, int(np.count_nonzero(bad)))
+    bad = bad | ~px.pred_finite
+    return percent_of(int(np.count_nonzero(reference_finite)), int(np.count_nonzero(bad & reference_finite)))
 
 
 _SCHARR_H = np.array([[3.0, 10.0, 3.0], [0.0, 0.0, 0.0], [-3.0, -10.0, -3.0]]) / 16.0  # scikit-image's HSCHARR
@@ -206,10 +208,18 @@ def median_angular_error(gt: np.ndarray, pred: np.ndarray, params: SceneParamete
     Disparities are converted to depth as the toolkit does (:func:`toolkit_depth`, float32), normals
     from :func:`depth_normals` in float64."""
     gt, pred, mask = check_maps(gt, pred, mask)
+    n_gt = disparity_normals(gt, params)
+    return _median_angle(angular_error_deg(n_gt, disparity_normals(pred, params)), n_gt, pred, mask, toolkit)
+
+
+def disparity_normals(disparity: np.ndarray, params: SceneParameters) -> np.ndarray:
+    """Unit normals (H, W, 3) of a disparity map's surface: :func:`depth_normals` of :func:`toolkit_depth`."""
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-        n_gt = depth_normals(toolkit_depth(gt, params), params.focal_length_mm, params.sensor_size_mm)
-        n_pred = depth_normals(toolkit_depth(pred, params), params.focal_length_mm, params.sensor_size_mm)
-    angle = angular_error_deg(n_gt, n_pred)
+        return depth_normals(toolkit_depth(disparity, params), params.focal_length_mm, params.sensor_size_mm)
+
+
+def _median_angle(angle: np.ndarray, n_gt: np.ndarray, pred: np.ndarray, mask: np.ndarray, toolkit: bool) -> float:
+    """The median of the angles (H, W) over the mask, under the non-finite rule of :func:`median_angular_error`."""
     if toolkit:
         scored = mask & np.isfinite(pred) & np.isfinite(angle)
     else:  # a normal the prediction cannot give is the worst angle; gt without a normal is not scored
@@ -225,26 +235,50 @@ def fine_fattening(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = N
                    threshold: float = FINE_THRESHOLD, *, toolkit: bool = False) -> float:
     """Fine fattening: % of scored pixels with gt - pred < -threshold (px), i.e. the prediction
     is nearer than the ground truth (scored on mask_fine_surrounding)."""
-    gt, pred, mask = check_maps(gt, pred, mask)
-    with np.errstate(invalid="ignore"):
-        bad = (gt - pred) < -threshold
-    return _percent_bad(bad, gt, pred, mask, toolkit)
+    return fine_fattening_of(PixelErrors.of_maps(gt, pred, mask), threshold, toolkit=toolkit)
+
+
+def fine_fattening_of(px: PixelErrors, threshold: float = FINE_THRESHOLD, *, toolkit: bool = False) -> float:
+    """:func:`fine_fattening` of the pixels ``px`` holds (lfbench.scoring.pixels)."""
+    with np.errstate(invalid="ignore", over="ignore"):
+        bad = (px.gt - px.pred) < -threshold
+    return _percent_bad_of(bad, px.gt_finite, px, toolkit)
 
 
 def fine_thinning(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = None,
                   threshold: float = FINE_THRESHOLD, *, toolkit: bool = False) -> float:
     """Fine thinning: % of scored pixels with gt - pred > threshold (px), i.e. the prediction is
     farther than the ground truth (scored on mask_fine)."""
-    gt, pred, mask = check_maps(gt, pred, mask)
+    return fine_thinning_of(PixelErrors.of_maps(gt, pred, mask), threshold, toolkit=toolkit)
+
+
+def fine_thinning_of(px: PixelErrors, threshold: float = FINE_THRESHOLD, *, toolkit: bool = False) -> float:
+    """:func:`fine_thinning` of the pixels ``px`` holds."""
+    with np.errstate(invalid="ignore", over="ignore"):
+        bad = (px.gt - px.pred) > threshold
+    return _percent_bad_of(bad, px.gt_finite, px, toolkit)
+
+
+def _halfway_of(px: PixelErrors, column: int) -> np.ndarray:
+    """Float64 at each pixel of ``px``: half way between its gt and the gt at ``column`` of its row (the
+    foreground or background extrapolated along the row), in float64 as the toolkit computes it; kept by
+    the pixel set (it does not depend on the prediction)."""
+    pixels = px.pixels
+
+    def compute() -> np.ndarray:
+        extrapolated = pixels.per_row(pixels.gt_map[:, column].astype(px.gt.dtype).astype(np.float64))
+        extrapolated += pixels.gt.astype(px.gt.dtype)
+        extrapolated *= 0.5
+        return extrapolated
+
+    return pixels.memo(("halfway", column, px.gt.dtype.str), compute)
+
+
+def _backgammon_of(px: PixelErrors, column: int, nearer_foreground: bool, toolkit: bool) -> float:
+    half = _halfway_of(px, column)
     with np.errstate(invalid="ignore"):
-        bad = (gt - pred) > threshold
-    return _percent_bad(bad, gt, pred, mask, toolkit)
-
-
-def _halfway_to_column(gt: np.ndarray, column: int) -> np.ndarray:
-    """(H, W) float64: half way between each pixel's gt and the gt at ``column`` of its row (the
-    foreground or background extrapolated along the row), in float64 as the toolkit computes it."""
-    return 0.5 * (gt[:, column:column + 1].astype(np.float64) + gt)
+        bad = px.pred > half if nearer_foreground else px.pred < half
+    return _percent_bad_of(bad, np.isfinite(half), px, toolkit)
 
 
 def backgammon_fattening(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = None, *, fg_column: int,
@@ -252,11 +286,7 @@ def backgammon_fattening(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | No
     """Backgammon fattening: % of scored pixels with pred > (gt + fg) / 2, where fg (per row) is
     the gt at column ``fg_column`` (the foreground extrapolated along each row): the prediction
     is nearer to the foreground than to the true (background) disparity."""
-    gt, pred, mask = check_maps(gt, pred, mask)
-    half = _halfway_to_column(gt, fg_column)
-    with np.errstate(invalid="ignore"):
-        bad = pred > half
-    return _percent_bad(bad, half, pred, mask, toolkit)
+    return _backgammon_of(PixelErrors.of_maps(gt, pred, mask), fg_column, True, toolkit)
 
 
 def backgammon_thinning(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = None, *, bg_column: int,
@@ -264,11 +294,7 @@ def backgammon_thinning(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | Non
     """Backgammon thinning: % of scored pixels with pred < (gt + bg) / 2, where bg (per row) is
     the gt at column ``bg_column`` (the background extrapolated along each row): the prediction
     is nearer to the background than to the true (foreground) disparity."""
-    gt, pred, mask = check_maps(gt, pred, mask)
-    half = _halfway_to_column(gt, bg_column)
-    with np.errstate(invalid="ignore"):
-        bad = pred < half
-    return _percent_bad(bad, half, pred, mask, toolkit)
+    return _backgammon_of(PixelErrors.of_maps(gt, pred, mask), bg_column, False, toolkit)
 
 
 # --------------------------------------------------------------------------- dots
@@ -289,61 +315,100 @@ def missed_dots(gt: np.ndarray, pred: np.ndarray, boxes: np.ndarray, dots_by_siz
     toolkit's): pixels outside it are not scored, and a dot with no valid pixel is no dot, in both modes.
     """
     gt, pred, _ = check_maps(gt, pred, None)
-    boxes = np.asarray(boxes)
-    dots_by_size = np.asarray(dots_by_size)
-    if boxes.shape != gt.shape or dots_by_size.shape != gt.shape:
-        raise ValueError(f"boxes {boxes.shape} and dots {dots_by_size.shape} must match gt {gt.shape}")
-    if boxes.size and (boxes.min() < 0 or dots_by_size.min() < 0):
-        raise ValueError("box and dot labels must be non-negative integers")
-    box_lut = _label_lut(boxes, 1, None)  # label value -> index of the box, -1 for none
-    dot_lut = _first_labels(dots_by_size, max_label)
-    n_boxes, n_labels = int(box_lut.max()) + 1, int(dot_lut.max()) + 1
-    n_pairs = n_boxes * n_labels
-    if n_pairs == 0:
-        return float("nan")
-    box_idx = box_lut[boxes]
-    dot_idx = dot_lut[dots_by_size]
-    in_dot = (box_idx >= 0) & (dot_idx >= 0)
-    key = box_idx * n_labels + dot_idx
-    dropped = 0  # (box, label) pairs whose pixels all lie outside ``valid``
-    if valid is not None:
-        valid = np.asarray(valid, dtype=bool)
-        if valid.shape != gt.shape:
-            raise ValueError(f"valid mask {valid.shape} must match gt {gt.shape}")
-        had_pixels = np.bincount(key[in_dot], minlength=n_pairs) > 0
-        in_dot &= valid
-        dropped = int(np.count_nonzero(had_pixels & (np.bincount(key[in_dot], minlength=n_pairs) == 0)))
-    with np.errstate(invalid="ignore"):
-        bad = np.abs(gt - pred) > threshold
-    if toolkit:
-        scored = in_dot
-    else:
-        scored = in_dot & np.isfinite(gt)
-        bad = bad | ~np.isfinite(pred)
-    n = np.bincount(key[scored], minlength=n_pairs)
-    n_bad = np.bincount(key[scored & bad], minlength=n_pairs)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        dot_bad_pix = 100.0 * n_bad / n
-    missed = (n > 0) & (dot_bad_pix >= missed_percent)
-    if toolkit:
-        return percent_of(n_pairs - dropped, int(np.count_nonzero(missed | (n == 0))) - dropped)
-    return percent_of(int(np.count_nonzero(n > 0)), int(np.count_nonzero(missed)))
+    dots = DotLayout.of(boxes, dots_by_size, valid, shape=gt.shape, max_label=max_label)
+    return dots.missed(gt.ravel()[dots.index], pred.ravel()[dots.index], threshold=threshold,
+                       missed_percent=missed_percent, toolkit=toolkit)
+
+
+class DotLayout:
+    """The dots of :func:`missed_dots` on one scene, whatever the prediction: ``index``, the flat indices of
+    the pixels of every dot (inside ``valid``); ``key``, each one's dot ((box, label) pair) number;
+    ``n_pairs``, the number of (box, label) pairs; ``dropped``, pairs whose pixels all lie outside ``valid``."""
+
+    def __init__(self, index: np.ndarray, key: np.ndarray, n_pairs: int, dropped: int) -> None:
+        self.index, self.key, self.n_pairs, self.dropped = index, key, n_pairs, dropped
+
+    @classmethod
+    def of(cls, boxes: np.ndarray, dots_by_size: np.ndarray, valid: np.ndarray | None, *, shape: tuple[int, ...],
+           max_label: int = DOT_MAX_LABEL) -> DotLayout:
+        """The layout of the label masks ``boxes`` and ``dots_by_size`` ((H, W) int, the ground truth's
+        ``shape``) and the valid mask (bool (H, W) or None); ValueError for other shapes or negative labels."""
+        boxes = np.asarray(boxes)
+        dots_by_size = np.asarray(dots_by_size)
+        if boxes.shape != tuple(shape) or dots_by_size.shape != tuple(shape):
+            raise ValueError(f"boxes {boxes.shape} and dots {dots_by_size.shape} must match gt {tuple(shape)}")
+        if boxes.size and (boxes.min() < 0 or dots_by_size.min() < 0):
+            raise ValueError("box and dot labels must be non-negative integers")
+        box_lut = _label_lut(boxes, 1, None)  # label value -> index of the box, -1 for none
+        dot_lut = _first_labels(dots_by_size, max_label)
+        n_boxes, n_labels = int(box_lut.max()) + 1, int(dot_lut.max()) + 1
+        n_pairs = n_boxes * n_labels
+        if n_pairs == 0:
+            return cls(np.zeros(0, np.intp), np.zeros(0, np.intp), 0, 0)
+        # only pixels with a dot label 1..n can lie in a dot: the rest of the work is on them alone
+        candidates = np.flatnonzero((dots_by_size > 0).ravel() & (dots_by_size <= n_labels).ravel())
+        box_idx = box_lut[boxes.ravel()[candidates]]
+        dot_idx = dot_lut[dots_by_size.ravel()[candidates]]
+        in_dot = (box_idx >= 0) & (dot_idx >= 0)
+        key = box_idx * n_labels + dot_idx
+        dropped = 0
+        if valid is not None:
+            valid = np.asarray(valid, dtype=bool)
+            if valid.shape != tuple(shape):
+                raise ValueError(f"valid mask {valid.shape} must match gt {tuple(shape)}")
+            had_pixels = np.bincount(key[in_dot], minlength=n_pairs) > 0
+            in_dot &= valid.ravel()[candidates]
+            dropped = int(np.count_nonzero(had_pixels & (np.bincount(key[in_dot], minlength=n_pairs) == 0)))
+        return cls(candidates[in_dot], key[in_dot], n_pairs, dropped)
+
+    def missed(self, gt: np.ndarray, pred: np.ndarray, *, threshold: float = DOT_THRESHOLD,
+               missed_percent: float = DOT_MISSED_PERCENT, toolkit: bool = False) -> float:
+        """:func:`missed_dots` of the ground truth and prediction at :attr:`index` (1-D, one precision)."""
+        if self.n_pairs == 0:
+            return float("nan")
+        with np.errstate(invalid="ignore", over="ignore"):
+            bad = np.abs(gt - pred) > threshold
+        if toolkit:
+            key = self.key
+        else:
+            scored = np.isfinite(gt)
+            bad = (bad | ~np.isfinite(pred))[scored]
+            key = self.key[scored]
+        n = np.bincount(key, minlength=self.n_pairs)
+        n_bad = np.bincount(key[bad], minlength=self.n_pairs)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            dot_bad_pix = 100.0 * n_bad / n
+        missed = (n > 0) & (dot_bad_pix >= missed_percent)
+        if toolkit:
+            return percent_of(self.n_pairs - self.dropped, int(np.count_nonzero(missed | (n == 0))) - self.dropped)
+        return percent_of(int(np.count_nonzero(n > 0)), int(np.count_nonzero(missed)))
 
 
 def _first_labels(labels: np.ndarray, highest: int) -> np.ndarray:
     """The toolkit's dot labels: with n = the number of distinct labels in 1..highest present, the
     labels 1..n (even when one of them is absent and a higher one present). Lookup table: label
     value -> its index 0..n-1, else -1."""
-    values = np.unique(labels)
-    n = int(np.count_nonzero((values > 0) & (values <= highest)))
-    lut = np.full(max(int(values.max()) + 1 if values.size else 1, n + 1), -1, dtype=np.intp)
+    present = _present(labels)
+    n = int(np.count_nonzero(present[1:highest + 1]))
+    lut = np.full(max(present.size, n + 1), -1, dtype=np.intp)
     lut[1:n + 1] = np.arange(n)
     return lut
 
 
+def _present(labels: np.ndarray, chunk: int = 1 << 20) -> np.ndarray:
+    """Bool by label value 0..max: whether it occurs in ``labels`` (non-negative integers); counted a chunk
+    at a time, so that no copy of a high-resolution mask in the index type is made."""
+    flat = labels.ravel()
+    present = np.zeros(int(flat.max()) + 1 if flat.size else 1, bool)
+    for start in range(0, flat.size, chunk):
+        counts = np.bincount(flat[start:start + chunk])
+        present[:counts.size] |= counts > 0
+    return present
+
+
 def _label_lut(labels: np.ndarray, lowest: int, highest: int | None) -> np.ndarray:
     """A lookup table: label value -> rank among the values present in [lowest, highest], else -1."""
-    present = np.bincount(labels.ravel().astype(np.intp, copy=False)) > 0 if labels.size else np.zeros(1, bool)
+    present = _present(labels)
     present[:lowest] = False
     if highest is not None:
         present[highest + 1:] = False
@@ -364,20 +429,43 @@ def _bad_pix_fn(t: float):
     return fn
 
 
+def _bad_pix_pixels(t: float):
+    def pixel_fn(px, *, toolkit=False):
+        return bad_pix_of(px, t, toolkit=toolkit)
+    return pixel_fn
+
+
 def _bump_fn(gt, pred, mask=None, *, toolkit=False):
     return bumpiness_x100(gt, pred, mask, toolkit=toolkit)
 
 
-def _mae_fn(gt, pred, mask=None, *, toolkit=False, scene: Scene, resolution: str):
-    return median_angular_error(gt, pred, scene.params, mask, toolkit=toolkit)
+def _mae_fn(gt, pred, mask=None, *, toolkit=False, scene: Scene | SceneReference, resolution: str):
+    reference = SceneReference.of(scene)
+    if gt is not reference.gt(resolution) or np.asarray(pred).flags.writeable:
+        return median_angular_error(gt, pred, reference.params, mask, toolkit=toolkit)
+    # the scene's own gt and a prepared (read-only) prediction: gt normals kept for the scene, the angles for
+    # the prediction (MAE of planes and of smooth surfaces share them)
+    gt, pred, mask = check_maps(gt, pred, mask)
+    n_gt = reference.memo(("gt_normals", resolution, gt.dtype.str), lambda: disparity_normals(gt, reference.params))
+    angle = reference.per_prediction(("mae_angle", resolution), pred,
+                                     lambda: angular_error_deg(n_gt, disparity_normals(pred, reference.params)))
+    return _median_angle(angle, n_gt, pred, mask, toolkit)
 
 
 def _fine_fat_fn(gt, pred, mask=None, *, toolkit=False):
     return fine_fattening(gt, pred, mask, toolkit=toolkit)
 
 
+def _fine_fat_pixels(px, *, toolkit=False):
+    return fine_fattening_of(px, toolkit=toolkit)
+
+
 def _fine_thin_fn(gt, pred, mask=None, *, toolkit=False):
     return fine_thinning(gt, pred, mask, toolkit=toolkit)
+
+
+def _fine_thin_pixels(px, *, toolkit=False):
+    return fine_thinning_of(px, toolkit=toolkit)
 
 
 def _bg_fat_fn(gt, pred, mask=None, *, toolkit=False, scene: Scene, resolution: str):
@@ -385,15 +473,35 @@ def _bg_fat_fn(gt, pred, mask=None, *, toolkit=False, scene: Scene, resolution: 
                                 toolkit=toolkit)
 
 
+def _bg_fat_pixels(px, *, toolkit=False):
+    scale = max(1, px.pixels.shape[1] // px.pixels.low_width)
+    return _backgammon_of(px, int(BACKGAMMON_FG_COLUMN * scale), True, toolkit)
+
+
 def _bg_thin_fn(gt, pred, mask=None, *, toolkit=False, scene: Scene, resolution: str):
     return backgammon_thinning(gt, pred, mask, bg_column=gt.shape[1] - BACKGAMMON_BG_FROM_RIGHT, toolkit=toolkit)
 
 
+def _bg_thin_pixels(px, *, toolkit=False):
+    return _backgammon_of(px, px.pixels.shape[1] - BACKGAMMON_BG_FROM_RIGHT, False, toolkit)
+
+
 def _missed_dots_fn(gt, pred, mask=None, *, toolkit=False, scene: Scene | SceneReference, resolution: str):
     reference = SceneReference.of(scene)
-    boxes = reference.label_mask("mask_boxes", resolution, gt.shape)
-    dots = reference.label_mask("mask_dots_by_size", resolution, gt.shape)
-    return missed_dots(gt, pred, boxes, dots, toolkit=toolkit, valid=reference.valid_mask(resolution))
+    check_maps(gt, pred, None)  # one shape
+
+    def layout() -> tuple[DotLayout, np.ndarray]:
+        boxes = reference.label_mask("mask_boxes", resolution, gt.shape)
+        dots = DotLayout.of(boxes, reference.label_mask("mask_dots_by_size", resolution, gt.shape),
+                            reference.valid_mask(resolution), shape=gt.shape)
+        return dots, gt.ravel()[dots.index]
+
+    if gt is reference.gt(resolution):  # the scene's own: its dots and their gt kept for every prediction
+        dots, gt_dots = reference.memo(("missed_dots", resolution), layout)
+    else:
+        dots, gt_dots = layout()
+    gt_dots, pred_dots = check_maps(gt_dots, np.asarray(pred).ravel()[dots.index], None)[:2]
+    return dots.missed(gt_dots, pred_dots, toolkit=toolkit)
 
 
 _SLANTED_MASKS = ("mask_sphere_in", "mask_sphere_out", "mask_pyramids")
@@ -415,10 +523,11 @@ _RANGE_OF_UNIT = {"%": PERCENT, "% of dots": PERCENT, _BUMP_UNIT: (0.0, 100 * BU
 
 
 def _region(id, name, description, unit, fn, toolkit_id, mask_name, resolution, vmin, vmax, cmap, *,
-            category="region", extra_masks=(), needs_scene=False) -> Metric:
+            category="region", extra_masks=(), needs_scene=False, pixel_fn=None) -> Metric:
     return Metric(id=id, name=name, description=description, unit=unit, fn=fn, toolkit_id=toolkit_id,
                   mask_name=mask_name, resolution=resolution, vmin=vmin, vmax=vmax, cmap=cmap, category=category,
-                  extra_masks=tuple(extra_masks), needs_scene=needs_scene, value_range=_RANGE_OF_UNIT[unit])
+                  extra_masks=tuple(extra_masks), needs_scene=needs_scene, value_range=_RANGE_OF_UNIT[unit],
+                  pixel_fn=pixel_fn)
 
 _BUMP_DESC = ("100 x the mean of min(||Scharr Hessian of (pred - gt)||_F, 0.05) over {}: 0 = as smooth as the ground "
               "truth (a constant or planar offset is not penalised).")
@@ -426,7 +535,8 @@ _BUMP_DESC = ("100 x the mean of min(||Scharr Hessian of (pred - gt)||_F, 0.05) 
 REGION_METRICS: tuple[Metric, ...] = (
     _region("discontinuities", "Discontinuities",
             "BadPix(0.07): % of pixels at depth discontinuities (mask_discontinuities) with |gt - pred| > 0.07 px.",
-            "%", _bad_pix_fn(0.07), "discontinuities_0070", "mask_discontinuities", "highres", 0, 1, "RdYlGn_r"),
+            "%", _bad_pix_fn(0.07), "discontinuities_0070", "mask_discontinuities", "highres", 0, 1, "RdYlGn_r",
+            pixel_fn=_bad_pix_pixels(0.07)),
     _region("bumpiness_planes", "Bumpiness Planes", _BUMP_DESC.format("planar regions (mask_planes)"), _BUMP_UNIT,
             _bump_fn, "bumpiness_planes_100_0050", "mask_planes", "lowres", 0, 5, "viridis"),
     _region("bumpiness_contin_surfaces", "Bumpiness Contin. Surfaces",
@@ -442,10 +552,12 @@ REGION_METRICS: tuple[Metric, ...] = (
             needs_scene=True),
     _region("fine_fattening", "Fine Fattening",
             "% of pixels around fine structures (mask_fine_surrounding) with gt - pred < -0.15 px.",
-            "%", _fine_fat_fn, "fine_fattening_0150", "mask_fine_surrounding", "highres", 0, 1, "RdYlGn_r"),
+            "%", _fine_fat_fn, "fine_fattening_0150", "mask_fine_surrounding", "highres", 0, 1, "RdYlGn_r",
+            pixel_fn=_fine_fat_pixels),
     _region("fine_thinning", "Fine Thinning",
             "% of pixels on fine structures (mask_fine) with gt - pred > 0.15 px.",
-            "%", _fine_thin_fn, "fine_thinning_0150", "mask_fine", "highres", 0, 1, "RdYlGn_r"),
+            "%", _fine_thin_fn, "fine_thinning_0150", "mask_fine", "highres", 0, 1, "RdYlGn_r",
+            pixel_fn=_fine_thin_pixels),
 )
 
 
@@ -460,17 +572,18 @@ STRATIFIED_METRICS: dict[str, tuple[Metric, ...]] = {
                "% of background pixels between the foreground bars (mask_foreground_fattening) whose prediction is "
                "nearer to the foreground than half way from the ground truth.",
                "%", _bg_fat_fn, "backgammon_fattening_0070", "mask_foreground_fattening", "highres", 0, 1, "RdYlGn_r",
-               needs_scene=True),
+               needs_scene=True, pixel_fn=_bg_fat_pixels),
         _strat("backgammon_thinning", "Backgammon: Thinning",
                "% of pixels on the foreground bars (mask_foreground_thinning) whose prediction is nearer to the "
                "background than half way from the ground truth.",
                "%", _bg_thin_fn, "backgammon_thinning_0070", "mask_foreground_thinning", "highres", 0, 1, "RdYlGn_r",
-               needs_scene=True),
+               needs_scene=True, pixel_fn=_bg_thin_pixels),
     ),
     "dots": (
         _strat("dots_background_mse", "Dots: Background MSE",
                "Mean squared disparity error (px^2) x 100 on the noisy background (mask_background).",
-               "px^2 x 100", mse_x100, "background_mse_100", "mask_background", "highres", -0.2, 0.2, "seismic"),
+               "px^2 x 100", mse_x100, "background_mse_100", "mask_background", "highres", -0.2, 0.2, "seismic",
+               pixel_fn=mse_x100_of),
         _strat("missed_dots", "Dots: Missed Dots",
                "% of dots (size labels 1-8 of mask_dots_by_size in each cell of mask_boxes) with BadPix(0.4) >= 50%.",
                "% of dots", _missed_dots_fn, "missed_dots_50_0400", None, "highres", 0, 1, "RdYlGn_r",
@@ -488,13 +601,16 @@ STRATIFIED_METRICS: dict[str, tuple[Metric, ...]] = {
     "stripes": (
         _strat("stripes_low_texture", "Stripes: Low Texture",
                "BadPix(0.07) on the low-texture region (mask_low_texture).",
-               "%", _bad_pix_fn(0.07), "low_texture_0070", "mask_low_texture", "highres", 0, 1, "RdYlGn_r"),
+               "%", _bad_pix_fn(0.07), "low_texture_0070", "mask_low_texture", "highres", 0, 1, "RdYlGn_r",
+               pixel_fn=_bad_pix_pixels(0.07)),
         _strat("stripes_dark", "Stripes: Dark Stripes",
                "BadPix(0.07) on the high-contrast (dark) stripes (mask_high_contrast).",
-               "%", _bad_pix_fn(0.07), "dark_stripes_0070", "mask_high_contrast", "highres", 0, 1, "RdYlGn_r"),
+               "%", _bad_pix_fn(0.07), "dark_stripes_0070", "mask_high_contrast", "highres", 0, 1, "RdYlGn_r",
+               pixel_fn=_bad_pix_pixels(0.07)),
         _strat("stripes_bright", "Stripes: Bright Stripes",
                "BadPix(0.07) on the low-contrast (bright) stripes (mask_low_contrast).",
-               "%", _bad_pix_fn(0.07), "bright_stripes_0070", "mask_low_contrast", "highres", 0, 1, "RdYlGn_r"),
+               "%", _bad_pix_fn(0.07), "bright_stripes_0070", "mask_low_contrast", "highres", 0, 1, "RdYlGn_r",
+               pixel_fn=_bad_pix_pixels(0.07)),
     ),
 }
 

@@ -3,7 +3,11 @@
 Each metric is scored at the resolution the rules give it (:func:`lfbench.scoring.rules.metric_resolution`)
 on the prediction as :meth:`lfbench.scoring.prepare.SceneReference.prepare` makes it ready (alignment of a
 cropped map, float32, the toolkit's upsampling, border and valid mask), prepared once per resolution; a
-region metric adds its own mask. :func:`applicable_metrics` lists what a scene supports.
+region metric adds its own mask. A pixel-wise metric (``Metric.pixel_fn``) is computed from the prediction's
+errors at its pixels, gathered once per region and shared by every metric of that region (|error| once for
+every BadPix threshold, MSE and the quantiles); the others from the maps. What does not depend on the method
+is the scene's :class:`~lfbench.scoring.prepare.SceneReference`: pass one reference for every prediction
+scored on a scene. :func:`applicable_metrics` lists what a scene supports.
 """
 
 from __future__ import annotations
@@ -20,7 +24,7 @@ from lfbench.scoring.prepare import Prepared, SceneReference
 from lfbench.scoring.region_metrics import scene_metrics
 from lfbench.scoring.rules import ScoringRules, metric_resolution
 
-__all__ = ["SceneScore", "applicable_metrics", "score_scene"]
+__all__ = ["SceneScore", "applicable_metrics", "score_predictions", "score_scene"]
 
 
 @dataclass
@@ -76,13 +80,14 @@ def score_scene(scene: Scene, pred: np.ndarray, metrics: Sequence[Metric] = GENE
                 continue
             prepared[res] = reference.prepare(pred, res, source)
         p = prepared[res]
-        mask = p.mask
-        if metric.mask_name is not None:
-            if metric.mask_name not in reference.mask_names(res):
-                continue
-            mask = mask & reference.mask(metric.mask_name, res, mask.shape)
-        context = {"scene": reference, "resolution": res} if metric.needs_scene else {}
-        values[metric.id] = metric(p.gt, p.pred, mask, toolkit=rules.toolkit, **context)
+        if metric.mask_name is not None and metric.mask_name not in reference.mask_names(res):
+            continue
+        if metric.pixel_fn is not None:  # pixel-wise: from the errors at its pixels, gathered once per region
+            values[metric.id] = metric.score_pixels(p.errors(metric.mask_name), toolkit=rules.toolkit)
+        else:
+            context = {"scene": reference, "resolution": res} if metric.needs_scene else {}
+            values[metric.id] = metric(p.gt, p.pred, reference.scored_mask(res, metric.mask_name),
+                                       toolkit=rules.toolkit, **context)
         resolution[metric.id] = res
     timed = [m for m in metrics if m.is_runtime]
     for metric in timed:
@@ -93,3 +98,15 @@ def score_scene(scene: Scene, pred: np.ndarray, metrics: Sequence[Metric] = GENE
         notes.append(f"runtime {runtime_s:g} s is not a positive number: no runtime record")
     return SceneScore(scene=scene.name, values=values, resolution=resolution, nonfinite_pixels=nonfinite,
                       aligned_from=aligned_from, notes=notes)
+
+
+def score_predictions(scene: Scene, predictions: Sequence[tuple[np.ndarray, float | None, str]],
+                      metrics: Sequence[Metric] = GENERAL_METRICS, rules: ScoringRules = ScoringRules()
+                      ) -> list[SceneScore]:
+    """Score several predictions on one scene (e.g. every method's): ``predictions`` are (disparity (H, W),
+    runtime in s or None, source: the name errors give it). One :class:`SceneReference` serves them all, so
+    the ground truth, masks, upsampling index and scored pixels are made once; it is dropped on return (the
+    memory of one scene). Each score is :func:`score_scene`'s."""
+    reference = SceneReference(scene, rules)
+    return [score_scene(scene, disparity, metrics, rules, source, runtime_s=runtime_s, reference=reference)
+            for disparity, runtime_s, source in predictions]

@@ -1,7 +1,8 @@
 """Validation during training: whole-image inference on chosen scenes, BadPix and MSE x100
 (lfbench.scoring.metrics) inside a border mask, per scene and pooled over the pixels of all scenes (as
 the authors' validation pools its 8 scenes). Each prediction is prepared for scoring as every score is
-(lfbench.scoring.prepare.SceneReference.prepare), at low resolution, on the validation crop."""
+(lfbench.scoring.prepare.SceneReference.prepare), at low resolution, on the validation crop, and scored from
+its errors at the scored pixels (lfbench.scoring.pixels), as the scoring engine scores every metric."""
 
 from __future__ import annotations
 
@@ -12,7 +13,8 @@ import numpy as np
 import torch
 
 from lfbench.data.scene import LOWRES, Scene
-from lfbench.scoring.metrics import bad_pix, mse_x100
+from lfbench.scoring.general import bad_pix_of, mse_x100_of
+from lfbench.scoring.pixels import PixelErrors
 from lfbench.scoring.prepare import SceneReference
 from lfbench.scoring.rules import ScoringRules
 from lfbench.training.data import ValidationScene, validation_size
@@ -52,10 +54,10 @@ def validate(model: torch.nn.Module, scenes: Sequence[ValidationScene], device: 
     for s in scenes:
         p = SceneReference.of_ground_truth(s.gt, rules, s.name).prepare(predict_disparity(model, s.views, device),
                                                                         LOWRES, f"validation on {s.name}")
-        mask = p.mask & np.isfinite(p.gt)
-        per_scene[s.name] = {"badpix": bad_pix(p.gt, p.pred, threshold, mask), "mse_x100": mse_x100(p.gt, p.pred, mask)}
-        gts.append(p.gt[mask])
-        preds.append(p.pred[mask])
-    gt, pred = np.concatenate(gts), np.concatenate(preds)
-    return {"badpix": bad_pix(gt, pred, threshold), "mse_x100": mse_x100(gt, pred), "threshold": threshold,
-            "pixels": int(gt.size), "scenes": per_scene}
+        px = p.errors()  # the prediction's errors inside the border, as every score computes them
+        per_scene[s.name] = {"badpix": bad_pix_of(px, threshold), "mse_x100": mse_x100_of(px)}
+        gts.append(px.gt[px.gt_finite])
+        preds.append(px.pred[px.gt_finite])
+    pooled = PixelErrors.of_maps(np.concatenate(gts), np.concatenate(preds))
+    return {"badpix": bad_pix_of(pooled, threshold), "mse_x100": mse_x100_of(pooled), "threshold": threshold,
+            "pixels": pooled.size, "scenes": per_scene}

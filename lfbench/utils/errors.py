@@ -18,6 +18,9 @@ class LFBenchError(Exception):
         self.path = None if path is None else Path(path)
         super().__init__(message)
 
+    def __reduce__(self):  # message and path survive a trip to a worker process and back
+        return type(self), (self.args[0] if self.args else "", self.path)
+
     def __str__(self) -> str:
         msg = _visible(" ".join(super().__str__().split()))  # always a single line
         return f"{_visible(str(self.path))}: {msg}" if self.path is not None else msg

@@ -1,0 +1,146 @@
+"""The scored pixels of a metric and a prediction's errors on them: what the pixel-wise metrics compute from.
+
+A pixel-wise metric (BadPix, MSE, the quantiles, and the region metrics that count pixels of a mask) depends
+only on the (ground truth, prediction) pairs of the pixels it scores, in raster order, not on where they lie.
+So scoring keeps, per scene, each set of scored pixels once (:class:`PixelSet`: their mask, how a
+low-resolution prediction reaches them, their ground truth), and per prediction gathers
+its values at those pixels once (:class:`PixelErrors`) and computes the absolute error, the finite masks
+and anything else its metrics ask for once, for every metric of that set.
+
+The metric functions of arrays (:func:`lfbench.scoring.general.bad_pix`, ...) compute through the same
+objects (:meth:`PixelErrors.of_maps`), so there is one definition of each metric. Values are bit for bit
+those of the same formula on the full maps: the same elements in the same order (a boolean mask keeps raster
+order), the same precision (the maps' common one, at least float32).
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+__all__ = ["PixelErrors", "PixelSet", "common_precision"]
+
+
+def common_precision(gt: np.ndarray, pred: np.ndarray) -> np.dtype:
+    """The precision the metrics compute in: the maps' common float type, at least float32."""
+    return np.result_type(gt.dtype, pred.dtype, np.float32)
+
+
+def _read_only(arr: np.ndarray) -> np.ndarray:
+    arr.flags.writeable = False
+    return arr
+
+
+class PixelSet:
+    """Pixels a metric scores on one scene at one resolution, whatever the method (kept by the scene's
+    :class:`~lfbench.scoring.prepare.SceneReference`).
+
+    ``mask``: bool (H, W), the pixels; ``gt_map``: the ground truth (H, W); ``upsample``: (rows, cols), the
+    low-resolution row of each of the H rows and column of each of the W columns (the toolkit's upsampling,
+    lfbench.scoring.prepare.upsample_index) when predictions come at low resolution, else None.
+    ``low_width``: the width of the low-resolution map (the scene's; W when the maps are at it).
+    :meth:`memo` keeps further method-independent arrays of the set (e.g. a metric's per-pixel reference values).
+    """
+
+    def __init__(self, mask: np.ndarray | None, gt_map: np.ndarray, *,
+                 upsample: tuple[np.ndarray, np.ndarray] | None = None, low_width: int | None = None) -> None:
+        self.mask = mask
+        self.gt_map = gt_map
+        self.shape: tuple[int, ...] = tuple(gt_map.shape)
+        self.upsample = upsample
+        self.low_width = int(self.shape[-1] if low_width is None else low_width)
+        self._memo: dict[Any, Any] = {}
+
+    @functools.cached_property
+    def gt(self) -> np.ndarray:
+        """The ground truth at the pixels (1-D, the map's dtype, read-only)."""
+        return _read_only(self.gt_map.ravel() if self.mask is None else self.gt_map[self.mask])
+
+    def per_row(self, values: np.ndarray) -> np.ndarray:
+        """``values`` (one per row of the map) at each pixel: the value of its row (raster order is row by row)."""
+        h, w = self.shape
+        counts = np.full(h, w) if self.mask is None else np.count_nonzero(self.mask, axis=1)
+        return np.repeat(values, counts)
+
+    @functools.cached_property
+    def size(self) -> int:
+        return int(self.gt.size)
+
+    def memo(self, key: Any, compute: Callable[[], Any]) -> Any:
+        """``compute()`` the first time ``key`` is asked for, then the same value (method-independent data)."""
+        if key not in self._memo:
+            self._memo[key] = compute()
+        return self._memo[key]
+
+    def values(self, pred: np.ndarray, rows_per_block: int = 256) -> np.ndarray:
+        """A prediction's values at the pixels, in raster order: ``pred`` is the low-resolution map when the
+        set upsamples (taken to the set's resolution a block of rows at a time, never whole), else a map of
+        ``shape``."""
+        pred = np.asarray(pred)
+        if self.upsample is None:
+            return pred.ravel() if self.mask is None else pred[self.mask]
+        rows, cols = self.upsample
+        mask = np.ones(self.shape, bool) if self.mask is None else self.mask
+        out = np.empty(self.size, dtype=pred.dtype)
+        at = 0
+        for r in range(0, self.shape[0], rows_per_block):
+            block = pred.take(rows[r:r + rows_per_block], axis=0).take(cols, axis=1)[mask[r:r + rows_per_block]]
+            out[at:at + block.size] = block
+            at += block.size
+        return out
+
+
+class PixelErrors:
+    """One prediction on a :class:`PixelSet`: ground truth and prediction at its pixels in their common
+    precision, and what every pixel-wise metric computes from them, each computed once: ``err`` =
+    |pred - gt|, ``gt_finite``, ``pred_finite``."""
+
+    def __init__(self, pixels: PixelSet, pred: np.ndarray) -> None:
+        self.pixels = pixels
+        dtype = common_precision(pixels.gt, pred)
+        self.gt = pixels.gt.astype(dtype, copy=False)
+        self.pred = np.asarray(pred).astype(dtype, copy=False)
+
+    @classmethod
+    def of_maps(cls, gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = None) -> PixelErrors:
+        """The errors of ``pred`` against ``gt`` ((H, W) of one shape) at the pixels of ``mask`` (bool (H, W),
+        None = all). ValueError when the shapes differ."""
+        gt, pred = np.asarray(gt), np.asarray(pred)
+        if gt.shape != pred.shape:
+            raise ValueError(f"gt {gt.shape} and pred {pred.shape} differ in shape")
+        if mask is not None:
+            mask = np.asarray(mask, dtype=bool)
+            if mask.shape != gt.shape:
+                raise ValueError(f"mask {mask.shape} and gt {gt.shape} differ in shape")
+        if gt.ndim != 2:  # a plain array of values: every element is a pixel
+            gt, pred = gt.reshape(1, -1), pred.reshape(1, -1)
+            mask = None if mask is None else mask.reshape(1, -1)
+        pixels = PixelSet(mask, gt)
+        return cls(pixels, pixels.values(pred))
+
+    @property
+    def size(self) -> int:
+        return int(self.gt.size)
+
+    @functools.cached_property
+    def err(self) -> np.ndarray:
+        """|pred - gt| (NaN where either is NaN)."""
+        with np.errstate(invalid="ignore", over="ignore"):
+            err = np.subtract(self.pred, self.gt)
+            return np.abs(err, out=err)
+
+    @functools.cached_property
+    def gt_finite(self) -> np.ndarray:
+        return np.isfinite(self.gt)
+
+    @functools.cached_property
+    def pred_finite(self) -> np.ndarray:
+        return np.isfinite(self.pred)
+
+    @functools.cached_property
+    def finite(self) -> np.ndarray:
+        """Both finite."""
+        return self.gt_finite & self.pred_finite
