@@ -26,12 +26,14 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[2]
 OLD_TESTS = ("tests/test_metrics.py", "tests/test_region_metrics.py", "tests/test_toolkit_fidelity.py",
              "tests/test_regress.py")
-S, G = "tests/test_scoring_mutants.py", "tests/test_gate_mutants.py"
+S, G, E = "tests/test_scoring_mutants.py", "tests/test_gate_mutants.py", "tests/test_scoring_engine.py"
+M = "tests/test_scoring_engine_mutants.py"  # the issue-23 survivors' tests
 # where the mutated code lives (the issue named lfbench/scoring/metrics.py and rules.py; since issue 21 the
-# general metrics are in general.py, the preparation of a prediction in prepare.py, score_scene in score.py)
-GENERAL, PREPARE, SCORE, REGION, REGRESS = ("lfbench/scoring/general.py", "lfbench/scoring/prepare.py",
-                                            "lfbench/scoring/score.py", "lfbench/scoring/region_metrics.py",
-                                            "lfbench/runs/regress.py")
+# general metrics are in general.py, the preparation of a prediction in prepare.py, score_scene in score.py;
+# since issue 23 the errors at the scored pixels in pixels.py)
+GENERAL, PREPARE, REGION, REGRESS, PIXELS = ("lfbench/scoring/general.py", "lfbench/scoring/prepare.py",
+                                             "lfbench/scoring/region_metrics.py", "lfbench/runs/regress.py",
+                                             "lfbench/scoring/pixels.py")
 
 
 @dataclass(frozen=True)
@@ -140,6 +142,34 @@ MUTATIONS = (
     Mutation("fine_fattening_abs", "8", REGION, "bad = (px.gt - px.pred) < -threshold",
              "bad = np.abs(px.gt - px.pred) > threshold",
              (f"{S}::test_fine_fattening_is_not_symmetric_with_thinning",)),
+    # 9: properties, which mutmut does not mutate (it skips every decorated function but static and class
+    # methods): the errors every pixel-wise metric computes from (issue 23), changed as classes 2, 3 and 6 change
+    # the code that computed them before
+    Mutation("errors_signed", "9", PIXELS, "return np.abs(err, out=err)", "return err",
+             (f"{E}::test_pixelwise_metrics_are_the_formulas_on_the_maps",)),
+    Mutation("errors_float64", "9/2", PIXELS, "err = np.subtract(self.pred, self.gt)",
+             "err = np.subtract(self.pred, self.gt, dtype=np.float64)",
+             (f"{S}::test_score_scene_scores_in_float32",)),
+    Mutation("errors_gt_finite_nan_only", "9/6", PIXELS, "return np.isfinite(self.gt)", "return ~np.isnan(self.gt)",
+             (f"{M}::test_infinite_ground_truth_is_not_scored",)),
+    Mutation("errors_pred_finite_nan_only", "9/6", PIXELS, "return np.isfinite(self.pred)",
+             "return ~np.isnan(self.pred)", (f"{E}::test_pixelwise_metrics_are_the_formulas_on_the_maps",)),
+    Mutation("errors_finite_gt_only", "9/6", PIXELS, "return self.gt_finite & self.pred_finite",
+             "return self.gt_finite", (f"{E}::test_pixelwise_metrics_are_the_formulas_on_the_maps",)),
+    Mutation("errors_size_all_pixels", "9/3", PIXELS,
+             "def size(self) -> int:\n        return int(self.gt.size)\n\n    @functools.cached_property\n    def err",
+             "def size(self) -> int:\n        return int(self.pixels.gt_map.size)\n\n    @functools.cached_property\n"
+             "    def err", (f"{E}::test_pixelwise_metrics_are_the_formulas_on_the_maps",)),
+    Mutation("pixel_set_size_all_pixels", "9/3", PIXELS,
+             "def size(self) -> int:\n        return int(self.gt.size)\n\n    def memo",
+             "def size(self) -> int:\n        return int(self.gt_map.size)\n\n    def memo",
+             (f"{S}::test_backgammon_metrics_at_high_resolution",)),
+    Mutation("pixel_set_gt_unmasked", "9/3", PIXELS,
+             "self.gt_map.ravel() if self.mask is None else self.gt_map[self.mask]", "self.gt_map.ravel()",
+             (f"{S}::test_region_mask_is_combined_with_the_border_and_the_valid_mask",)),
+    Mutation("prepared_pred_not_upsampled", "9/4", PREPARE,
+             "return _kept(self.reference.upsample(self.aligned, self.resolution))", "return _kept(self.aligned)",
+             (f"{E}::test_one_reference_scores_each_prediction_as_a_reference_of_its_own",)),
 )
 
 
@@ -176,7 +206,8 @@ def main() -> int:
                                env={**os.environ, "PYTHONPATH": tmp}, capture_output=True, text=True).stdout
         if not where.startswith(tmp):
             raise SystemExit(f"the tests would not import the copy under {tmp}: lfbench is {where.strip()}")
-        clean_tests = list(OLD_TESTS) if args.tests == "old" else [S, G]
+        clean_tests = list(OLD_TESTS) if args.tests == "old" else sorted({t.split("::")[0] for m in chosen
+                                                                           for t in m.tests})
         if run_tests(Path(tmp), clean_tests) != 0:
             raise SystemExit("the tests fail without any mutation")
     rows = []
