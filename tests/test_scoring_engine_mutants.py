@@ -18,6 +18,7 @@ from lfbench.scoring.metrics import bad_pix, get_metric
 from lfbench.scoring.pixels import PixelErrors
 from lfbench.scoring.prepare import SceneReference
 from lfbench.scoring.region_metrics import (
+    fine_fattening,
     fine_fattening_of,
     fine_thinning,
     fine_thinning_of,
@@ -145,7 +146,7 @@ def test_backgammon_metric_function_at_low_resolution(tmp_path):
     """The metric's function of maps at low resolution takes the foreground at column 14 (scale 1), not 28:
     on 10 x 5 scored background pixels, 0.6 is beyond half way to the foreground (1.0 -> 0.5) on 5 rows,
     0.48 is not, though it would be half way to column 28's 0.9: 50 %."""
-    scene, hi, fat, _ = _backgammon_highres(tmp_path)
+    scene, hi, fat, thin = _backgammon_highres(tmp_path)
     gt = hi[::10, ::10]
     assert gt[0, 14] == 1.0 and gt[0, 28] == F32(0.9)
     pred = np.zeros((N, N), F32)
@@ -155,6 +156,20 @@ def test_backgammon_metric_function_at_low_resolution(tmp_path):
     assert np.count_nonzero(region) == 50
     value = get_metric("backgammon_fattening")(gt, pred, region, scene=scene, resolution="lowres")
     assert value == 50.0
+    # the toolkit's rule through the same function: a NaN prediction is good (24 of 50), by default bad
+    pred[15, 20] = np.nan
+    for toolkit, expected in ((False, 50.0), (True, 48.0)):
+        assert get_metric("backgammon_fattening")(gt, pred, region, scene=scene, resolution="lowres",
+                                                  toolkit=toolkit) == expected
+    # thinning on the bar (gt 1, rows 15..24 x columns 15..19): half way to column 40 - 11 = 29 (0.9) is 0.95;
+    # the prediction 0 is below it on all 50 pixels, the NaN at (16, 16) good by the toolkit's rule only
+    assert gt[0, 29] == F32(0.9)
+    pred[16, 16] = np.nan
+    bar = thin[::10, ::10] & _box(N, 15, 25, 15, 25)
+    assert np.count_nonzero(bar) == 50
+    for toolkit, expected in ((False, 100.0), (True, 98.0)):
+        assert get_metric("backgammon_thinning")(gt, pred, bar, scene=scene, resolution="lowres",
+                                                 toolkit=toolkit) == expected
 
 
 def test_scene_caches_follow_a_ground_truth_that_is_not_the_scenes(layout):  # noqa: F811
@@ -187,3 +202,66 @@ def test_scene_caches_follow_a_ground_truth_that_is_not_the_scenes(layout):  # n
         values.append(get_metric("missed_dots")(other, q.pred, None, scene=dots, resolution="highres"))
         assert values[-1] == missed_dots(other, q.pred, *labels, valid=dots.valid_mask("highres"))
     assert values[0] < 100.0 == values[1]
+
+
+def test_region_functions_pass_on_their_own_thresholds():
+    """fine_fattening / fine_thinning / missed_dots use the threshold, percentage and label limit they are given
+    (not the benchmark defaults). By hand: gt - pred = 0.2 on 1 of 2 pixels."""
+    gt = np.array([[0.2, 0.0]], F32)
+    pred = np.zeros((1, 2), F32)
+    assert fine_thinning(gt, pred) == 50.0 and fine_thinning(gt, pred, threshold=0.3) == 0.0
+    assert fine_fattening(pred, gt) == 50.0 and fine_fattening(pred, gt, threshold=0.3) == 0.0
+    boxes = np.ones((1, 6), np.uint8)
+    dots = np.array([[1, 1, 2, 2, 3, 3]], np.uint8)
+    gt = np.zeros((1, 6), F32)
+    pred = np.array([[0.3, 0.3, 0.3, 0.0, 0.5, 0.5]], F32)  # dot 1: 2 of 2 off by 0.3, dot 2: 1 of 2, dot 3: 2 of 2
+    assert missed_dots(gt, pred, boxes, dots) == 100.0 / 3  # only dot 3 is off by > 0.4
+    assert missed_dots(gt, pred, boxes, dots, threshold=0.2) == 100.0  # BadPix 100, 50 (>= 50), 100
+    assert missed_dots(gt, pred, boxes, dots, threshold=0.2, missed_percent=60.0) == 200.0 / 3
+    assert missed_dots(gt, pred, boxes, dots, max_label=2) == 0.0  # dots 1 and 2 only
+
+
+def test_pixel_set_takes_a_low_resolution_prediction_block_by_block():
+    """PixelSet.values is the toolkit's upsampling (scipy.ndimage.zoom, order 0) at the set's pixels in raster
+    order, for any block of rows, a non-square map, pixels in the first row and no mask at all."""
+    from scipy import ndimage
+
+    from lfbench.scoring.pixels import PixelSet
+    from lfbench.scoring.prepare import upsample_index
+
+    rng = np.random.default_rng(4)
+    low = rng.uniform(-1, 1, (7, 5)).astype(F32)
+    up = ndimage.zoom(low, 10, order=0)
+    mask = rng.random(up.shape) < 0.5
+    mask[0, :3] = True
+    index = upsample_index(low.shape, 10)
+    for m in (mask, None):
+        pixels = PixelSet(m, np.zeros(up.shape, F32), upsample=index, low_width=5)
+        expected = up.ravel() if m is None else up[m]
+        for block in (3, 7, 256):
+            assert np.array_equal(pixels.values(low, rows_per_block=block), expected)
+        assert np.array_equal(pixels.values(low), expected)
+
+
+def test_plain_value_arrays_and_unmasked_backgammon():
+    """Arrays that are not (H, W) maps are plain lists of pixels, with their mask; backgammon without a mask
+    finds each row's column on a wide map (PixelSet's own width). By hand."""
+    gt = np.zeros(5, F32)
+    pred = np.array([0.1, 0.0, 0.2, 0.0, 0.3], F32)
+    mask = np.array([True, True, False, False, True])
+    assert bad_pix(gt, pred) == 60.0 and bad_pix(gt, pred, mask=mask) == 100.0 * 2 / 3
+    gt = np.zeros((2, 30), F32)
+    gt[:, 14] = 1.0  # the foreground column: half way is 0.5
+    pred = np.zeros((2, 30), F32)
+    pred[0, :10] = 0.6
+    metric = get_metric("backgammon_fattening")
+    assert metric.score_pixels(PixelErrors.of_maps(gt, pred)) == 100.0 * 10 / 60
+
+
+def test_cached_pixels_are_read_only(layout):  # noqa: F811
+    """A scene's pixel sets are shared by every method: their ground truth cannot be written."""
+    _, scenes = layout
+    pixels = SceneReference(scenes[0]).pixels("lowres")
+    assert not pixels.gt.flags.writeable
+    with pytest.raises(ValueError):
+        pixels.gt[0] = 1.0
