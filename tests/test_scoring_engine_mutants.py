@@ -265,3 +265,15 @@ def test_cached_pixels_are_read_only(layout):  # noqa: F811
     assert not pixels.gt.flags.writeable
     with pytest.raises(ValueError):
         pixels.gt[0] = 1.0
+
+
+def test_general_metrics_in_the_papers_table_order_with_their_headers():
+    """Tables show the general metrics as the paper does: BadPix 0.07, 0.03, 0.01, MSE x100, Q25, before any
+    other metric, with these column headers (each metric's `order` and `short_label`)."""
+    from lfbench.scoring.metrics import metric_order
+
+    ids = ["q50_x100", "q25_x100", "mse_x100", "badpix_0.01", "badpix_0.03", "badpix_0.07", "discontinuities"]
+    assert metric_order(ids) == ["badpix_0.07", "badpix_0.03", "badpix_0.01", "mse_x100", "q25_x100", "q50_x100",
+                                 "discontinuities"]
+    assert [get_metric(m).label for m in ids[1:6]] == ["Q25", "MSE x100", "BadPix 0.01 (%)", "BadPix 0.03 (%)",
+                                                      "BadPix 0.07 (%)"]

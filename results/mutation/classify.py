@@ -225,10 +225,13 @@ def reason_of(name: str, diff: str) -> str | None:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--mutants", type=Path, default=ROOT / "mutants")
-    parser.add_argument("--recheck", type=Path, required=True)
+    parser.add_argument("--recheck", type=Path, nargs="+", required=True,
+                        help="recheck_import_time.py's reports (a later one's verdict wins)")
     parser.add_argument("--out", type=Path, required=True)
     args = parser.parse_args()
-    verdicts = json.loads(args.recheck.read_text(encoding="utf-8"))["verdicts"]
+    verdicts = {}
+    for report in args.recheck:
+        verdicts.update(json.loads(report.read_text(encoding="utf-8"))["verdicts"])
     rows, unexplained = [], []
     for name, _, diff in survivors(args.mutants, (SURVIVED,)):
         if verdicts.get(name) == "killed":

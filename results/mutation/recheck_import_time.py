@@ -30,8 +30,8 @@ MODULES = ("lfbench.scoring.base", "lfbench.scoring.general", "lfbench.scoring.r
            "lfbench.scoring.prepare", "lfbench.scoring.region_metrics", "lfbench.scoring.metrics",
            "lfbench.scoring.score", "lfbench.runs.regress")
 # the tests of the metric definitions and the registry (what runs at import), the definitions table first
-TESTS = ("tests/test_scoring_edges.py", "tests/test_metrics.py", "tests/test_region_metrics.py",
-         "tests/test_prepare.py")
+TESTS = ("tests/test_scoring_edges.py", "tests/test_scoring_engine_mutants.py", "tests/test_metrics.py",
+         "tests/test_region_metrics.py", "tests/test_prepare.py", "tests/test_scoring_engine.py")
 # subprocesses: they import the unmutated code
 DESELECT = ("tests/test_region_metrics.py::test_cli_evaluate_all_metrics",
             "tests/test_scoring_engine.py::test_cli_jobs_option",
@@ -79,12 +79,15 @@ def main() -> int:
     parser.add_argument("--out", type=Path, required=True)
     parser.add_argument("--jobs", type=int, default=2, help="test processes at once")
     parser.add_argument("--tests", nargs="+", default=list(TESTS), help="test files (default: %(default)s)")
+    parser.add_argument("--only", nargs="+", help="re-check only these mutants (full mutmut names)")
     parser.add_argument("--skip-explained", action="store_true",
                         help="leave out survivors whose change classify.py explains by its rules (presentation "
                              "fields, copy flags, float('NAN')): a partial run's shortcut")
     args = parser.parse_args()
     at_import = import_time_functions()
     todo = [m for m in survivors() if re.sub(r"__mutmut_\d+$", "", m) in at_import]
+    if args.only:
+        todo = [m for m in todo if m in args.only]
     if args.skip_explained:
         from classify import reason_of
         from survivors import SURVIVED as CODE
