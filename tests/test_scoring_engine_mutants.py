@@ -277,3 +277,11 @@ def test_general_metrics_in_the_papers_table_order_with_their_headers():
                                  "discontinuities"]
     assert [get_metric(m).label for m in ids[1:6]] == ["Q25", "MSE x100", "BadPix 0.01 (%)", "BadPix 0.03 (%)",
                                                       "BadPix 0.07 (%)"]
+
+
+def test_region_metrics_value_ranges_follow_their_units():
+    """A region metric's value range (what a plausible value is) follows its unit: percentages 0-100, the
+    bumpiness 0-5 (100 x the clip 0.05), angles 0-180 degrees, MSE x100 from 0."""
+    expected = {"discontinuities": (0.0, 100.0), "missed_dots": (0.0, 100.0), "bumpiness_planes": (0.0, 5.0),
+                "mae_planes": (0.0, 180.0), "dots_background_mse": (0.0, np.inf)}
+    assert {m: tuple(map(float, get_metric(m).value_range)) for m in expected} == expected
