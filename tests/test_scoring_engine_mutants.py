@@ -285,3 +285,13 @@ def test_region_metrics_value_ranges_follow_their_units():
     expected = {"discontinuities": (0.0, 100.0), "missed_dots": (0.0, 100.0), "bumpiness_planes": (0.0, 5.0),
                 "mae_planes": (0.0, 180.0), "dots_background_mse": (0.0, np.inf)}
     assert {m: tuple(map(float, get_metric(m).value_range)) for m in expected} == expected
+
+
+def test_quantile_family_metric_uses_its_mask():
+    """A quantile of the family (Q50 here) computed from maps keeps to the mask: errors 0.1, 0.2 of the masked
+    pixels, index int(2 x 0.5) = 1 -> 0.2 px (x 100, float32); on every pixel it would be 0.3."""
+    gt = np.zeros((1, 4), F32)
+    pred = np.array([[0.1, 0.2, 0.3, 0.4]], F32)
+    mask = np.array([[True, True, False, False]])
+    assert get_metric("q50_x100")(gt, pred, mask) == float(F32(0.2) * F32(100))
+    assert get_metric("q50_x100")(gt, pred) == float(F32(0.3) * F32(100))

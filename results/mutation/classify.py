@@ -52,6 +52,7 @@ REASONS: dict[str, tuple[str, ...]] = {
         "scoring.region_metrics.x_bumpiness_x100__mutmut_19"),
     "equivalent: a default that is never used: every metric is called through Metric.__call__, which always "
     "passes `toolkit=`; mse_x100 ignores `toolkit` (MSE has one rule)": (
+        "scoring.general.x__quantile_metric__mutmut_1", "scoring.general.x__quantile_metric__mutmut_12",
         "scoring.general.x_bad_pix_metric__mutmut_14", "scoring.region_metrics.x__bad_pix_pixels__mutmut_1",
         "scoring.general.x_mse_x100__mutmut_3",
         "scoring.general.x_mse_x100__mutmut_5",
@@ -193,6 +194,12 @@ REASONS: dict[str, tuple[str, ...]] = {
         *(f"scoring.region_metrics.xǁDotLayoutǁof__mutmut_{i}" for i in (44, 45, 47, 58, 60, 61, 63, 66, 67)),),
     "equivalent: the default percentage of quantile_x100_of is 25, so leaving 25 out of _q25_of's call "
     "changes nothing": ("scoring.general.x__q25_of__mutmut_6",),
+    "equivalent: MSE's short label is its name ('MSE x100'), so without it the column header is the same; Q25 "
+    "is the last metric with an order (4), and 5 keeps it last": (
+        "scoring.general.x__mse_metric__mutmut_11", "scoring.general.x__mse_metric__mutmut_24",
+        "scoring.general.x__q25_metric__mutmut_47"),
+    "equivalent: NumPy's reshape reads a negative size as the one unknown dimension, -2 as -1": (
+        *(f"scoring.pixels.xǁPixelErrorsǁof_maps__mutmut_{i}" for i in (23, 30, 41)),),
     "equivalent: every region BadPix is BadPix(0.07), bad_pix_of's default threshold, so leaving t out of "
     "the call changes nothing": ("scoring.region_metrics.x__bad_pix_pixels__mutmut_6",),
 }
