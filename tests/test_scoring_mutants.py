@@ -378,6 +378,12 @@ def test_backgammon_metrics_at_high_resolution(tmp_path):
     assert score.resolution["backgammon_fattening"] == score.resolution["backgammon_thinning"] == "highres"
     assert score.values["backgammon_fattening"] == pytest.approx(expected_fat, rel=1e-12)
     assert score.values["backgammon_thinning"] == pytest.approx(expected_thin, rel=1e-12)
+    # the same metrics as functions of the high-res maps (Metric.__call__, without the scoring engine's pixel
+    # sets): they find their columns on their own (int(14 x scale) from the scene's size, width - 11)
+    for metric_id, region, expected in (("backgammon_fattening", fat, expected_fat),
+                                        ("backgammon_thinning", thin, expected_thin)):
+        value = get_metric(metric_id)(hi, up, region & border, scene=scene, resolution="highres")
+        assert value == pytest.approx(expected, rel=1e-12)
     assert score.resolution["badpix_0.07"] == "highres"  # backgammon's general metrics are high-res too
     bad = np.abs(up - hi) > F32(0.07)  # the toolkit's BadPix, vectorised (float32 on both sides)
     assert score.values["badpix_0.07"] == 100.0 * np.count_nonzero(bad & border) / np.count_nonzero(border)

@@ -32,6 +32,8 @@ _SEEN_AT = "lfbench."
 REASONS: dict[str, tuple[str, ...]] = {
     "equivalent: NumPy comparisons raise no floating-point exception (NaN compares False silently), so "
     "ignoring `invalid` around a comparison changes nothing": (
+        "scoring.general.x_bad_pix_of__mutmut_3",
+        "scoring.region_metrics.x__backgammon_of__mutmut_6",
         "scoring.general.x_bad_pix__mutmut_16", "scoring.general.x_bad_pix__mutmut_33",
         "scoring.region_metrics.x_backgammon_fattening__mutmut_14",
         "scoring.region_metrics.x_backgammon_thinning__mutmut_14"),
@@ -39,6 +41,10 @@ REASONS: dict[str, tuple[str, ...]] = {
     "needs x / 0 with x != 0 (a normal is 0 only when all its components are; n_bad <= n); `over` needs "
     "1 / d with 0 < |d| < 3e-39 in disp2depth, whose float32 denominator is 0 or >= ~1e-9; the gt-finiteness "
     "map is 0 or NaN, whose filtering raises nothing": (
+        "scoring.region_metrics.x_disparity_normals__mutmut_3",
+        "scoring.region_metrics.x_disparity_normals__mutmut_6",
+        "scoring.region_metrics.xǁDotLayoutǁmissed__mutmut_38",
+        "scoring.region_metrics.xǁDotLayoutǁmissed__mutmut_40",
         "scoring.region_metrics.x_depth_normals__mutmut_63", "scoring.region_metrics.x_depth_normals__mutmut_65",
         "scoring.region_metrics.x_missed_dots__mutmut_118", "scoring.region_metrics.x_missed_dots__mutmut_120",
         "scoring.region_metrics.x_median_angular_error__mutmut_11",
@@ -46,6 +52,17 @@ REASONS: dict[str, tuple[str, ...]] = {
         "scoring.region_metrics.x_bumpiness_x100__mutmut_19"),
     "equivalent: a default that is never used: every metric is called through Metric.__call__, which always "
     "passes `toolkit=`; mse_x100 ignores `toolkit` (MSE has one rule)": (
+        "scoring.general.x__quantile_metric__mutmut_1", "scoring.general.x__quantile_metric__mutmut_12",
+        "scoring.general.x_bad_pix_metric__mutmut_14", "scoring.region_metrics.x__bad_pix_pixels__mutmut_1",
+        "scoring.general.x_mse_x100__mutmut_3",
+        "scoring.general.x_mse_x100__mutmut_5",
+        "scoring.general.x_mse_x100_of__mutmut_1",
+        "scoring.general.x__q25_of__mutmut_1",
+        "scoring.region_metrics.x__fine_fat_pixels__mutmut_1",
+        "scoring.region_metrics.x__fine_thin_pixels__mutmut_1",
+        "scoring.region_metrics.x__bg_fat_pixels__mutmut_1",
+        "scoring.region_metrics.x__bg_thin_pixels__mutmut_1",
+        "scoring.region_metrics.xǁDotLayoutǁmissed__mutmut_1",
         "scoring.general.x_mse_x100__mutmut_1", "scoring.general.x_bad_pix_metric__mutmut_3",
         "scoring.region_metrics.x__bad_pix_fn__mutmut_1", "scoring.region_metrics.x__bump_fn__mutmut_1",
         "scoring.region_metrics.x__mae_fn__mutmut_1", "scoring.region_metrics.x__fine_fat_fn__mutmut_1",
@@ -56,6 +73,11 @@ REASONS: dict[str, tuple[str, ...]] = {
     "intp here; _scharr_separable's inputs are float64; depth_normals' depth reaches the filters only through "
     "_scharr_separable, which casts it to float64 exactly); np.full(..., None, float32) is NaN; a float "
     "zeros(1) behaves as False": (
+        "scoring.region_metrics.x__first_labels__mutmut_12",
+        "scoring.region_metrics.x__first_labels__mutmut_15",
+        "scoring.region_metrics.x__halfway_of__mutmut_4",
+        "scoring.region_metrics.x__halfway_of__mutmut_5",
+        "scoring.region_metrics.x__halfway_of__mutmut_8",
         "scoring.region_metrics.x_bumpiness_map__mutmut_11", "scoring.region_metrics.x__halfway_to_column__mutmut_4",
         "scoring.region_metrics.x__scharr_separable__mutmut_11",
         "scoring.region_metrics.x__scharr_separable__mutmut_13",
@@ -70,6 +92,16 @@ REASONS: dict[str, tuple[str, ...]] = {
     "equivalent: a lookup table only needs one entry per label value and -1 (any negative) elsewhere: a longer "
     "table, a -2 fill, an empty-label table of 2 entries or `present[:lowest] = None` (False) change no "
     "lookup; `highest` is None for the only caller (boxes), so its branch never runs": (
+        "scoring.region_metrics.x__first_labels__mutmut_20",
+        "scoring.region_metrics.x__first_labels__mutmut_21",
+        "scoring.region_metrics.x__first_labels__mutmut_23",
+        "scoring.region_metrics.x__label_lut__mutmut_3",
+        "scoring.region_metrics.x__label_lut__mutmut_6",
+        "scoring.region_metrics.x__label_lut__mutmut_7",
+        "scoring.region_metrics.x__label_lut__mutmut_8",
+        "scoring.region_metrics.x__label_lut__mutmut_9",
+        "scoring.region_metrics.x__present__mutmut_11",
+        "scoring.region_metrics.x__present__mutmut_12",
         "scoring.region_metrics.x__first_labels__mutmut_25", "scoring.region_metrics.x__first_labels__mutmut_26",
         "scoring.region_metrics.x__first_labels__mutmut_27", "scoring.region_metrics.x__first_labels__mutmut_28",
         "scoring.region_metrics.x__first_labels__mutmut_30", "scoring.region_metrics.x__label_lut__mutmut_16",
@@ -84,6 +116,8 @@ REASONS: dict[str, tuple[str, ...]] = {
     "METHOD/METRIC pattern can match it, an empty error list returns before the thresholds are used, "
     "reading mask names when none is needed changes nothing, ndimage.convolve's default mode is the "
     "default 'reflect'": (
+        "scoring.region_metrics.xǁDotLayoutǁmissed__mutmut_51",
+        "scoring.region_metrics.x__bg_fat_pixels__mutmut_8",
         "scoring.region_metrics.x_bumpiness_map__mutmut_14", "scoring.region_metrics.x_bumpiness_x100__mutmut_27",
         "scoring.region_metrics.x_bumpiness_x100__mutmut_32", "scoring.region_metrics.x_missed_dots__mutmut_131",
         "scoring.region_metrics.x__scale__mutmut_6", "scoring.prepare.x_align_prediction__mutmut_34",
@@ -103,6 +137,14 @@ REASONS: dict[str, tuple[str, ...]] = {
     "whose masks are not read by Scene); Scene.valid_mask refuses any size but the scene's, and a high-res "
     "ground truth is read with its size checked, so the valid mask always scales by an integer; "
     "metric_resolution returns high resolution only when the high-res gt exists": (
+        "scoring.prepare.xǁSceneReferenceǁscored_mask__mutmut_12",
+        "scoring.prepare.xǁSceneReferenceǁscored_mask__mutmut_15",
+        "scoring.prepare.xǁSceneReferenceǁupsample_index__mutmut_10",
+        "scoring.prepare.xǁSceneReferenceǁupsample_index__mutmut_11",
+        "scoring.prepare.xǁSceneReferenceǁupsample_index__mutmut_12",
+        "scoring.prepare.xǁSceneReferenceǁupsample_index__mutmut_13",
+        "scoring.prepare.xǁSceneReferenceǁupsample_index__mutmut_14",
+        "scoring.prepare.xǁSceneReferenceǁupsample_index__mutmut_15",
         "scoring.score.x_score_scene__mutmut_43", "scoring.score.x_score_scene__mutmut_61",
         "scoring.score.x_score_scene__mutmut_64", "scoring.region_metrics.x__slanted_fn__mutmut_13",
         "scoring.region_metrics.x__slanted_fn__mutmut_16",
@@ -115,9 +157,51 @@ REASONS: dict[str, tuple[str, ...]] = {
     "equivalent: a comparison with NaN is False, so `not low < high` alone already refuses a NaN end of "
     "value_range": ("scoring.base.xǁMetricǁ__post_init____mutmut_7",),
     "equivalent: NumPy sets a flag to the truth value it is given (`writeable = None` is False)": (
+        "scoring.pixels.x__read_only__mutmut_1",
         "scoring.prepare.x__kept__mutmut_4",),
     "equivalent while SCENE_AGGREGATES has one entry ('mean'): the separator of a one-item join never "
     "appears in the message": ("scoring.base.xǁMetricǁ__post_init____mutmut_4",),
+    # issue 23's scoring engine (results/mutation/issue23/)
+    "equivalent: a cache bypassed or keyed differently: the value is computed afresh (the same numbers) or "
+    "kept under another key that is still unique to it (SceneReference.memo / per_prediction, PixelSet.memo, "
+    "the reference score_predictions shares, the MAE shortcut for the scene's own gt and a read-only "
+    "prediction)": (
+        *(f"scoring.prepare.xǁSceneReferenceǁper_prediction__mutmut_{i}" for i in (1, 2, 5)),
+        *(f"scoring.region_metrics.x__mae_fn__mutmut_{i}" for i in (7, 26, 30, 31, 38, 44, 45)),
+        *(f"scoring.region_metrics.x__missed_dots_fn__mutmut_{i}" for i in (39, 43, 44)),
+        "scoring.region_metrics.x__halfway_of__mutmut_16", "scoring.region_metrics.x__halfway_of__mutmut_17",
+        *(f"scoring.score.x_score_predictions__mutmut_{i}" for i in (1, 12, 19))),
+    "equivalent: a shortcut taken or not: when every element is kept, `values[keep]` is `values` (the same "
+    "elements in the same order); at scale 1 the upsampling index is the identity; the block size of "
+    "PixelSet.values only splits the same rows differently": (
+        "scoring.general.x_mse_x100_of__mutmut_9", "scoring.general.x__where__mutmut_1",
+        "scoring.general.x_quantile_x100_of__mutmut_21", "scoring.prepare.xǁSceneReferenceǁpixels__mutmut_12",
+        "scoring.prepare.xǁSceneReferenceǁpixels__mutmut_15", "scoring.pixels.xǁPixelSetǁvalues__mutmut_1"),
+    "equivalent: upsample_index zooms a map whose every column (row) holds the row (column) numbers: zoom "
+    "maps each axis on its own, so the number of repeated columns, which of them is read and an integer "
+    "arange (exact in zoom's float64) give the same index": (
+        *(f"scoring.prepare.x_upsample_index__mutmut_{i}" for i in (14, 16, 17, 19, 32, 34, 35, 37)),),
+    "equivalent: read_png gives a label mask as non-negative integers (uint8, uint16, or int32 from a 16-bit "
+    "PNG), so the int32 cast is never needed, and made anyway it keeps every label value": (
+        *(f"scoring.prepare.x_read_label_mask__mutmut_{i}" for i in (25, 26, 27, 28, 31, 32, 33, 34, 35, 36, 37,
+                                                                         38, 39)),),
+    "equivalent: False and None are both false (the flag `nearer_foreground`), and a 2-D PixelSet's "
+    "shape[+1] is its shape[-1]": (
+        "scoring.region_metrics.x_backgammon_thinning__mutmut_4",
+        "scoring.region_metrics.x__bg_thin_pixels__mutmut_4", "scoring.pixels.xǁPixelSetǁ__init____mutmut_10"),
+    "equivalent: without any (box, label) pair DotLayout.missed returns NaN before it reads the layout's "
+    "index, key or dropped count; the candidate pixels only skip labels the lookup tables map to -1 anyway": (
+        *(f"scoring.region_metrics.xǁDotLayoutǁof__mutmut_{i}" for i in (44, 45, 47, 58, 60, 61, 63, 66, 67)),),
+    "equivalent: the default percentage of quantile_x100_of is 25, so leaving 25 out of _q25_of's call "
+    "changes nothing": ("scoring.general.x__q25_of__mutmut_6",),
+    "equivalent: MSE's short label is its name ('MSE x100'), so without it the column header is the same; Q25 "
+    "is the last metric with an order (4), and 5 keeps it last": (
+        "scoring.general.x__mse_metric__mutmut_11", "scoring.general.x__mse_metric__mutmut_24",
+        "scoring.general.x__q25_metric__mutmut_47"),
+    "equivalent: NumPy's reshape reads a negative size as the one unknown dimension, -2 as -1": (
+        *(f"scoring.pixels.xǁPixelErrorsǁof_maps__mutmut_{i}" for i in (23, 30, 41)),),
+    "equivalent: every region BadPix is BadPix(0.07), bad_pix_of's default threshold, so leaving t out of "
+    "the call changes nothing": ("scoring.region_metrics.x__bad_pix_pixels__mutmut_6",),
 }
 
 _FIELDS = re.compile(r"\b(name|description|vmin|vmax|cmap)=(f?\"[^\"]*\"|[^,)\n]*)\s*,?")
@@ -151,10 +235,13 @@ def reason_of(name: str, diff: str) -> str | None:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--mutants", type=Path, default=ROOT / "mutants")
-    parser.add_argument("--recheck", type=Path, required=True)
+    parser.add_argument("--recheck", type=Path, nargs="+", required=True,
+                        help="recheck_import_time.py's reports (a later one's verdict wins)")
     parser.add_argument("--out", type=Path, required=True)
     args = parser.parse_args()
-    verdicts = json.loads(args.recheck.read_text(encoding="utf-8"))["verdicts"]
+    verdicts = {}
+    for report in args.recheck:
+        verdicts.update(json.loads(report.read_text(encoding="utf-8"))["verdicts"])
     rows, unexplained = [], []
     for name, _, diff in survivors(args.mutants, (SURVIVED,)):
         if verdicts.get(name) == "killed":

@@ -26,12 +26,14 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[2]
 OLD_TESTS = ("tests/test_metrics.py", "tests/test_region_metrics.py", "tests/test_toolkit_fidelity.py",
              "tests/test_regress.py")
-S, G = "tests/test_scoring_mutants.py", "tests/test_gate_mutants.py"
+S, G, E = "tests/test_scoring_mutants.py", "tests/test_gate_mutants.py", "tests/test_scoring_engine.py"
+M = "tests/test_scoring_engine_mutants.py"  # the issue-23 survivors' tests
 # where the mutated code lives (the issue named lfbench/scoring/metrics.py and rules.py; since issue 21 the
-# general metrics are in general.py, the preparation of a prediction in prepare.py, score_scene in score.py)
-GENERAL, PREPARE, SCORE, REGION, REGRESS = ("lfbench/scoring/general.py", "lfbench/scoring/prepare.py",
-                                            "lfbench/scoring/score.py", "lfbench/scoring/region_metrics.py",
-                                            "lfbench/runs/regress.py")
+# general metrics are in general.py, the preparation of a prediction in prepare.py, score_scene in score.py;
+# since issue 23 the errors at the scored pixels in pixels.py)
+GENERAL, PREPARE, REGION, REGRESS, PIXELS = ("lfbench/scoring/general.py", "lfbench/scoring/prepare.py",
+                                             "lfbench/scoring/region_metrics.py", "lfbench/runs/regress.py",
+                                             "lfbench/scoring/pixels.py")
 
 
 @dataclass(frozen=True)
@@ -45,23 +47,29 @@ class Mutation:
 
 
 MUTATIONS = (
-    Mutation("badpix_toolkit_ge", "1", GENERAL, "bad = err > threshold  # NaN", "bad = err >= threshold  # NaN",
+    # since issue 23 one comparison serves both modes (bad_pix_of): each mode's tie is mutated on its own branch
+    Mutation("badpix_toolkit_ge", "1", GENERAL, "return percent_of(px.size, int(np.count_nonzero(bad)))",
+             "return percent_of(px.size, int(np.count_nonzero(px.err >= threshold)))",
              (f"{S}::test_bad_pix_error_equal_to_the_threshold_is_good",)),
-    Mutation("badpix_default_ge", "1", GENERAL, "bad = (err > threshold) |", "bad = (err >= threshold) |",
+    Mutation("badpix_default_ge", "1", GENERAL, "bad |= ~px.pred_finite",
+             "bad = (px.err >= threshold) | ~px.pred_finite",
              (f"{S}::test_bad_pix_error_equal_to_the_threshold_is_good",)),
     Mutation("badpix_curve_left", "1", GENERAL, 'side="right"', 'side="left"',
              (f"{S}::test_bad_pix_curve_counts_a_tie_as_good",)),
-    Mutation("badpix_default_07", "1", GENERAL, "threshold: float = 0.07,", "threshold: float = 0.7,",
+    Mutation("badpix_default_07", "1", GENERAL, "pred: np.ndarray, threshold: float = 0.07,",
+             "pred: np.ndarray, threshold: float = 0.7,",
              (f"{S}::test_public_bad_pix_default_threshold_is_007",)),
-    Mutation("fine_thinning_ge", "1", REGION, "bad = (gt - pred) > threshold", "bad = (gt - pred) >= threshold",
+    Mutation("fine_thinning_ge", "1", REGION, "bad = (px.gt - px.pred) > threshold",
+             "bad = (px.gt - px.pred) >= threshold",
              (f"{S}::test_fine_thinning_tie_is_good",)),
-    Mutation("fine_fattening_le", "1", REGION, "bad = (gt - pred) < -threshold", "bad = (gt - pred) <= -threshold",
+    Mutation("fine_fattening_le", "1", REGION, "bad = (px.gt - px.pred) < -threshold",
+             "bad = (px.gt - px.pred) <= -threshold",
              (f"{S}::test_fine_fattening_tie_is_good",)),
     Mutation("dots_badpix_ge", "1/5", REGION, "bad = np.abs(gt - pred) > threshold",
              "bad = np.abs(gt - pred) >= threshold", (f"{S}::test_missed_dots_threshold_is_04_and_strict",)),
-    Mutation("bg_fattening_ge", "1", REGION, "bad = pred > half", "bad = pred >= half",
+    Mutation("bg_fattening_ge", "1", REGION, "px.pred > half if", "px.pred >= half if",
              (f"{S}::test_backgammon_prediction_exactly_half_way_is_neither_fattening_nor_thinning",)),
-    Mutation("bg_thinning_le", "1", REGION, "bad = pred < half", "bad = pred <= half",
+    Mutation("bg_thinning_le", "1", REGION, "else px.pred < half", "else px.pred <= half",
              (f"{S}::test_backgammon_prediction_exactly_half_way_is_neither_fattening_nor_thinning",)),
     Mutation("score_scene_float64", "2", PREPARE, "pred = pred.astype(np.float32, copy=False)",
              "pred = pred.astype(np.float64, copy=False)", (f"{S}::test_score_scene_scores_in_float32",)),
@@ -70,28 +78,44 @@ MUTATIONS = (
     Mutation("bumpiness_diff_float64", "2", REGION, "diff = (pred - gt).astype(np.float64)",
              "diff = pred.astype(np.float64) - gt.astype(np.float64)",
              (f"{S}::test_bumpiness_takes_the_difference_in_float32",)),
-    Mutation("region_replaces_mask", "3", SCORE, "mask = mask & reference.mask(", "mask = reference.mask(",
+    # since issue 23 the region mask is combined once per scene (SceneReference.scored_mask)
+    Mutation("region_replaces_mask", "3", PREPARE, "_kept(mask & self.mask(mask_name, resolution, mask.shape))",
+             "_kept(self.mask(mask_name, resolution, mask.shape))",
              (f"{S}::test_region_mask_is_combined_with_the_border_and_the_valid_mask",)),
     Mutation("valid_mask_dropped", "3", PREPARE, "mask &= valid", "pass",
              (f"{S}::test_region_mask_is_combined_with_the_border_and_the_valid_mask",)),
     Mutation("border_not_scaled", "4", PREPARE, "self.rules.border_px * self.scale(resolution))",
              "self.rules.border_px)", (f"{S}::test_backgammon_metrics_at_high_resolution",)),
-    Mutation("bg_fg_column_unscaled", "4", REGION, "fg_column=int(BACKGAMMON_FG_COLUMN * _scale(scene, gt))",
+    # since issue 23 score_scene scores backgammon from the pixels (_bg_fat_pixels, _bg_thin_pixels); the metrics'
+    # functions of maps (_bg_fat_fn, _bg_thin_fn, _scale) keep their own columns: each change in both places
+    Mutation("bg_fg_column_unscaled", "4", REGION, "int(BACKGAMMON_FG_COLUMN * scale)", "BACKGAMMON_FG_COLUMN",
+             (f"{S}::test_backgammon_metrics_at_high_resolution",)),
+    Mutation("bg_fg_column_rows", "4", REGION, "scale = max(1, px.pixels.shape[1] // px.pixels.low_width)",
+             "scale = max(1, px.pixels.shape[1] // px.pixels.low_width - 1)",
+             (f"{S}::test_backgammon_metrics_at_high_resolution",)),
+    Mutation("bg_bg_column_scaled", "4", REGION, "px.pixels.shape[1] - BACKGAMMON_BG_FROM_RIGHT,",
+             "px.pixels.shape[1] - BACKGAMMON_BG_FROM_RIGHT * (px.pixels.shape[1] // px.pixels.low_width),",
+             (f"{S}::test_backgammon_metrics_at_high_resolution",)),
+    Mutation("bg_bg_column_lowres_width", "4", REGION, "px.pixels.shape[1] - BACKGAMMON_BG_FROM_RIGHT,",
+             "px.pixels.low_width - BACKGAMMON_BG_FROM_RIGHT,", (f"{S}::test_backgammon_metrics_at_high_resolution",)),
+    Mutation("bg_fg_column_unscaled_maps", "4", REGION, "fg_column=int(BACKGAMMON_FG_COLUMN * _scale(scene, gt))",
              "fg_column=BACKGAMMON_FG_COLUMN", (f"{S}::test_backgammon_metrics_at_high_resolution",)),
-    Mutation("bg_fg_column_rows", "4", REGION, "return max(1, gt.shape[1] // scene.spatial_size[1])",
+    Mutation("bg_fg_column_rows_maps", "4", REGION, "return max(1, gt.shape[1] // scene.spatial_size[1])",
              "return max(1, gt.shape[1] // scene.spatial_size[1] - 1)",
              (f"{S}::test_backgammon_metrics_at_high_resolution",)),
-    Mutation("bg_bg_column_scaled", "4", REGION, "bg_column=gt.shape[1] - BACKGAMMON_BG_FROM_RIGHT,",
+    Mutation("bg_bg_column_scaled_maps", "4", REGION, "bg_column=gt.shape[1] - BACKGAMMON_BG_FROM_RIGHT,",
              "bg_column=gt.shape[1] - BACKGAMMON_BG_FROM_RIGHT * _scale(scene, gt),",
              (f"{S}::test_backgammon_metrics_at_high_resolution",)),
-    Mutation("bg_bg_column_lowres_width", "4", REGION, "bg_column=gt.shape[1] - BACKGAMMON_BG_FROM_RIGHT,",
+    Mutation("bg_bg_column_lowres_width_maps", "4", REGION, "bg_column=gt.shape[1] - BACKGAMMON_BG_FROM_RIGHT,",
              "bg_column=scene.spatial_size[1] - BACKGAMMON_BG_FROM_RIGHT,",
              (f"{S}::test_backgammon_metrics_at_high_resolution",)),
     Mutation("dots_threshold_03", "5", REGION, "DOT_THRESHOLD = 0.4", "DOT_THRESHOLD = 0.3",
              (f"{S}::test_missed_dots_threshold_is_04_and_strict",)),
-    Mutation("percent_bad_nonfinite_gt", "6", REGION, "scored = mask & np.isfinite(reference)", "scored = mask",
+    Mutation("percent_bad_nonfinite_gt", "6", REGION,
+             "percent_of(int(np.count_nonzero(reference_finite)), int(np.count_nonzero(bad & reference_finite)))",
+             "percent_of(px.size, int(np.count_nonzero(bad)))",
              (f"{S}::test_region_metrics_leave_out_nonfinite_ground_truth",)),
-    Mutation("dots_nonfinite_gt", "6", REGION, "scored = in_dot & np.isfinite(gt)", "scored = in_dot",
+    Mutation("dots_nonfinite_gt", "6", REGION, "scored = np.isfinite(gt)", "scored = np.ones(gt.shape, bool)",
              (f"{S}::test_missed_dots_leave_out_nonfinite_ground_truth",)),
     Mutation("mae_nonfinite_gt", "6", REGION, "scored = mask & np.isfinite(n_gt).all(axis=-1)", "scored = mask",
              (f"{S}::test_mae_and_bumpiness_leave_out_nonfinite_ground_truth",)),
@@ -113,10 +137,39 @@ MUTATIONS = (
     Mutation("make_golden_allow_nan", "7", REGRESS, "for r in results.records if math.isfinite(r.value)]",
              "for r in results.records]\n    records = json.loads(json.dumps(records))  # NaN kept",
              (f"{G}::test_make_golden_leaves_out_nonfinite_values",)),
-    Mutation("fine_fattening_sign_swap", "8", REGION, "bad = (gt - pred) < -threshold",
-             "bad = (pred - gt) < -threshold", (f"{S}::test_fine_fattening_is_not_symmetric_with_thinning",)),
-    Mutation("fine_fattening_abs", "8", REGION, "bad = (gt - pred) < -threshold",
-             "bad = np.abs(gt - pred) > threshold", (f"{S}::test_fine_fattening_is_not_symmetric_with_thinning",)),
+    Mutation("fine_fattening_sign_swap", "8", REGION, "bad = (px.gt - px.pred) < -threshold",
+             "bad = (px.pred - px.gt) < -threshold", (f"{S}::test_fine_fattening_is_not_symmetric_with_thinning",)),
+    Mutation("fine_fattening_abs", "8", REGION, "bad = (px.gt - px.pred) < -threshold",
+             "bad = np.abs(px.gt - px.pred) > threshold",
+             (f"{S}::test_fine_fattening_is_not_symmetric_with_thinning",)),
+    # 9: properties, which mutmut does not mutate (it skips every decorated function but static and class
+    # methods): the errors every pixel-wise metric computes from (issue 23), changed as classes 2, 3 and 6 change
+    # the code that computed them before
+    Mutation("errors_signed", "9", PIXELS, "return np.abs(err, out=err)", "return err",
+             (f"{E}::test_pixelwise_metrics_are_the_formulas_on_the_maps",)),
+    Mutation("errors_float64", "9/2", PIXELS, "err = np.subtract(self.pred, self.gt)",
+             "err = np.subtract(self.pred, self.gt, dtype=np.float64)",
+             (f"{S}::test_score_scene_scores_in_float32",)),
+    Mutation("errors_gt_finite_nan_only", "9/6", PIXELS, "return np.isfinite(self.gt)", "return ~np.isnan(self.gt)",
+             (f"{M}::test_infinite_ground_truth_is_not_scored",)),
+    Mutation("errors_pred_finite_nan_only", "9/6", PIXELS, "return np.isfinite(self.pred)",
+             "return ~np.isnan(self.pred)", (f"{E}::test_pixelwise_metrics_are_the_formulas_on_the_maps",)),
+    Mutation("errors_finite_gt_only", "9/6", PIXELS, "return self.gt_finite & self.pred_finite",
+             "return self.gt_finite", (f"{E}::test_pixelwise_metrics_are_the_formulas_on_the_maps",)),
+    Mutation("errors_size_all_pixels", "9/3", PIXELS,
+             "def size(self) -> int:\n        return int(self.gt.size)\n\n    @functools.cached_property\n    def err",
+             "def size(self) -> int:\n        return int(self.pixels.gt_map.size)\n\n    @functools.cached_property\n"
+             "    def err", (f"{E}::test_pixelwise_metrics_are_the_formulas_on_the_maps",)),
+    Mutation("pixel_set_size_all_pixels", "9/3", PIXELS,
+             "def size(self) -> int:\n        return int(self.gt.size)\n\n    def memo",
+             "def size(self) -> int:\n        return int(self.gt_map.size)\n\n    def memo",
+             (f"{S}::test_backgammon_metrics_at_high_resolution",)),
+    Mutation("pixel_set_gt_unmasked", "9/3", PIXELS,
+             "self.gt_map.ravel() if self.mask is None else self.gt_map[self.mask]", "self.gt_map.ravel()",
+             (f"{S}::test_region_mask_is_combined_with_the_border_and_the_valid_mask",)),
+    Mutation("prepared_pred_not_upsampled", "9/4", PREPARE,
+             "return _kept(self.reference.upsample(self.aligned, self.resolution))", "return _kept(self.aligned)",
+             (f"{E}::test_one_reference_scores_each_prediction_as_a_reference_of_its_own",)),
 )
 
 
@@ -153,7 +206,8 @@ def main() -> int:
                                env={**os.environ, "PYTHONPATH": tmp}, capture_output=True, text=True).stdout
         if not where.startswith(tmp):
             raise SystemExit(f"the tests would not import the copy under {tmp}: lfbench is {where.strip()}")
-        clean_tests = list(OLD_TESTS) if args.tests == "old" else [S, G]
+        clean_tests = list(OLD_TESTS) if args.tests == "old" else sorted({t.split("::")[0] for m in chosen
+                                                                           for t in m.tests})
         if run_tests(Path(tmp), clean_tests) != 0:
             raise SystemExit("the tests fail without any mutation")
     rows = []

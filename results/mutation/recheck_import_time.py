@@ -24,13 +24,18 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(Path(__file__).parent))
 MUTANTS = ROOT / "mutants"
-MODULES = ("lfbench.scoring.base", "lfbench.scoring.general", "lfbench.scoring.rules", "lfbench.scoring.prepare",
-           "lfbench.scoring.region_metrics", "lfbench.scoring.metrics", "lfbench.scoring.score", "lfbench.runs.regress")
+MODULES = ("lfbench.scoring.base", "lfbench.scoring.general", "lfbench.scoring.rules", "lfbench.scoring.pixels",
+           "lfbench.scoring.prepare", "lfbench.scoring.region_metrics", "lfbench.scoring.metrics",
+           "lfbench.scoring.score", "lfbench.runs.regress")
 # the tests of the metric definitions and the registry (what runs at import), the definitions table first
-TESTS = ("tests/test_scoring_edges.py", "tests/test_metrics.py", "tests/test_region_metrics.py",
-         "tests/test_prepare.py")
-DESELECT = ("tests/test_region_metrics.py::test_cli_evaluate_all_metrics",)  # a subprocess: imports unmutated code
+TESTS = ("tests/test_scoring_edges.py", "tests/test_scoring_engine_mutants.py", "tests/test_metrics.py",
+         "tests/test_region_metrics.py", "tests/test_prepare.py", "tests/test_scoring_engine.py")
+# subprocesses: they import the unmutated code
+DESELECT = ("tests/test_region_metrics.py::test_cli_evaluate_all_metrics",
+            "tests/test_scoring_engine.py::test_cli_jobs_option",
+            "tests/test_scoring_engine.py::test_scale_benchmark_quick_run")
 SURVIVED = 0
 
 _HITS = """
@@ -74,9 +79,21 @@ def main() -> int:
     parser.add_argument("--out", type=Path, required=True)
     parser.add_argument("--jobs", type=int, default=2, help="test processes at once")
     parser.add_argument("--tests", nargs="+", default=list(TESTS), help="test files (default: %(default)s)")
+    parser.add_argument("--only", nargs="+", help="re-check only these mutants (full mutmut names)")
+    parser.add_argument("--skip-explained", action="store_true",
+                        help="leave out survivors whose change classify.py explains by its rules (presentation "
+                             "fields, copy flags, float('NAN')): a partial run's shortcut")
     args = parser.parse_args()
     at_import = import_time_functions()
     todo = [m for m in survivors() if re.sub(r"__mutmut_\d+$", "", m) in at_import]
+    if args.only:
+        todo = [m for m in todo if m in args.only]
+    if args.skip_explained:
+        from classify import reason_of
+        from survivors import SURVIVED as CODE
+        from survivors import survivors as with_diffs
+        diffs = {name: diff for name, _, diff in with_diffs(MUTANTS, (CODE,))}
+        todo = [m for m in todo if reason_of(m, diffs[m]) is None]
     print(f"{len(todo)} surviving mutants of {len(at_import)} functions that run at import", flush=True)
     verdicts = {}
     with ThreadPoolExecutor(args.jobs) as pool:

@@ -57,10 +57,13 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--mutants", type=Path, default=ROOT / "mutants")
     parser.add_argument("--no-tests", action="store_true", help="also list mutants no test reaches")
-    parser.add_argument("--recheck", type=Path, help="recheck_import_time.py's JSON report")
+    parser.add_argument("--recheck", type=Path, nargs="+", help="recheck_import_time.py's JSON reports (a later "
+                        "one's verdict wins)")
     args = parser.parse_args()
     codes = (SURVIVED, NO_TESTS) if args.no_tests else (SURVIVED,)
-    verdicts = json.loads(args.recheck.read_text(encoding="utf-8"))["verdicts"] if args.recheck else {}
+    verdicts = {}
+    for report in args.recheck or ():
+        verdicts.update(json.loads(report.read_text(encoding="utf-8"))["verdicts"])
     rows = [row for row in survivors(args.mutants, codes) if verdicts.get(row[0]) != "killed"]
     print(f"# {len(rows)} surviving mutants ({sum(v == 'killed' for v in verdicts.values())} more were killed "
           "when re-run in a fresh process: recheck_import_time.json)\n")
