@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from lfbench import __version__
+from lfbench.scoring.rules import ScoringRules
 from lfbench.utils.atomic import write_text
 from lfbench.utils.errors import DataError
 from lfbench.utils.jsonfile import json_text, read_json
@@ -199,7 +200,7 @@ def _is_int(v: Any) -> bool:
 #: The meta keys lfbench reads back, each with the JSON type it must have (other keys are kept as they are).
 _META_TYPES: dict[str, tuple[type, str]] = {
     "data_root": (str, "a folder name (a string)"), "created": (str, "a string"),
-    "lfbench_version": (str, "a string"), "scoring": (dict, "an object"), "ablation": (dict, "an object"),
+    "lfbench_version": (str, "a string"), "ablation": (dict, "an object"),
     "scenes": (list, "a list of folder names"), "methods": (dict, "an object"),
 }
 
@@ -212,6 +213,10 @@ def _check_meta(meta: dict[str, Any], path: Path) -> None:
             raise DataError(f"'meta.{key}' must be {text}, got {type(meta[key]).__name__}", path)
     if "\0" in (meta.get("data_root") or "") or any(not isinstance(s, str) for s in meta.get("scenes") or []):
         raise DataError("'meta.data_root' and 'meta.scenes' must be folder names", path)
+    try:
+        ScoringRules.from_meta(meta)  # the recorded rules, as every reader takes them
+    except ValueError as exc:
+        raise DataError("'meta." + str(exc).removeprefix("'"), path) from None  # 'meta.scoring...' must be
     ablation = meta.get("ablation") or {}
     if not isinstance(ablation.get("title", ""), str) or not isinstance(ablation.get("cells", []), list):
         raise DataError("'meta.ablation' must have a string title and a list of cells", path)

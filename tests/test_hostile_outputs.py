@@ -353,6 +353,10 @@ def test_an_ablation_folder_leading_out_of_out_is_refused_before_any_work(tmp_pa
     ("ablation", "title", "'meta.ablation' must be an object"),
     ("ablation", {"title": {"x": 1}}, "string title"),
     ("scoring", [], "'meta.scoring' must be an object"),
+    ("scoring", {"border_px": "15"}, "'meta.scoring.border_px' must be an integer >= 0"),
+    ("scoring", {"border_px": -5}, "'meta.scoring.border_px' must be an integer >= 0"),
+    ("scoring", {"highres_scenes": "dots"}, "'meta.scoring.highres_scenes' must be a list"),
+    ("scoring", {"toolkit_nonfinite": "false"}, "'meta.scoring.toolkit_nonfinite' must be true or false"),
     ("created", 3, "'meta.created' must be a string"),
 ])
 @pytest.mark.parametrize("command", ["report", "report-html", "report-maps"])

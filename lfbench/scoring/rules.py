@@ -51,15 +51,28 @@ class ScoringRules:
     def from_meta(cls, meta: Mapping[str, Any], **overrides: Any) -> ScoringRules:
         """The rules a results file was scored under, from its ``meta["scoring"]`` (:meth:`to_meta`);
         what it does not record keeps the default. ``overrides``: fields set by the caller (e.g.
-        ``allow_highres``)."""
-        scoring = meta.get("scoring") or {}
+        ``allow_highres``). ValueError naming the key when a recorded value has the wrong type (a results
+        file from elsewhere is untrusted)."""
+        scoring = meta.get("scoring")
+        if scoring is None:
+            scoring = {}
+        if not isinstance(scoring, Mapping):
+            raise ValueError("'scoring' must be an object")
         recorded: dict[str, Any] = {}
         if "border_px" in scoring:
-            recorded["border_px"] = int(scoring["border_px"])
+            border = scoring["border_px"]
+            if isinstance(border, bool) or not isinstance(border, int) or border < 0:
+                raise ValueError("'scoring.border_px' must be an integer >= 0")
+            recorded["border_px"] = border
         if "highres_scenes" in scoring:
-            recorded["highres_scenes"] = frozenset(scoring["highres_scenes"])
+            scenes = scoring["highres_scenes"]
+            if not isinstance(scenes, list) or not all(isinstance(name, str) for name in scenes):
+                raise ValueError("'scoring.highres_scenes' must be a list of scene names")
+            recorded["highres_scenes"] = frozenset(scenes)
         if "toolkit_nonfinite" in scoring:
-            recorded["toolkit"] = bool(scoring["toolkit_nonfinite"])
+            if not isinstance(scoring["toolkit_nonfinite"], bool):
+                raise ValueError("'scoring.toolkit_nonfinite' must be true or false")
+            recorded["toolkit"] = scoring["toolkit_nonfinite"]
         return cls(**{**recorded, **overrides})
 
     def general_resolution(self, scene: Scene) -> str:
