@@ -133,6 +133,15 @@ def test_markdown_tables_keep_a_hostile_label_in_its_cell(tmp_path):
     assert cells[2] == ["a|b | c | d", "1.500", "x|y"] and cells[3] == ["s", "2.000", "z"]
 
 
+def test_bench_table_keeps_a_multi_line_error_in_its_cell():
+    """A worker's error (line breaks, a "|") stays in the error cell of its row of the bench table."""
+    from lfbench.runs.bench import table
+
+    text = table([{"bench": "peak", "precision": "fp32", "seconds": 1.5, "error": "boom\nline | two"}])
+    rows = [line for line in text.splitlines() if line.startswith("|")]
+    assert len(rows) == 3 and rows[2].rstrip().endswith("boom line \\| two |")
+
+
 # --------------------------------------------------------------------------- every path into a .tex file, end to end
 
 SIZE = 40

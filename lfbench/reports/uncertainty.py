@@ -10,6 +10,7 @@ from collections.abc import Mapping
 from pathlib import Path
 
 from lfbench.reports.plotting import method_colours, pyplot, save_figure
+from lfbench.reports.tables import render
 from lfbench.scoring.uncertainty import Sparsification, UncertaintyCollector, average_sparsification, uncertainty_table
 from lfbench.utils.atomic import write_text
 from lfbench.utils.figure_text import plain_text
@@ -74,7 +75,7 @@ def write_uncertainty_report(collector: UncertaintyCollector, out: str | Path) -
                          full=table.full.map("{:.4g}".format), oracle_half=table.oracle_half.map("{:.4g}".format))
     lines = ["Uncertainty quality: sparsification of each method's uncertainty map against its error "
              "(AUSE: 0 = ranks pixels like the true error; AURG > 0: better than a random ranking).", "",
-             shown.to_markdown(index=False), ""]
+             render(shown.set_index("method"), "markdown")]  # labels escaped as in every table
     write_text(out / "table_uncertainty.md", "\n".join(lines))
     written = [out / "uncertainty.csv", out / "table_uncertainty.md"]
     for measure in collector.measures:

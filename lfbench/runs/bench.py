@@ -55,6 +55,7 @@ from typing import Any
 from lfbench.method.trainable import DEFAULT_TRAINABLE
 from lfbench.utils.errors import SpecError
 from lfbench.utils.jsonfile import json_text
+from lfbench.utils.markdown import markdown_cell
 from lfbench.utils.subprocesses import safe_path_env
 
 PRECISIONS = ("fp32", "bf16")
@@ -567,7 +568,8 @@ def table(records: Sequence[dict]) -> str:
                                                                          else "")] for r in rows]
         models = ", ".join(dict.fromkeys(str(r["model"]) for r in rows if r.get("model")))
         parts.append(f"## {bench}{f' ({models})' if models and bench in ('inference', 'train') else ''}\n\n"
-                     + tabulate(body, headers=[*cols, "load", "error"], tablefmt="github", disable_numparse=True))
+                     + tabulate([[markdown_cell(c) for c in row] for row in body],  # an error's line breaks, a "|"
+                                headers=[*cols, "load", "error"], tablefmt="github", disable_numparse=True))
     machines = {json.dumps({k: v for k, v in (r.get("machine") or {}).items() if "load" not in k}, sort_keys=True)
                 for r in records if r.get("machine")}
     for m in sorted(machines):
