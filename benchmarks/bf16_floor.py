@@ -239,12 +239,12 @@ def main(argv: list[str] | None = None) -> int:
     from lfbench_methods.subfocal.bench import bench_peak
 
     from lfbench.runs.bench import machine_info
-    from lfbench.utils.hardware import cpu_bf16_missing
+    from lfbench.utils.hardware import bf16_unavailable
 
     torch.set_num_threads(args.threads or os.cpu_count() or 1)
-    missing = cpu_bf16_missing()
+    missing = bf16_unavailable(torch.device("cpu"))
     if "bf16" in args.precision and missing is not None:
-        print(f"bf16 skipped: this CPU lacks {missing}", file=sys.stderr)
+        print(f"bf16 skipped: {missing}", file=sys.stderr)
         args.precision = [x for x in args.precision if x != "bf16"]
     params = {"interval": args.interval, "width": args.width}
     records = []

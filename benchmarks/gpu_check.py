@@ -67,7 +67,7 @@ def section_inference(device, sizes: dict) -> dict:
     from lfbench_methods.subfocal.network import SubFocalNet
 
     from lfbench.runs.bench import sync
-    from lfbench.utils.hardware import bf16_missing
+    from lfbench.utils.hardware import bf16_unavailable
 
     out: dict = {"size": sizes["size"], "width": sizes["width"], "cases": []}
     views = torch.rand((1, 81, sizes["size"], sizes["size"]), generator=torch.Generator().manual_seed(0))
@@ -77,9 +77,9 @@ def section_inference(device, sizes: dict) -> dict:
         net = SubFocalNet(interval=interval, width=sizes["width"]).eval().to(device)
         for precision in ("fp32", "bf16"):
             case = {"interval": interval, "precision": precision}
-            missing = bf16_missing(device) if precision == "bf16" else None
+            missing = bf16_unavailable(device) if precision == "bf16" else None
             if missing is not None:
-                out["cases"].append({**case, "skipped": f"bf16 convolutions: {device} lacks {missing}"})
+                out["cases"].append({**case, "skipped": missing})
                 continue
             infer(net, warm, precision=precision, max_memory_gb=None)  # cuDNN / oneDNN set-up, lazy init
             if device.type == "cuda":

@@ -109,7 +109,7 @@ def main(argv: list[str] | None = None) -> int:
 
     from lfbench.runs.bench import machine_info
     from lfbench.utils.errors import LFBenchError
-    from lfbench.utils.hardware import bf16_missing, fp32_numerics, resolve_device, set_fp32_numerics
+    from lfbench.utils.hardware import bf16_unavailable, fp32_numerics, resolve_device, set_fp32_numerics
 
     try:
         device = resolve_device(args.device)
@@ -142,10 +142,10 @@ def main(argv: list[str] | None = None) -> int:
             if time.perf_counter() - clock > args.budget:
                 break
             case = {"width": width, "size": size, "interval": 0.5, "precision": precision}
-            missing = bf16_missing(device) if precision == "bf16" else None
+            missing = bf16_unavailable(device) if precision == "bf16" else None
             try:
                 if missing is not None:
-                    case["skipped"] = f"bf16 convolutions: {device} lacks {missing}"
+                    case["skipped"] = missing
                 else:
                     case["seconds"] = infer_seconds(device, width, size, precision)
             except Exception as exc:  # noqa: BLE001

@@ -63,10 +63,11 @@ def test_bf16_on_a_cpu_without_it_is_skipped_with_its_reason(tmp_path: Path, cap
     assert code == 0
     bf16, fp32 = json.loads(out.read_text())
     assert bf16["precision"] == "bf16" and "seconds" not in bf16
-    assert bf16["skipped"].startswith("bf16 convolutions: this CPU lacks avx512bw, avx512vl, avx512dq")
+    assert bf16["skipped"].startswith("this CPU has no bf16 convolutions (it lacks avx512bw, avx512vl, avx512dq")
     assert fp32["precision"] == "fp32" and fp32["seconds"] > 0 and "skipped" not in fp32
     text = capsys.readouterr().out
-    assert "[inference] bf16 skipped: bf16 convolutions" in text and "skipped: bf16" in text.split("## inference")[1]
+    assert "[inference] bf16 skipped: this CPU has no bf16 convolutions" in text
+    assert "skipped: this CPU has no bf16" in text.split("## inference")[1]
     assert bench.skip_reason("peak", {"precision": "bf16"})
     assert bench.skip_reason("volume", {"precision": "bf16"}) is None  # a gather, no convolution
 
@@ -104,23 +105,29 @@ def _parse(argv: list[str]):
     return parser.parse_args(argv)
 
 
-def test_every_inference_case_sits_between_the_fp32_and_the_bf16_peak(monkeypatch):
+def test_every_inference_case_sits_between_the_peaks_of_the_precisions_asked(monkeypatch):
     from lfbench.cli.bench import _cases
 
-    args = _parse(["inference", "--size", "12", "--precision", "fp32", "--interval", "1", "0.5", "--device", "cpu"])
+    both = _parse(["inference", "--size", "12", "--precision", "fp32", "bf16", "--interval", "1", "--device", "cpu"])
     monkeypatch.delenv(FORCE_NO_BF16_ENV, raising=False)
-    order = [(bench_, params.get("precision"), params.get("interval")) for bench_, params in _cases(args)]
     if cpu_bf16_missing() is None:
-        peaks = [("peak", "fp32", None), ("peak", "bf16", None)]
-        assert order == [*peaks, ("inference", "fp32", 1.0), *peaks, ("inference", "fp32", 0.5), *peaks]
+        order = [(bench_, params.get("precision")) for bench_, params in _cases(both)]
+        peaks = [("peak", "fp32"), ("peak", "bf16")]
+        assert order == [*peaks, ("inference", "fp32"), *peaks, ("inference", "bf16"), *peaks]
+    # Only the precisions asked for are measured: --precision fp32 runs no bf16 peak at all (on a CPU
+    # without bf16 it used to try one anyway, and the run exited 1).
+    fp32 = _parse(["inference", "--size", "12", "--precision", "fp32", "--interval", "1", "0.5", "--device", "cpu"])
+    order = [(bench_, params.get("precision"), params.get("interval")) for bench_, params in _cases(fp32)]
+    assert order == [("peak", "fp32", None), ("inference", "fp32", 1.0), ("peak", "fp32", None),
+                     ("inference", "fp32", 0.5), ("peak", "fp32", None)]
     # A CPU without bf16: its bf16 peak is one skipped case (one line), not one around every case.
     monkeypatch.setenv(FORCE_NO_BF16_ENV, "1")
-    cases = _cases(args)
+    cases = _cases(both)
     order = [(bench_, params.get("precision")) for bench_, params in cases]
     assert order == [("peak", "fp32"), ("peak", "bf16"), ("inference", "fp32"), ("peak", "fp32"),
-                     ("inference", "fp32"), ("peak", "fp32")]
+                     ("inference", "bf16"), ("peak", "fp32")]
     record = bench.run_isolated(*cases[1])  # decided here, no process
-    assert record["skipped"].startswith("bf16 convolutions: this CPU lacks avx512bw")
+    assert record["skipped"].startswith("this CPU has no bf16 convolutions (it lacks avx512bw")
     assert _parse(["inference", "--no-peak"]).no_peak and all(b == "inference" for b, _ in _cases(
         _parse(["inference", "--no-peak", "--device", "cpu"])))
 
@@ -176,7 +183,7 @@ def test_both_floors_beside_every_inference_record():
     assert {k: rows[1][k] for k in ("ratio_to_fp32_floor", "bf16_floor_s", "ratio_to_bf16_floor")} == {
         "ratio_to_fp32_floor": "1.25", "bf16_floor_s": "5.71", "ratio_to_bf16_floor": "1.75"}
     # Without bf16 units: the bf16 peak is a skipped record, and so is the ratio to its floor.
-    reason = "bf16 convolutions: this CPU lacks avx512bw, avx512vl, avx512dq; fp32 runs"
+    reason = "this CPU has no bf16 convolutions (it lacks avx512bw, avx512vl, avx512dq); fp32 runs"
     no_bf16 = [peak("fp32", 100.0), {"bench": "peak", "precision": "bf16", "skipped": reason}, case("fp32", 30.0),
                peak("fp32", 100.0)]
     r = bench.attach_peaks(no_bf16)[2]

@@ -60,5 +60,6 @@ def test_bf16_on_a_cpu_without_it_is_one_line(tmp_path: Path):
                            "--json", str(out)], LFBENCH_FORCE_NO_BF16="1")
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert proc.stderr.strip().splitlines() == [
-        "bf16 skipped: this CPU lacks avx512bw, avx512vl, avx512dq (simulated by LFBENCH_FORCE_NO_BF16=1)"]
+        "bf16 skipped: this CPU has no bf16 convolutions (it lacks avx512bw, avx512vl, avx512dq (simulated by "
+        "LFBENCH_FORCE_NO_BF16=1))"]
     assert json.loads(out.read_text()) == []

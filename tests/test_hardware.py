@@ -59,6 +59,48 @@ def test_the_answer_follows_the_trial_convolution(monkeypatch):
     assert hardware.cpu_bf16_missing() == "avx512bw, avx512vl, avx512dq"
 
 
+def test_the_real_answer_is_what_the_real_kernels_do(monkeypatch):
+    # Not simulated: the answer must agree with what oneDNN does with shapes of the size SubFocal runs
+    # (an AVX2 CPU runs a tiny bf16 F.conv2d through an emulation and fails only on the fused oneDNN ops real
+    # shapes take, so a probe of F.conv2d said "bf16 available" there and predict ended in a traceback).
+    from lfbench_methods.subfocal.fast import conv
+
+    monkeypatch.delenv(hardware.FORCE_NO_BF16_ENV, raising=False)
+    x = torch.rand(1, 16, 5, 24, 24).to(torch.bfloat16).contiguous(memory_format=torch.channels_last_3d)
+    w = torch.rand(16, 16, 3, 3, 3).to(torch.bfloat16).contiguous(memory_format=torch.channels_last_3d)
+    x2 = torch.rand(1, 81, 32, 32).to(torch.bfloat16).contiguous(memory_format=torch.channels_last)
+    w2 = torch.rand(16, 81, 3, 3).to(torch.bfloat16).contiguous(memory_format=torch.channels_last)
+
+    def runs() -> bool:
+        try:
+            with torch.inference_mode():
+                conv(x, w, None, (1, 1, 1), relu=True)
+                torch.mkldnn_convolution(x2, w2, None, [1, 1], [1, 1], [1, 1], 1)
+        except RuntimeError:
+            return False
+        return True
+
+    assert (hardware.cpu_bf16_missing() is None) == runs()
+    unavailable = hardware.bf16_unavailable(torch.device("cpu"))
+    assert (unavailable is None) == (hardware.cpu_bf16_missing() is None)
+    if unavailable is not None:
+        assert unavailable.startswith("this CPU has no bf16 convolutions (it lacks ") and "\n" not in unavailable
+
+
+def test_predict_bf16_is_a_map_or_one_line_on_this_real_cpu(monkeypatch, tmp_path: Path, capsys):
+    monkeypatch.delenv(hardware.FORCE_NO_BF16_ENV, raising=False)
+    views = tmp_path / "views.npy"
+    np.save(views, np.random.default_rng(0).random((16, 16, 81), dtype=np.float32))
+    out = tmp_path / "out.npy"
+    code = main(["predict", "--method", "subfocal:width=16,precision=bf16,threads=1", "--input", str(views),
+                 "--out", str(out)])
+    err = capsys.readouterr().err.strip().splitlines()
+    if hardware.cpu_bf16_missing() is None:
+        assert code == 0 and np.load(out).shape == (16, 16)
+    else:
+        assert code == 2 and len(err) == 1 and "needs bf16 convolutions" in err[0] and not out.exists()
+
+
 def test_bf16_on_a_cpu_without_it_is_one_line_naming_the_capability_and_the_alternative(no_bf16):
     with pytest.raises(SpecError) as exc:
         hardware.require_bf16(torch.device("cpu"))

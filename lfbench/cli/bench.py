@@ -232,15 +232,15 @@ def _sweep(args: argparse.Namespace, trainable, base: dict, defaults: dict | Non
 
 
 class _FloorPeaks:
-    """The peak cases measured around each inference case: one per precision of lfbench.runs.bench.PRECISIONS,
-    whatever precisions the cases run, so that every inference record gets its ratio to the fp32 floor and
-    to the bf16 floor. A peak this machine cannot run (bf16 on a CPU without bf16 instructions) is listed
-    once, as its one skipped record, not around every case."""
+    """The peak cases measured around each inference case: one per precision asked for (``--precision``), so
+    that every inference record gets its ratio to the floor of each of them (fp32 and bf16 when both are
+    asked). A peak this machine cannot run (bf16 on a CPU without bf16 convolutions) is listed once, as its
+    one skipped record, not around every case; a precision not asked for is never measured."""
 
-    def __init__(self, model: str, th: dict) -> None:
-        from lfbench.runs.bench import PRECISIONS, skip_reason
+    def __init__(self, model: str, th: dict, precisions: list[str]) -> None:
+        from lfbench.runs.bench import skip_reason
 
-        self.params = [{"model": model, "precision": p, **th} for p in PRECISIONS]
+        self.params = [{"model": model, "precision": p, **th} for p in dict.fromkeys(precisions)]
         self.skipped = [skip_reason("peak", params) is not None for params in self.params]
         self.listed: set[int] = set()
 
@@ -269,7 +269,7 @@ def _cases(args: argparse.Namespace) -> list[tuple[str, dict]]:
         size = 64 if getattr(args, "quick", False) else args.size
         if which == "inference" or "inference" not in skip:
             peaks = "peak" in has and not args.no_peak and not (which == "suite" and "peak" in skip)
-            floors = _FloorPeaks(model, th)
+            floors = _FloorPeaks(model, th, args.precision)
             for net in _sweep(args, trainable, model_params):
                 for precision in args.precision:
                     if peaks:

@@ -189,14 +189,12 @@ def memory_fields(device, baseline_gb: float) -> dict:
 
 def skip_reason(bench: str, params: dict) -> str | None:
     """Why a case cannot run on this machine (bf16 convolutions its device lacks), else None."""
-    from lfbench.utils.hardware import bf16_missing, resolve_device
+    from lfbench.utils.hardware import bf16_unavailable, resolve_device
 
     if bench in ("peak", "inference", "train") and params.get("precision") == "bf16":
-        device = resolve_device(params.get("device", "cpu"))
-        missing = bf16_missing(device)
-        if missing is not None:
-            where = "this CPU" if device.type == "cpu" else str(device)
-            return f"bf16 convolutions: {where} lacks {missing}; fp32 runs"
+        unavailable = bf16_unavailable(resolve_device(params.get("device", "cpu")))
+        if unavailable is not None:
+            return f"{unavailable}; fp32 runs"
     return None
 
 

@@ -1,10 +1,12 @@
 """What this machine can run, and where tensors live: bf16 convolutions on the CPU, CUDA devices, and the
 fp32 numerics policy.
 
-- :func:`cpu_bf16_missing` says whether this CPU can run bfloat16 convolutions (oneDNN's bf16 path needs
-  AVX-512 BW+VL+DQ, AVX-NE-CONVERT or AMX; an AVX2-only CPU raises inside ``mkldnn_convolution``). It
-  runs a tiny bf16 convolution once and caches the answer. ``LFBENCH_FORCE_NO_BF16=1`` makes it answer
-  as on an AVX2-only CPU (tests of that behaviour on machines that have the instructions).
+- :func:`cpu_bf16_missing` says whether this CPU runs bfloat16 convolutions natively (oneDNN's bf16 path
+  needs AVX-512 BW+VL+DQ, AVX-NE-CONVERT or AMX; on an AVX2-only CPU ``mkldnn_convolution`` raises, and
+  ``F.conv2d`` on small shapes silently falls back to a slow emulation). It asks oneDNN itself (torch's
+  ``_is_mkldnn_bf16_supported``) and runs a tiny bf16 conv2d and conv3d through ``mkldnn_convolution``, the
+  kernel path real shapes and the fused ops take, once, and caches the answer. ``LFBENCH_FORCE_NO_BF16=1``
+  makes it answer as on an AVX2-only CPU (tests of that behaviour on machines that have the instructions).
 - :func:`require_bf16` turns a missing capability into one :class:`SpecError` line naming it and the
   alternative, before any work.
 - :func:`resolve_device` maps ``auto`` / ``cpu`` / ``cuda`` / ``cuda:K`` to a ``torch.device`` (SpecError
@@ -61,16 +63,24 @@ def cpu_flags(cpuinfo: Path = CPUINFO) -> frozenset[str]:
 
 @functools.cache
 def _bf16_conv_error() -> str | None:
-    """None when a tiny bf16 conv2d and conv3d run on this CPU, else the first line of the error."""
-    import torch
-    import torch.nn.functional as F
+    """None when oneDNN runs bf16 convolutions natively on this CPU, else why not (one line).
 
+    A plain ``F.conv2d`` is no test: on a CPU without the instructions small bf16 convolutions take torch's
+    emulated fallback (2-3x slower than fp32) and only larger ones reach oneDNN and raise. So this asks
+    oneDNN's own check and runs a tiny bf16 conv2d and conv3d through ``mkldnn_convolution`` itself."""
+    import torch
+
+    if not torch.backends.mkldnn.is_available():
+        return "oneDNN (this torch is built without it)"
+    supported = getattr(torch.ops.mkldnn, "_is_mkldnn_bf16_supported", None)
     try:
+        if supported is not None and not supported():
+            return "oneDNN's bf16 instructions"
         with torch.inference_mode():
-            x2 = torch.ones((1, 2, 4, 4), dtype=torch.bfloat16).contiguous(memory_format=torch.channels_last)
-            F.conv2d(x2, torch.ones((2, 2, 3, 3), dtype=torch.bfloat16), padding=1)
-            x3 = torch.ones((1, 2, 3, 4, 4), dtype=torch.bfloat16).contiguous(memory_format=torch.channels_last_3d)
-            F.conv3d(x3, torch.ones((2, 2, 3, 3, 3), dtype=torch.bfloat16), padding=1)
+            for dims, fmt in ((2, torch.channels_last), (3, torch.channels_last_3d)):
+                x = torch.ones((1, 2) + (4,) * dims, dtype=torch.bfloat16).contiguous(memory_format=fmt)
+                w = torch.ones((2, 2) + (3,) * dims, dtype=torch.bfloat16).contiguous(memory_format=fmt)
+                torch.mkldnn_convolution(x, w, None, [1] * dims, [1] * dims, [1] * dims, 1)
     except RuntimeError as exc:
         return (str(exc).strip().splitlines() or ["bf16 convolution failed"])[0]
     return None
@@ -101,6 +111,15 @@ def bf16_missing(device) -> str | None:
     if device.type == "cpu":
         return cpu_bf16_missing()
     return "bf16 convolutions"
+
+
+def bf16_unavailable(device) -> str | None:
+    """None when ``device`` runs bf16 convolutions natively; else the one line users see where a bf16 case is
+    skipped, e.g. ``this CPU has no bf16 convolutions (it lacks avx512bw, avx512vl, avx512dq)``."""
+    missing = bf16_missing(device)
+    if missing is None:
+        return None
+    return f"{'this CPU' if device.type == 'cpu' else device} has no bf16 convolutions (it lacks {missing})"
 
 
 def require_bf16(device, what: str = "precision=bf16") -> None:
@@ -193,4 +212,5 @@ def cuda_devices() -> list[str]:
 
 
 __all__ = ["FORCE_NO_BF16_ENV", "DEVICE_HELP", "cpuinfo_field", "cpu_flags", "cpu_bf16_missing", "bf16_missing",
-           "require_bf16", "parse_device", "resolve_device", "set_fp32_numerics", "fp32_numerics", "cuda_devices"]
+           "bf16_unavailable", "require_bf16", "parse_device", "resolve_device", "set_fp32_numerics", "fp32_numerics",
+           "cuda_devices"]
