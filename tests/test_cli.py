@@ -455,7 +455,7 @@ def test_plugin_commands_come_from_entry_points(tmp_path, monkeypatch, capsys):
         assert f"plugin command 'empty-{tag}' failed to load (TypeError" in err and "add_arguments, run" in err
         assert main([f"broken-{tag}"]) == 2
         assert f"plugin command 'broken-{tag}' failed to load (ModuleNotFoundError" in capsys.readouterr().err
-        assert "lfbench.cli.evaluate" in main.__globals__["COMMANDS"].values()  # the built-in stays
+        assert "lfbench.cli.evaluate" in main.__globals__["BUILTIN_COMMANDS"].values()  # the built-in stays
     finally:
         for name in (f"lfbench_cmd_{tag}", f"lfbench_cmd_{tag}_empty"):
             sys.modules.pop(name, None)
@@ -466,7 +466,7 @@ def test_convert_keras_is_the_subfocal_plugin_command():
 
     eps = {ep.name: ep.value for ep in metadata.entry_points(group="lfbench.commands")}
     assert eps.get("convert-keras") == "lfbench_methods.subfocal.cli"
-    assert "convert-keras" not in main.__globals__["COMMANDS"]
+    assert "convert-keras" not in main.__globals__["BUILTIN_COMMANDS"]
 
 
 def test_a_stop_on_sigint_is_reported_as_a_stop_not_an_error(tmp_path, monkeypatch, capsys):
@@ -476,10 +476,11 @@ def test_a_stop_on_sigint_is_reported_as_a_stop_not_an_error(tmp_path, monkeypat
 
     import lfbench.training.config as config
     import lfbench.training.loop as loop
+    from lfbench.training.signals import TrainingInterrupted
 
     def stop(cfg, out, **kwargs):
-        raise loop.TrainingInterrupted(f"stopped at stage 1 step 3; checkpoint written to {out}/checkpoint.pt; "
-                                       "run the same command to resume")
+        raise TrainingInterrupted(f"stopped at stage 1 step 3; checkpoint written to {out}/checkpoint.pt; "
+                                  "run the same command to resume")
 
     monkeypatch.setattr(config.TrainConfig, "from_toml", staticmethod(lambda path: types.SimpleNamespace(out=None)))
     monkeypatch.setattr(loop, "train", stop)

@@ -497,7 +497,7 @@ def test_toolkit_pairwise_names_of_one_file_are_refused_before_drawing(tmp_path)
 
 def test_training_stage_names_are_file_names(tmp_path):
     from lfbench.training.config import TrainConfig
-    from lfbench.training.loop import stage_weights_name
+    from lfbench.training.run_folder import stage_weights_name
     from lfbench.utils.errors import LFBenchError
 
     assert stage_weights_name(0, "../../escape") == "stage1_.._.._escape.pt"

@@ -104,7 +104,7 @@ def test_fixing_a_stage_that_has_not_started_resumes_the_finished_ones(tmp_path,
 
 
 def test_a_second_train_into_the_same_folder_is_refused(tmp_path, capsys, data_root):
-    from lfbench.training.loop import run_folder_lock
+    from lfbench.training.run_folder import run_folder_lock
 
     out = tmp_path / "run"
     config = write_config(tmp_path, config_text(data_root, STAGE1))

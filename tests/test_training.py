@@ -511,7 +511,7 @@ def test_cli_errors(tmp_path, data_root):
     assert main(["train", str(config), "--out", str(tmp_path / "none"), "--resume"]) == 2
     bad = TrainConfig.from_dict({**cfg.to_dict(), "data": {**cfg.to_dict()["data"], "train": ["nosuch"]}})
     with pytest.raises(DataError, match="nosuch"):
-        from lfbench.training.loop import discover, select_scenes
+        from lfbench.training.scenes import discover, select_scenes
 
         select_scenes(discover(bad, tmp_path), bad)
 
@@ -569,7 +569,7 @@ def test_ranks_resuming_from_different_steps_stop_with_one_error():
 def test_dataloader_workers_give_the_same_batches_as_none(data_root, one_torch_thread):
     """Each sample's generator is derived from (seed, stage, step, index): 0 and 2 workers, and a start in the
     middle (a resume), give identical batches."""
-    from lfbench.training.loop import batch_source
+    from lfbench.training.batches import batch_source
 
     cfg = tiny_config(data_root, batch_size=3)
     sampler = PatchSampler([scene_data(data_root, "plane_a"), scene_data(data_root, "plane_b")], cfg.data,
@@ -672,7 +672,8 @@ def test_the_stage_in_progress_may_be_cut_or_extended_on_resume(reference_run, t
     """Stage 1 planned with 3 or 7 steps, stopped at step 2 or 4, resumed with the reference config (4 steps):
     the same weights, bit for bit, and the same log as the run configured with 4 steps from the start (cut at
     step 4, the validation it ran before the stop is not repeated)."""
-    from lfbench.training.loop import TrainingInterrupted, train
+    from lfbench.training.loop import train
+    from lfbench.training.signals import TrainingInterrupted
 
     cfg, ref_out, _ = reference_run
     raw = cfg.to_dict()
@@ -694,7 +695,8 @@ def test_the_stage_in_progress_may_be_cut_or_extended_on_resume(reference_run, t
 
 
 def test_a_stage_cut_below_its_checkpoint_step_is_refused(reference_run, tmp_path):
-    from lfbench.training.loop import TrainingInterrupted, train
+    from lfbench.training.loop import train
+    from lfbench.training.signals import TrainingInterrupted
     from lfbench.utils.errors import DataError, SpecError
 
     cfg, _, _ = reference_run

@@ -83,7 +83,7 @@ def test_the_config_without_errors_trains(tmp_path, capsys, one_torch_thread):
 
 def test_only_the_synthetic_sets_a_run_reads_are_generated(tmp_path):
     """data.validation = [] leaves the validation set of the base config ungenerated (it used to be written)."""
-    from lfbench.training.loop import prepare_synthetic
+    from lfbench.training.scenes import prepare_synthetic
 
     def sets(train: list[str], validation: list[str]) -> TrainConfig:
         sets = [{"category": "synthetic", "seed": 1, "size": 16, "scenes": 1},

@@ -14,7 +14,7 @@ from lfbench_methods.subfocal.volume import GatheredVolume
 from torch import nn
 
 from lfbench.data.shift import shift_views
-from lfbench.training.loop import to_channels_last
+from lfbench.method.trainable import to_channels_last
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 

@@ -127,7 +127,7 @@ def seed_from_stage1(task: CellTask) -> float:
     """Put the shared run's final checkpoint (next stage = the last, step 0, no optimizer) into the cell
     with the cell's config, unless the cell has a checkpoint already. Returns the stage-1 seconds."""
     from lfbench.training import checkpoint as ckpt
-    from lfbench.training.loop import stage_weights_name
+    from lfbench.training.run_folder import stage_weights_name
 
     assert task.stage1_dir is not None
     src = Path(task.stage1_dir)

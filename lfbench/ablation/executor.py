@@ -146,7 +146,7 @@ def run_job(fn: Callable[[Any], Any], arg: Any, label: str) -> Any:
     SIGUSR2 (90 s before the time limit) ends the job without a result, so that the submitting command asks
     the scheduler what became of the job: requeued, it waits for its next run (which resumes from the
     checkpoint); cancelled or timed out, it reports the cell."""
-    from lfbench.training.loop import TrainingInterrupted
+    from lfbench.training.signals import TrainingInterrupted
 
     if hasattr(signal, "SIGUSR2") and threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGUSR2, _stop_at_a_checkpoint)

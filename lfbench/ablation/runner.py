@@ -49,7 +49,7 @@ from lfbench.reports.writers import Maps
 from lfbench.results import Results
 from lfbench.runs.folder import evaluate_to_folder
 from lfbench.scoring.rules import ScoringRules
-from lfbench.training.loop import check_data
+from lfbench.training.scenes import check_data
 from lfbench.utils.atomic import fresh_dir, write_text
 from lfbench.utils.errors import DataError, SpecError
 from lfbench.utils.hardware import available_cores
@@ -98,7 +98,7 @@ def prepare_training_data(cells: tuple[Cell, ...], out: Path, log: Log) -> dict[
 
 def check_training_data(spec: AblationSpec, out: Path) -> None:
     """Every cell's data names (roots, train / validation scenes, validation border) checked before anything
-    is generated or written (lfbench.training.loop.check_data; cells with the same data checked once)."""
+    is generated or written (lfbench.training.scenes.check_data; cells with the same data checked once)."""
     seen = set()
     for cell in spec.cells:
         key = json.dumps([cell.config["data"], cell.config["validation"]], sort_keys=True)

@@ -45,7 +45,6 @@ BUILTIN_COMMANDS = {
     "validate-submission": "lfbench.cli.validate_submission",
     "bench": "lfbench.cli.bench",
 }
-COMMANDS = BUILTIN_COMMANDS  # the name earlier releases used
 _HELP_BYTES = 1 << 20  # the most of a plugin command's source read for its HELP
 
 

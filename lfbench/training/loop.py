@@ -27,6 +27,9 @@ progress may change (cut a long stage short, or extend it): with a constant lear
 the result is the run that the new config describes (a network's own schedule continues from its
 state). With K processes (torchrun) rank r takes samples [r B/K, (r+1) B/K) of the global batch B,
 DistributedDataParallel averages the gradients, and only rank 0 writes files.
+
+This module is the trainer alone; around it, one module per concern: the scenes (``scenes``), the network
+and its optimizers (``model``), batches (``batches``), the run folder (``run_folder``), stops (``signals``).
 """
 
 from __future__ import annotations
@@ -34,380 +37,45 @@ from __future__ import annotations
 import contextlib
 import functools
 import logging
-import os
-import shutil
-import signal
 import sys
-import threading
 import time
-from collections.abc import Iterator, Sequence
-from concurrent.futures import Future, ThreadPoolExecutor
-from dataclasses import dataclass
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import torch
-from filelock import FileLock, Timeout
 from torch.nn.parallel import DistributedDataParallel
 from tqdm import tqdm
 
-from lfbench.data.scene import Benchmark, Scene, check_scene_names
-from lfbench.data.synth import write_benchmark
 from lfbench.method.trainable import check_state_dict, get_trainable, to_channels_last
 from lfbench.training import checkpoint as ckpt
-from lfbench.training.config import TrainConfig, expand_path, resume_view
+from lfbench.training.batches import batch_source
+from lfbench.training.config import TrainConfig, resume_view
 from lfbench.training.curves import MAX_LOG_BYTES, RunLogger, default_loggers, parse_log_line
 from lfbench.training.data import PatchSampler, ValidationScene, load_scene_data, load_validation_scene
 from lfbench.training.distributed import DistContext, agree_on_resume, setup
 from lfbench.training.losses import make_loss
+from lfbench.training.model import (
+    build_model,
+    check_model,
+    describe_optimizer,
+    load_init_weights,
+    network_config,
+    stage_optimizer,
+)
+from lfbench.training.run_folder import EXPORTS, RunPaths, check_resume_state, run_folder_lock
+from lfbench.training.scenes import check_data, discover, invalid_area, prepare_synthetic, select_scenes
+from lfbench.training.signals import StopFlag, TrainingInterrupted
 from lfbench.training.validate import check_validation_area, validate
-from lfbench.utils.atomic import fresh_dir, write_text
-from lfbench.utils.errors import DataError, Interrupted, LFBenchError, SpecError
-from lfbench.utils.hardware import available_cores, require_bf16, set_fp32_numerics
+from lfbench.utils.atomic import write_text
+from lfbench.utils.errors import DataError, LFBenchError, SpecError
+from lfbench.utils.hardware import require_bf16, set_fp32_numerics
 from lfbench.utils.jsonfile import json_text
 from lfbench.utils.malloc import retain_freed_memory
-from lfbench.utils.names import file_name
 from lfbench.utils.outputs import read_manifest, recover, staged_outputs
 from lfbench.utils.readfile import read_text
 from lfbench.utils.threads import torch_threads
 from lfbench.utils.tomlfile import MAX_TOML_BYTES
-
-EXPORTS = "train"  # the output set (lfbench.utils.outputs) of a run's final exports: final.pt and summary.json
-
-
-class TrainingInterrupted(Interrupted):
-    """Training stopped on SIGINT/SIGTERM after writing a checkpoint (resumable: a stop, exit 130)."""
-
-
-@dataclass(frozen=True)
-class RunPaths:
-    out: Path
-
-    @property
-    def checkpoint(self) -> Path:
-        return self.out / "checkpoint.pt"
-
-    @property
-    def final(self) -> Path:
-        return self.out / "final.pt"
-
-    @property
-    def best(self) -> Path:
-        return self.out / "best.pt"
-
-    @property
-    def metrics(self) -> Path:
-        return self.out / "metrics.jsonl"
-
-    @property
-    def command(self) -> Path:
-        return self.out / "command.txt"
-
-    @property
-    def config(self) -> Path:
-        return self.out / "config.toml"
-
-    @property
-    def summary(self) -> Path:
-        return self.out / "summary.json"
-
-    @property
-    def data(self) -> Path:
-        return self.out / "data"
-
-    def stage_weights(self, index: int, name: str) -> Path:
-        return self.out / stage_weights_name(index, name)
-
-
-def stage_weights_name(index: int, name: str) -> str:
-    """File name of the weights after stage ``index`` (0-based) named ``name``: ``stage<k>_<name>.pt``,
-    the name as a file name (lfbench.utils.names; the config refuses two that are one)."""
-    return f"stage{index + 1}_{file_name(name)}.pt"
-
-
-_STATE_TYPES: dict[str, tuple[type, ...]] = {
-    "config": (dict,), "stage": (int,), "step": (int,), "global_step": (int,), "model": (dict,),
-    "optimizer": (dict, type(None)), "rng": (dict,), "elapsed_s": (int, float), "best_badpix": (int, float),
-    "last_validation": (dict, type(None)),
-}
-
-
-def check_resume_state(state: dict[str, Any], path: Path) -> None:
-    """DataError naming ``path`` when a training checkpoint lacks an entry or holds one of the wrong type
-    (a tampered or foreign file must fail in one line, not deep inside the loop)."""
-    for key, kinds in _STATE_TYPES.items():
-        if key not in state:
-            raise DataError(f"training checkpoint has no {key!r} entry", path)
-        value = state[key]
-        if isinstance(value, bool) or not isinstance(value, kinds):
-            raise DataError(f"training checkpoint entry {key!r} is a {type(value).__name__}", path)
-    if state["stage"] < 0 or state["step"] < 0 or state["global_step"] < 0:
-        raise DataError("training checkpoint has a negative stage or step", path)
-    if not isinstance(state["config"].get("stages"), list):
-        raise DataError("training checkpoint config has no list of stages", path)
-    if state["stage"] > len(state["config"]["stages"]):
-        raise DataError(f"training checkpoint is at stage {state['stage'] + 1}, beyond its config's "
-                        f"{len(state['config']['stages'])} stage(s)", path)
-
-
-# --------------------------------------------------------------------------- data preparation
-
-def prepare_synthetic(cfg: TrainConfig, data_dir: Path, log=logging.getLogger(__name__).info) -> None:
-    """Generate each [[data.synthetic]] set in use (DataConfig.synthetic_in_use) into data_dir/<category>
-    unless it is already there (generated in a temporary folder and renamed, so a killed run never leaves
-    half a set)."""
-    for spec in cfg.data.synthetic_in_use():
-        target = data_dir / spec.category
-        if target.is_dir():
-            continue
-        data_dir.mkdir(parents=True, exist_ok=True)
-        log(f"generating {spec.scenes} synthetic scenes ({spec.size} px, seed {spec.seed}) into {target}")
-        tmp = fresh_dir(data_dir, f".{spec.category}.")
-        try:
-            write_benchmark(tmp, seed=spec.seed, size=spec.size, scenes=spec.scenes, category=spec.category,
-                            workers=available_cores())
-            produced = tmp / spec.category
-            if not produced.is_dir():
-                raise DataError(f"lfbench.data.synth wrote no {spec.category}/ folder", tmp)
-            os.replace(produced, target)
-        finally:
-            shutil.rmtree(tmp, ignore_errors=True)
-
-
-def _roots(cfg: TrainConfig, data_dir: Path) -> list[Path]:
-    roots = [expand_path(r, cfg.source) for r in cfg.data.roots]
-    return [*roots, data_dir] if cfg.data.synthetic_in_use() else roots
-
-
-def discover(cfg: TrainConfig, data_dir: Path) -> Benchmark:
-    """All scenes of the configured roots and the generated synthetic sets, as one benchmark."""
-    roots = _roots(cfg, data_dir)
-    scenes: list[Scene] = []
-    for root in roots:
-        scenes += Benchmark.discover(root).scenes
-    return Benchmark(root=roots[0], scenes=tuple(scenes))
-
-
-def select_scenes(bench: Benchmark, cfg: TrainConfig) -> tuple[list[Scene], list[Scene]]:
-    """(training scenes, validation scenes) by the config's names (default: all with gt but validation)."""
-    val = bench.select(list(cfg.data.validation)) if cfg.data.validation else []
-    if cfg.data.train:
-        train = bench.select(list(cfg.data.train))
-    else:
-        train = check_scene_names(s for s in bench.scenes if s not in val and s.has_gt())
-    if not train:
-        raise DataError("no training scenes selected", cfg.source)
-    return train, val
-
-
-@dataclass(frozen=True)
-class PlannedScene:
-    """A scene that a [[data.synthetic]] set will hold once generated: what scene selection and the
-    validation-area check read of a scene."""
-
-    name: str
-    category: str
-    path: Path
-    spatial_size: tuple[int, int]
-
-    def has_gt(self) -> bool:
-        return True
-
-
-def check_data(cfg: TrainConfig, data_dir: Path) -> None:
-    """The config's data checked before anything is generated or written: the roots hold scenes, every
-    data.train / data.validation name selects scenes of them or of the synthetic sets in use, the
-    validation border leaves pixels to score, data.invalid_area is a folder (DataError / SpecError)."""
-    roots = _roots(cfg, data_dir)
-    real = [s for r in roots if r != data_dir for s in Benchmark.discover(r).scenes]
-    in_use = cfg.data.synthetic_in_use()
-    if in_use and any(p.is_dir() for p in data_dir.glob("*")):  # generated before (a resumed or re-run folder)
-        real += Benchmark.discover(data_dir).scenes
-    planned = [PlannedScene(name, spec.category, data_dir / spec.category / name, (spec.size, spec.size))
-               for spec in in_use if not (data_dir / spec.category).is_dir() for name in spec.scene_names()]
-    try:
-        _, val = select_scenes(Benchmark(root=roots[0], scenes=(*real, *planned)), cfg)  # type: ignore[arg-type]
-    except DataError as exc:  # a name of the config that selects nothing: the config's error
-        raise SpecError(f"[data] {exc.args[0]}", cfg.source) from None
-    check_validation_area(val, cfg.validation.border, cfg.validation.max_size, cfg.source)
-    invalid_area(cfg)
-
-
-def invalid_area(cfg: TrainConfig) -> Path | None:
-    """The data.invalid_area folder (None when not given); DataError when it is not a folder."""
-    path = expand_path(cfg.data.invalid_area, cfg.source) if cfg.data.invalid_area else None
-    if path is not None and not path.is_dir():
-        raise DataError("data.invalid_area folder not found", path)
-    return path
-
-
-def check_model(cfg: TrainConfig) -> None:
-    """The [model] values checked by the network (Trainable.check_params: its own checks, its size on the
-    meta device) before anything is built, generated or written; SpecError naming the config."""
-    try:
-        get_trainable(cfg.method).check_params(cfg.model)
-    except (TypeError, ValueError) as exc:
-        raise SpecError(f"[model]: {exc}", cfg.source) from None
-
-
-# --------------------------------------------------------------------------- helpers
-
-class Prefetcher:
-    """Batches of one rank for steps start..end-1, computed ``depth`` steps ahead in a thread."""
-
-    def __init__(self, sampler: PatchSampler, seed: int, stage: int, start: int, end: int,
-                 first_index: int, count: int, depth: int) -> None:
-        self.args = (sampler, seed, stage, first_index, count)
-        self.end, self.depth = end, depth
-        self.pool = ThreadPoolExecutor(max_workers=1) if depth > 0 else None
-        self.pending: dict[int, Future] = {}
-        self.next = start
-
-    def _make(self, step: int):
-        sampler, seed, stage, first, count = self.args
-        return sampler.sample(seed, stage, step, first, count)
-
-    def get(self, step: int) -> tuple[np.ndarray, np.ndarray]:
-        if self.pool is None:
-            return self._make(step)
-        while self.next < min(step + self.depth + 1, self.end):
-            self.pending[self.next] = self.pool.submit(self._make, self.next)
-            self.next += 1
-        fut = self.pending.pop(step, None)
-        return fut.result() if fut is not None else self._make(step)
-
-    def close(self) -> None:
-        if self.pool is not None:
-            for f in self.pending.values():
-                f.cancel()
-            self.pool.shutdown(wait=True)
-
-
-class _StepBatches(torch.utils.data.Dataset):
-    """Item i: the batch of step start + i (samples first..first+count-1 of its global batch) as tensors."""
-
-    def __init__(self, sampler: PatchSampler, seed: int, stage: int, start: int, end: int, first: int,
-                 count: int) -> None:
-        self.args, self.start, self.end = (seed, stage, first, count), start, end
-        self.sampler = sampler
-
-    def __len__(self) -> int:
-        return max(0, self.end - self.start)
-
-    def __getitem__(self, i: int) -> tuple[torch.Tensor, torch.Tensor]:
-        seed, stage, first, count = self.args
-        views, target = self.sampler.sample(seed, stage, self.start + i, first, count)
-        return torch.from_numpy(views), torch.from_numpy(target)
-
-
-class LoaderBatches:
-    """Batches of steps start..end-1 made by ``workers`` DataLoader processes, in step order (the same interface
-    as :class:`Prefetcher`). Every sample's generator is derived from (seed, stage, step, index), so the
-    batches are the same for any number of workers, and a resumed run continues with the same batches."""
-
-    def __init__(self, sampler: PatchSampler, seed: int, stage: int, start: int, end: int, first_index: int,
-                 count: int, workers: int, pin_memory: bool = False, depth: int = 2) -> None:
-        data = _StepBatches(sampler, seed, stage, start, end, first_index, count)
-        self.loader = torch.utils.data.DataLoader(data, batch_size=None, shuffle=False, num_workers=workers,
-                                                  pin_memory=pin_memory, prefetch_factor=max(2, depth))
-        self.it = iter(self.loader)
-        self.next = start
-
-    def get(self, step: int) -> tuple[torch.Tensor, torch.Tensor]:
-        if step != self.next:
-            raise RuntimeError(f"batches are made in order: asked for step {step}, next is {self.next}")
-        self.next += 1
-        return next(self.it)
-
-    def close(self) -> None:
-        self.it = None  # the iterator's workers stop when it is released
-
-
-def batch_source(sampler: PatchSampler, cfg: TrainConfig, stage: int, start: int, end: int, first_index: int,
-                 count: int, pin_memory: bool = False):
-    """The batches of a stage: DataLoader workers when training.workers > 0, else the prefetch thread."""
-    tc = cfg.training
-    if tc.workers > 0:
-        return LoaderBatches(sampler, cfg.seed, stage, start, end, first_index, count, tc.workers, pin_memory,
-                             tc.prefetch)
-    return Prefetcher(sampler, cfg.seed, stage, start, end, first_index, count, tc.prefetch)
-
-
-class StopFlag:
-    """Set by SIGINT/SIGTERM; training stops at the next step boundary (a second signal aborts)."""
-
-    def __init__(self) -> None:
-        self.set = False
-        self._old: dict[int, Any] = {}
-
-    def _handler(self, signum, frame):
-        if self.set:
-            raise KeyboardInterrupt
-        self.set = True
-
-    @contextlib.contextmanager
-    def installed(self) -> Iterator[StopFlag]:
-        if threading.current_thread() is threading.main_thread():
-            for sig in (signal.SIGINT, signal.SIGTERM):
-                self._old[sig] = signal.signal(sig, self._handler)
-        try:
-            yield self
-        finally:
-            for sig, old in self._old.items():
-                signal.signal(sig, old)
-            self._old.clear()
-
-
-def load_init_weights(cfg: TrainConfig) -> tuple[Path, dict[str, torch.Tensor]]:
-    """(path, state_dict) of ``cfg.init``: exported weights (``{"state_dict", "config", ...}``, loaded with
-    weights_only=True); DataError naming the file when it is missing, unreadable or not in that format."""
-    path = expand_path(cfg.init, cfg.source) if cfg.init else None
-    if path is None:
-        raise SpecError("init: no weights file given", cfg.source)
-    payload = ckpt.load(path)
-    state = payload.get("state_dict")
-    if not isinstance(state, dict) or not all(isinstance(v, torch.Tensor) for v in state.values()):
-        raise DataError("init weights: not an exported weights file (no state_dict of tensors; use a final.pt, "
-                        "best.pt or stage*.pt of lfbench train)", path)
-    return path, state
-
-
-def build_model(cfg: TrainConfig) -> torch.nn.Module:
-    """The config's trainable network built from [model]; SpecError naming the config for bad parameters."""
-    check_model(cfg)
-    try:
-        return get_trainable(cfg.method).build(**cfg.model)
-    except (TypeError, ValueError) as exc:
-        raise SpecError(f"[model]: {exc}", cfg.source) from None
-
-
-def network_config(cfg: TrainConfig, model: torch.nn.Module) -> dict[str, Any]:
-    """What the weights files store as the network's config (``model.config()``, else the [model] table)."""
-    return get_trainable(cfg.method).config_of(model, cfg.model)
-
-
-def stage_optimizer(cfg: TrainConfig, model: torch.nn.Module, si: int
-                    ) -> tuple[torch.optim.Optimizer, torch.optim.lr_scheduler.LRScheduler | None]:
-    """A fresh optimizer (and learning-rate schedule, or None) for stage ``si``, from the trainable
-    network's :meth:`~lfbench.method.trainable.Trainable.configure_optimizers` (default: Adam with the stage's
-    lr, betas and eps, constant rate)."""
-    made = get_trainable(cfg.method).configure_optimizers(model, cfg.stages[si])
-    optimizer, schedule = made if isinstance(made, tuple) else (made, None)
-    if not isinstance(optimizer, torch.optim.Optimizer):
-        raise LFBenchError(f"{cfg.method}: configure_optimizers returned a {type(optimizer).__name__}, not a "
-                           "torch.optim.Optimizer")
-    return optimizer, schedule
-
-
-def describe_optimizer(optimizer: torch.optim.Optimizer) -> str:
-    """E.g. 'Adam lr 0.001 eps 1e-07' (the first parameter group's rate, and epsilon when it has one)."""
-    group = optimizer.param_groups[0]
-    eps = f" eps {group['eps']:g}" if isinstance(group.get("eps"), float) else ""
-    return f"{type(optimizer).__name__} lr {group['lr']:g}{eps}"
-
-
-# --------------------------------------------------------------------------- the trainer
 
 _log = logging.getLogger(__name__)
 
@@ -888,26 +556,3 @@ def train(cfg: TrainConfig, out: str | Path, *, require_checkpoint: bool = False
             ctx.close()
 
 
-LOCK_NAME = ".lfbench-train.lock"
-
-
-@contextlib.contextmanager
-def run_folder_lock(out: Path) -> Iterator[None]:
-    """Hold an exclusive lock on the run folder ``out`` (created if needed): a second ``lfbench train``
-    into the same folder is refused at once (DataError) instead of interleaving logs and checkpoints.
-    The lock is an OS file lock (filelock): it goes away with the process, even after kill -9."""
-    if out.exists() and not out.is_dir():
-        raise DataError("output folder is a file", out)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-        lock = FileLock(str(out / LOCK_NAME))
-        lock.acquire(timeout=0)
-    except Timeout:
-        raise DataError("another lfbench train is running into this folder (it holds "
-                        f"{LOCK_NAME}); wait for it or use another --out", out) from None
-    except OSError as exc:
-        raise DataError(f"cannot write into the output folder: {exc.strerror or exc}", out) from None
-    try:
-        yield
-    finally:
-        lock.release()
