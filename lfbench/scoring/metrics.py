@@ -15,10 +15,11 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 
-from lfbench.scoring.base import NON_NEGATIVE, PERCENT, SCENE_AGGREGATES, Metric, MetricRegistry, PixelStatistic
+from lfbench.scoring.base import NON_NEGATIVE, PERCENT, SCENE_AGGREGATES, Metric, MetricRegistry
 from lfbench.scoring.general import (
     GENERAL_METRICS,
     RUNTIME_METRICS,
+    BadPixels,
     bad_pix,
     bad_pix_curve,
     bad_pix_metric,
@@ -29,6 +30,7 @@ from lfbench.scoring.general import (
     quantile_family,
     quantile_x100,
 )
+from lfbench.scoring.pixelwise import Mean, OrderStatistic, PixelMetric, Proportion, Sample
 from lfbench.scoring.region_metrics import REGION_METRICS, STRATIFIED_METRICS
 
 __all__ = [
@@ -40,8 +42,13 @@ __all__ = [
     "nonfinite_count",
     "bad_pix_metric",
     "quantile_metric",
+    "BadPixels",
     "Metric",
-    "PixelStatistic",
+    "PixelMetric",
+    "Sample",
+    "Proportion",
+    "Mean",
+    "OrderStatistic",
     "MetricRegistry",
     "METRICS",
     "SCENE_AGGREGATES",
