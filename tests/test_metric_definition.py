@@ -52,6 +52,9 @@ def test_a_metric_defined_once_is_a_function_of_maps_and_bootstraps_in_its_famil
     assert EPE(gt, pred) == float(np.average(finite)) == EPE.score_pixels(PixelErrors.of_maps(gt, pred))
     assert FAR(gt, pred) == 100.0 * np.count_nonzero(~(err <= np.float32(0.5))) / err.size
     assert MEDIAN(gt, pred) == float(np.sort(finite)[finite.size // 2])
+    mask = np.zeros(gt.shape, bool)
+    mask[3:9, 4:20] = True  # a plugin's sample may count the pixels it is given: the mask's, not the map's
+    assert PixelErrors.of_maps(gt, pred, mask).size == 96 == ErrorsOnly(stats.scored_errors(gt, pred, mask)).size
     for metric in (EPE, FAR, MEDIAN):
         assert metric.bootstrap is metric.pixelwise.family
         for block in (None, 4):
