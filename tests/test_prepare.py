@@ -271,7 +271,7 @@ def test_metric_order_and_labels_come_from_the_metrics():
 
 # lfbench/scoring from the bottom up: a module may import only those before it (and data, utils)
 SCORING_LAYERS = ("pixels", "resample", "pixelwise", "base", "general", "rules", "prepare", "region_metrics", "metrics",
-                  "score", "stats", "uncertainty")
+                  "builtin", "score", "stats", "uncertainty")
 
 
 def _lfbench_imports(path: Path) -> list[tuple[str, list[str]]]:

@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from importlib import metadata
 
 import numpy as np
 
@@ -22,6 +23,8 @@ from lfbench.utils.registry import Registry
 
 __all__ = [
     "ANY_VALUE",
+    "BUILTIN_METRICS",
+    "METRICS_GROUP",
     "Metric",
     "MetricFn",
     "MetricRegistry",
@@ -31,6 +34,9 @@ __all__ = [
 ]
 
 MetricFn = Callable[..., float]
+#: The entry-point group of metrics, and lfbench's own entry point's module (its built-in metrics).
+METRICS_GROUP = "lfbench.metrics"
+BUILTIN_METRICS = "lfbench.scoring.builtin"
 
 #: Value ranges (low, high) a metric declares: every value it can take lies in [low, high].
 PERCENT: tuple[float, float] = (0.0, 100.0)
@@ -194,16 +200,38 @@ class MetricRegistry(Registry[Metric]):
 
     ``register`` refuses anything but a :class:`Metric` and a second metric under a taken id;
     ``get`` raises :class:`~lfbench.utils.errors.SpecError` "Unknown metric X. Available: ...".
+    ``group``: the entry-point group whose plugins fill it (``lfbench.metrics``: the built-in metrics come
+    through it as a plugin's do). An entry point names a module (importing it registers its metrics) or a
+    :class:`Metric` (registered under its id, which must be the entry point's name); lfbench's own entry
+    points load first, so that the benchmark's metrics keep their order.
     """
 
-    def __init__(self) -> None:
-        super().__init__("metric", Metric)
+    def __init__(self, group: str | None = None) -> None:
+        super().__init__("metric", Metric, group=group)
         self._families: list[tuple[str, Callable[[str], Metric | None]]] = []
 
     def register(self, metric: Metric) -> Metric:
         self.check(str(getattr(metric, "id", "?")), metric)
-        self.add(metric.id, metric, aliases=(metric.toolkit_id,) if metric.toolkit_id else ())
+        self.add(metric.id, metric)
         return metric
+
+    def add(self, name: str, obj, *, entry=None, aliases: tuple[str, ...] = ()) -> None:
+        """:meth:`Registry.add`, with the metric's toolkit id as an alias; ValueError when ``name`` is not
+        the metric's id (an entry point named otherwise than its metric)."""
+        if isinstance(obj, Metric):
+            if name != obj.id:
+                raise ValueError(f"metric {obj.id!r} registered as {name!r}: the name must be the metric's id")
+            aliases = aliases or ((obj.toolkit_id,) if obj.toolkit_id else ())
+        super().add(name, obj, entry=entry, aliases=aliases)
+
+    def entry_points(self) -> list[metadata.EntryPoint]:
+        """The group's entry points, lfbench's own first (then the plugins', by name). Metadata of an install
+        older than the group (e.g. a stale ``lfbench.egg-info`` beside the sources) lacks lfbench's own entry
+        point: it is added then, so that the benchmark's metrics are never missing."""
+        eps = sorted(super().entry_points(), key=lambda ep: not ep.value.startswith("lfbench."))
+        if self.group == METRICS_GROUP and not any(ep.value == BUILTIN_METRICS for ep in eps):
+            eps.insert(0, metadata.EntryPoint(name="hci", value=BUILTIN_METRICS, group=METRICS_GROUP))
+        return eps
 
     def register_family(self, pattern: str, make: Callable[[str], Metric | None]) -> None:
         """A parametrised family: ``make(id)`` returns the metric for an id it understands, else None;
@@ -211,7 +239,9 @@ class MetricRegistry(Registry[Metric]):
         self._families.append((pattern, make))
 
     def find(self, metric_id: str) -> Metric | None:
-        """The metric with this id or toolkit id (or from a family), or None."""
+        """The metric with this id or toolkit id (or from a family), or None. The first lookup loads every
+        plugin of the group (lfbench's first: the order of the metrics does not depend on what is asked)."""
+        self.names()
         metric = super().find(str(metric_id))
         if metric is not None:
             return metric
@@ -228,5 +258,7 @@ class MetricRegistry(Registry[Metric]):
         return metric
 
     def all(self, category: str | None = None) -> tuple[Metric, ...]:
-        """The registered metrics (families excluded), in registration order, optionally of one category."""
+        """The registered metrics (families excluded; every plugin loaded), in registration order, optionally
+        of one category."""
+        self.names()
         return tuple(m for m in map(self.get, self.registered()) if category is None or m.category == category)
