@@ -74,3 +74,28 @@ def test_builtin_metrics_come_through_the_entry_point_group_first():
     ids = [m.id for m in list_metrics()]
     assert ids[:5] == ["badpix_0.01", "badpix_0.03", "badpix_0.07", "mse_x100", "q25_x100"]
     assert len(ids) == len(set(ids)) == 23
+
+
+def test_a_broken_or_misnamed_metric_plugin_is_reported_and_breaks_nothing(tmp_path, monkeypatch):
+    """An entry point whose module fails to import, or that names a metric under another id, is recorded with
+    its reason (shown when its name is asked for); the benchmark's metrics and the other plugins still load."""
+    import pytest
+
+    from lfbench.scoring.metrics import METRICS
+    from lfbench.utils.errors import SpecError
+
+    site = tmp_path / "site"
+    _install_readme_plugin(site)
+    with open(site / "my_metrics-1.0.dist-info" / "entry_points.txt", "a", encoding="utf-8") as f:
+        f.write("\nbroken = my_metrics_does_not_exist:X\nmae = my_metrics:EPE\n")
+    monkeypatch.syspath_prepend(str(site))
+    registry = METRICS  # the process-wide registry, as it is now, loading the group again (undone afterwards)
+    for attr in ("_objects", "_entries", "_aliases", "load_errors"):
+        monkeypatch.setattr(registry, attr, dict(getattr(registry, attr)))
+    monkeypatch.setattr(registry, "_loaded", False)
+    monkeypatch.delitem(sys.modules, "my_metrics", raising=False)
+    assert [m.id for m in registry.all()][-1] == "epe" and registry.get("badpix_0070").id == "badpix_0.07"
+    assert registry.load_errors["broken"].startswith("ModuleNotFoundError: No module named 'my_metrics_does_not_exist'")
+    assert registry.load_errors["mae"] == "metric 'epe' registered as 'mae': the name must be the metric's id"
+    with pytest.raises(SpecError, match=r"^Unknown metric 'broken' \(plugin failed to load: ModuleNotFoundError"):
+        registry.get("broken")

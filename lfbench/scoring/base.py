@@ -241,7 +241,8 @@ class MetricRegistry(Registry[Metric]):
     def find(self, metric_id: str) -> Metric | None:
         """The metric with this id or toolkit id (or from a family), or None. The first lookup loads every
         plugin of the group (lfbench's first: the order of the metrics does not depend on what is asked)."""
-        self.names()
+        if not self._loaded:
+            self.names()
         metric = super().find(str(metric_id))
         if metric is not None:
             return metric
@@ -260,5 +261,6 @@ class MetricRegistry(Registry[Metric]):
     def all(self, category: str | None = None) -> tuple[Metric, ...]:
         """The registered metrics (families excluded; every plugin loaded), in registration order, optionally
         of one category."""
-        self.names()
+        if not self._loaded:
+            self.names()
         return tuple(m for m in map(self.get, self.registered()) if category is None or m.category == category)
