@@ -15,7 +15,9 @@ import skimage.filters as skf
 from helpers import scene_parameters
 from scipy import signal
 
+from lfbench.scoring.general import BadPixels, abs_error_x100, squared_error
 from lfbench.scoring.metrics import bad_pix, bad_pix_curve, mse_x100, nonfinite_count, q25_x100, quantile_x100
+from lfbench.scoring.pixelwise import Mean, OrderStatistic, Proportion
 from lfbench.scoring.prepare import border_mask
 from lfbench.scoring.region_metrics import (
     angular_error_deg,
@@ -345,15 +347,16 @@ def test_shape_errors_say_which_shapes():
 # --------------------------------------------------------------------------- the metric definitions
 
 # The benchmark's metrics as results files name them (the toolkit's ids), with what decides their numbers:
-# id: (toolkit id, unit, evaluation mask, extra masks, resolution, category, needs scene, bootstrap statistic).
+# id: (toolkit id, unit, evaluation mask, extra masks, resolution, category, needs scene, and for a metric that
+# bootstraps: its sample of the pixel errors and its resampling family).
 # From the evaluation fact sheet (General / Region / Stratified metrics); units as the tables print them.
 _REGION, _STRAT = "region", "stratified"
 METRIC_TABLE = {
-    "badpix_0.01": ("badpix_0010", "%", None, (), "scene", "general", False, ("badpix", 0.01)),
-    "badpix_0.03": ("badpix_0030", "%", None, (), "scene", "general", False, ("badpix", 0.03)),
-    "badpix_0.07": ("badpix_0070", "%", None, (), "scene", "general", False, ("badpix", 0.07)),
-    "mse_x100": ("mse_100", "px^2 x 100", None, (), "scene", "general", False, ("mse", 0.0)),
-    "q25_x100": ("q_25_100", "px x 100", None, (), "scene", "general", False, ("quantile", 25.0)),
+    "badpix_0.01": ("badpix_0010", "%", None, (), "scene", "general", False, (BadPixels(0.01), Proportion())),
+    "badpix_0.03": ("badpix_0030", "%", None, (), "scene", "general", False, (BadPixels(0.03), Proportion())),
+    "badpix_0.07": ("badpix_0070", "%", None, (), "scene", "general", False, (BadPixels(0.07), Proportion())),
+    "mse_x100": ("mse_100", "px^2 x 100", None, (), "scene", "general", False, (squared_error, Mean())),
+    "q25_x100": ("q_25_100", "px x 100", None, (), "scene", "general", False, (abs_error_x100, OrderStatistic(25.0))),
     # the toolkit's runtime metrics: read from the method's runtime, not computed from maps (no bootstrap)
     "runtime": ("runtime", "s", None, (), "scene", "runtime", False, None),
     "runtime_log": ("runtime_log", "log10 s", None, (), "scene", "runtime", False, None),
@@ -393,7 +396,7 @@ def test_metric_definitions_are_the_benchmarks():
 
     assert [m.id for m in list_metrics()] == list(METRIC_TABLE)
     for m in list_metrics():
-        boot = None if m.bootstrap is None else (m.bootstrap.name, m.bootstrap.param)
+        boot = None if m.bootstrap is None else (m.pixelwise.sample, m.bootstrap)
         assert (m.toolkit_id, m.unit, m.mask_name, m.extra_masks, m.resolution, m.category, m.needs_scene,
                 boot) == METRIC_TABLE[m.id], m.id
         assert get_metric(m.toolkit_id) is m and not m.higher_is_better and m.scene_aggregate == "mean"
@@ -402,7 +405,7 @@ def test_metric_definitions_are_the_benchmarks():
 
 def test_region_badpix_and_mse_metrics_score_their_mask():
     """Kills the region metrics built on BadPix(0.07) / MSE losing their mask, threshold or non-finite rule
-    (`_bad_pix_fn` closures; the stratified MSE)."""
+    (their BadPixels(0.07) sample; the stratified MSE)."""
     from lfbench.scoring.metrics import get_metric
 
     gt = np.zeros((1, 5), F32)
@@ -556,13 +559,13 @@ def test_slanted_bumpiness_keeps_the_border(tmp_path):
 
 def test_bad_metric_definitions_are_refused_with_a_reason():
     """Kills the errors of a bad metric definition (a plugin's) losing their message: an unknown scene
-    aggregate or pixel statistic, an empty or NaN value range, a non-Metric registered."""
-    from lfbench.scoring.metrics import METRICS, Metric, PixelStatistic
+    aggregate, nothing to compute, an empty or NaN value range, a non-Metric registered."""
+    from lfbench.scoring.metrics import METRICS, Metric
 
     with pytest.raises(ValueError, match="^metric 'x': unknown scene_aggregate 'median'; use one of mean$"):
         Metric(id="x", name="x", description="x", unit="%", fn=bad_pix, scene_aggregate="median")
-    with pytest.raises(ValueError, match="^unknown pixel statistic 'median': badpix, mse or quantile$"):
-        PixelStatistic("median")
+    with pytest.raises(ValueError, match="^metric 'x': give fn or pixelwise, what it computes$"):
+        Metric(id="x", name="x", description="x", unit="%")
     for bad in ((1.0, 1.0), (2.0, 1.0), (float("nan"), 1.0), (0.0, float("nan"))):  # an empty or NaN range
         with pytest.raises(ValueError, match=r"^metric 'x': value_range must be \(low, high\) with low < high, got "):
             Metric(id="x", name="x", description="x", unit="%", fn=bad_pix, value_range=bad)

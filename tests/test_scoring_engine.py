@@ -145,10 +145,10 @@ def test_pixelwise_metrics_are_the_formulas_on_the_maps(seed, toolkit):
 
 
 def test_every_pixelwise_metric_agrees_with_its_map_function():
-    """``pixel_fn`` and ``fn`` are one metric: on maps and a mask both give the same value."""
+    """``pixelwise`` and ``fn`` are one metric: on maps and a mask both give the same value."""
     gt, pred, mask = _maps(7)
     pixelwise = [m for m in (*GENERAL_METRICS, *REGION_METRICS, *(m for ms in STRATIFIED_METRICS.values() for m in ms))
-                 if m.pixel_fn is not None and not m.needs_scene]
+                 if m.pixelwise is not None and not m.needs_scene]
     assert {"badpix_0.07", "mse_x100", "q25_x100", "discontinuities", "fine_fattening", "stripes_dark",
             "dots_background_mse"} <= {m.id for m in pixelwise}
     for metric in pixelwise:

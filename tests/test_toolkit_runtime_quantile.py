@@ -16,7 +16,7 @@ from lfbench.data.submission import read_runtime, write_submission_map
 from lfbench.scoring.metrics import (
     GENERAL_METRICS,
     RUNTIME_METRICS,
-    PixelStatistic,
+    OrderStatistic,
     find_metric,
     get_metric,
     quantile_metric,
@@ -33,7 +33,7 @@ PRED = ERRORS.reshape(4, 5)[::-1].copy()  # any order: the metric sorts
 def test_quantile_family_is_the_element_at_int_n_p_over_100(p, index):
     metric = get_metric(f"q{p:g}_x100")
     assert metric.id == f"q{p:g}_x100" and metric.name == f"Q{p:g}" and metric.unit == "px x 100"
-    assert metric.bootstrap == PixelStatistic("quantile", float(p)) and metric.category == "general"
+    assert metric.bootstrap == OrderStatistic(float(p)) and metric.category == "general"
     assert metric(GT, PRED) == pytest.approx(100 * float(ERRORS[index]), rel=1e-6)
     assert quantile_metric(p).id == metric.id
 

@@ -27,7 +27,7 @@ from lfbench.method.base import Method, Prediction
 from lfbench.reports.writers import CIOptions, OutputWriter, RunOutputs, Tables, write_outputs
 from lfbench.results import Results
 from lfbench.runs.runner import check_names, evaluate
-from lfbench.scoring.metrics import GENERAL_METRICS, RUNTIME_METRICS, Metric
+from lfbench.scoring.metrics import RUNTIME_METRICS, Metric, list_metrics
 from lfbench.scoring.rules import ScoringRules
 from lfbench.scoring.score import applicable_metrics
 from lfbench.utils.outputs import staged_outputs
@@ -67,7 +67,7 @@ def evaluate_to_folder(methods: Sequence[Method], scenes: Sequence[Scene], out: 
             for writer in writers:
                 writer.on_prediction(label if label is not None else method.label, scene, pred)
 
-        chosen = metrics if metrics is not None else GENERAL_METRICS
+        chosen = metrics if metrics is not None else list_metrics("general")  # plugins' general metrics too
         if all_metrics:
             chosen = functools.partial(_all_metrics, rules=rules)
         score = functools.partial(evaluate, metrics=chosen, rules=rules, on_prediction=each_prediction,

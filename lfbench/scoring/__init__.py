@@ -1,9 +1,12 @@
 """Scoring, in layers (each module imports only those above it in this list):
 
-- ``base``: what a metric is (:class:`Metric`, its pixel statistic, the metric registry type);
 - ``pixels``: the pixels a metric scores on a scene and a prediction's errors there, each computed once
   (:class:`~lfbench.scoring.pixels.PixelSet`, :class:`~lfbench.scoring.pixels.PixelErrors`): what the
   pixel-wise metrics compute from;
+- ``resample``: the bootstrap's resampling engines (functions of arrays);
+- ``pixelwise``: a pixel-wise metric's one definition (:class:`~lfbench.scoring.pixelwise.PixelMetric`: a sample
+  of the pixel errors and the family that reduces and resamples it: proportion, mean, order statistic);
+- ``base``: what a metric is (:class:`Metric`, the metric registry type);
 - ``general``: the general metrics (BadPix, MSE, Q25 as functions of arrays) and their definitions;
 - ``rules``: the benchmark's scoring rules (:class:`~lfbench.scoring.rules.ScoringRules`: border,
   resolution of each metric, non-finite rule, the high-resolution scenes);

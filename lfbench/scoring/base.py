@@ -1,6 +1,8 @@
 """What a metric is: :class:`Metric` (the one definition of a metric: what it computes, its unit,
-direction, label and display order, plot settings, how it aggregates over scenes and how it bootstraps),
-:class:`PixelStatistic` and :class:`MetricRegistry` (the generic registry of metrics).
+direction, label and display order, plot settings, how it aggregates over scenes and how it bootstraps)
+and :class:`MetricRegistry` (the generic registry of metrics). A pixel-wise metric computes through its
+:class:`~lfbench.scoring.pixelwise.PixelMetric` (lfbench.scoring.pixelwise), from which its function of maps
+and its bootstrap derive.
 
 The metrics themselves are defined beside their functions (:mod:`lfbench.scoring.general`,
 :mod:`lfbench.scoring.region_metrics`) and registered in :mod:`lfbench.scoring.metrics`; the scoring
@@ -12,23 +14,29 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from importlib import metadata
 
 import numpy as np
 
+from lfbench.scoring.pixelwise import Family, OnMaps, PixelMetric
 from lfbench.utils.registry import Registry
 
 __all__ = [
     "ANY_VALUE",
+    "BUILTIN_METRICS",
+    "METRICS_GROUP",
     "Metric",
     "MetricFn",
     "MetricRegistry",
     "NON_NEGATIVE",
     "PERCENT",
-    "PixelStatistic",
     "SCENE_AGGREGATES",
 ]
 
 MetricFn = Callable[..., float]
+#: The entry-point group of metrics, and lfbench's own entry point's module (its built-in metrics).
+METRICS_GROUP = "lfbench.metrics"
+BUILTIN_METRICS = "lfbench.scoring.builtin"
 
 #: Value ranges (low, high) a metric declares: every value it can take lies in [low, high].
 PERCENT: tuple[float, float] = (0.0, 100.0)
@@ -51,28 +59,17 @@ SCENE_AGGREGATES: dict[str, Callable[[np.ndarray], float]] = {"mean": _mean_of_f
 
 
 @dataclass(frozen=True)
-class PixelStatistic:
-    """What a metric is as a statistic of the per-pixel errors, which is how it bootstraps.
-
-    ``name``: 'badpix' (percentage of |error| > ``param`` px, non-finite = bad), 'mse' (100 x the mean
-    squared error over finite errors) or 'quantile' (100 x the |error| at index int(n * ``param`` / 100)
-    of the sorted errors). :mod:`lfbench.scoring.stats` resamples the per-pixel values accordingly.
-    """
-
-    name: str
-    param: float = 0.0
-
-    def __post_init__(self) -> None:
-        if self.name not in ("badpix", "mse", "quantile"):
-            raise ValueError(f"unknown pixel statistic {self.name!r}: badpix, mse or quantile")
-
-
-@dataclass(frozen=True)
 class Metric:
     """The one definition of a metric: what it computes, its unit and direction, its label and place in
     tables, how it is drawn, how its per-scene values aggregate and how it bootstraps.
 
-    ``fn(gt, pred, mask, toolkit=...)`` returns the score in ``unit``. ``mask_name`` is the evaluation
+    ``pixelwise``: a pixel-wise metric's one definition (:class:`~lfbench.scoring.pixelwise.PixelMetric`: a
+    sample of per-pixel values of the prediction's errors at the pixels of ``mask_name`` inside the evaluation
+    mask, and the family that reduces and resamples it), for metrics that depend only on those pixels' values:
+    scoring then gathers each prediction once per set of pixels and computes |error| once for all of its metrics
+    (:func:`lfbench.scoring.score.score_scene`), ``fn`` is derived from it
+    (:class:`~lfbench.scoring.pixelwise.OnMaps`) and :attr:`bootstrap` is its family. None: ``fn`` is the
+    definition. ``fn(gt, pred, mask, toolkit=...)`` returns the score in ``unit``. ``mask_name`` is the evaluation
     mask the metric needs (None = general metric, scored under the border mask); ``resolution`` is
     'scene' (the scene's rule), 'lowres' or 'highres'. Region / stratified metrics
     (lfbench.scoring.region_metrics) may also need ``extra_masks`` (further mask files the metric reads
@@ -82,8 +79,6 @@ class Metric:
     ``spatial_size``, ``mask`` and ``mask_names`` as the scene does, from its caches (the scene itself
     is its ``.scene``). ``category``: 'general', 'region' or 'stratified'.
     ``vmin``/``vmax``/``cmap``: plot settings. ``scene_aggregate``: a key of :data:`SCENE_AGGREGATES`.
-    ``bootstrap``: the metric as a :class:`PixelStatistic` of the general scoring's per-pixel errors,
-    or None when it cannot be resampled from them (region metrics score other pixels).
     ``value_range``: (low, high), every value the metric can take (e.g. (0, 100) for a percentage;
     infinite ends where it has no bound): it bounds regression tolerances and golden values.
     ``short_label``: the header of a table column that holds the metric with its unit ('BadPix 0.07 (%)'
@@ -91,11 +86,6 @@ class Metric:
     in tables and reports: metrics with an order come first, by it (the paper's BadPix 0.07, 0.03,
     0.01, MSE x100, Q25), the others after them in the order they come
     (:func:`lfbench.scoring.metrics.metric_order`).
-    ``pixel_fn(px, toolkit=...)``: the same metric as a function of a
-    :class:`~lfbench.scoring.pixels.PixelErrors` (the prediction's errors at the pixels of ``mask_name``
-    inside the evaluation mask), for metrics that depend only on those pixels' values (pixel-wise): scoring
-    then gathers each prediction once per set of pixels and computes |error| once for all of its metrics
-    (:func:`lfbench.scoring.score.score_scene`); ``fn`` must give the same value bit for bit. None: ``fn``.
     Category 'runtime' (:data:`lfbench.scoring.general.RUNTIME_METRICS`): ``fn(runtime_s)`` of the runtime
     a method reports for a scene (no maps, no masks, no resolution of its own; see
     :func:`lfbench.scoring.score.score_scene`).
@@ -105,7 +95,7 @@ class Metric:
     name: str
     description: str
     unit: str
-    fn: MetricFn = field(repr=False, compare=False)
+    fn: MetricFn | None = field(default=None, repr=False, compare=False)
     toolkit_id: str | None = None
     mask_name: str | None = None
     resolution: str = "scene"
@@ -117,13 +107,16 @@ class Metric:
     extra_masks: tuple[str, ...] = ()
     needs_scene: bool = False
     scene_aggregate: str = "mean"
-    bootstrap: PixelStatistic | None = None
     value_range: tuple[float, float] = NON_NEGATIVE
     short_label: str | None = None
     order: int | None = None
-    pixel_fn: MetricFn | None = field(default=None, repr=False, compare=False)
+    pixelwise: PixelMetric | None = None
 
     def __post_init__(self) -> None:
+        if self.fn is None:
+            if self.pixelwise is None:
+                raise ValueError(f"metric {self.id!r}: give fn or pixelwise, what it computes")
+            object.__setattr__(self, "fn", OnMaps(self.pixelwise))
         if self.scene_aggregate not in SCENE_AGGREGATES:
             raise ValueError(f"metric {self.id!r}: unknown scene_aggregate {self.scene_aggregate!r}; "
                              f"use one of {', '.join(SCENE_AGGREGATES)}")
@@ -149,6 +142,16 @@ class Metric:
         value is larger, so a regression tolerance of this much or more accepts anything."""
         low, high = self.value_range
         return high - low
+
+    @property
+    def bootstrap(self) -> Family | None:
+        """How the metric resamples (its pixel-wise family) from the per-pixel errors of the general scoring
+        (:mod:`lfbench.scoring.stats`), or None when it cannot be resampled from them: not pixel-wise, scored
+        on other pixels (a mask of its own, further masks or its scene) or reading more than the errors."""
+        p = self.pixelwise
+        if p is None or not p.of_errors or self.mask_name is not None or self.extra_masks or self.needs_scene:
+            return None
+        return p.family
 
     @property
     def is_runtime(self) -> bool:
@@ -185,10 +188,10 @@ class Metric:
 
     def score_pixels(self, px, *, toolkit: bool = False) -> float:
         """The metric of the errors ``px`` (:class:`~lfbench.scoring.pixels.PixelErrors`) through
-        :attr:`pixel_fn` (TypeError for a metric without one)."""
-        if self.pixel_fn is None:
+        :attr:`pixelwise` (TypeError for a metric without one)."""
+        if self.pixelwise is None:
             raise TypeError(f"metric {self.id!r} is not pixel-wise: score it from maps")
-        return self.pixel_fn(px, toolkit=toolkit)
+        return self.pixelwise(px, toolkit=toolkit)
 
 
 class MetricRegistry(Registry[Metric]):
@@ -197,16 +200,38 @@ class MetricRegistry(Registry[Metric]):
 
     ``register`` refuses anything but a :class:`Metric` and a second metric under a taken id;
     ``get`` raises :class:`~lfbench.utils.errors.SpecError` "Unknown metric X. Available: ...".
+    ``group``: the entry-point group whose plugins fill it (``lfbench.metrics``: the built-in metrics come
+    through it as a plugin's do). An entry point names a module (importing it registers its metrics) or a
+    :class:`Metric` (registered under its id, which must be the entry point's name); lfbench's own entry
+    points load first, so that the benchmark's metrics keep their order.
     """
 
-    def __init__(self) -> None:
-        super().__init__("metric", Metric)
+    def __init__(self, group: str | None = None) -> None:
+        super().__init__("metric", Metric, group=group)
         self._families: list[tuple[str, Callable[[str], Metric | None]]] = []
 
     def register(self, metric: Metric) -> Metric:
         self.check(str(getattr(metric, "id", "?")), metric)
-        self.add(metric.id, metric, aliases=(metric.toolkit_id,) if metric.toolkit_id else ())
+        self.add(metric.id, metric)
         return metric
+
+    def add(self, name: str, obj, *, entry=None, aliases: tuple[str, ...] = ()) -> None:
+        """:meth:`Registry.add`, with the metric's toolkit id as an alias; ValueError when ``name`` is not
+        the metric's id (an entry point named otherwise than its metric)."""
+        if isinstance(obj, Metric):
+            if name != obj.id:
+                raise ValueError(f"metric {obj.id!r} registered as {name!r}: the name must be the metric's id")
+            aliases = aliases or ((obj.toolkit_id,) if obj.toolkit_id else ())
+        super().add(name, obj, entry=entry, aliases=aliases)
+
+    def entry_points(self) -> list[metadata.EntryPoint]:
+        """The group's entry points, lfbench's own first (then the plugins', by name). Metadata of an install
+        older than the group (e.g. a stale ``lfbench.egg-info`` beside the sources) lacks lfbench's own entry
+        point: it is added then, so that the benchmark's metrics are never missing."""
+        eps = sorted(super().entry_points(), key=lambda ep: not ep.value.startswith("lfbench."))
+        if self.group == METRICS_GROUP and not any(ep.value == BUILTIN_METRICS for ep in eps):
+            eps.insert(0, metadata.EntryPoint(name="hci", value=BUILTIN_METRICS, group=METRICS_GROUP))
+        return eps
 
     def register_family(self, pattern: str, make: Callable[[str], Metric | None]) -> None:
         """A parametrised family: ``make(id)`` returns the metric for an id it understands, else None;
@@ -214,7 +239,10 @@ class MetricRegistry(Registry[Metric]):
         self._families.append((pattern, make))
 
     def find(self, metric_id: str) -> Metric | None:
-        """The metric with this id or toolkit id (or from a family), or None."""
+        """The metric with this id or toolkit id (or from a family), or None. The first lookup loads every
+        plugin of the group (lfbench's first: the order of the metrics does not depend on what is asked)."""
+        if not self._loaded:
+            self.names()
         metric = super().find(str(metric_id))
         if metric is not None:
             return metric
@@ -231,5 +259,8 @@ class MetricRegistry(Registry[Metric]):
         return metric
 
     def all(self, category: str | None = None) -> tuple[Metric, ...]:
-        """The registered metrics (families excluded), in registration order, optionally of one category."""
+        """The registered metrics (families excluded; every plugin loaded), in registration order, optionally
+        of one category."""
+        if not self._loaded:
+            self.names()
         return tuple(m for m in map(self.get, self.registered()) if category is None or m.category == category)

@@ -24,15 +24,19 @@ from __future__ import annotations
 import math
 import re
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
-from lfbench.scoring.base import ANY_VALUE, PERCENT, Metric, PixelStatistic
+from lfbench.scoring.base import ANY_VALUE, PERCENT, Metric
 from lfbench.scoring.pixels import PixelErrors
+from lfbench.scoring.pixelwise import Mean, OrderStatistic, PixelMetric, Proportion, Sample, kept
 
 __all__ = [
+    "BadPixels",
     "GENERAL_METRICS",
     "RUNTIME_METRICS",
+    "abs_error_x100",
     "bad_pix",
     "bad_pix_curve",
     "bad_pix_metric",
@@ -47,6 +51,7 @@ __all__ = [
     "quantile_family",
     "quantile_x100",
     "quantile_x100_of",
+    "squared_error",
 ]
 
 
@@ -85,15 +90,26 @@ def bad_pix(gt: np.ndarray, pred: np.ndarray, threshold: float = 0.07, mask: np.
     return bad_pix_of(PixelErrors.of_maps(gt, pred, mask), threshold, toolkit=toolkit)
 
 
+@dataclass(frozen=True)
+class BadPixels:
+    """BadPix(``threshold``)'s sample: whether each scored pixel is bad, |error| > threshold px (compared in the
+    errors' precision). Default: non-finite predictions are bad, pixels with non-finite ground truth are not
+    scored; ``toolkit``: every pixel is scored and NaN is good (the toolkit's comparison)."""
+
+    threshold: float
+
+    def __call__(self, px: PixelErrors, *, toolkit: bool = False) -> Sample:
+        with np.errstate(invalid="ignore"):
+            bad = px.err > self.threshold  # NaN compares False
+        if toolkit:  # counted as good
+            return Sample(bad)
+        bad |= ~px.pred_finite
+        return kept(bad, px.gt_finite)
+
+
 def bad_pix_of(px: PixelErrors, threshold: float = 0.07, *, toolkit: bool = False) -> float:
     """:func:`bad_pix` of the errors ``px`` (lfbench.scoring.pixels) at the pixels they hold."""
-    with np.errstate(invalid="ignore"):
-        bad = px.err > threshold  # NaN compares False
-    if toolkit:  # counted as good
-        return percent_of(px.size, int(np.count_nonzero(bad)))
-    scored = px.gt_finite
-    bad |= ~px.pred_finite
-    return percent_of(int(np.count_nonzero(scored)), int(np.count_nonzero(bad & scored)))
+    return PixelMetric(BadPixels(threshold), Proportion())(px, toolkit=toolkit)
 
 
 def bad_pix_curve(gt: np.ndarray, pred: np.ndarray, thresholds: Sequence[float] | np.ndarray,
@@ -117,14 +133,20 @@ def mse_x100(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = None, *
     return mse_x100_of(PixelErrors.of_maps(gt, pred, mask), toolkit=toolkit)
 
 
-def mse_x100_of(px: PixelErrors, *, toolkit: bool = False) -> float:
-    """:func:`mse_x100` of the errors ``px`` at the pixels they hold (|e|^2 = e^2 exactly)."""
+def squared_error(px: PixelErrors, *, toolkit: bool = False) -> Sample:
+    """MSE's sample: the squared error (px^2, |e|^2 = e^2 exactly) of the pixels with finite ground truth and
+    prediction (one rule in both modes: no finite stand-in for a non-finite error exists)."""
     scored = px.finite
-    if not scored.any():
-        return float("nan")
-    diff = np.square(px.err if scored.all() else px.err[scored])  # all kept: the same elements, no copy
-    # the toolkit (numpy 1.x) multiplied the float32 mean by 100 in float64; do the same under numpy 2
-    return float(np.average(diff)) * 100
+    return Sample(np.square(px.err), None) if scored.all() else Sample(np.square(px.err[scored]), scored)
+
+
+# MSE x100: the toolkit (numpy 1.x) multiplied the float32 mean by 100 in float64; :class:`Mean` does the same
+_MSE = PixelMetric(squared_error, Mean(100.0))
+
+
+def mse_x100_of(px: PixelErrors, *, toolkit: bool = False) -> float:
+    """:func:`mse_x100` of the errors ``px`` at the pixels they hold."""
+    return _MSE(px, toolkit=toolkit)
 
 
 def quantile_x100(gt: np.ndarray, pred: np.ndarray, percentage: float = 25, mask: np.ndarray | None = None,
@@ -133,24 +155,20 @@ def quantile_x100(gt: np.ndarray, pred: np.ndarray, percentage: float = 25, mask
     return quantile_x100_of(PixelErrors.of_maps(gt, pred, mask), percentage, toolkit=toolkit)
 
 
-def _where(values: np.ndarray, keep: np.ndarray) -> np.ndarray:
-    """``values[keep]`` (1-D), itself when every element is kept."""
-    return values if keep.all() else values[keep]
+def abs_error_x100(px: PixelErrors, *, toolkit: bool = False) -> Sample:
+    """The quantiles' sample: 100 x |error| (px x 100). Default: a non-finite prediction is an infinite error,
+    pixels with non-finite ground truth are not scored; ``toolkit``: non-finite errors are left out."""
+    with np.errstate(over="ignore"):
+        diffs = px.err * 100
+    if toolkit:
+        return kept(diffs, np.isfinite(diffs) & px.pred_finite)
+    return kept(diffs if px.pred_finite.all() else np.where(px.pred_finite, diffs, np.inf), px.gt_finite)
 
 
 def quantile_x100_of(px: PixelErrors, percentage: float = 25, *, toolkit: bool = False) -> float:
     """:func:`quantile_x100` of the errors ``px`` at the pixels they hold (the element at that index of
     the sorted errors, found by a partition: the same value as a full sort's)."""
-    with np.errstate(over="ignore"):
-        diffs = px.err * 100
-    if toolkit:
-        values = _where(diffs, np.isfinite(diffs) & px.pred_finite)
-    else:
-        values = _where(diffs if px.pred_finite.all() else np.where(px.pred_finite, diffs, np.inf), px.gt_finite)
-    if values.size == 0:
-        return float("nan")
-    k = int(values.size * percentage / 100.0)
-    return float(np.partition(values, k)[k])
+    return PixelMetric(abs_error_x100, OrderStatistic(float(percentage)))(px, toolkit=toolkit)
 
 
 def q25_x100(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = None, *, toolkit: bool = False) -> float:
@@ -163,27 +181,19 @@ def q25_x100(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = None, *
 def bad_pix_metric(threshold: float, *, order: int | None = None) -> Metric:
     """The BadPix metric for any threshold (px); ``order``: its place in tables (the paper's three have one)."""
     t = float(threshold)
-
-    def fn(gt, pred, mask=None, *, toolkit=False):
-        return bad_pix(gt, pred, t, mask, toolkit=toolkit)
-
-    def pixel_fn(px, *, toolkit=False):
-        return bad_pix_of(px, t, toolkit=toolkit)
-
     return Metric(
         id=f"badpix_{t:g}", name=f"BadPix({t:g})",
         description=f"Percentage of pixels with |gt - pred| > {t:g} px (non-finite predictions count as bad).",
-        unit="%", fn=fn, toolkit_id=("badpix_%0.3f" % t).replace(".", ""), vmin=0, vmax=1, cmap="RdYlGn_r",
-        bootstrap=PixelStatistic("badpix", t), value_range=PERCENT, short_label=f"BadPix {t:g} (%)", order=order,
-        pixel_fn=pixel_fn,
+        unit="%", pixelwise=PixelMetric(BadPixels(t), Proportion()), toolkit_id=("badpix_%0.3f" % t).replace(".", ""),
+        vmin=0, vmax=1, cmap="RdYlGn_r", value_range=PERCENT, short_label=f"BadPix {t:g} (%)", order=order,
     )
 
 
 def _mse_metric() -> Metric:
     return Metric(
         id="mse_x100", name="MSE x100", description="Mean squared disparity error (px^2) multiplied by 100.",
-        unit="px^2 x 100", fn=mse_x100, toolkit_id="mse_100", vmin=-0.2, vmax=0.2, cmap="seismic",
-        bootstrap=PixelStatistic("mse"), short_label="MSE x100", order=3, pixel_fn=mse_x100_of,
+        unit="px^2 x 100", pixelwise=_MSE, toolkit_id="mse_100", vmin=-0.2, vmax=0.2, cmap="seismic",
+        short_label="MSE x100", order=3,
     )
 
 
@@ -195,38 +205,20 @@ def _ordinal(p: float) -> str:
     return f"{n}{suffix}"
 
 
-def _quantile_metric(p: float) -> Metric:
+def _quantile_metric(p: float, *, name: str | None = None, order: int | None = None) -> Metric:
     """Quantile(p): 100 x the |error| at index int(n * p / 100) of the n sorted errors, 0 <= p < 100."""
-    def fn(gt, pred, mask=None, *, toolkit=False):
-        return quantile_x100(gt, pred, p, mask, toolkit=toolkit)
-
-    def pixel_fn(px, *, toolkit=False):
-        return quantile_x100_of(px, p, toolkit=toolkit)
-
     return Metric(
-        id=f"q{p:g}_x100", name=f"Q{p:g}",
+        id=f"q{p:g}_x100", name=name or f"Q{p:g}",
         description=f"{_ordinal(p)} percentile of the absolute disparity error, x100.",
-        unit="px x 100", fn=fn, toolkit_id=f"q_{p:g}_100" if p == int(p) else None, vmin=0, vmax=0.5,
-        cmap="YlOrRd", bootstrap=PixelStatistic("quantile", p), pixel_fn=pixel_fn,
+        unit="px x 100", pixelwise=PixelMetric(abs_error_x100, OrderStatistic(float(p))),
+        toolkit_id=f"q_{p:g}_100" if p == int(p) else None, vmin=0, vmax=0.5, cmap="YlOrRd", order=order,
     )
-
-
-def _q25_metric() -> Metric:
-    return Metric(
-        id="q25_x100", name="Q25", description="25th percentile of the absolute disparity error, x100.",
-        unit="px x 100", fn=q25_x100, toolkit_id="q_25_100", vmin=0, vmax=0.5, cmap="YlOrRd",
-        bootstrap=PixelStatistic("quantile", 25.0), order=4, pixel_fn=_q25_of,
-    )
-
-
-def _q25_of(px: PixelErrors, *, toolkit: bool = False) -> float:
-    return quantile_x100_of(px, 25, toolkit=toolkit)
 
 
 #: The benchmark's general metrics (registration order); ``order`` puts them in the paper's table order.
 GENERAL_METRICS: tuple[Metric, ...] = (
     bad_pix_metric(0.01, order=2), bad_pix_metric(0.03, order=1), bad_pix_metric(0.07, order=0), _mse_metric(),
-    _q25_metric(),
+    _quantile_metric(25.0, order=4),
 )
 
 

@@ -15,21 +15,20 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 
-from lfbench.scoring.base import NON_NEGATIVE, PERCENT, SCENE_AGGREGATES, Metric, MetricRegistry, PixelStatistic
+from lfbench.scoring.base import METRICS_GROUP, NON_NEGATIVE, PERCENT, SCENE_AGGREGATES, Metric, MetricRegistry
 from lfbench.scoring.general import (
     GENERAL_METRICS,
     RUNTIME_METRICS,
+    BadPixels,
     bad_pix,
     bad_pix_curve,
     bad_pix_metric,
-    badpix_family,
     mse_x100,
     nonfinite_count,
     q25_x100,
-    quantile_family,
     quantile_x100,
 )
-from lfbench.scoring.region_metrics import REGION_METRICS, STRATIFIED_METRICS
+from lfbench.scoring.pixelwise import Mean, OrderStatistic, PixelMetric, Proportion, Sample
 
 __all__ = [
     "bad_pix",
@@ -40,8 +39,13 @@ __all__ = [
     "nonfinite_count",
     "bad_pix_metric",
     "quantile_metric",
+    "BadPixels",
     "Metric",
-    "PixelStatistic",
+    "PixelMetric",
+    "Sample",
+    "Proportion",
+    "Mean",
+    "OrderStatistic",
     "MetricRegistry",
     "METRICS",
     "SCENE_AGGREGATES",
@@ -56,13 +60,10 @@ __all__ = [
     "metric_order",
 ]
 
-#: The process-wide registry, in this order: the general and runtime metrics, the region metrics, the
-#: stratified metrics of each stratified scene; and the families ``badpix_<t>`` and ``q<p>_x100``.
-METRICS = MetricRegistry()
-for _m in (*GENERAL_METRICS, *RUNTIME_METRICS, *REGION_METRICS, *(m for ms in STRATIFIED_METRICS.values() for m in ms)):
-    METRICS.register(_m)
-METRICS.register_family("badpix_<t>", badpix_family)
-METRICS.register_family("q<p>_x100", quantile_family)
+#: The process-wide registry, filled from the entry-point group ``lfbench.metrics``: lfbench's own metrics first
+#: (lfbench.scoring.builtin: the general and runtime metrics, the region metrics, the stratified metrics of each
+#: stratified scene; the families ``badpix_<t>`` and ``q<p>_x100``), then the plugins'.
+METRICS = MetricRegistry(group=METRICS_GROUP)
 
 
 def quantile_metric(percentage: float) -> Metric:

@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["PixelErrors", "PixelSet", "common_precision"]
+__all__ = ["ErrorsOnly", "PixelErrors", "PixelSet", "common_precision"]
 
 
 def common_precision(gt: np.ndarray, pred: np.ndarray) -> np.dtype:
@@ -105,9 +105,11 @@ class PixelErrors:
         self.pred = np.asarray(pred).astype(dtype, copy=False)
 
     @classmethod
-    def of_maps(cls, gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = None) -> PixelErrors:
+    def of_maps(cls, gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = None, *,
+                low_width: int | None = None) -> PixelErrors:
         """The errors of ``pred`` against ``gt`` ((H, W) of one shape) at the pixels of ``mask`` (bool (H, W),
-        None = all). ValueError when the shapes differ."""
+        None = all). ``low_width``: the scene's low-resolution width when the maps are at a higher one (None:
+        the maps' width). ValueError when the shapes differ."""
         gt, pred = np.asarray(gt), np.asarray(pred)
         if gt.shape != pred.shape:
             raise ValueError(f"gt {gt.shape} and pred {pred.shape} differ in shape")
@@ -118,7 +120,7 @@ class PixelErrors:
         if gt.ndim != 2:  # a plain array of values: every element is a pixel
             gt, pred = gt.reshape(1, -1), pred.reshape(1, -1)
             mask = None if mask is None else mask.reshape(1, -1)
-        pixels = PixelSet(mask, gt)
+        pixels = PixelSet(mask, gt, low_width=low_width)
         return cls(pixels, pixels.values(pred))
 
     @property
@@ -133,6 +135,12 @@ class PixelErrors:
             return np.abs(err, out=err)
 
     @functools.cached_property
+    def signed(self) -> np.ndarray:
+        """pred - gt (px; NaN where either is NaN)."""
+        with np.errstate(invalid="ignore", over="ignore"):
+            return np.subtract(self.pred, self.gt)
+
+    @functools.cached_property
     def gt_finite(self) -> np.ndarray:
         return np.isfinite(self.gt)
 
@@ -144,3 +152,40 @@ class PixelErrors:
     def finite(self) -> np.ndarray:
         """Both finite."""
         return self.gt_finite & self.pred_finite
+
+
+class ErrorsOnly(PixelErrors):
+    """The signed errors pred - gt (1-D, px) of scored pixels without the maps they came from: what the bootstrap
+    keeps per pixel (:mod:`lfbench.scoring.stats`). It answers what a metric of the errors asks for (``err``,
+    ``signed``, ``size`` and the finite flags: the ground truth of scored pixels is finite, a non-finite error
+    is a non-finite prediction), computed from the errors exactly as :class:`PixelErrors` computes it from the
+    maps; ``gt``, ``pred`` and ``pixels`` raise TypeError (a metric that reads them is not a function of the
+    errors and declares so, :class:`lfbench.scoring.pixelwise.PixelMetric`)."""
+
+    def __init__(self, errors: np.ndarray) -> None:  # no maps: PixelErrors.__init__ is not called
+        self.signed = np.asarray(errors)
+
+    def _no_maps(self, name: str):
+        raise TypeError(f"{name}: only the errors pred - gt of the scored pixels are kept here, not the maps")
+
+    gt = property(lambda self: self._no_maps("gt"))
+    pred = property(lambda self: self._no_maps("pred"))
+    pixels = property(lambda self: self._no_maps("pixels"))
+
+    @property
+    def size(self) -> int:
+        return int(self.signed.size)
+
+    @functools.cached_property
+    def err(self) -> np.ndarray:
+        """|pred - gt| (NaN where the error is NaN)."""
+        with np.errstate(invalid="ignore"):
+            return np.abs(self.signed)
+
+    @functools.cached_property
+    def gt_finite(self) -> np.ndarray:
+        return np.ones(self.signed.shape, dtype=bool)
+
+    @functools.cached_property
+    def pred_finite(self) -> np.ndarray:
+        return np.isfinite(self.signed)

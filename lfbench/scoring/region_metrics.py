@@ -27,13 +27,16 @@ the scene's :class:`~lfbench.scoring.prepare.SceneReference` (read once per scen
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from lfbench.data.params import SceneParameters
 from lfbench.data.scene import Scene
 from lfbench.scoring.base import NON_NEGATIVE, PERCENT, Metric
-from lfbench.scoring.general import bad_pix, bad_pix_of, check_maps, mse_x100, mse_x100_of, percent_of
+from lfbench.scoring.general import BadPixels, check_maps, percent_of, squared_error
 from lfbench.scoring.pixels import PixelErrors
+from lfbench.scoring.pixelwise import Mean, PixelMetric, Proportion, Sample, kept
 from lfbench.scoring.prepare import SceneReference
 
 __all__ = [
@@ -70,13 +73,16 @@ _DIFF = np.array([-1.0, 0.0, 1.0])  # correlation: f[i + 1] - f[i - 1]
 
 # --------------------------------------------------------------------------- shared helpers
 
-def _percent_bad_of(bad: np.ndarray, reference_finite: np.ndarray, px: PixelErrors, toolkit: bool) -> float:
-    """% of the pixels of ``px`` that are bad. ``bad`` was computed with NaN comparisons False;
+_PERCENT = Proportion()  # the share of bad pixels, in %
+
+
+def _bad_sample(bad: np.ndarray, reference_finite: np.ndarray, px: PixelErrors, toolkit: bool) -> Sample:
+    """Which pixels of ``px`` are bad, at the scored ones. ``bad`` was computed with NaN comparisons False;
     the reference (gt or a value derived from it) must be finite (``reference_finite``) for a pixel to be scored."""
     if toolkit:  # the toolkit: every pixel is scored, NaN comparisons are good
-        return percent_of(px.size, int(np.count_nonzero(bad)))
+        return Sample(bad)
     bad = bad | ~px.pred_finite
-    return percent_of(int(np.count_nonzero(reference_finite)), int(np.count_nonzero(bad & reference_finite)))
+    return kept(bad, reference_finite)
 
 
 _SCHARR_H = np.array([[3.0, 10.0, 3.0], [0.0, 0.0, 0.0], [-3.0, -10.0, -3.0]]) / 16.0  # scikit-image's HSCHARR
@@ -240,9 +246,14 @@ def fine_fattening(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = N
 
 def fine_fattening_of(px: PixelErrors, threshold: float = FINE_THRESHOLD, *, toolkit: bool = False) -> float:
     """:func:`fine_fattening` of the pixels ``px`` holds (lfbench.scoring.pixels)."""
+    return _PERCENT.reduce(_fattened(px, threshold, toolkit=toolkit).values)
+
+
+def _fattened(px: PixelErrors, threshold: float = FINE_THRESHOLD, *, toolkit: bool = False) -> Sample:
+    """Fine fattening's sample: whether each scored pixel of ``px`` has gt - pred < -threshold (px)."""
     with np.errstate(invalid="ignore", over="ignore"):
         bad = (px.gt - px.pred) < -threshold
-    return _percent_bad_of(bad, px.gt_finite, px, toolkit)
+    return _bad_sample(bad, px.gt_finite, px, toolkit)
 
 
 def fine_thinning(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = None,
@@ -254,9 +265,14 @@ def fine_thinning(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = No
 
 def fine_thinning_of(px: PixelErrors, threshold: float = FINE_THRESHOLD, *, toolkit: bool = False) -> float:
     """:func:`fine_thinning` of the pixels ``px`` holds."""
+    return _PERCENT.reduce(_thinned(px, threshold, toolkit=toolkit).values)
+
+
+def _thinned(px: PixelErrors, threshold: float = FINE_THRESHOLD, *, toolkit: bool = False) -> Sample:
+    """Fine thinning's sample: whether each scored pixel of ``px`` has gt - pred > threshold (px)."""
     with np.errstate(invalid="ignore", over="ignore"):
         bad = (px.gt - px.pred) > threshold
-    return _percent_bad_of(bad, px.gt_finite, px, toolkit)
+    return _bad_sample(bad, px.gt_finite, px, toolkit)
 
 
 def _halfway_of(px: PixelErrors, column: int) -> np.ndarray:
@@ -274,11 +290,26 @@ def _halfway_of(px: PixelErrors, column: int) -> np.ndarray:
     return pixels.memo(("halfway", column, px.gt.dtype.str), compute)
 
 
-def _backgammon_of(px: PixelErrors, column: int, nearer_foreground: bool, toolkit: bool) -> float:
+def _backgammon_sample(px: PixelErrors, column: int, nearer_foreground: bool, toolkit: bool) -> Sample:
     half = _halfway_of(px, column)
     with np.errstate(invalid="ignore"):
         bad = px.pred > half if nearer_foreground else px.pred < half
-    return _percent_bad_of(bad, np.isfinite(half), px, toolkit)
+    return _bad_sample(bad, np.isfinite(half), px, toolkit)
+
+
+def _backgammon_of(px: PixelErrors, column: int, nearer_foreground: bool, toolkit: bool) -> float:
+    return _PERCENT.reduce(_backgammon_sample(px, column, nearer_foreground, toolkit).values)
+
+
+def _bg_fattened(px: PixelErrors, *, toolkit: bool = False) -> Sample:
+    """Backgammon fattening's sample; the foreground column scales with the resolution of ``px``'s pixels."""
+    scale = max(1, px.pixels.shape[1] // px.pixels.low_width)
+    return _backgammon_sample(px, int(BACKGAMMON_FG_COLUMN * scale), True, toolkit)
+
+
+def _bg_thinned(px: PixelErrors, *, toolkit: bool = False) -> Sample:
+    """Backgammon thinning's sample; the background column counts from the right edge, unscaled (as the toolkit)."""
+    return _backgammon_sample(px, px.pixels.shape[1] - BACKGAMMON_BG_FROM_RIGHT, False, toolkit)
 
 
 def backgammon_fattening(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = None, *, fg_column: int,
@@ -419,22 +450,6 @@ def _label_lut(labels: np.ndarray, lowest: int, highest: int | None) -> np.ndarr
 # Metrics with needs_scene get scene= (the scene's SceneReference, or a Scene) and resolution= from
 # score_scene (lfbench.scoring.score).
 
-def _scale(scene: Scene, gt: np.ndarray) -> int:
-    return max(1, gt.shape[1] // scene.spatial_size[1])
-
-
-def _bad_pix_fn(t: float):
-    def fn(gt, pred, mask=None, *, toolkit=False):
-        return bad_pix(gt, pred, t, mask, toolkit=toolkit)
-    return fn
-
-
-def _bad_pix_pixels(t: float):
-    def pixel_fn(px, *, toolkit=False):
-        return bad_pix_of(px, t, toolkit=toolkit)
-    return pixel_fn
-
-
 def _bump_fn(gt, pred, mask=None, *, toolkit=False):
     return bumpiness_x100(gt, pred, mask, toolkit=toolkit)
 
@@ -450,40 +465,6 @@ def _mae_fn(gt, pred, mask=None, *, toolkit=False, scene: Scene | SceneReference
     angle = reference.per_prediction(("mae_angle", resolution), pred,
                                      lambda: angular_error_deg(n_gt, disparity_normals(pred, reference.params)))
     return _median_angle(angle, n_gt, pred, mask, toolkit)
-
-
-def _fine_fat_fn(gt, pred, mask=None, *, toolkit=False):
-    return fine_fattening(gt, pred, mask, toolkit=toolkit)
-
-
-def _fine_fat_pixels(px, *, toolkit=False):
-    return fine_fattening_of(px, toolkit=toolkit)
-
-
-def _fine_thin_fn(gt, pred, mask=None, *, toolkit=False):
-    return fine_thinning(gt, pred, mask, toolkit=toolkit)
-
-
-def _fine_thin_pixels(px, *, toolkit=False):
-    return fine_thinning_of(px, toolkit=toolkit)
-
-
-def _bg_fat_fn(gt, pred, mask=None, *, toolkit=False, scene: Scene, resolution: str):
-    return backgammon_fattening(gt, pred, mask, fg_column=int(BACKGAMMON_FG_COLUMN * _scale(scene, gt)),
-                                toolkit=toolkit)
-
-
-def _bg_fat_pixels(px, *, toolkit=False):
-    scale = max(1, px.pixels.shape[1] // px.pixels.low_width)
-    return _backgammon_of(px, int(BACKGAMMON_FG_COLUMN * scale), True, toolkit)
-
-
-def _bg_thin_fn(gt, pred, mask=None, *, toolkit=False, scene: Scene, resolution: str):
-    return backgammon_thinning(gt, pred, mask, bg_column=gt.shape[1] - BACKGAMMON_BG_FROM_RIGHT, toolkit=toolkit)
-
-
-def _bg_thin_pixels(px, *, toolkit=False):
-    return _backgammon_of(px, px.pixels.shape[1] - BACKGAMMON_BG_FROM_RIGHT, False, toolkit)
 
 
 def _missed_dots_fn(gt, pred, mask=None, *, toolkit=False, scene: Scene | SceneReference, resolution: str):
@@ -522,95 +503,116 @@ _RANGE_OF_UNIT = {"%": PERCENT, "% of dots": PERCENT, _BUMP_UNIT: (0.0, 100 * BU
                   "px^2 x 100": NON_NEGATIVE}
 
 
-def _region(id, name, description, unit, fn, toolkit_id, mask_name, resolution, vmin, vmax, cmap, *,
-            category="region", extra_masks=(), needs_scene=False, pixel_fn=None) -> Metric:
-    return Metric(id=id, name=name, description=description, unit=unit, fn=fn, toolkit_id=toolkit_id,
-                  mask_name=mask_name, resolution=resolution, vmin=vmin, vmax=vmax, cmap=cmap, category=category,
-                  extra_masks=tuple(extra_masks), needs_scene=needs_scene, value_range=_RANGE_OF_UNIT[unit],
-                  pixel_fn=pixel_fn)
+class Plot(NamedTuple):
+    """How a region metric's maps are drawn: colour range [vmin, vmax] and colour map."""
+
+    vmin: float
+    vmax: float
+    cmap: str
+
+
+_PERCENT_PLOT = Plot(0, 1, "RdYlGn_r")
+_BUMP_PLOT = Plot(0, 5, "viridis")
+_MAE_PLOT = Plot(0, 80, "RdYlGn_r")
+
+
+def _region(*, unit: str, plot: Plot, category: str = "region", **fields) -> Metric:
+    """A region (or stratified) metric from its named fields (those of :class:`Metric`); its value range
+    follows from its unit."""
+    return Metric(unit=unit, vmin=plot.vmin, vmax=plot.vmax, cmap=plot.cmap, category=category,
+                  value_range=_RANGE_OF_UNIT[unit], **fields)
+
+
+def _strat(**fields) -> Metric:
+    return _region(category="stratified", **fields)
+
 
 _BUMP_DESC = ("100 x the mean of min(||Scharr Hessian of (pred - gt)||_F, 0.05) over {}: 0 = as smooth as the ground "
               "truth (a constant or planar offset is not penalised).")
+_BADPIX_007 = PixelMetric(BadPixels(0.07), _PERCENT)
 
 REGION_METRICS: tuple[Metric, ...] = (
-    _region("discontinuities", "Discontinuities",
-            "BadPix(0.07): % of pixels at depth discontinuities (mask_discontinuities) with |gt - pred| > 0.07 px.",
-            "%", _bad_pix_fn(0.07), "discontinuities_0070", "mask_discontinuities", "highres", 0, 1, "RdYlGn_r",
-            pixel_fn=_bad_pix_pixels(0.07)),
-    _region("bumpiness_planes", "Bumpiness Planes", _BUMP_DESC.format("planar regions (mask_planes)"), _BUMP_UNIT,
-            _bump_fn, "bumpiness_planes_100_0050", "mask_planes", "lowres", 0, 5, "viridis"),
-    _region("bumpiness_contin_surfaces", "Bumpiness Contin. Surfaces",
-            _BUMP_DESC.format("smooth non-planar regions (mask_smooth_surfaces)"), _BUMP_UNIT,
-            _bump_fn, "bumpiness_contin_surfaces_100_0050", "mask_smooth_surfaces", "lowres", 0, 5, "viridis"),
-    _region("mae_planes", "MAE Planes",
-            "Median angle (degrees) between surface normals of gt and pred depth on planar regions (mask_planes).",
-            "deg", _mae_fn, "mae_planes", "mask_planes", "lowres", 0, 80, "RdYlGn_r", needs_scene=True),
-    _region("mae_contin_surfaces", "MAE Contin. Surfaces",
-            "Median angle (degrees) between surface normals of gt and pred depth on smooth non-planar regions "
-            "(mask_smooth_surfaces).",
-            "deg", _mae_fn, "mae_contin_surfaces", "mask_smooth_surfaces", "lowres", 0, 80, "RdYlGn_r",
+    _region(id="discontinuities", name="Discontinuities", toolkit_id="discontinuities_0070",
+            description="BadPix(0.07): % of pixels at depth discontinuities (mask_discontinuities) with "
+                        "|gt - pred| > 0.07 px.",
+            unit="%", pixelwise=_BADPIX_007, mask_name="mask_discontinuities", resolution="highres",
+            plot=_PERCENT_PLOT),
+    _region(id="bumpiness_planes", name="Bumpiness Planes", toolkit_id="bumpiness_planes_100_0050",
+            description=_BUMP_DESC.format("planar regions (mask_planes)"),
+            unit=_BUMP_UNIT, fn=_bump_fn, mask_name="mask_planes", resolution="lowres", plot=_BUMP_PLOT),
+    _region(id="bumpiness_contin_surfaces", name="Bumpiness Contin. Surfaces",
+            toolkit_id="bumpiness_contin_surfaces_100_0050",
+            description=_BUMP_DESC.format("smooth non-planar regions (mask_smooth_surfaces)"),
+            unit=_BUMP_UNIT, fn=_bump_fn, mask_name="mask_smooth_surfaces", resolution="lowres", plot=_BUMP_PLOT),
+    _region(id="mae_planes", name="MAE Planes", toolkit_id="mae_planes",
+            description="Median angle (degrees) between surface normals of gt and pred depth on planar regions "
+                        "(mask_planes).",
+            unit="deg", fn=_mae_fn, mask_name="mask_planes", resolution="lowres", plot=_MAE_PLOT, needs_scene=True),
+    _region(id="mae_contin_surfaces", name="MAE Contin. Surfaces", toolkit_id="mae_contin_surfaces",
+            description="Median angle (degrees) between surface normals of gt and pred depth on smooth non-planar "
+                        "regions (mask_smooth_surfaces).",
+            unit="deg", fn=_mae_fn, mask_name="mask_smooth_surfaces", resolution="lowres", plot=_MAE_PLOT,
             needs_scene=True),
-    _region("fine_fattening", "Fine Fattening",
-            "% of pixels around fine structures (mask_fine_surrounding) with gt - pred < -0.15 px.",
-            "%", _fine_fat_fn, "fine_fattening_0150", "mask_fine_surrounding", "highres", 0, 1, "RdYlGn_r",
-            pixel_fn=_fine_fat_pixels),
-    _region("fine_thinning", "Fine Thinning",
-            "% of pixels on fine structures (mask_fine) with gt - pred > 0.15 px.",
-            "%", _fine_thin_fn, "fine_thinning_0150", "mask_fine", "highres", 0, 1, "RdYlGn_r",
-            pixel_fn=_fine_thin_pixels),
+    _region(id="fine_fattening", name="Fine Fattening", toolkit_id="fine_fattening_0150",
+            description="% of pixels around fine structures (mask_fine_surrounding) with gt - pred < -0.15 px.",
+            unit="%", pixelwise=PixelMetric(_fattened, _PERCENT, of_errors=False), mask_name="mask_fine_surrounding",
+            resolution="highres", plot=_PERCENT_PLOT),
+    _region(id="fine_thinning", name="Fine Thinning", toolkit_id="fine_thinning_0150",
+            description="% of pixels on fine structures (mask_fine) with gt - pred > 0.15 px.",
+            unit="%", pixelwise=PixelMetric(_thinned, _PERCENT, of_errors=False), mask_name="mask_fine",
+            resolution="highres", plot=_PERCENT_PLOT),
 )
 
 
-def _strat(*args, **kwargs) -> Metric:
-    return _region(*args, category="stratified", **kwargs)
+def _stripes(*, id: str, name: str, toolkit_id: str, region: str, mask_name: str) -> Metric:
+    """A stripes metric: BadPix(0.07) on ``region`` (in words) of the mask ``mask_name``."""
+    return _strat(id=id, name=f"Stripes: {name}", toolkit_id=toolkit_id,
+                  description=f"BadPix(0.07) on the {region} ({mask_name}).", unit="%", pixelwise=_BADPIX_007,
+                  mask_name=mask_name, resolution="highres", plot=_PERCENT_PLOT)
 
 
 # The benchmark's rule data: which stratified metrics belong to which stratified scene.
 STRATIFIED_METRICS: dict[str, tuple[Metric, ...]] = {
     "backgammon": (
-        _strat("backgammon_fattening", "Backgammon: Fattening",
-               "% of background pixels between the foreground bars (mask_foreground_fattening) whose prediction is "
-               "nearer to the foreground than half way from the ground truth.",
-               "%", _bg_fat_fn, "backgammon_fattening_0070", "mask_foreground_fattening", "highres", 0, 1, "RdYlGn_r",
-               needs_scene=True, pixel_fn=_bg_fat_pixels),
-        _strat("backgammon_thinning", "Backgammon: Thinning",
-               "% of pixels on the foreground bars (mask_foreground_thinning) whose prediction is nearer to the "
-               "background than half way from the ground truth.",
-               "%", _bg_thin_fn, "backgammon_thinning_0070", "mask_foreground_thinning", "highres", 0, 1, "RdYlGn_r",
-               needs_scene=True, pixel_fn=_bg_thin_pixels),
+        _strat(id="backgammon_fattening", name="Backgammon: Fattening", toolkit_id="backgammon_fattening_0070",
+               description="% of background pixels between the foreground bars (mask_foreground_fattening) whose "
+                           "prediction is nearer to the foreground than half way from the ground truth.",
+               unit="%", pixelwise=PixelMetric(_bg_fattened, _PERCENT, of_errors=False),
+               mask_name="mask_foreground_fattening", resolution="highres", plot=_PERCENT_PLOT, needs_scene=True),
+        _strat(id="backgammon_thinning", name="Backgammon: Thinning", toolkit_id="backgammon_thinning_0070",
+               description="% of pixels on the foreground bars (mask_foreground_thinning) whose prediction is nearer "
+                           "to the background than half way from the ground truth.",
+               unit="%", pixelwise=PixelMetric(_bg_thinned, _PERCENT, of_errors=False),
+               mask_name="mask_foreground_thinning", resolution="highres", plot=_PERCENT_PLOT, needs_scene=True),
     ),
     "dots": (
-        _strat("dots_background_mse", "Dots: Background MSE",
-               "Mean squared disparity error (px^2) x 100 on the noisy background (mask_background).",
-               "px^2 x 100", mse_x100, "background_mse_100", "mask_background", "highres", -0.2, 0.2, "seismic",
-               pixel_fn=mse_x100_of),
-        _strat("missed_dots", "Dots: Missed Dots",
-               "% of dots (size labels 1-8 of mask_dots_by_size in each cell of mask_boxes) with BadPix(0.4) >= 50%.",
-               "% of dots", _missed_dots_fn, "missed_dots_50_0400", None, "highres", 0, 1, "RdYlGn_r",
+        _strat(id="dots_background_mse", name="Dots: Background MSE", toolkit_id="background_mse_100",
+               description="Mean squared disparity error (px^2) x 100 on the noisy background (mask_background).",
+               unit="px^2 x 100", pixelwise=PixelMetric(squared_error, Mean()), mask_name="mask_background",
+               resolution="highres", plot=Plot(-0.2, 0.2, "seismic")),
+        _strat(id="missed_dots", name="Dots: Missed Dots", toolkit_id="missed_dots_50_0400",
+               description="% of dots (size labels 1-8 of mask_dots_by_size in each cell of mask_boxes) with "
+                           "BadPix(0.4) >= 50%.",
+               unit="% of dots", fn=_missed_dots_fn, resolution="highres", plot=_PERCENT_PLOT,
                extra_masks=("mask_boxes", "mask_dots_by_size"), needs_scene=True),
     ),
     "pyramids": (
-        _strat("pyramids_bumpiness_slanted", "Pyramids: Bump. Slanted",
-               _BUMP_DESC.format("the slanted surfaces (mask_sphere_in | mask_sphere_out | mask_pyramids)"),
-               _BUMP_UNIT, _slanted_fn, "bumpiness_slanted_100_0050", None, "lowres", 0, 5, "viridis",
-               extra_masks=_SLANTED_MASKS, needs_scene=True),
-        _strat("pyramids_bumpiness_parallel", "Pyramids: Bump. Parallel",
-               _BUMP_DESC.format("the fronto-parallel plane (mask_plane)"),
-               _BUMP_UNIT, _bump_fn, "bumpiness_parallel_100_0050", "mask_plane", "lowres", 0, 5, "viridis"),
+        _strat(id="pyramids_bumpiness_slanted", name="Pyramids: Bump. Slanted", toolkit_id="bumpiness_slanted_100_0050",
+               description=_BUMP_DESC.format("the slanted surfaces (mask_sphere_in | mask_sphere_out | mask_pyramids)"),
+               unit=_BUMP_UNIT, fn=_slanted_fn, resolution="lowres", plot=_BUMP_PLOT, extra_masks=_SLANTED_MASKS,
+               needs_scene=True),
+        _strat(id="pyramids_bumpiness_parallel", name="Pyramids: Bump. Parallel",
+               toolkit_id="bumpiness_parallel_100_0050",
+               description=_BUMP_DESC.format("the fronto-parallel plane (mask_plane)"),
+               unit=_BUMP_UNIT, fn=_bump_fn, mask_name="mask_plane", resolution="lowres", plot=_BUMP_PLOT),
     ),
     "stripes": (
-        _strat("stripes_low_texture", "Stripes: Low Texture",
-               "BadPix(0.07) on the low-texture region (mask_low_texture).",
-               "%", _bad_pix_fn(0.07), "low_texture_0070", "mask_low_texture", "highres", 0, 1, "RdYlGn_r",
-               pixel_fn=_bad_pix_pixels(0.07)),
-        _strat("stripes_dark", "Stripes: Dark Stripes",
-               "BadPix(0.07) on the high-contrast (dark) stripes (mask_high_contrast).",
-               "%", _bad_pix_fn(0.07), "dark_stripes_0070", "mask_high_contrast", "highres", 0, 1, "RdYlGn_r",
-               pixel_fn=_bad_pix_pixels(0.07)),
-        _strat("stripes_bright", "Stripes: Bright Stripes",
-               "BadPix(0.07) on the low-contrast (bright) stripes (mask_low_contrast).",
-               "%", _bad_pix_fn(0.07), "bright_stripes_0070", "mask_low_contrast", "highres", 0, 1, "RdYlGn_r",
-               pixel_fn=_bad_pix_pixels(0.07)),
+        _stripes(id="stripes_low_texture", name="Low Texture", toolkit_id="low_texture_0070",
+                 region="low-texture region", mask_name="mask_low_texture"),
+        _stripes(id="stripes_dark", name="Dark Stripes", toolkit_id="dark_stripes_0070",
+                 region="high-contrast (dark) stripes", mask_name="mask_high_contrast"),
+        _stripes(id="stripes_bright", name="Bright Stripes", toolkit_id="bright_stripes_0070",
+                 region="low-contrast (bright) stripes", mask_name="mask_low_contrast"),
     ),
 }
 

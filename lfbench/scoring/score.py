@@ -3,7 +3,7 @@
 Each metric is scored at the resolution the rules give it (:func:`lfbench.scoring.rules.metric_resolution`)
 on the prediction as :meth:`lfbench.scoring.prepare.SceneReference.prepare` makes it ready (alignment of a
 cropped map, float32, the toolkit's upsampling, border and valid mask), prepared once per resolution; a
-region metric adds its own mask. A pixel-wise metric (``Metric.pixel_fn``) is computed from the prediction's
+region metric adds its own mask. A pixel-wise metric (``Metric.pixelwise``) is computed from the prediction's
 errors at its pixels, gathered once per region and shared by every metric of that region (|error| once for
 every BadPix threshold, MSE and the quantiles); the others from the maps. What does not depend on the method
 is the scene's :class:`~lfbench.scoring.prepare.SceneReference`: pass one reference for every prediction
@@ -20,6 +20,7 @@ import numpy as np
 from lfbench.data.scene import HIGHRES, LOWRES, Scene
 from lfbench.scoring.base import Metric
 from lfbench.scoring.general import GENERAL_METRICS, nonfinite_count
+from lfbench.scoring.metrics import list_metrics
 from lfbench.scoring.prepare import Prepared, SceneReference
 from lfbench.scoring.region_metrics import scene_metrics
 from lfbench.scoring.rules import ScoringRules, metric_resolution
@@ -40,10 +41,12 @@ class SceneScore:
 
 
 def applicable_metrics(scene: Scene, rules: ScoringRules = ScoringRules()) -> list[Metric]:
-    """The general metrics plus the region / stratified metrics whose mask files exist for ``scene``
-    (at a resolution :func:`lfbench.scoring.rules.metric_resolution` can score them at), so that
-    ``score_scene(scene, pred, applicable_metrics(scene))`` scores everything the scene supports."""
-    return list(GENERAL_METRICS) + [m for m in scene_metrics(scene) if metric_resolution(scene, m, rules) is not None]
+    """The general metrics (every registered one: a plugin's too) plus the region / stratified metrics whose
+    mask files exist for ``scene`` (at a resolution :func:`lfbench.scoring.rules.metric_resolution` can score
+    them at), so that ``score_scene(scene, pred, applicable_metrics(scene))`` scores everything the scene
+    supports."""
+    regional = [m for m in scene_metrics(scene) if metric_resolution(scene, m, rules) is not None]
+    return [*list_metrics("general"), *regional]
 
 
 def score_scene(scene: Scene, pred: np.ndarray, metrics: Sequence[Metric] = GENERAL_METRICS,
@@ -82,7 +85,7 @@ def score_scene(scene: Scene, pred: np.ndarray, metrics: Sequence[Metric] = GENE
         p = prepared[res]
         if metric.mask_name is not None and metric.mask_name not in reference.mask_names(res):
             continue
-        if metric.pixel_fn is not None:  # pixel-wise: from the errors at its pixels, gathered once per region
+        if metric.pixelwise is not None:  # pixel-wise: from the errors at its pixels, gathered once per region
             values[metric.id] = metric.score_pixels(p.errors(metric.mask_name), toolkit=rules.toolkit)
         else:
             context = {"scene": reference, "resolution": res} if metric.needs_scene else {}

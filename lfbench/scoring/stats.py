@@ -39,7 +39,7 @@ from __future__ import annotations
 import itertools
 import math
 import sys
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import NamedTuple
@@ -50,10 +50,16 @@ import scipy.stats
 from tqdm import tqdm
 
 from lfbench.data.scene import Scene
-from lfbench.scoring.base import Metric, PixelStatistic
+from lfbench.scoring.base import Metric
 from lfbench.scoring.general import check_maps
 from lfbench.scoring.metrics import get_metric, list_metrics
+from lfbench.scoring.pixels import ErrorsOnly
+from lfbench.scoring.pixelwise import Family, PixelMetric, Proportion, Sample
 from lfbench.scoring.prepare import Prepared, SceneReference
+from lfbench.scoring.resample import chunks as _chunks
+from lfbench.scoring.resample import group_counts as _group_counts
+from lfbench.scoring.resample import index_means as _index_means
+from lfbench.scoring.resample import weighted_quantile_replicates as _weighted_quantile_replicates  # noqa: F401
 from lfbench.scoring.rules import ScoringRules
 from lfbench.utils.errors import DataError, SpecError
 from lfbench.utils.readfile import read_csv
@@ -81,7 +87,6 @@ __all__ = [
 
 DEFAULT_RESAMPLES = 1000
 DEFAULT_LEVEL = 0.95
-_CHUNK_ELEMENTS = 1 << 22  # elements per resampling chunk (~16 MiB of int32 indices)
 _EXACT_FLIPS_MAX = 16  # enumerate all 2^k sign flips up to this many scenes/tiles
 #: Columns of ci.csv (``lfbench evaluate --ci``): :func:`ci_records` as CSV.
 CI_COLUMNS = ("method", "scene", "metric", "value", "low", "high", "n_pixels", "resolution")
@@ -117,13 +122,19 @@ class PairedTest:
 
 # --------------------------------------------------------------------------- metric kinds
 
-def _kind_of(metric: str | Metric) -> tuple[str, PixelStatistic]:
-    """(canonical id, pixel statistic) of a metric id or definition; SpecError when it has no bootstrap."""
+def _kind_of(metric: str | Metric) -> Metric:
+    """The metric of an id or definition; SpecError when it has no bootstrap (no resampling family)."""
     m = metric if isinstance(metric, Metric) else get_metric(str(metric))
     if m.bootstrap is None:
         bootstrapped = ", ".join(x.id for x in list_metrics() if x.bootstrap is not None)
         raise SpecError(f"no bootstrap for metric {m.id!r}: supported are {bootstrapped}, badpix_<t>")
-    return m.id, m.bootstrap
+    return m
+
+
+def _sample(errors: np.ndarray, metric: Metric, toolkit: bool) -> tuple[Sample, Family]:
+    """The metric's own sample of the per-pixel ``errors`` (:func:`scored_errors`), and its family."""
+    definition: PixelMetric = metric.pixelwise
+    return definition.sample(ErrorsOnly(errors), toolkit=toolkit), definition.family
 
 
 # --------------------------------------------------------------------------- per-pixel errors
@@ -197,121 +208,13 @@ def block_groups(mask: np.ndarray, block: int | None) -> np.ndarray | None:
     return (y // block) * (-(-mask.shape[1] // block)) + x // block
 
 
-def _badpix_flags(errors: np.ndarray, threshold: float, toolkit: bool) -> np.ndarray:
-    """Bool (N,): bad pixels, exactly as metrics.bad_pix decides them."""
-    with np.errstate(invalid="ignore"):
-        absd = np.abs(errors)
-        bad = absd > threshold  # threshold compared in the errors' precision, as the metric does
-    return bad if toolkit else bad | ~np.isfinite(errors)
-
-
-def _sample(errors: np.ndarray, kind: PixelStatistic, toolkit: bool) -> tuple[np.ndarray, np.ndarray]:
-    """(values, keep): the per-pixel values the metric averages / ranks, and which errors they came from."""
-    errors = np.asarray(errors)
-    if kind.name == "badpix":
-        return _badpix_flags(errors, kind.param, toolkit).astype(np.float64), np.ones(errors.shape, bool)
-    if kind.name == "mse":
-        keep = np.isfinite(errors)
-        return np.square(errors[keep]), keep
-    with np.errstate(invalid="ignore"):
-        diffs = np.abs(errors) * 100
-    if toolkit:
-        keep = np.isfinite(diffs)
-        return diffs[keep], keep
-    return np.where(np.isfinite(diffs), diffs, np.inf), np.ones(errors.shape, bool)
-
-
-def _estimate(values: np.ndarray, kind: PixelStatistic) -> float:
-    if values.size == 0:
-        return float("nan")
-    if kind.name == "badpix":
-        return 100.0 * np.count_nonzero(values) / float(values.size)
-    if kind.name == "mse":
-        return float(np.average(values)) * 100  # the metric's own arithmetic (float32 mean, then x100)
-    return float(np.sort(values)[int(values.size * kind.param / 100.0)])
-
-
 def metric_from_errors(errors: np.ndarray, metric: str | Metric, *, toolkit: bool = False) -> float:
-    """The metric's value from :func:`scored_errors` output; equals lfbench.scoring.metrics on the maps."""
-    _, kind = _kind_of(metric)
-    return _estimate(_sample(errors, kind, toolkit)[0], kind)
+    """The metric's value from :func:`scored_errors` output; equals lfbench.scoring.metrics on the maps (it is
+    the metric's own definition, :class:`~lfbench.scoring.pixelwise.PixelMetric`, on the errors)."""
+    return _kind_of(metric).pixelwise(ErrorsOnly(np.asarray(errors)), toolkit=toolkit)
 
 
-# --------------------------------------------------------------------------- resampling engines
-
-def _chunks(total: int, row: int) -> Iterator[int]:
-    """Chunk sizes (rows) covering ``total`` rows of ``row`` elements each."""
-    step = max(1, _CHUNK_ELEMENTS // max(row, 1))
-    for start in range(0, total, step):
-        yield min(step, total - start)
-
-
-def _index_means(values: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
-    """(n,) means of i.i.d. resamples (with replacement, same size) of ``values``."""
-    size = values.size
-    out = [values[rng.integers(0, size, size=(c, size), dtype=np.int64 if size >= 2**31 else np.int32)]
-           .mean(axis=1, dtype=np.float64) for c in _chunks(n, size)]
-    return np.concatenate(out)
-
-
-def _order_stat_replicates(values: np.ndarray, k: int, n: int, rng: np.random.Generator) -> np.ndarray:
-    """(n,) draws of the k-th smallest (0-based) value of an i.i.d. resample of ``values``.
-
-    Exact: with sorted values x_(0..N-1), the resampled k-th order statistic has rank <= j when at
-    least k+1 of the N draws have rank <= j, i.e. P = P(Binomial(N, (j+1)/N) >= k+1).
-    """
-    x = np.sort(values)
-    size = x.size
-    cdf = scipy.stats.binom.sf(k, size, np.arange(1, size + 1) / size)
-    cdf[-1] = 1.0
-    ranks = np.searchsorted(cdf, rng.random(n), side="left")
-    return x[np.minimum(ranks, size - 1)].astype(np.float64)
-
-
-def _group_counts(n_groups: int, n: int, rng: np.random.Generator) -> np.ndarray:
-    """(n, G) how often each of G groups is drawn in G draws with replacement, per resample."""
-    rows = []
-    for c in _chunks(n, n_groups):
-        idx = rng.integers(0, n_groups, size=(c, n_groups)) + n_groups * np.arange(c)[:, None]
-        rows.append(np.bincount(idx.ravel(), minlength=c * n_groups).reshape(c, n_groups))
-    return np.concatenate(rows).astype(np.float64)
-
-
-def _weighted_quantile_replicates(values: np.ndarray, gid: np.ndarray, counts: np.ndarray,
-                                  percentage: float) -> np.ndarray:
-    """Per row of ``counts`` (n, G): the metric's quantile of the pooled pixels, each group repeated
-    counts[g] times (index int(W * p / 100) of the sorted pooled values, W = pooled size)."""
-    order = np.argsort(values, kind="stable")
-    x, g = values[order], gid[order]
-    n_groups = counts.shape[1]
-    sizes = np.bincount(gid, minlength=n_groups).astype(np.float64)
-    k = np.floor((counts @ sizes) * percentage / 100.0)  # 0-based index in each pooled resample
-    out = np.full(counts.shape[0], np.nan)
-    todo = np.arange(counts.shape[0])
-    centre = int(x.size * percentage / 100.0)
-    half = max(1024, x.size // 64)
-    # The answer lies near the full-sample quantile: scan a window of sorted pixels around it, and
-    # widen it (up to everything) only for the resamples whose quantile falls outside.
-    while todo.size:
-        lo, hi = max(0, centre - half), min(x.size, centre + half)
-        before = counts[todo] @ np.bincount(g[:lo], minlength=n_groups).astype(np.float64)
-        found = np.zeros(todo.size, bool)
-        start = 0
-        for c in _chunks(todo.size, hi - lo):
-            rows = todo[start:start + c]
-            cum = before[start:start + c, None] + np.cumsum(counts[rows][:, g[lo:hi]], axis=1)
-            kk = k[rows][:, None]
-            inside = (before[start:start + c] <= k[rows]) & (cum[:, -1] > k[rows])
-            pos = lo + (cum <= kk).sum(axis=1)  # first sorted index whose cumulative weight exceeds k
-            out[rows[inside]] = x[pos[inside]]
-            found[start:start + c] = inside
-            start += c
-        if lo == 0 and hi == x.size:
-            break
-        todo = todo[~found]
-        half *= 4
-    return out
-
+# --------------------------------------------------------------------------- resampling
 
 def bootstrap_replicates(errors: np.ndarray, metric: str | Metric, n: int = DEFAULT_RESAMPLES, seed: int | None = 0,
                          *, toolkit: bool = False, groups: np.ndarray | None = None) -> np.ndarray:
@@ -320,35 +223,18 @@ def bootstrap_replicates(errors: np.ndarray, metric: str | Metric, n: int = DEFA
     ``groups``: optional (N,) int cluster id per pixel (e.g. :func:`block_groups`): whole clusters
     are resampled instead of pixels (cluster bootstrap; the metric is taken on the pooled pixels).
     """
-    _, kind = _kind_of(metric)
+    (values, keep), family = _sample(np.asarray(errors), _kind_of(metric), toolkit)
     rng = np.random.default_rng(seed)
-    values, keep = _sample(np.asarray(errors), kind, toolkit)
     if values.size == 0 or n <= 0:
         return np.full(max(n, 0), np.nan)
     if groups is None:
-        if kind.name == "badpix":
-            bad = np.count_nonzero(values)
-            return rng.binomial(values.size, bad / values.size, size=n) * (100.0 / values.size)
-        if kind.name == "mse":
-            # float64 resample means, shifted by the (float32) rounding of the metric's own mean so that
-            # identical errors give exactly the estimate
-            return (_index_means(values, n, rng) - float(values.mean(dtype=np.float64))) * 100.0 \
-                + _estimate(values, kind)
-        return _order_stat_replicates(values, int(values.size * kind.param / 100.0), n, rng)
+        return family.replicates(values, n, rng)
     groups = np.asarray(groups)
     if groups.shape != np.shape(errors):
         raise ValueError(f"groups {groups.shape} and errors {np.shape(errors)} differ in shape")
-    _, gid = np.unique(groups[keep], return_inverse=True)
+    _, gid = np.unique(groups if keep is None else groups[keep], return_inverse=True)
     n_groups = int(gid.max()) + 1
-    counts = _group_counts(n_groups, n, rng)
-    sizes = np.bincount(gid, minlength=n_groups).astype(np.float64)
-    if kind.name in ("badpix", "mse"):
-        sums = np.bincount(gid, weights=values, minlength=n_groups)
-        reps = 100.0 * (counts @ sums) / (counts @ sizes)
-        if kind.name == "mse":  # align with the metric's float32 mean, as in the i.i.d. path
-            reps += _estimate(values, kind) - 100.0 * float(values.mean(dtype=np.float64))
-        return reps
-    return _weighted_quantile_replicates(values, gid, counts, kind.param)
+    return family.pooled_replicates(values, gid, _group_counts(n_groups, n, rng))
 
 
 def _percentile_ci(estimate: float, reps: np.ndarray, level: float) -> CI:
@@ -426,23 +312,31 @@ def pixel_loss(errors: np.ndarray, measure: str) -> tuple[np.ndarray, str, str]:
     'badpix_<t>': 100 * [|e| > t or non-finite] (%, mean = BadPix(t)). Non-finite errors give
     inf for abs/sq (callers drop them) and a bad pixel for BadPix.
     """
+    return _loss(errors, measure)[:3]
+
+
+def _loss(errors: np.ndarray, measure: str) -> tuple[np.ndarray, str, str, Family | None]:
+    """:func:`pixel_loss` and the metric's family (None for 'abs'). A metric's loss: ``scale`` x its own sample
+    of the errors (in the family's loss precision), inf at the pixels its sample leaves out."""
     e = np.asarray(errors)
     name = str(measure).lower()
     if name in ("abs", "epe", "mae"):
         with np.errstate(invalid="ignore"):
-            return np.where(np.isfinite(e), np.abs(e), np.inf).astype(np.float64), "abs", "px"
+            return np.where(np.isfinite(e), np.abs(e), np.inf).astype(np.float64), "abs", "px", None
     name = {"sq": "mse_x100", "mse": "mse_x100", "badpix": "badpix_0.07"}.get(name, name)
     try:
         metric = get_metric(name)
     except SpecError:
         raise SpecError(f"unknown measure {measure!r}: use abs, mse_x100 or badpix_<t>") from None
-    kind = metric.bootstrap
-    if kind is not None and kind.name == "mse":
-        with np.errstate(invalid="ignore", over="ignore"):
-            return np.where(np.isfinite(e), 100.0 * np.square(e.astype(np.float64)), np.inf), metric.id, metric.unit
-    if kind is not None and kind.name == "badpix":
-        return 100.0 * _badpix_flags(e, kind.param, False), metric.id, metric.unit
-    raise SpecError(f"measure {measure!r} is not a mean of per-pixel losses: use abs, mse_x100 or badpix_<t>")
+    family = metric.bootstrap
+    if family is None or not family.per_pixel_mean:
+        raise SpecError(f"measure {measure!r} is not a mean of per-pixel losses: use abs, mse_x100 or badpix_<t>")
+    e = e if family.loss_dtype is None else e.astype(family.loss_dtype)
+    with np.errstate(invalid="ignore", over="ignore"):
+        values, keep = metric.pixelwise.sample(ErrorsOnly(e), toolkit=False)
+        loss = np.full(e.shape, np.inf)
+        loss[slice(None) if keep is None else keep] = family.scale * values
+    return loss, metric.id, metric.unit, family
 
 
 def _signflip_p(sums: np.ndarray, n: int, rng: np.random.Generator) -> float:
@@ -479,8 +373,8 @@ def paired_pixel_test(gt: np.ndarray, pred_a: np.ndarray, pred_b: np.ndarray, ma
     """
     err_a, scored = _scored(gt, pred_a, mask, False)
     err_b, _ = _scored(gt, pred_b, mask, False)
-    loss_a, mid, _unit = pixel_loss(err_a, measure)
-    loss_b, _, _ = pixel_loss(err_b, measure)
+    loss_a, mid, _unit, family = _loss(err_a, measure)
+    loss_b = _loss(err_b, measure)[0]
     keep = np.isfinite(loss_a) & np.isfinite(loss_b)
     d = (loss_a - loss_b)[keep]
     groups = block_groups(scored, block)
@@ -488,7 +382,7 @@ def paired_pixel_test(gt: np.ndarray, pred_a: np.ndarray, pred_b: np.ndarray, ma
     if d.size == 0:
         return PairedTest(float("nan"), float("nan"), float("nan"), float("nan"), 0, mid, "no common scored pixels")
     diff = float(d.mean())
-    if groups is None and mid.startswith("badpix"):
+    if groups is None and isinstance(family, Proportion):  # indicator losses: McNemar on the discordant pixels
         worse, better = int(np.count_nonzero(d > 0)), int(np.count_nonzero(d < 0))
         probs = np.array([worse, d.size - worse - better, better], dtype=np.float64) / d.size
         counts = rng.multinomial(d.size, probs, size=n)

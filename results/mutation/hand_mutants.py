@@ -30,10 +30,12 @@ S, G, E = "tests/test_scoring_mutants.py", "tests/test_gate_mutants.py", "tests/
 M = "tests/test_scoring_engine_mutants.py"  # the issue-23 survivors' tests
 # where the mutated code lives (the issue named lfbench/scoring/metrics.py and rules.py; since issue 21 the
 # general metrics are in general.py, the preparation of a prediction in prepare.py, score_scene in score.py;
-# since issue 23 the errors at the scored pixels in pixels.py)
-GENERAL, PREPARE, REGION, REGRESS, PIXELS = ("lfbench/scoring/general.py", "lfbench/scoring/prepare.py",
-                                             "lfbench/scoring/region_metrics.py", "lfbench/runs/regress.py",
-                                             "lfbench/scoring/pixels.py")
+# since issue 23 the errors at the scored pixels in pixels.py; since issue 29 the families that reduce and resample
+# a pixel-wise metric's sample in pixelwise.py)
+GENERAL, PREPARE, REGION, REGRESS, PIXELS, FAMILIES = ("lfbench/scoring/general.py", "lfbench/scoring/prepare.py",
+                                                       "lfbench/scoring/region_metrics.py", "lfbench/runs/regress.py",
+                                                       "lfbench/scoring/pixels.py", "lfbench/scoring/pixelwise.py")
+T, D = "tests/test_stats.py", "tests/test_metric_definition.py"
 
 
 @dataclass(frozen=True)
@@ -47,12 +49,12 @@ class Mutation:
 
 
 MUTATIONS = (
-    # since issue 23 one comparison serves both modes (bad_pix_of): each mode's tie is mutated on its own branch
-    Mutation("badpix_toolkit_ge", "1", GENERAL, "return percent_of(px.size, int(np.count_nonzero(bad)))",
-             "return percent_of(px.size, int(np.count_nonzero(px.err >= threshold)))",
+    # since issue 23 one comparison serves both modes (since issue 29 in BadPixels, BadPix's sample): each mode's
+    # tie is mutated on its own branch
+    Mutation("badpix_toolkit_ge", "1", GENERAL, "return Sample(bad)", "return Sample(px.err >= self.threshold)",
              (f"{S}::test_bad_pix_error_equal_to_the_threshold_is_good",)),
     Mutation("badpix_default_ge", "1", GENERAL, "bad |= ~px.pred_finite",
-             "bad = (px.err >= threshold) | ~px.pred_finite",
+             "bad = (px.err >= self.threshold) | ~px.pred_finite",
              (f"{S}::test_bad_pix_error_equal_to_the_threshold_is_good",)),
     Mutation("badpix_curve_left", "1", GENERAL, 'side="right"', 'side="left"',
              (f"{S}::test_bad_pix_curve_counts_a_tie_as_good",)),
@@ -86,8 +88,8 @@ MUTATIONS = (
              (f"{S}::test_region_mask_is_combined_with_the_border_and_the_valid_mask",)),
     Mutation("border_not_scaled", "4", PREPARE, "self.rules.border_px * self.scale(resolution))",
              "self.rules.border_px)", (f"{S}::test_backgammon_metrics_at_high_resolution",)),
-    # since issue 23 score_scene scores backgammon from the pixels (_bg_fat_pixels, _bg_thin_pixels); the metrics'
-    # functions of maps (_bg_fat_fn, _bg_thin_fn, _scale) keep their own columns: each change in both places
+    # since issue 23 score_scene scores backgammon from the pixels; since issue 29 the columns exist once (the
+    # samples _bg_fattened, _bg_thinned; the metrics' functions of maps derive from them)
     Mutation("bg_fg_column_unscaled", "4", REGION, "int(BACKGAMMON_FG_COLUMN * scale)", "BACKGAMMON_FG_COLUMN",
              (f"{S}::test_backgammon_metrics_at_high_resolution",)),
     Mutation("bg_fg_column_rows", "4", REGION, "scale = max(1, px.pixels.shape[1] // px.pixels.low_width)",
@@ -98,22 +100,9 @@ MUTATIONS = (
              (f"{S}::test_backgammon_metrics_at_high_resolution",)),
     Mutation("bg_bg_column_lowres_width", "4", REGION, "px.pixels.shape[1] - BACKGAMMON_BG_FROM_RIGHT,",
              "px.pixels.low_width - BACKGAMMON_BG_FROM_RIGHT,", (f"{S}::test_backgammon_metrics_at_high_resolution",)),
-    Mutation("bg_fg_column_unscaled_maps", "4", REGION, "fg_column=int(BACKGAMMON_FG_COLUMN * _scale(scene, gt))",
-             "fg_column=BACKGAMMON_FG_COLUMN", (f"{S}::test_backgammon_metrics_at_high_resolution",)),
-    Mutation("bg_fg_column_rows_maps", "4", REGION, "return max(1, gt.shape[1] // scene.spatial_size[1])",
-             "return max(1, gt.shape[1] // scene.spatial_size[1] - 1)",
-             (f"{S}::test_backgammon_metrics_at_high_resolution",)),
-    Mutation("bg_bg_column_scaled_maps", "4", REGION, "bg_column=gt.shape[1] - BACKGAMMON_BG_FROM_RIGHT,",
-             "bg_column=gt.shape[1] - BACKGAMMON_BG_FROM_RIGHT * _scale(scene, gt),",
-             (f"{S}::test_backgammon_metrics_at_high_resolution",)),
-    Mutation("bg_bg_column_lowres_width_maps", "4", REGION, "bg_column=gt.shape[1] - BACKGAMMON_BG_FROM_RIGHT,",
-             "bg_column=scene.spatial_size[1] - BACKGAMMON_BG_FROM_RIGHT,",
-             (f"{S}::test_backgammon_metrics_at_high_resolution",)),
     Mutation("dots_threshold_03", "5", REGION, "DOT_THRESHOLD = 0.4", "DOT_THRESHOLD = 0.3",
              (f"{S}::test_missed_dots_threshold_is_04_and_strict",)),
-    Mutation("percent_bad_nonfinite_gt", "6", REGION,
-             "percent_of(int(np.count_nonzero(reference_finite)), int(np.count_nonzero(bad & reference_finite)))",
-             "percent_of(px.size, int(np.count_nonzero(bad)))",
+    Mutation("percent_bad_nonfinite_gt", "6", REGION, "return kept(bad, reference_finite)", "return Sample(bad)",
              (f"{S}::test_region_metrics_leave_out_nonfinite_ground_truth",)),
     Mutation("dots_nonfinite_gt", "6", REGION, "scored = np.isfinite(gt)", "scored = np.ones(gt.shape, bool)",
              (f"{S}::test_missed_dots_leave_out_nonfinite_ground_truth",)),
@@ -159,7 +148,8 @@ MUTATIONS = (
     Mutation("errors_size_all_pixels", "9/3", PIXELS,
              "def size(self) -> int:\n        return int(self.gt.size)\n\n    @functools.cached_property\n    def err",
              "def size(self) -> int:\n        return int(self.pixels.gt_map.size)\n\n    @functools.cached_property\n"
-             "    def err", (f"{E}::test_pixelwise_metrics_are_the_formulas_on_the_maps",)),
+             "    def err",  # since issue 29 no built-in metric reads it (a sample counts its own values)
+             (f"{D}::test_a_metric_defined_once_is_a_function_of_maps_and_bootstraps_in_its_family",)),
     Mutation("pixel_set_size_all_pixels", "9/3", PIXELS,
              "def size(self) -> int:\n        return int(self.gt.size)\n\n    def memo",
              "def size(self) -> int:\n        return int(self.gt_map.size)\n\n    def memo",
@@ -170,6 +160,18 @@ MUTATIONS = (
     Mutation("prepared_pred_not_upsampled", "9/4", PREPARE,
              "return _kept(self.reference.upsample(self.aligned, self.resolution))", "return _kept(self.aligned)",
              (f"{E}::test_one_reference_scores_each_prediction_as_a_reference_of_its_own",)),
+    # 10: the resampling families (issue 29): how every pixel-wise metric's sample reduces to its value, and the
+    # errors-only view the bootstrap draws the samples from
+    Mutation("proportion_unscaled", "10/2", FAMILIES, "else self.scale * int(np.count_nonzero(values))",
+             "else int(np.count_nonzero(values))", (f"{S}::test_bad_pix_error_equal_to_the_threshold_is_good",)),
+    Mutation("order_statistic_next", "10/1", FAMILIES, "k = int(values.size * self.percentage / 100.0)",
+             "k = min(values.size - 1, int(values.size * self.percentage / 100.0) + 1)",
+             ("tests/test_toolkit_runtime_quantile.py::test_quantile_family_is_the_element_at_int_n_p_over_100",)),
+    Mutation("mean_in_float64", "10/2", FAMILIES, "float(np.average(values)) * self.scale",
+             "float(np.mean(values, dtype=np.float64)) * self.scale",
+             (f"{D}::test_mse_is_the_float32_mean_times_100",)),
+    Mutation("errors_only_nan_only", "10/6", PIXELS, "return np.isfinite(self.signed)", "return ~np.isnan(self.signed)",
+             (f"{T}::test_estimate_equals_metrics_module",)),
 )
 
 
