@@ -54,7 +54,7 @@ from tqdm import tqdm
 
 from lfbench.data.scene import Benchmark, Scene, check_scene_names
 from lfbench.data.synth import write_benchmark
-from lfbench.method.trainable import check_state_dict, get_trainable, to_channels_last
+from lfbench.method.trainable import check_state_dict, construct, get_trainable, to_channels_last
 from lfbench.training import checkpoint as ckpt
 from lfbench.training.config import TrainConfig, expand_path, resume_view
 from lfbench.training.curves import MAX_LOG_BYTES, RunLogger, default_loggers, parse_log_line
@@ -376,8 +376,9 @@ def load_init_weights(cfg: TrainConfig) -> tuple[Path, dict[str, torch.Tensor]]:
 def build_model(cfg: TrainConfig) -> torch.nn.Module:
     """The config's trainable network built from [model]; SpecError naming the config for bad parameters."""
     check_model(cfg)
+    trainable = get_trainable(cfg.method)
     try:
-        return get_trainable(cfg.method).build(**cfg.model)
+        return construct(trainable.build, cfg.model)
     except (TypeError, ValueError) as exc:
         raise SpecError(f"[model]: {exc}", cfg.source) from None
 
