@@ -227,6 +227,12 @@ class SceneReference:
     def __repr__(self) -> str:
         return f"SceneReference({self.scene!r}, {self.rules!r})"
 
+    def check_serves(self, scene: LightField, rules: ScoringRules | None = None) -> None:
+        """ValueError unless this reference was made for ``scene`` itself (the same object: not another
+        folder's scene of the same name, whose ground truth differs) and, when given, under ``rules``."""
+        if self.scene is not scene or (rules is not None and self.rules != rules):
+            raise ValueError(f"the reference is of {self.scene!r} under {self.rules}, not of the scene scored")
+
     # ------------------------------------------------------------------ the scene, as scoring asks it
 
     @property
