@@ -68,6 +68,19 @@ def _train_config(tmp: Path, extra: str) -> Path:
     return _file(tmp, "c.toml", f'[data]\nroots = ["{root}"]\n[model]\nwidth = 2\n{extra}')
 
 
+def _odd_submission(tmp: Path) -> Path:
+    """A submission whose map is 3 px narrower than its scene (predict wrote it as it was, exit 0)."""
+    return write_submission(tmp / "sub", {"tiny": np.zeros((SIZE, SIZE - 3), np.float32)})
+
+
+def _wide_ci(tmp: Path) -> Path:
+    """A results folder whose ci.csv has 3 rows of 100,000 columns (it took report --html over a minute)."""
+    folder = _file(tmp, "res/results.json", RESULTS).parent
+    row = ",".join(["m", "s", "mse_x100", "1", "0.5", "1.5", "10", "lowres"] + [""] * 99_992)
+    _file(tmp, "res/ci.csv", "method,scene,metric,value,low,high,n_pixels,resolution\n" + f"{row}\n" * 3)
+    return folder
+
+
 VICTIM = "victim"  # a folder beside OUT that a hostile output folder points at: it must stay as it was
 ABLATION_SPEC = ('title = "t"\n[base.data]\ntrain = ["synthetic"]\n[[base.data.synthetic]]\ncategory = "synthetic"\n'
                  'seed = 1\nsize = 48\nscenes = 1\n[base.model]\nwidth = 2\n[[base.stages]]\nname = "l1"\n'
@@ -132,6 +145,11 @@ CASES: list[tuple[str, Callable[[Path], list], tuple[str, ...], tuple[str, ...]]
     ("predict-garbage-params", lambda t: ["predict", "--method", "planesweep", "--input",
                                           _file(t, "s/parameters.cfg", "\x00\x01garbage").parent, "--out",
                                           t / "o.pfm"], ("parameters.cfg",), ("o.pfm",)),
+    ("predict-published-odd-crop", lambda t: ["predict", "--method", f"published:path={_odd_submission(t)}",
+                                              "--input", _scene(t), "--out", t / "o.pfm"],
+     ("published:sub on tiny", f"prediction is {SIZE - 3}x{SIZE}, scene is {SIZE}x{SIZE}"), ("o.pfm",)),
+    ("report-ci-csv-too-wide", lambda t: ["report", _wide_ci(t), "--out", t / "rep", "--html"],
+     ("ci.csv", "a line of 100000 comma-separated fields"), ("rep",)),
     ("info-unknown", lambda t: ["info", "nosuch"], ("nosuch",), ()),
     ("regress-golden-nan", lambda t: ["regress", _file(t, "g.json", '[{"method": "m", "scene": "s", "metric": '
                                       '"mse_x100", "value": NaN, "tolerance": 0, "resolution": "lowres"}]'),

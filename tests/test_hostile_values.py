@@ -72,6 +72,40 @@ def test_ci_csv_reads_back_as_text_and_numbers(ci_run, tmp_path):
     assert ci.loc[0, "method"] == "7" and ci.loc[0, "scene"] == "001" and math.isnan(ci.loc[0, "low"])
 
 
+@pytest.mark.parametrize("where", ["header", "rows"])
+def test_report_html_refuses_a_ci_csv_of_100000_columns_in_one_line(ci_run, tmp_path, capsys, where):
+    """Issue 31, class 8: a ci.csv of 3 rows and 100,000 columns (600 KB) kept report --html busy for more than
+    a minute (pandas and the site's lookup take rows x columns); the wide line may be the header or a row."""
+    import shutil
+
+    run = tmp_path / "run"
+    shutil.copytree(ci_run, run)
+    lines = (run / "ci.csv").read_text(encoding="utf-8").splitlines()[:3]
+    wide = 100_000 - len(lines[0].split(","))
+    if where == "header":
+        lines = [lines[0] + "".join(f",x{i}" for i in range(wide))] + [ln + "," * wide for ln in lines[1:]]
+    else:
+        lines[2] += "," * wide
+    (run / "ci.csv").write_text("\n".join(lines) + "\n", encoding="utf-8")
+    rc, _, err = run_cli(capsys, "report", run, "--out", tmp_path / "rep", "--html")
+    assert_one_error_line(rc, err, str(run / "ci.csv"), "a line of 100000 comma-separated fields",
+                          "more than lfbench reads (256 columns)")
+    assert not (tmp_path / "rep").exists()
+
+
+def test_csv_tables_are_bounded_in_rows_and_columns(tmp_path):
+    from lfbench.utils.errors import DataError
+    from lfbench.utils.readfile import read_csv
+
+    path = tmp_path / "t.csv"
+    path.write_text("a,b\n" + "1,2\n" * 5, encoding="utf-8")
+    assert read_csv(path, max_rows=5, max_columns=2).shape == (5, 2)
+    with pytest.raises(DataError, match="t.csv: table has 6 lines, more than lfbench reads \\(4 rows and a header\\)"):
+        read_csv(path, "table", max_rows=4)
+    with pytest.raises(DataError, match="a line of 2 comma-separated fields, more than lfbench reads \\(1 columns\\)"):
+        read_csv(path, "table", max_columns=1)
+
+
 # --------------------------------------------------------------------------- validation border
 
 @pytest.fixture(scope="module")

@@ -238,6 +238,23 @@ def test_missed_dots_one_of_three():
     assert missed_dots(gt, gt, boxes, dots) == 0.0
 
 
+def test_a_box_mask_without_label_0_scores_every_label_as_a_box():
+    """docs/benchmark-rules.md: the toolkit stops with a ValueError on a box mask without label 0; lfbench scores
+    each non-zero label as a box, exactly as with a label-0 background around the dots."""
+    boxes, dots = _dots_layout()
+    assert not (boxes == 0).any()
+    gt = np.full(boxes.shape, 0.2, dtype=np.float32)
+    pred = gt.copy()
+    pred[1:3, 5:7] = 1.0
+    framed = boxes.copy()
+    framed[0, :] = framed[:, 0] = 0  # a background row and column that touches no dot pixel's box
+    framed[:, 11] = 0
+    assert missed_dots(gt, pred, boxes, dots) == missed_dots(gt, pred, framed, dots) == pytest.approx(100 / 3)
+    for toolkit in (False, True):
+        assert missed_dots(gt, pred, boxes, dots, toolkit=toolkit) == missed_dots(gt, pred, framed, dots,
+                                                                                  toolkit=toolkit)
+
+
 def test_missed_dots_half_bad_is_missed_and_nan_rule():
     boxes, dots = _dots_layout()
     gt = np.zeros(boxes.shape, dtype=np.float32)

@@ -324,7 +324,7 @@ def _check_networks(args: argparse.Namespace, cases: list[tuple[str, dict]]) -> 
     than MAX_NETWORK_BYTES of parameters (checked on the meta device), weights of another network or that do
     not fit; and, for a network that has no check of its own, when it fails one forward pass on a small
     light field (lfbench.method.trainable.Trainable.check_forward)."""
-    from lfbench.method.trainable import Trainable
+    from lfbench.method.trainable import Trainable, construct
     from lfbench.utils.errors import SpecError
 
     _, _, trainable = _model(args)
@@ -341,7 +341,7 @@ def _check_networks(args: argparse.Namespace, cases: list[tuple[str, dict]]) -> 
             trainable.check_params(net)
             built = trainable.load(Path(weights), **net) if weights else None  # DataError: not its weights
             if not trusted:
-                trainable.check_forward(built if built is not None else trainable.build(**net))
+                trainable.check_forward(built if built is not None else construct(trainable.build, net))
         except (TypeError, ValueError) as exc:
             raise SpecError(f"--model {args.model}: {' '.join(str(exc).split())[:240]}") from None
 

@@ -72,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
     reason = method.available_for(lf)
     if reason:
         raise DataError(f"{method.label} cannot run on this input: {reason}", args.input)
-    pred = method.run(lf)
+    pred = method.run(lf)  # the one check of a prediction: real floating values, the light field's size
 
     def save(path: Path, arr) -> None:
         with atomic_open(path, "wb") as f:
@@ -88,6 +88,8 @@ def run(args: argparse.Namespace) -> int:
                             (".uncertainty.npy", pred.uncertainty)):
             if arr is not None:
                 save(Path(f"{stem}{suffix}"), arr)
+    nonfinite = int(pred.disparity.size - np.count_nonzero(np.isfinite(pred.disparity)))
+    counted = f", {nonfinite} non-finite pixels" if nonfinite else ""
     print(f"{method.label}: wrote {args.out} ({pred.disparity.shape[1]}x{pred.disparity.shape[0]}, "
-          f"{pred.runtime_s:.2f} s)")
+          f"{pred.runtime_s:.2f} s{counted})")
     return 0

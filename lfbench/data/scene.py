@@ -135,6 +135,11 @@ class LightField:
         """(V, U, H, W) float32 gray in [0, 1]."""
         raise NotImplementedError
 
+    @property
+    def spatial_size(self) -> tuple[int, int]:
+        """(H, W) of each view (and of a prediction for it), px."""
+        return tuple(self.gray_views().shape[2:4])
+
     def center_view(self) -> np.ndarray:
         """(H, W, 3) RGB (or (H, W) gray when no colour is known), float32 in [0, 1]."""
         v, u = self.angular_size

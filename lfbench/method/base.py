@@ -9,8 +9,10 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from lfbench.data.disparity import EVALUATION_BORDER_PX, check_disparity
 from lfbench.data.scene import LightField
 from lfbench.method.params import format_spec
+from lfbench.utils.errors import DataError
 from lfbench.utils.readfile import file_sha256
 
 
@@ -143,15 +145,20 @@ class Method:
 
     # -- running ---------------------------------------------------------------------------------
 
-    def run(self, lf: LightField) -> Prediction:
+    def run(self, lf: LightField, *, max_crop: int = EVALUATION_BORDER_PX) -> Prediction:
         """predict() with the wall time recorded (unless the prediction carries its own runtime) and the
-        disparity as float32. Not a hook: runners call this."""
+        disparity checked and made float32 (lfbench.data.disparity.check_disparity: real floating values, the
+        light field's size or a symmetric crop of at most ``max_crop`` px per side; DataError naming the method
+        and the light field otherwise). Not a hook: runners call this."""
         start = time.perf_counter()
         pred = self.predict(lf)
         elapsed = time.perf_counter() - start
+        source = f"{self.label} on {getattr(lf, 'name', 'the light field')}"
+        if not isinstance(pred, Prediction):
+            raise DataError(f"{source}: predict() returned a {type(pred).__name__}, not a Prediction")
         if pred.runtime_s is None:
             pred.runtime_s = elapsed
-        pred.disparity = np.asarray(pred.disparity, dtype=np.float32)
+        pred.disparity = check_disparity(pred.disparity, lf.spatial_size, source, max_crop=max_crop)
         return pred
 
 

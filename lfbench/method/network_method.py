@@ -25,8 +25,8 @@ import numpy as np
 from lfbench.data.scene import LightField
 from lfbench.method.base import Method, Prediction
 from lfbench.method.params import Param, Range
-from lfbench.method.trainable import Trainable, get_trainable
-from lfbench.utils.errors import DataError, SpecError
+from lfbench.method.trainable import Trainable, contract_problem, get_trainable, plugin_failure
+from lfbench.utils.errors import DataError, LFBenchError, SpecError
 from lfbench.utils.hardware import DEVICE_HELP
 
 if TYPE_CHECKING:
@@ -188,11 +188,22 @@ class NetworkMethod(Method):
         x = torch.from_numpy(np.ascontiguousarray(views.reshape(1, v * u, *views.shape[2:]), dtype=np.float32))
         if self.device.type == "cuda":
             set_fp32_numerics(tf32=False)  # fp32 is IEEE fp32
-        with torch_threads(self.threads if self.device.type == "cpu" else None):
-            disparity, probability = self.trainable.infer(net, x.to(self.device), precision=self.precision,
-                                                          tile=self.tile)
-        disparity = disparity.float()[0].cpu()
+        h, w = views.shape[2:]
+        source = f"{self.label} on {lf.name}"
+        try:
+            with torch_threads(self.threads if self.device.type == "cpu" else None):
+                out = self.trainable.infer(net, x.to(self.device), precision=self.precision, tile=self.tile)
+        except LFBenchError:
+            raise
+        except Exception as exc:  # noqa: BLE001 - whatever the plugin's forward raised: one line
+            raise DataError(f"{source}: {plugin_failure(f'network {self.trainable.name!r} ({w}x{h} px)', exc)}"
+                            ) from None
         values = getattr(net, "disparities", None)
+        problem = contract_problem(out, (h, w), values)  # the one check of a prediction, on the tensors
+        if problem:
+            raise DataError(f"{source}: network {self.trainable.name!r} breaks the network contract: {problem}")
+        disparity, probability = out
+        disparity = disparity.float()[0].cpu()
         if probability is None or values is None:
             return Prediction(disparity=disparity.numpy())
         probability = probability.float()[0].cpu()

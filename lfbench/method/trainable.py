@@ -42,6 +42,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 
+from lfbench.data.disparity import disparity_problem
 from lfbench.method.checkpoint import read_weights
 from lfbench.method.params import Param, docstring_help, signature_params, value_problem
 from lfbench.utils.errors import DataError
@@ -184,7 +185,7 @@ class Trainable:
         cannot run there (e.g. it reads a tensor's value; such a network's size cannot be bounded before it
         is built); override with a cheaper check where one exists."""
         if check_network_size(self.build, params) is None:  # a constructor that needs real tensors decides
-            self.build(**params)
+            construct(self.build, params)
 
     def check_values(self, params: dict[str, Any]) -> None:
         """ValueError naming unknown keys and values that do not fit a parameter's annotated type or bounds
@@ -303,9 +304,8 @@ class Trainable:
         except (TypeError, ValueError):
             raise
         except Exception as exc:  # noqa: BLE001 - whatever the plugin's forward raised: one line
-            first = (str(exc).strip().splitlines() or [""])[0][:160]
-            raise ValueError(f"network {self.name!r} fails on a {size}x{size} light field of {angular}x{angular} "
-                             f"views: {type(exc).__name__}: {first}") from None
+            raise ValueError(plugin_failure(f"network {self.name!r} on a {size}x{size} light field of "
+                                            f"{angular}x{angular} views", exc)) from None
         problem = contract_problem(out, size, getattr(net, "disparities", None))
         if problem:
             raise ValueError(f"network {self.name!r} breaks the network contract: {problem}")
@@ -336,25 +336,59 @@ class Trainable:
         return True
 
 
-def contract_problem(out: Any, size: int, disparities: Any) -> str | None:
-    """What is wrong with a forward pass's ``out`` on one size x size light field (None: nothing): it must be
-    ``(disparity (1, size, size), probability (1, D, size, size) or None)``, D the number of ``disparities``."""
+def contract_problem(out: Any, size: int | tuple[int, int], disparities: Any) -> str | None:
+    """What is wrong with a forward pass's ``out`` on one light field of ``size`` (H, W) px, or size x size
+    (None: nothing): it must be ``(disparity (B, H, W), probability (B, D, H, W) or None)`` of real floating
+    tensors, D the number of ``disparities``; each disparity map is held to the one rule of a prediction
+    (lfbench.data.disparity.disparity_problem: real floating values, exactly the light field's size)."""
     import torch
 
+    h, w = (size, size) if isinstance(size, int) else tuple(size)
     if not isinstance(out, tuple | list) or len(out) != 2:
-        return f"forward returned a {type(out).__name__}, not (disparity, probability or None)"
+        what = f"a {type(out).__name__} of {len(out)}" if isinstance(out, tuple | list) else f"a {type(out).__name__}"
+        return f"forward returned {what}, not (disparity, probability or None)"
     disparity, probability = out
-    if not isinstance(disparity, torch.Tensor) or tuple(disparity.shape) != (1, size, size):
+    if not isinstance(disparity, torch.Tensor) or disparity.dim() != 3 or disparity.shape[0] != 1:
         shape = tuple(disparity.shape) if isinstance(disparity, torch.Tensor) else type(disparity).__name__
-        return f"disparity is {shape}, not (B, H, W) = (1, {size}, {size})"
+        return f"disparity is {shape}, not (B, H, W) = (1, {h}, {w})"
+    problem = disparity_problem(disparity.is_floating_point(), str(disparity.dtype), tuple(disparity.shape[1:]),
+                                (h, w))
+    if problem:
+        return problem
     if probability is None:
         return None
     d = int(disparities.numel()) if isinstance(disparities, torch.Tensor) else None
     if not isinstance(probability, torch.Tensor) or probability.dim() != 4 or \
-            tuple(probability.shape[2:]) != (size, size) or (d is not None and probability.shape[1] != d):
+            tuple(probability.shape[2:]) != (h, w) or (d is not None and probability.shape[1] != d):
         shape = tuple(probability.shape) if isinstance(probability, torch.Tensor) else type(probability).__name__
-        return f"probability is {shape}, not (B, D, H, W) = (1, {d if d is not None else 'D'}, {size}, {size})"
+        return f"probability is {shape}, not (B, D, H, W) = (1, {d if d is not None else 'D'}, {h}, {w})"
+    if not probability.is_floating_point():
+        return f"probability must be real floating-point values, got {probability.dtype}"
     return None
+
+
+def plugin_failure(what: str, exc: BaseException) -> str:
+    """One line for an exception a plugin's code raised (its constructor or forward): ``what failed:
+    RuntimeError: <first line of the message>`` (an allocator's refusal, a CUDA error, a bug)."""
+    first = (str(exc).strip().splitlines() or [""])[0][:200]
+    return f"{what} failed: {type(exc).__name__}: {first}"
+
+
+class ConstructorError(ValueError):
+    """A plugin network's constructor failed with something other than ValueError/TypeError (one line)."""
+
+
+def construct(build: Callable[..., torch.nn.Module], params: dict[str, Any]) -> torch.nn.Module:
+    """``build(**params)``: ValueError and TypeError as the constructor raised them (a bad value); any other
+    exception of the plugin's constructor (a RuntimeError, the allocator refusing 10**12 floats, MemoryError)
+    a :class:`ConstructorError` (a ValueError) of one line, so that every caller that turns a bad value into
+    an error line names it."""
+    try:
+        return build(**params)
+    except (TypeError, ValueError):
+        raise
+    except Exception as exc:  # noqa: BLE001 - whatever the plugin's constructor raised: one line
+        raise ConstructorError(plugin_failure("the network's constructor", exc)) from None
 
 
 def to_channels_last(model: torch.nn.Module) -> torch.nn.Module:
@@ -408,7 +442,9 @@ def network_from_state(build: Callable[..., torch.nn.Module], state: dict, confi
     before anything is allocated) or the weights do not fit it."""
     try:
         check_network_size(build, config)
-        net = build(**config)
+        net = construct(build, config)
+    except ConstructorError as exc:
+        raise DataError(f"the network of this checkpoint does not build: {exc}", path) from None
     except (TypeError, ValueError) as exc:
         raise DataError(f"checkpoint config is not valid: {' '.join(str(exc).split())[:200]}", path) from None
     check_state_dict(state, net.state_dict(), path)
@@ -484,6 +520,7 @@ list_trainables = trainable_names
 
 
 __all__ = ["Trainable", "StageOptions", "BenchOption", "network_from_state", "check_state_dict", "network_bytes",
-           "check_network_size", "contract_problem", "to_channels_last", "tiled_forward", "MAX_NETWORK_BYTES",
+           "check_network_size", "contract_problem", "construct", "ConstructorError", "plugin_failure",
+           "to_channels_last", "tiled_forward", "MAX_NETWORK_BYTES",
            "TRAINABLES", "DEFAULT_TRAINABLE", "ENTRY_POINT_GROUP", "register_trainable", "get_trainable",
            "find_trainable", "trainable_names", "list_trainables", "trainable_registry"]

@@ -122,7 +122,7 @@ def _ci_lookup(ci: pd.DataFrame | None) -> dict[tuple[str, str, str], tuple[floa
     if ci is None or ci.empty:
         return {}
     out = {}
-    for r in ci.itertuples(index=False):
+    for r in ci[["method", "scene", "metric", "low", "high"]].itertuples(index=False):  # not every column a file has
         if np.isfinite(r.low) and np.isfinite(r.high):
             out[(r.method, r.scene, r.metric)] = (float(r.low), float(r.high))
     return out

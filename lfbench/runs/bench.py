@@ -213,7 +213,7 @@ def _network(model: str, params: dict[str, Any], weights: str | None, seed: int)
     loaded from ``weights`` with ``params`` written over the stored config."""
     import torch
 
-    from lfbench.method.trainable import get_trainable
+    from lfbench.method.trainable import construct, get_trainable
 
     trainable = get_trainable(model)
     unknown = sorted(set(params) - set(trainable.parameters()))
@@ -223,7 +223,7 @@ def _network(model: str, params: dict[str, Any], weights: str | None, seed: int)
     if weights:
         return trainable, trainable.load(Path(weights), **params).eval()
     torch.manual_seed(seed)
-    return trainable, trainable.build(**params).eval()
+    return trainable, construct(trainable.build, params).eval()
 
 
 def _described(record: dict, net, params: dict[str, Any]) -> dict:
@@ -247,6 +247,8 @@ def bench_inference(size: int = 512, precision: str = "fp32", *, model: str = DE
     checkpoint). max_memory_gb None: the device's budget (4 GB on the CPU, the free memory of a GPU)."""
     import torch
 
+    from lfbench.method.trainable import contract_problem
+
     set_threads(threads)
     torch_dtype(precision)
     dev = case_device(device)
@@ -256,8 +258,16 @@ def bench_inference(size: int = 512, precision: str = "fp32", *, model: str = DE
     views = torch.rand((1, angular * angular, size, size), generator=torch.Generator().manual_seed(seed))
     baseline = memory_now_gb(dev)
     phases: dict = {}
-    seconds, cpu = timed(lambda: trainable.infer(net, views, precision=precision, max_memory_gb=max_memory_gb,
-                                                 tile=tile, timings=phases), repeat, dev)
+    outputs: list = []
+
+    def run() -> None:
+        outputs[:] = [trainable.infer(net, views, precision=precision, max_memory_gb=max_memory_gb, tile=tile,
+                                      timings=phases)]
+
+    seconds, cpu = timed(run, repeat, dev)
+    problem = contract_problem(outputs[0], (size, size), getattr(net, "disparities", None))  # the one check
+    if problem:
+        raise SpecError(f"network {model!r} breaks the network contract on a {size}x{size} light field: {problem}")
     record = {"bench": "inference", "model": model, "size": size, **params, "network_params": list(params),
               "precision": precision, "seconds": seconds, **memory_fields(dev, baseline),
               "cpu_seconds": cpu, "weights": weights or "random", "max_memory_gb": max_memory_gb}

@@ -166,6 +166,14 @@ def _range_text(metric: Metric) -> str:
     return f"{low:g} to {high:g} {metric.unit}"
 
 
+def _invalid(metric: Metric | None, value: float) -> str | None:
+    """Why a new ``value`` of ``metric`` (None: an id lfbench does not know) cannot be a value: not finite, or
+    outside the metric's range; None when it can."""
+    if not math.isfinite(value):
+        return f"value is {value}"
+    return _out_of_range(metric, value) if metric is not None else None
+
+
 def _out_of_range(metric: Metric, value: float) -> str | None:
     """Why ``value`` cannot be a value of ``metric`` (outside its declared range), or None."""
     low, high = metric.value_range
@@ -217,8 +225,8 @@ def check(golden: list[GoldenRecord], new: Results, *, skip_absent_scenes: bool 
                                     f"CHANGED  {name}: scored at {r.resolution}, golden at {g.resolution}"))
             continue
         metric = find_metric(g.metric)  # known: read_golden refuses unknown ids
-        if not math.isfinite(r.value) or (metric is not None and _out_of_range(metric, r.value)):
-            why = f"value is {r.value}" if not math.isfinite(r.value) else _out_of_range(metric, r.value)
+        why = _invalid(metric, r.value)
+        if why:
             findings.append(Finding("nan", g.key, f"INVALID  {name}: new {why}"))
             continue
         sign = -1.0 if metric is not None and metric.higher_is_better else 1.0
@@ -231,8 +239,9 @@ def check(golden: list[GoldenRecord], new: Results, *, skip_absent_scenes: bool 
     known = {g.key for g in golden}
     for key, r in current.items():
         if key not in known:
-            findings.append(Finding("new", key, f"NEW      {'/'.join(key)}: {r.value:.6g} is not in the golden file",
-                                    failed=fail_on_new or not math.isfinite(r.value)))
+            why = _invalid(find_metric(key[2]), r.value)  # a value that cannot be one fails, golden or not
+            findings.append(Finding("new", key, f"NEW      {'/'.join(key)}: {r.value:.6g} is not in the golden file"
+                                    + (f" (INVALID: {why})" if why else ""), failed=fail_on_new or why is not None))
     findings.sort(key=lambda f: not f.failed)
     compared = sum(1 for g in golden if g.scene not in skipped)
     return GateResult(findings, golden=len(golden), compared=compared, skipped_scenes=tuple(skipped),

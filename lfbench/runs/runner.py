@@ -68,7 +68,7 @@ def evaluate(methods: Sequence[Method], scenes: Sequence[Scene], *,
                 if reasons[i][j] is not None:
                     log.warning("lfbench: skipping %s on %s: %s", method.label, scene.name, reasons[i][j])
                     continue
-                pred = method.run(scene)
+                pred = method.run(scene, max_crop=rules.border_px)
                 if on_prediction is not None:
                     on_prediction(method, scene, pred)
                 batch.append((i, method, pred))

@@ -38,6 +38,7 @@ from typing import Any
 
 import numpy as np
 
+from lfbench.data.disparity import disparity_problem
 from lfbench.data.scene import LOWRES, LightField, read_png
 from lfbench.scoring.base import Metric
 from lfbench.scoring.pixels import PixelErrors, PixelSet
@@ -73,14 +74,14 @@ def align_prediction(pred: np.ndarray, shape: tuple[int, int], source: str = "pr
     pixels would be scored, so such a map is the wrong size rather than a cropped one.
     """
     pred = np.asarray(pred)
-    if pred.ndim != 2:
-        raise DataError(f"disparity must be a 2-D map, got shape {pred.shape}", source)
+    # the one rule of a prediction's size (lfbench.data.disparity); any real numbers here: a library caller's
+    # integer map is scored as the float32 it becomes (a method's prediction was checked as floating already)
+    problem = disparity_problem(pred.dtype.kind in "fiu", str(pred.dtype), pred.shape, shape, max_crop=max_crop)
+    if problem:
+        raise DataError(problem, source)
     if pred.shape == tuple(shape):
         return pred, None
     dh, dw = shape[0] - pred.shape[0], shape[1] - pred.shape[1]
-    if dh < 0 or dw < 0 or dh % 2 or dw % 2 or (max_crop is not None and max(dh, dw) // 2 > max_crop):
-        raise DataError(f"prediction is {pred.shape[1]}x{pred.shape[0]}, scene is {shape[1]}x{shape[0]} "
-                        "(only a symmetric crop of at most the evaluation border can be aligned)", source)
     out = np.full(shape, np.nan, dtype=np.float32)
     out[dh // 2:dh // 2 + pred.shape[0], dw // 2:dw // 2 + pred.shape[1]] = pred
     return out, (int(pred.shape[0]), int(pred.shape[1]))
@@ -225,6 +226,12 @@ class SceneReference:
 
     def __repr__(self) -> str:
         return f"SceneReference({self.scene!r}, {self.rules!r})"
+
+    def check_serves(self, scene: LightField, rules: ScoringRules | None = None) -> None:
+        """ValueError unless this reference was made for ``scene`` itself (the same object: not another
+        folder's scene of the same name, whose ground truth differs) and, when given, under ``rules``."""
+        if self.scene is not scene or (rules is not None and self.rules != rules):
+            raise ValueError(f"the reference is of {self.scene!r} under {self.rules}, not of the scene scored")
 
     # ------------------------------------------------------------------ the scene, as scoring asks it
 

@@ -22,6 +22,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from lfbench.data.disparity import EVALUATION_BORDER_PX
 from lfbench.data.scene import HIGHRES, LOWRES, Scene
 from lfbench.scoring.base import Metric
 
@@ -36,7 +37,7 @@ BENCHMARK_HIGHRES_SCENES = frozenset({"backgammon", "dots", "stripes"})
 class ScoringRules:
     """How a scene is scored. Defaults are the benchmark's."""
 
-    border_px: int = 15
+    border_px: int = EVALUATION_BORDER_PX
     highres_scenes: frozenset[str] = BENCHMARK_HIGHRES_SCENES
     toolkit: bool = False  # reproduce the toolkit's non-finite handling exactly
     allow_highres: bool = True  # False: score everything at low resolution

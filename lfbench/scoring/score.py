@@ -61,8 +61,8 @@ def score_scene(scene: Scene, pred: np.ndarray, metrics: Sequence[Metric] = GENE
     positive number (noted), and are recorded at low resolution (the resolution of the map timed)."""
     if reference is None:
         reference = SceneReference(scene, rules)
-    elif reference.scene is not scene or reference.rules != rules:
-        raise ValueError(f"the reference is of {reference.scene!r} under {reference.rules}, not of the scene scored")
+    else:
+        reference.check_serves(scene, rules)
     h, w = reference.spatial_size
     pred, aligned_from = reference.align(pred, source)
     notes = []

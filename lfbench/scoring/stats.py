@@ -445,10 +445,12 @@ def scene_errors(scene: Scene, pred: np.ndarray, rules: ScoringRules | None = No
     :func:`lfbench.scoring.score.score_scene` scores the general metrics on (the scene's resolution, the
     prediction prepared by :meth:`~lfbench.scoring.prepare.SceneReference.prepare`: alignment, the
     toolkit's upsampling, border and valid masks; the rules' non-finite handling). ``reference``: the
-    scene's SceneReference (its rules are used), made from ``scene`` and ``rules`` when None.
+    scene's SceneReference (its rules are used; ValueError when it is another scene's, or ``rules`` are
+    given and differ), made from ``scene`` and ``rules`` when None.
     Memory: ~8 bytes per scored pixel (2 MB at 512 x 512, ~200 MB for a 5120 x 5120 high-res scene)."""
     if reference is None:
         reference = SceneReference(scene, rules or ScoringRules())
+    reference.check_serves(scene, rules)  # not another folder's scene of the same name
     prepared = reference.prepare(pred, reference.general_resolution(), source)
     return ScoredErrors.from_prepared(prepared, toolkit=reference.rules.toolkit)
 

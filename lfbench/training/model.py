@@ -9,7 +9,7 @@ from typing import Any
 
 import torch
 
-from lfbench.method.trainable import get_trainable
+from lfbench.method.trainable import construct, get_trainable
 from lfbench.training import checkpoint as ckpt
 from lfbench.training.config import TrainConfig, expand_path
 from lfbench.utils.errors import DataError, LFBenchError, SpecError
@@ -41,8 +41,9 @@ def load_init_weights(cfg: TrainConfig) -> tuple[Path, dict[str, torch.Tensor]]:
 def build_model(cfg: TrainConfig) -> torch.nn.Module:
     """The config's trainable network built from [model]; SpecError naming the config for bad parameters."""
     check_model(cfg)
+    trainable = get_trainable(cfg.method)
     try:
-        return get_trainable(cfg.method).build(**cfg.model)
+        return construct(trainable.build, cfg.model)
     except (TypeError, ValueError) as exc:
         raise SpecError(f"[model]: {exc}", cfg.source) from None
 

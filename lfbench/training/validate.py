@@ -13,12 +13,13 @@ import numpy as np
 import torch
 
 from lfbench.data.scene import LOWRES, Scene
+from lfbench.method.trainable import contract_problem, plugin_failure
 from lfbench.scoring.general import bad_pix_of, mse_x100_of
 from lfbench.scoring.pixels import PixelErrors
 from lfbench.scoring.prepare import SceneReference
 from lfbench.scoring.rules import ScoringRules
 from lfbench.training.data import ValidationScene, validation_size
-from lfbench.utils.errors import SpecError
+from lfbench.utils.errors import DataError, SpecError
 
 
 def check_validation_area(scenes: Sequence[Scene], border: int, max_size: int, source: str | Path | None) -> None:
@@ -34,15 +35,23 @@ def check_validation_area(scenes: Sequence[Scene], border: int, max_size: int, s
 
 
 @torch.no_grad()
-def predict_disparity(model: torch.nn.Module, views: np.ndarray, device: torch.device) -> np.ndarray:
-    """(N, h, w) gray views -> (h, w) float32 disparity, model in eval mode, batch 1."""
+def predict_disparity(model: torch.nn.Module, views: np.ndarray, device: torch.device, name: str = "validation"
+                      ) -> np.ndarray:
+    """(N, h, w) gray views -> (h, w) float32 disparity, model in eval mode, batch 1. The output is held to
+    the network contract (lfbench.method.trainable.contract_problem, the one check of a prediction):
+    DataError naming the validation scene ``name`` otherwise, or when the forward pass fails."""
     was_training = model.training
     model.eval()
     try:
-        disp, _ = model(torch.from_numpy(views).unsqueeze(0).to(device))
+        out = model(torch.from_numpy(views).unsqueeze(0).to(device))
+    except Exception as exc:  # noqa: BLE001 - whatever the network's forward raised: one line
+        raise DataError(f"validation on {name}: {plugin_failure('the network', exc)}") from None
     finally:
         model.train(was_training)
-    return disp[0].float().cpu().numpy()
+    problem = contract_problem(out, tuple(views.shape[1:]), getattr(model, "disparities", None))
+    if problem:
+        raise DataError(f"validation on {name}: the network breaks the network contract: {problem}")
+    return out[0][0].float().cpu().numpy()
 
 
 def validate(model: torch.nn.Module, scenes: Sequence[ValidationScene], device: torch.device,
@@ -52,8 +61,8 @@ def validate(model: torch.nn.Module, scenes: Sequence[ValidationScene], device: 
     gts, preds = [], []
     rules = ScoringRules(border_px=border)
     for s in scenes:
-        p = SceneReference.of_ground_truth(s.gt, rules, s.name).prepare(predict_disparity(model, s.views, device),
-                                                                        LOWRES, f"validation on {s.name}")
+        pred = predict_disparity(model, s.views, device, s.name)
+        p = SceneReference.of_ground_truth(s.gt, rules, s.name).prepare(pred, LOWRES, f"validation on {s.name}")
         px = p.errors()  # the prediction's errors inside the border, as every score computes them
         per_scene[s.name] = {"badpix": bad_pix_of(px, threshold), "mse_x100": mse_x100_of(px)}
         gts.append(px.gt[px.gt_finite])

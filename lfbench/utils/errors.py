@@ -40,6 +40,13 @@ class Interrupted(LFBenchError):
     exit_code = 130
 
 
+class RunFailed(LFBenchError):
+    """The run stopped for a reason that is not its input (e.g. a worker process died: killed, or out of memory):
+    nothing of it was written, the previous outputs are kept, and the same command can be run again. Exit code 1."""
+
+    exit_code = 1
+
+
 class DataError(LFBenchError):
     """A data file or folder is missing, malformed or inconsistent."""
 

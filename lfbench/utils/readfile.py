@@ -15,10 +15,15 @@ from pathlib import Path
 
 from lfbench.utils.errors import DataError, LFBenchError
 
-__all__ = ["MAX_TEXT_BYTES", "check_regular_file", "file_sha256", "read_bytes", "read_csv", "read_text"]
+__all__ = ["MAX_CSV_COLUMNS", "MAX_CSV_ROWS", "MAX_TEXT_BYTES", "check_regular_file", "file_sha256", "read_bytes",
+           "read_csv", "read_text"]
 
 #: The default cap of a text file lfbench reads (configs, specs, CSVs, golden files are far smaller).
 MAX_TEXT_BYTES = 64 * 1024**2
+#: The most columns and rows a CSV table lfbench reads back may hold (ci.csv has 8 columns and one row per
+#: method, scene and metric; a paper's table a dozen columns).
+MAX_CSV_COLUMNS = 256
+MAX_CSV_ROWS = 1_000_000
 
 
 def _size(n: int) -> str:
@@ -103,14 +108,25 @@ def read_text(path: str | Path, what: str = "file", max_bytes: int = MAX_TEXT_BY
         raise error(f"{what} is not UTF-8 text", path) from None
 
 
-def read_csv(path: str | Path, what: str = "CSV table", max_bytes: int = MAX_TEXT_BYTES, **options):
+def read_csv(path: str | Path, what: str = "CSV table", max_bytes: int = MAX_TEXT_BYTES, *,
+             max_columns: int = MAX_CSV_COLUMNS, max_rows: int = MAX_CSV_ROWS, **options):
     """A CSV file as a pandas DataFrame, read with :func:`read_text`'s cap; ``options`` go to
-    ``pandas.read_csv`` (e.g. ``dtype=str``); DataError naming the file when it cannot be read or parsed."""
+    ``pandas.read_csv`` (e.g. ``dtype=str``); DataError naming the file when it cannot be read or parsed,
+    or holds more than ``max_rows`` lines or a line of more than ``max_columns`` comma-separated fields:
+    both counted before pandas parses it, whose time grows with rows x columns (a 3-row ci.csv of
+    100,000 columns took a minute to report)."""
     import io
 
     import pandas as pd
 
     text = read_text(path, what, max_bytes)
+    rows = text.splitlines()
+    if len(rows) > max_rows + 1:
+        raise DataError(f"{what} has {len(rows)} lines, more than lfbench reads ({max_rows} rows and a header)", path)
+    widest = max((row.count(",") + 1 for row in rows), default=0)  # quoted commas count too: a bound
+    if widest > max_columns:
+        raise DataError(f"{what} has a line of {widest} comma-separated fields, more than lfbench reads "
+                        f"({max_columns} columns)", path)
     try:
         return pd.read_csv(io.StringIO(text), **options)
     except (pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
