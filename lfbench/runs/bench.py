@@ -263,7 +263,7 @@ def bench_inference(size: int = 512, precision: str = "fp32", *, model: str = DE
     record = {"bench": "inference", "model": model, "size": size, **params, "network_params": list(params),
               "precision": precision, "seconds": seconds, **memory_fields(dev, baseline),
               "cpu_seconds": cpu, "weights": weights or "random", "max_memory_gb": max_memory_gb}
-    flops = trainable.flops(net, size, size)
+    flops = trainable.flop_count(net, size, size)
     if flops:
         record.update({"gflops_per_s": flops["total"] / seconds / 1e9, "gflops_per_cpu_s": flops["total"] / cpu / 1e9,
                        "tflop": flops["total"] / 1e12,
@@ -338,7 +338,7 @@ def bench_train(batch: int = 2, patch: int = 32, steps: int = 2, channels_last: 
               "steps": max(1, steps), "warmup": max(1, warmup), "seconds": seconds, "seconds_per_step": seconds,
               "steps_per_s": 1.0 / seconds, "cpu_seconds": cpu, **memory_fields(dev, baseline),
               "precision": precision}
-    flops = trainable.flops(net, patch, patch)
+    flops = trainable.flop_count(net, patch, patch)
     if flops:
         forward = flops["total"] * batch
         record.update({"gflops_per_s": 3 * forward / seconds / 1e9, "gflops_per_cpu_s": 3 * forward / cpu / 1e9})
