@@ -239,7 +239,8 @@ def _gflops(self, net, height, width):
 
 
 BROKEN = {  # name: (trainable, the failing check, fragments of its line)
-    "wrong-shape": (_trainable(WrongShape), "forward", ["disparity is (2, 1, 20, 24)", "return (B, H, W) = (2, 20, 24)"]),
+    "wrong-shape": (_trainable(WrongShape), "forward",
+                    ["disparity is (2, 1, 20, 24)", "return (B, H, W) = (2, 20, 24)"]),
     "double": (_trainable(Double), "forward", ["disparity is torch.float64 in fp32: return float32"]),
     "small-radius": (_trainable(SmallRadius), "receptive_radius",
                      ["declared 1 px, but a change of one pixel moved outputs 2 px away",

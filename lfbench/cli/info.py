@@ -59,7 +59,8 @@ def print_network(network: str, name: str, raw: dict[str, str]) -> None:
         print("  FLOPs: not declared (the network's flops() hook)")
     else:
         parts = ", ".join(f"{k} {_giga(v)}" for k, v in flops.items() if k != "total")
-        print(f"  FLOPs of one forward pass at 512x512: {_giga(flops['total'])} GFLOP" + (f" ({parts})" if parts else ""))
+        total = f"  FLOPs of one forward pass at 512x512: {_giga(flops['total'])} GFLOP"
+        print(total + (f" ({parts})" if parts else ""))
 
 
 def _giga(flops: float) -> str:

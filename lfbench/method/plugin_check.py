@@ -40,7 +40,7 @@ if TYPE_CHECKING:
     import torch
 
 OK, FAIL, SKIP = "ok", "FAIL", "skip"
-SIGN_DISPARITY = 1.0  # px per view step of the two planes of the sign check (fewer when the network's range is narrower)
+SIGN_DISPARITY = 1.0  # px per view step of the sign check's two planes (less for a network of a narrower range)
 SIGN_SIZE = 32  # px of those planes
 TILE = 8  # px of the tiles of the tiling check
 TOLERANCE = 1e-4  # px (and probability) a tiled or reloaded output may differ by (float rounding)
@@ -73,8 +73,11 @@ def check_plugin(name: str, params: dict[str, Any] | None = None, *, weights: st
     params = dict(params or {})
     try:
         trainable.check_values(params)
+        if params:
+            trainable.check_params(params)
     except (TypeError, ValueError) as exc:
-        raise SpecError(f"network {name!r}: {exc}") from None
+        if not params or _builds(trainable, {}):  # the values given are bad (the defaults build): bad input
+            raise SpecError(f"network {name!r}: {exc}") from None
     ctx = _Context(trainable, params, size, seed)
     findings: list[Finding] = []
 
@@ -110,6 +113,15 @@ def check_plugin(name: str, params: dict[str, Any] | None = None, *, weights: st
         run("save/load", ctx.save_load, "forward")
         run("training", ctx.training, "forward")
     return findings
+
+
+def _builds(trainable: Trainable, params: dict[str, Any]) -> bool:
+    """Whether the network builds from ``params`` (on the meta device where it can)."""
+    try:
+        trainable.check(params)
+    except Exception:  # noqa: BLE001 - whatever the constructor raised
+        return False
+    return True
 
 
 def _one_line(exc: BaseException) -> str:
@@ -230,9 +242,9 @@ class _Context:
         if plus - minus >= 0.2 * 2 * d:
             return OK, found
         if minus - plus >= 0.2 * 2 * d:
-            raise _Failed(f"{found}: the opposite sign. lfbench's disparity d is positive when a point of the centre "
-                          "view at (x, y) appears in view (u, v) at (x - (u - c) d, y - (v - c) d) (as in the HCI data): "
-                          "flip the direction of your shifts (or of net.disparities)")
+            raise _Failed(f"{found}: the opposite sign. lfbench's disparity d is positive when a point of the "
+                          "centre view at (x, y) appears in view (u, v) at (x - (u - c) d, y - (v - c) d) (as in the "
+                          "HCI data): flip the direction of your shifts (or of net.disparities)")
         raise _Failed(f"{found}: it does not follow the disparity. Train longer, or check the view order (view k at "
                       "row k // angular, column k % angular)")
 
@@ -246,6 +258,8 @@ class _Context:
             raise _Failed(f"receptive_radius is {declared!r} ({type(declared).__name__}): declare an int >= 0, the "
                           "px of context one output pixel depends on (or leave it out: whole images only)")
         radius = self.trainable.receptive_radius(self.net)
+        if radius is None and self.trainable.can_tile(self.net):
+            return SKIP, "not declared: the trainable's own infer() runs the tiles (the tiling check compares them)"
         if radius is None:
             return SKIP, ("not declared: the network runs on whole images only (tile= refused); declare "
                           "receptive_radius (px of context per output pixel) to run in exact tiles")
@@ -305,15 +319,14 @@ class _Context:
             self.net(self.views(1, h, w))
         measured = float(counter.get_total_flops())
         if measured and small["total"] < 0.9 * measured:
-            raise _Failed(f"flops() says {small['total']:.4g} at {h}x{w}, torch's FLOP counter measures {measured:.4g} in "
-                          "convolutions and matrix products alone: count FLOPs (2 per multiply-add, not GFLOPs or MACs) "
-                          "of the whole image")
+            raise _Failed(f"flops() says {small['total']:.4g} at {h}x{w}, torch's FLOP counter measures "
+                          f"{measured:.4g} in convolutions and matrix products alone: count FLOPs (2 per "
+                          "multiply-add, not GFLOPs or MACs) of the whole image")
         parts = ", ".join(f"{k} {v:.3g}" for k, v in small.items() if k != "total")
         return OK, (f"{small['total']:.4g} FLOPs at {h}x{w}{' (' + parts + ')' if parts else ''}; torch's counter "
                     f"measures {measured:.4g} in convolutions and matrix products")
 
     def save_load(self) -> tuple[str, str]:
-        import torch
 
         from lfbench.training.checkpoint import export_weights
 
@@ -366,8 +379,8 @@ class _Context:
         if bad:
             raise _Failed(f"gradients of {', '.join(bad[:3])} hold NaN or inf after one {loss_name} step")
         if no_grad:
-            raise _Failed(f"{len(no_grad)} parameter(s) get no gradient from the {loss_name} loss ({', '.join(no_grad[:3])}): "
-                          "they are never trained; use them in forward or remove them")
+            raise _Failed(f"{len(no_grad)} parameter(s) get no gradient from the {loss_name} loss "
+                          f"({', '.join(no_grad[:3])}): they are never trained; use them in forward or remove them")
         if same:
             raise _Failed(f"one optimizer step left {len(same)} of {len(before)} parameters unchanged "
                           f"({', '.join(same[:3])}): configure_optimizers must optimise net.parameters()")

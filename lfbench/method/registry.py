@@ -286,4 +286,5 @@ def offline_variants(name: str) -> list[dict[str, Any]]:
 
 __all__ = ["register_method", "create", "create_from_spec", "list_methods", "method_info", "parse_spec",
            "format_spec", "coerce", "coerce_params", "MethodRegistry", "REGISTRY", "ENTRY_POINT_GROUP",
-           "Param", "MethodInfo", "names_file", "signature_params", "network_method_info", "network_runner", "offline_variants"]
+           "Param", "MethodInfo", "names_file", "signature_params", "network_method_info", "network_runner",
+           "offline_variants"]

@@ -20,8 +20,10 @@ its ``lfbench.methods`` entry points, and says:
 The network contract (a ``torch.nn.Module``):
 
 - ``forward(views)``: views (B, N, H, W) float32 gray in [0, 1], N = angular^2, view k at angular row
-  ``k // angular``, column ``k % angular`` -> ``(disparity, probability)``: disparity (B, H, W) in px per
-  view step, probability (B, D, H, W) over ``disparities`` (softmax over D) or None;
+  ``k // angular``, column ``k % angular`` -> ``(disparity, probability)``: disparity (B, H, W) float32 in px
+  per view step, probability (B, D, H, W) float32 over ``disparities`` (softmax over D) or None; the sign is
+  the HCI data's: a point of the centre view at (x, y) with disparity d appears in view (u, v) at
+  (x - (u - c) d, y - (v - c) d), c = angular // 2;
 - ``angular`` (int, default 9): views per angular row;
 - ``disparities``: (D,) tensor of the candidate disparities (px), evenly spaced, when it has a distribution;
 - ``config()`` (optional): the build keyword arguments that rebuild it (stored in checkpoints; default:
@@ -370,7 +372,8 @@ def flops_problem(value: Any) -> str | None:
             return f"returned a dict without 'total' (keys: {', '.join(map(str, list(value)[:6]))}): {FLOPS_CONTRACT}"
         bad = [str(k) for k, v in value.items() if not _number(v)]
         if bad:
-            return f"returned a dict whose {bad[0]!r} is a {type(value[bad[0]]).__name__}, not a number: {FLOPS_CONTRACT}"
+            kind = type(value[bad[0]]).__name__
+            return f"returned a dict whose {bad[0]!r} is a {kind}, not a number: {FLOPS_CONTRACT}"
         numbers_ = list(value.values())
     elif _number(value):
         numbers_ = [value]
@@ -558,6 +561,7 @@ list_trainables = trainable_names
 
 
 __all__ = ["Trainable", "StageOptions", "BenchOption", "network_from_state", "check_state_dict", "network_bytes",
-           "check_network_size", "contract_problem", "flops_problem", "plugin_source", "network_summary", "FLOPS_CONTRACT", "to_channels_last", "tiled_forward", "MAX_NETWORK_BYTES",
+           "check_network_size", "contract_problem", "flops_problem", "plugin_source", "network_summary",
+           "FLOPS_CONTRACT", "to_channels_last", "tiled_forward", "MAX_NETWORK_BYTES",
            "TRAINABLES", "DEFAULT_TRAINABLE", "ENTRY_POINT_GROUP", "register_trainable", "get_trainable",
            "find_trainable", "trainable_names", "list_trainables", "trainable_registry"]
