@@ -251,7 +251,7 @@ BROKEN = {  # name: (trainable, the failing check, fragments of its line)
                     "one forward pass on an H x W light field: a number, or {'total': n, ...}"]),
     "giga-flops": (_trainable(Base, flops=_gflops), "flops",
                    ["torch's FLOP counter measures", "count FLOPs (2 per multiply-add, not GFLOPs or MACs)"]),
-    "random-buffer": (_trainable(RandomBuffer), "save/load", ["the reloaded network's disparity differs by",
+    "random-buffer": (_trainable(RandomBuffer), "save/load", ["the reloaded network's output differs by",
                                                                "persistent buffer"]),
     "unused": (_trainable(Unused), "training",
                ["2 parameter(s) get no gradient from the l1+js loss (spare.weight, spare.bias)", "never trained"]),
@@ -365,3 +365,45 @@ def test_a_missing_weights_file_for_the_sign_check_is_bad_input(broken, tmp_path
         check_plugin("base", weights=tmp_path / "none.pt")
     with pytest.raises(SpecError, match="hidden"):
         check_plugin("base", {"hidden": 0})
+
+
+LIST_FLOPS_PLUGIN = '''\
+from torch import nn
+
+from lfbench import Trainable, register_trainable
+
+
+class Net(nn.Module):
+    def __init__(self):
+        super().__init__()
+        self.angular = 9
+        self.conv = nn.Conv2d(81, 1, 3, padding=1)
+
+    def forward(self, views):
+        return self.conv(views)[:, 0], None
+
+
+@register_trainable("listflops")
+class ListFlops(Trainable):
+    network = Net
+
+    def flops(self, net, height, width):
+        return [1.0]
+'''
+
+
+def test_a_bench_case_of_a_wrong_flops_is_one_line_naming_the_hook_and_the_plugin(tmp_path, monkeypatch):
+    """As a user meets it: ``lfbench bench`` runs each case in a fresh process, where the plugin is installed."""
+    from lfbench.runs.bench import run_isolated
+
+    site = tmp_path / "site"
+    dist = site / "listflops_plugin-1.0.dist-info"
+    dist.mkdir(parents=True)
+    (site / "listflops_plugin.py").write_text(LIST_FLOPS_PLUGIN)
+    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: listflops-plugin\nVersion: 1.0\n")
+    (dist / "entry_points.txt").write_text("[lfbench.methods]\nlistflops = listflops_plugin\n")
+    monkeypatch.setenv("PYTHONPATH", str(site))
+    record = run_isolated("inference", {"size": 16, "model": "listflops", "threads": 1}, timeout_s=300)
+    assert record["error"] == ("exit 1: error: network 'listflops' (listflops_plugin.ListFlops): flops() returned a "
+                               "list: return the FLOPs of one forward pass on an H x W light field: a number, or "
+                               "{'total': n, ...}")

@@ -288,10 +288,7 @@ class _Context:
         h = min(128, max(3 * TILE, 2 * radius + TILE + 4))
         w = h + 4
         views = self.views(1, h, w, seed=2)
-        whole, tiled = self.infer(self.net, views), self.infer(self.net, views, tile=TILE)
-        diff = float((whole[0] - tiled[0]).abs().max())
-        if whole[1] is not None and tiled[1] is not None:
-            diff = max(diff, float((whole[1] - tiled[1]).abs().max()))
+        diff = _difference(self.infer(self.net, views), self.infer(self.net, views, tile=TILE))
         if not diff <= TOLERANCE:
             raise _Failed(f"tiles of {TILE} px differ from the whole image by {diff:.3g} on {h}x{w} px: the output "
                           f"depends on more than receptive_radius = {radius} px of context (declare the true radius) "
@@ -341,10 +338,9 @@ class _Context:
                 raise _Failed(f"{text}: config() must return the plain keyword arguments (numbers, strings, lists) "
                               "that rebuild the network") from None
         views = self.views(1, self.size, self.size, seed=3)
-        a, b = self.infer(self.net, views), self.infer(loaded, views)
-        diff = float((a[0] - b[0]).abs().max())
+        diff = _difference(self.infer(self.net, views), self.infer(loaded, views))
         if not diff <= TOLERANCE:
-            raise _Failed(f"the reloaded network's disparity differs by {diff:.3g} px: config() "
+            raise _Failed(f"the reloaded network's output differs by {diff:.3g}: config() "
                           f"({_kwargs(config)}) must hold every argument that changes the network, and every tensor "
                           "that matters must be a parameter or a persistent buffer")
         return OK, f"weights written as lfbench train writes them load back with config {_kwargs(config) or '{}'}"
@@ -385,6 +381,14 @@ class _Context:
             raise _Failed(f"one optimizer step left {len(same)} of {len(before)} parameters unchanged "
                           f"({', '.join(same[:3])}): configure_optimizers must optimise net.parameters()")
         return OK, f"one {loss_name} step (loss {value:.4g}) changed all {len(before)} parameter tensors"
+
+
+def _difference(a: tuple, b: tuple) -> float:
+    """The largest |a - b| of two forward results' disparities and, when both have one, probabilities."""
+    diff = float((a[0] - b[0]).abs().max())
+    if a[1] is not None and b[1] is not None:
+        diff = max(diff, float((a[1] - b[1]).abs().max()))
+    return diff
 
 
 def _kwargs(params: dict[str, Any]) -> str:

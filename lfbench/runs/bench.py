@@ -53,7 +53,7 @@ from pathlib import Path
 from typing import Any
 
 from lfbench.method.trainable import DEFAULT_TRAINABLE
-from lfbench.utils.errors import SpecError
+from lfbench.utils.errors import LFBenchError, SpecError
 from lfbench.utils.jsonfile import json_text
 from lfbench.utils.markdown import markdown_cell
 from lfbench.utils.subprocesses import safe_path_env
@@ -589,7 +589,12 @@ def write_json(path: str | Path, records: Sequence[dict]) -> None:
 def _main(argv: Sequence[str]) -> int:
     """Child entry: one JSON argument {"bench", "params"}; prints the record as one JSON line."""
     spec = json.loads(argv[0])
-    print(json.dumps(run_case(spec["bench"], spec.get("params", {}))), flush=True)
+    try:
+        record = run_case(spec["bench"], spec.get("params", {}))
+    except LFBenchError as exc:  # one line (the case's error record), e.g. a plugin's flops() of the wrong kind
+        print(f"error: {exc}", file=sys.stderr)
+        return exc.exit_code
+    print(json.dumps(record), flush=True)
     return 0
 
 
