@@ -324,6 +324,13 @@ def test_flops_may_be_a_number_and_a_wrong_return_names_the_hook_and_the_plugin(
         torch.set_num_threads(threads)
     expected = BaseNet.flops(None, Base(), 16, 16)
     assert record["tflop"] == pytest.approx(expected / 1e12) and record["gflops_per_s"] > 0
+    # what users naturally return is read as the total: a number, a one-element tensor, a dict with a total
+    trainable = get_trainable("base")
+    for value in (expected, float(expected), torch.tensor(float(expected)), np.float64(expected),
+                  {"total": expected, "convs": torch.tensor(expected)}):
+        with pytest.MonkeyPatch.context() as mp:
+            mp.setattr(BaseNet, "flops", lambda self, net, h, w, v=value: v)
+            assert trainable.flop_count(Base(), 16, 16)["total"] == expected, value
     assert str(info.value) == ("network 'list-flops' (test_check_plugin.BaseNet): flops() returned a list: return the "
                                "FLOPs of one forward pass on an H x W light field: a number, or {'total': n, ...}")
     assert info.value.exit_code == 1

@@ -109,7 +109,7 @@ def check_plugin(name: str, params: dict[str, Any] | None = None, *, weights: st
             run("sign", lambda: ctx.sign(trained), "forward")
         run("receptive_radius", ctx.receptive_radius, "forward")
         run("tiling", ctx.tiling, "forward")
-        run("flops", ctx.flops, "build")
+        run("flops", ctx.flops, "forward")
         run("save/load", ctx.save_load, "forward")
         run("training", ctx.training, "forward")
     return findings

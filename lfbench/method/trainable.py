@@ -321,10 +321,12 @@ class Trainable:
         return None
 
     def flop_count(self, net: torch.nn.Module, height: int, width: int) -> dict[str, float] | None:
-        """:meth:`flops` as ``{"total": n, part: n, ...}`` (a number ``n`` becomes ``{"total": n}``) or None;
+        """:meth:`flops` as ``{"total": n, part: n, ...}`` (a number ``n``, also a one-element tensor or array,
+        becomes ``{"total": n}``) or None;
         PluginError naming this network and its plugin class when it returns anything else or a number that
         is not finite and >= 0."""
         value = self.flops(net, height, width)
+        value = {k: _scalar(v) for k, v in value.items()} if isinstance(value, dict) else _scalar(value)
         problem = flops_problem(value)
         if problem:
             raise PluginError(f"network {self.name!r} ({plugin_source(self)}): flops() {problem}")
@@ -356,6 +358,14 @@ class Trainable:
 
 
 FLOPS_CONTRACT = "return the FLOPs of one forward pass on an H x W light field: a number, or {'total': n, ...}"
+
+
+def _scalar(value: Any) -> Any:
+    """A one-element tensor or array as its Python number (what a flops() computed with torch may return)."""
+    size = getattr(value, "numel", None) or getattr(value, "size", None)
+    if hasattr(value, "item") and (size() if callable(size) else size) == 1:
+        return value.item()
+    return value
 
 
 def _number(value: Any) -> bool:
