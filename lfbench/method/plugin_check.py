@@ -288,11 +288,9 @@ class _Context:
         h = min(128, max(3 * TILE, 2 * radius + TILE + 4))
         w = h + 4
         views = self.views(1, h, w, seed=2)
-        diff = _difference(self.infer(self.net, views), self.infer(self.net, views, tile=TILE))
-        if not diff <= TOLERANCE:
-            raise _Failed(f"tiles of {TILE} px differ from the whole image by {diff:.3g} on {h}x{w} px: the output "
-                          f"depends on more than receptive_radius = {radius} px of context (declare the true radius) "
-                          "or on where the image ends")
+        diff = _agree(self.infer(self.net, views), self.infer(self.net, views, tile=TILE), lambda d: (
+            f"tiles of {TILE} px differ from the whole image by {d:.3g} on {h}x{w} px: the output depends on more "
+            f"than receptive_radius = {radius} px of context (declare the true radius) or on where the image ends"))
         return OK, f"tiles of {TILE} px equal the whole image on {h}x{w} px (max difference {diff:.2g})"
 
     def flops(self) -> tuple[str, str]:
@@ -338,11 +336,10 @@ class _Context:
                 raise _Failed(f"{text}: config() must return the plain keyword arguments (numbers, strings, lists) "
                               "that rebuild the network") from None
         views = self.views(1, self.size, self.size, seed=3)
-        diff = _difference(self.infer(self.net, views), self.infer(loaded, views))
-        if not diff <= TOLERANCE:
-            raise _Failed(f"the reloaded network's output differs by {diff:.3g}: config() "
-                          f"({_kwargs(config)}) must hold every argument that changes the network, and every tensor "
-                          "that matters must be a parameter or a persistent buffer")
+        _agree(self.infer(self.net, views), self.infer(loaded, views), lambda d: (
+            f"the reloaded network's output differs by {d:.3g}: config() ({_kwargs(config)}) must hold every "
+            "argument that changes the network, and every tensor that matters must be a parameter or a persistent "
+            "buffer"))
         return OK, f"weights written as lfbench train writes them load back with config {_kwargs(config) or '{}'}"
 
     def training(self) -> tuple[str, str]:
@@ -383,11 +380,14 @@ class _Context:
         return OK, f"one {loss_name} step (loss {value:.4g}) changed all {len(before)} parameter tensors"
 
 
-def _difference(a: tuple, b: tuple) -> float:
-    """The largest |a - b| of two forward results' disparities and, when both have one, probabilities."""
+def _agree(a: tuple, b: tuple, failure: Callable[[float], str]) -> float:
+    """The largest |a - b| of two forward results' disparities and, when both have one, probabilities;
+    ``_Failed(failure(difference))`` when it exceeds TOLERANCE."""
     diff = float((a[0] - b[0]).abs().max())
     if a[1] is not None and b[1] is not None:
         diff = max(diff, float((a[1] - b[1]).abs().max()))
+    if not diff <= TOLERANCE:
+        raise _Failed(failure(diff))
     return diff
 
 
