@@ -187,6 +187,13 @@ CASES: list[tuple[str, Callable[[Path], list], tuple[str, ...], tuple[str, ...]]
     ("ablate-missing", lambda t: ["ablate", t / "nope.toml", "--out", t / "ab"], ("nope.toml",), ("ab",)),
     ("ablate-jobs-0", lambda t: ["ablate", t / "nope.toml", "--jobs", "0"], ("--jobs",), ()),
     ("bench-bad-model", lambda t: ["bench", "--model", "nosuch", "--json", t / "b.json"], ("nosuch",), ("b.json",)),
+    ("check-plugin-unknown", lambda t: ["check-plugin", "nosuchnet"], ("nosuchnet",), ()),
+    ("check-plugin-bad-param", lambda t: ["check-plugin", "subfocal:width=0"], ("width",), ()),
+    ("check-plugin-no-weights", lambda t: ["check-plugin", "subfocal", "--weights", t / "nope.pt"],
+     ("nope.pt", "not found"), ()),
+    ("new-plugin-bad-name", lambda t: ["new-plugin", "Bad Name", "--out", t / "p"], ("plugin name 'Bad Name'",),
+     ("p",)),
+    ("new-plugin-taken", lambda t: ["new-plugin", "subfocal", "--out", t / "p"], ("registered already",), ("p",)),
     # hostile output folders (issue 20.1): every command that reads one or writes a set into one
     ("evaluate-hostile-out", lambda t: ["evaluate", "--data", _scene(t), "--method", "gt", "--out", _hostile(t)],
      (".lfbench-commit.json", "nothing was changed"), ()),

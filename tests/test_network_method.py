@@ -259,3 +259,35 @@ def test_results_are_keyed_by_the_weights_content_not_their_path(nets, tmp_path,
     # a user-given label names the records instead
     named = create_from_spec("stack:weights=stack.pt").with_label("mine")
     assert named.label == "mine"
+
+
+def test_two_class_records_are_keyed_by_the_weights_content(nets, tmp_path, capsys):
+    """Issue 32.3: a plugin's own method (the two-class style) named its records by the weights' path, so a
+    moved weights file broke the gate (every record missing and new). Its weights are named by content too:
+    results with the file at A and then moved to B compare equal in ``lfbench regress``."""
+    from helpers import run_cli
+
+    scene = Scene(write_scene(tmp_path / "data", "alpha", size=32))
+    a = tmp_path / "a" / "w.pt"
+    a.parent.mkdir()
+    a.write_bytes(nets["stack2"].read_bytes())
+    digest = __import__("hashlib").sha256(a.read_bytes()).hexdigest()
+    method = create_from_spec(f"stack2:weights={a}")
+    assert type(method) is StackMethod and method.label == f"stack2:weights=sha256:{digest[:12]}"
+    before = evaluate_to_folder([method], [scene], tmp_path / "at_a", writers=(), progress=False,
+                                meta={"methods": {method.label: method.provenance()}})
+    b = tmp_path / "b" / "moved.pt"
+    b.parent.mkdir()
+    a.rename(b)
+    method = create_from_spec(f"stack2:weights={b}")
+    evaluate_to_folder([method], [scene], tmp_path / "at_b", writers=(), progress=False,
+                       meta={"methods": {method.label: method.provenance()}})
+    from lfbench.runs.regress import make_golden
+
+    make_golden(before, 0.0, tmp_path / "golden.json")
+    rc, out, err = run_cli(capsys, "regress", tmp_path / "golden.json", tmp_path / "at_b" / "results.json",
+                           "--fail-on-new")
+    assert rc == 0, out + err
+    assert "OK: 5 compared, 0 regressions" in out + err and "NEW" not in out + err and "MISSING" not in out + err
+    saved = json.loads((tmp_path / "at_b" / "results.json").read_text())["meta"]["methods"]
+    assert saved[method.label]["weights"] == {"path": str(b), "sha256": digest}  # the path stays as provenance

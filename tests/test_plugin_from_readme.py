@@ -78,9 +78,16 @@ def _run(env: dict, cwd: Path, args: list[str]) -> str:
     return proc.stdout
 
 
+def _lfbench_fails(env: dict, cwd: Path, args: list[str]) -> str:
+    proc = subprocess.run([sys.executable, "-m", *args], env=env, cwd=cwd, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 1, (args, proc.stdout, proc.stderr[-2000:])
+    return proc.stdout
+
+
 def test_the_readme_plugin_runs_with_the_readme_commands(readme_plugin):
     src, env, commands = readme_plugin
-    assert [c[1] for c in commands] == ["methods", "train", "synth", "evaluate", "evaluate", "bench", "bench"]
+    assert [c[1] for c in commands] == ["methods", "train", "synth", "evaluate", "evaluate", "bench", "bench",
+                                        "check-plugin"]
     outputs = [_run(env, src, [*c, "--no-progress"] if c[1] in ("train", "synth", "evaluate") else c)
                for c in commands]
     listing = outputs[0]
@@ -122,3 +129,12 @@ def test_the_readme_plugin_runs_with_the_readme_commands(readme_plugin):
     assert len(bench_lines) == 2 and "features 4" in bench_lines[0] and "features 8" in bench_lines[1]
     assert [line for line in outputs[6].splitlines() if line.startswith("[train]")]
     assert "path" not in outputs[6]
+
+    # checked (issue 32.2): every contract the README states; no flops() declared; no weights, so no sign
+    status = {line.split(":")[0].split()[1]: line.split()[0] for line in outputs[7].splitlines()[:-1]}
+    assert status == {"build": "ok", "forward": "ok", "sign": "skip", "receptive_radius": "ok", "tiling": "ok",
+                      "flops": "skip", "save/load": "ok", "training": "ok"}, outputs[7]
+    assert "receptive_radius: 2 px" in outputs[7]
+    # the 70 steps above teach it no disparity: the sign check says so instead of passing
+    weights = _lfbench_fails(env, src, ["lfbench", "check-plugin", "epinet", "--weights", "runs/epi/final.pt"])
+    assert "FAIL  sign: on planes at +1 and -1 px it predicts" in weights and "Train longer" in weights

@@ -44,6 +44,8 @@ BUILTIN_COMMANDS = {
     "regress": "lfbench.cli.regress",
     "validate-submission": "lfbench.cli.validate_submission",
     "bench": "lfbench.cli.bench",
+    "check-plugin": "lfbench.cli.check_plugin",
+    "new-plugin": "lfbench.cli.new_plugin",
 }
 _HELP_BYTES = 1 << 20  # the most of a plugin command's source read for its HELP
 

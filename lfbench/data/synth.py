@@ -696,6 +696,22 @@ class SyntheticScene:
         return ArrayLightField(views=self.gray_views(), name=self.name, gt=self.disparity)
 
 
+def plane_views(disparity: float, size: int, angular: int = 9, seed: int = 0) -> np.ndarray:
+    """(A, A, size, size) float32 gray views in [0, 1] of one textured fronto-parallel plane at ``disparity``
+    px per view step covering every view, rendered as every scene is (a point of the centre view at (x, y)
+    appears in view (u, v) at (x - (u - c) d, y - (v - c) d)): a scene whose ground truth is ``disparity``
+    everywhere (``lfbench check-plugin`` checks a network's sign on two of them)."""
+    check_args(size, angular)
+    rng = np.random.default_rng(np.random.SeedSequence([int(seed), int(size), int(angular), 7]))
+    margin = (angular // 2) * (abs(float(disparity)) + 1.0) + 4.0
+    extent = (-margin, -margin, size - 1 + margin, size - 1 + margin)
+    mid = (size - 1) / 2
+    texture = make_texture(rng, extent, "noise", 0.35)
+    layer = _make_layer("plane", Affine(float(disparity), 0.0, 0.0, mid, mid), Shape("all"), texture, "plane", extent)
+    views = render_views([layer], size, angular)
+    return rgb_to_gray(views.reshape(angular, angular, size, size, 3))
+
+
 MAX_SYNTH_SIZE = 4096  # px per side of a generated view
 MAX_SYNTH_SCENES = 1000
 MAX_SEED = 2**63 - 1  # seeds are 64-bit signed integers, as in TOML configs

@@ -16,6 +16,7 @@ A spec string selects a method and its parameters on the command line: ``name`` 
 from __future__ import annotations
 
 import inspect
+import typing
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -118,6 +119,12 @@ def _introspect(name: str, factory: Callable[..., Any], defaults: dict[str, Any]
                       network or (name if find_trainable(name) is not None else None))
 
 
+def names_file(param: Param) -> bool:
+    """Whether ``param`` names a file: typed ``Path`` (or ``Path | None``), or called ``weights``."""
+    kinds = (param.kind, *typing.get_args(param.kind))
+    return param.name == "weights" or any(k is Path for k in kinds)
+
+
 def network_method_info(trainable: Trainable) -> MethodInfo:
     """The MethodInfo of the generic network method running ``trainable``'s weights (``NAME:weights=...``)."""
     name = trainable.name
@@ -188,8 +195,23 @@ class MethodRegistry(Registry[MethodInfo]):
         if not isinstance(method, Method):
             raise SpecError(f"method {name!r}: {info.source}.{getattr(info.factory, '__qualname__', info.factory)} "
                             f"returned a {type(method).__name__}, which is not a Method")
+        if self.network_of(name) is not None:  # the two-class style too: keyed by the weights' content, not path
+            files = tuple(k for k, p in info.params.items() if names_file(p) and k not in method.content_params)
+            if files:
+                method.content_params = (*method.content_params, *files)
         method._bind(name, params)  # how it was made: results name a method by its canonical spec
         return method
+
+    def network_of(self, name: str) -> str | None:
+        """The registered trainable network method ``name`` runs, or None: the generic network method's, a
+        subclass's, or that of a method of its own (the two-class style) named like a network or as a network's
+        ``method`` (found now, whatever the order in which the plugin registered its two classes)."""
+        info = self.info(name)
+        if info.network is not None:
+            return info.network
+        if find_trainable(name) is not None:
+            return name
+        return next((n for n in trainable_names() if find_trainable(n).method_name == name), None)
 
     def create_from_spec(self, spec: str, runtime: Mapping[str, Any] | None = None) -> Any:
         """The method of ``name:key=value,...``; ``runtime`` (e.g. ``{"device": "cuda"}`` from ``--device``)
@@ -264,4 +286,5 @@ def offline_variants(name: str) -> list[dict[str, Any]]:
 
 __all__ = ["register_method", "create", "create_from_spec", "list_methods", "method_info", "parse_spec",
            "format_spec", "coerce", "coerce_params", "MethodRegistry", "REGISTRY", "ENTRY_POINT_GROUP",
-           "Param", "MethodInfo", "signature_params", "network_method_info", "network_runner", "offline_variants"]
+           "Param", "MethodInfo", "names_file", "signature_params", "network_method_info", "network_runner",
+           "offline_variants"]

@@ -20,8 +20,10 @@ its ``lfbench.methods`` entry points, and says:
 The network contract (a ``torch.nn.Module``):
 
 - ``forward(views)``: views (B, N, H, W) float32 gray in [0, 1], N = angular^2, view k at angular row
-  ``k // angular``, column ``k % angular`` -> ``(disparity, probability)``: disparity (B, H, W) in px per
-  view step, probability (B, D, H, W) over ``disparities`` (softmax over D) or None;
+  ``k // angular``, column ``k % angular`` -> ``(disparity, probability)``: disparity (B, H, W) float32 in px
+  per view step, probability (B, D, H, W) float32 over ``disparities`` (softmax over D) or None; the sign is
+  the HCI data's: a point of the centre view at (x, y) with disparity d appears in view (u, v) at
+  (x - (u - c) d, y - (v - c) d), c = angular // 2;
 - ``angular`` (int, default 9): views per angular row;
 - ``disparities``: (D,) tensor of the candidate disparities (px), evenly spaced, when it has a distribution;
 - ``config()`` (optional): the build keyword arguments that rebuild it (stored in checkpoints; default:
@@ -38,6 +40,8 @@ import contextlib
 import dataclasses
 import inspect
 import itertools
+import math
+import numbers
 from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar, Protocol
@@ -45,7 +49,7 @@ from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 from lfbench.data.disparity import disparity_problem
 from lfbench.method.checkpoint import read_weights
 from lfbench.method.params import Param, docstring_help, signature_params, value_problem
-from lfbench.utils.errors import DataError
+from lfbench.utils.errors import DataError, PluginError
 from lfbench.utils.registry import Lazy, Registry
 
 if TYPE_CHECKING:  # torch is imported where a network is built, not by `lfbench methods`
@@ -310,10 +314,27 @@ class Trainable:
         if problem:
             raise ValueError(f"network {self.name!r} breaks the network contract: {problem}")
 
-    def flops(self, net: torch.nn.Module, height: int, width: int) -> dict[str, float] | None:
-        """Floating-point operations of one eval forward on an H x W light field (``{"total": ...}`` and
-        any parts), or None when unknown (then bench records carry no GFLOP/s)."""
+    def flops(self, net: torch.nn.Module, height: int, width: int) -> float | dict[str, float] | None:
+        """Floating-point operations (a count, 2 per multiply-add) of one eval forward pass of ``net`` on one
+        H x W light field (batch 1): a number, or ``{"total": n, part: n, ...}`` (parts are reported beside the
+        total), or None when unknown (then bench records carry no GFLOP/s). Read through :meth:`flop_count`."""
         return None
+
+    def flop_count(self, net: torch.nn.Module, height: int, width: int) -> dict[str, float] | None:
+        """:meth:`flops` as ``{"total": n, part: n, ...}`` (a number ``n``, also a one-element tensor or array,
+        becomes ``{"total": n}``) or None;
+        PluginError naming this network and its plugin class when it returns anything else or a number that
+        is not finite and >= 0."""
+        value = self.flops(net, height, width)
+        value = {k: _scalar(v) for k, v in value.items()} if isinstance(value, dict) else _scalar(value)
+        problem = flops_problem(value)
+        if problem:
+            raise PluginError(f"network {self.name!r} ({plugin_source(self)}): flops() {problem}")
+        if value is None:
+            return None
+        if not isinstance(value, dict):
+            return {"total": float(value)}
+        return {str(k): float(v) for k, v in value.items()}
 
     # -- benches ---------------------------------------------------------------------------------
 
@@ -334,6 +355,72 @@ class Trainable:
         if variant:
             raise ValueError(f"network {self.name!r} has no training option {', '.join(variant)}")
         return True
+
+
+FLOPS_CONTRACT = "return the FLOPs of one forward pass on an H x W light field: a number, or {'total': n, ...}"
+
+
+def _scalar(value: Any) -> Any:
+    """A one-element tensor or array as its Python number (what a flops() computed with torch may return)."""
+    size = getattr(value, "numel", None) or getattr(value, "size", None)
+    if hasattr(value, "item") and (size() if callable(size) else size) == 1:
+        return value.item()
+    return value
+
+
+def _number(value: Any) -> bool:
+    return isinstance(value, numbers.Real) and not isinstance(value, bool)
+
+
+def flops_problem(value: Any) -> str | None:
+    """What is wrong with a value :meth:`Trainable.flops` returned (None: a number, a dict with a numeric
+    ``total`` and numeric parts, or None), as the rest of a line that starts with ``flops()``."""
+    if value is None:
+        return None
+    if isinstance(value, dict):
+        if "total" not in value:
+            return f"returned a dict without 'total' (keys: {', '.join(map(str, list(value)[:6]))}): {FLOPS_CONTRACT}"
+        bad = [str(k) for k, v in value.items() if not _number(v)]
+        if bad:
+            kind = type(value[bad[0]]).__name__
+            return f"returned a dict whose {bad[0]!r} is a {kind}, not a number: {FLOPS_CONTRACT}"
+        numbers_ = list(value.values())
+    elif _number(value):
+        numbers_ = [value]
+    else:
+        return f"returned a {type(value).__name__}: {FLOPS_CONTRACT}"
+    if not all(math.isfinite(float(v)) and float(v) >= 0 for v in numbers_):
+        return f"returned {value!r}: counts must be finite and >= 0"
+    return None
+
+
+def plugin_source(trainable: Trainable) -> str:
+    """``module.Class`` of a trainable: the plugin that registered it, for error lines."""
+    cls = type(trainable)
+    return f"{cls.__module__}.{cls.__qualname__}"
+
+
+def network_summary(trainable: Trainable, params: dict[str, Any], *, height: int = 512, width: int = 512
+                    ) -> dict[str, Any]:
+    """What ``lfbench info`` says of a network without weights: ``parameters`` (count), ``trainable`` (count of
+    those with requires_grad) and ``flops`` (:meth:`Trainable.flop_count` at height x width, or None) of
+    ``trainable.build(**params)``, built on PyTorch's meta device (shapes only: nothing allocated), or on the
+    CPU after the size check when its constructor or flops() cannot run there."""
+    import torch
+
+    def measure(net: torch.nn.Module) -> dict[str, Any]:
+        return {"parameters": sum(p.numel() for p in net.parameters()),
+                "trainable": sum(p.numel() for p in net.parameters() if p.requires_grad),
+                "flops": trainable.flop_count(net, height, width)}
+
+    try:
+        with torch.device("meta"):
+            return measure(trainable.build(**params))
+    except PluginError:
+        raise
+    except Exception:  # noqa: BLE001 - a constructor or flops() that needs real tensors: build it for real
+        check_network_size(trainable.build, params)
+    return measure(trainable.build(**params))
 
 
 def contract_problem(out: Any, size: int | tuple[int, int], disparities: Any) -> str | None:
@@ -521,6 +608,7 @@ list_trainables = trainable_names
 
 __all__ = ["Trainable", "StageOptions", "BenchOption", "network_from_state", "check_state_dict", "network_bytes",
            "check_network_size", "contract_problem", "construct", "ConstructorError", "plugin_failure",
-           "to_channels_last", "tiled_forward", "MAX_NETWORK_BYTES",
+           "flops_problem", "plugin_source", "network_summary", "FLOPS_CONTRACT", "to_channels_last",
+           "tiled_forward", "MAX_NETWORK_BYTES",
            "TRAINABLES", "DEFAULT_TRAINABLE", "ENTRY_POINT_GROUP", "register_trainable", "get_trainable",
            "find_trainable", "trainable_names", "list_trainables", "trainable_registry"]

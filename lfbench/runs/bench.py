@@ -53,7 +53,7 @@ from pathlib import Path
 from typing import Any
 
 from lfbench.method.trainable import DEFAULT_TRAINABLE
-from lfbench.utils.errors import SpecError
+from lfbench.utils.errors import LFBenchError, SpecError
 from lfbench.utils.jsonfile import json_text
 from lfbench.utils.markdown import markdown_cell
 from lfbench.utils.subprocesses import safe_path_env
@@ -271,7 +271,7 @@ def bench_inference(size: int = 512, precision: str = "fp32", *, model: str = DE
     record = {"bench": "inference", "model": model, "size": size, **params, "network_params": list(params),
               "precision": precision, "seconds": seconds, **memory_fields(dev, baseline),
               "cpu_seconds": cpu, "weights": weights or "random", "max_memory_gb": max_memory_gb}
-    flops = trainable.flops(net, size, size)
+    flops = trainable.flop_count(net, size, size)
     if flops:
         record.update({"gflops_per_s": flops["total"] / seconds / 1e9, "gflops_per_cpu_s": flops["total"] / cpu / 1e9,
                        "tflop": flops["total"] / 1e12,
@@ -346,7 +346,7 @@ def bench_train(batch: int = 2, patch: int = 32, steps: int = 2, channels_last: 
               "steps": max(1, steps), "warmup": max(1, warmup), "seconds": seconds, "seconds_per_step": seconds,
               "steps_per_s": 1.0 / seconds, "cpu_seconds": cpu, **memory_fields(dev, baseline),
               "precision": precision}
-    flops = trainable.flops(net, patch, patch)
+    flops = trainable.flop_count(net, patch, patch)
     if flops:
         forward = flops["total"] * batch
         record.update({"gflops_per_s": 3 * forward / seconds / 1e9, "gflops_per_cpu_s": 3 * forward / cpu / 1e9})
@@ -597,7 +597,12 @@ def write_json(path: str | Path, records: Sequence[dict]) -> None:
 def _main(argv: Sequence[str]) -> int:
     """Child entry: one JSON argument {"bench", "params"}; prints the record as one JSON line."""
     spec = json.loads(argv[0])
-    print(json.dumps(run_case(spec["bench"], spec.get("params", {}))), flush=True)
+    try:
+        record = run_case(spec["bench"], spec.get("params", {}))
+    except LFBenchError as exc:  # one line (the case's error record), e.g. a plugin's flops() of the wrong kind
+        print(f"error: {exc}", file=sys.stderr)
+        return exc.exit_code
+    print(json.dumps(record), flush=True)
     return 0
 
 

@@ -53,3 +53,10 @@ class DataError(LFBenchError):
 
 class SpecError(LFBenchError):
     """A method spec, parameter or option is not valid."""
+
+
+class PluginError(LFBenchError):
+    """A plugin broke its contract with lfbench (e.g. a hook returned a value of the wrong kind): the line
+    names the hook and the plugin. Exit code 1: the input was fine, the plugin's code is what to fix."""
+
+    exit_code = 1

@@ -1,0 +1,39 @@
+"""Run a registered network against the plugin contract on tiny generated light fields: output shapes and
+dtypes, the disparity sign (with --weights: a network with random weights has no sign), the receptive radius,
+tiled = untiled, flops(), a save/load round trip and one training step. One line per check (ok, FAIL with what
+to fix, skip with why), then a summary. Exit 0 when nothing failed, 1 when a check failed, 2 on bad input (an
+unknown network, a bad parameter, an unreadable weights file).
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+HELP = "check a plugin's network against lfbench's contract (shapes, sign, tiling, flops, save/load, training)"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("spec", metavar="NAME", help="registered network, optionally with parameters: NAME[:key=value,...]")
+    p.add_argument("--weights", type=Path, default=None, metavar="FILE",
+                   help="trained weights (lfbench train writes OUT/final.pt): also checks the disparity's sign")
+    p.add_argument("--seed", type=int, default=0, help="seed of the random views and initialisation (default 0)")
+
+
+def run(args: argparse.Namespace) -> int:
+    from lfbench.method.params import coerce_params, parse_spec
+    from lfbench.method.plugin_check import check_plugin, failed, summary
+    from lfbench.method.trainable import get_trainable
+
+    name, raw = parse_spec(args.spec)
+    trainable = get_trainable(name)  # SpecError listing the networks for an unknown name
+    params = coerce_params(raw, trainable.parameters(), name)
+    if args.weights is not None and not args.weights.is_file():
+        from lfbench.utils.errors import DataError
+
+        raise DataError("weights file not found" if not args.weights.exists() else "not a regular file", args.weights)
+    findings = check_plugin(name, params, weights=args.weights, seed=args.seed)
+    for finding in findings:
+        print(finding.line())
+    print(summary(name, findings))
+    return 1 if failed(findings) else 0
