@@ -1,7 +1,16 @@
-"""Where ablation cells run: worker processes on this machine, each with its own GPU (round-robin over the
-visible CUDA devices; the CPU when there are none), or a cluster through submitit (``--executor slurm``:
-the cells as one job array, then one job that measures their test times; ``--executor local`` runs the
-same path as local subprocesses). Tested against a real one-node SLURM cluster (tests/test_slurm.py).
+"""Where ablation cells run: one :class:`Executor` interface (``map`` a function over items, each result
+to a callback as it comes) with its implementations in one registry, :data:`EXECUTORS`, from which
+``lfbench ablate --executor`` takes its choices:
+
+- ``inline``: one item after the other in this process;
+- ``pool``: ``--jobs N`` worker processes on this machine, each with its own GPU (round-robin over the
+  visible CUDA devices; the CPU when there are none); one job or one item runs inline;
+- ``local`` / ``slurm``: each item as a job through submitit (``slurm``: one job array on a cluster, tested
+  against a real one-node SLURM cluster in tests/test_slurm.py; ``local``: the same path as local
+  subprocesses).
+
+A new executor is a subclass of :class:`Executor` added to :data:`EXECUTORS`; the runner
+(lfbench.ablation.runner) and the command line need no change.
 
 Every path runs :func:`lfbench.ablation.cell.run_cell`, which skips a finished cell and resumes an
 interrupted one from its checkpoint, so re-running the command after a crash, a pre-emption or a
@@ -14,6 +23,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import itertools
 import logging
 import os
 import shutil
@@ -21,15 +31,17 @@ import signal
 import subprocess
 import threading
 import time
+from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar, TypeVar
 
 from lfbench.utils.errors import LFBenchError, SpecError
+from lfbench.utils.registry import Registry
 from lfbench.utils.subprocesses import SAFE_PATH, safe_path_environ
 
-EXECUTORS = ("local", "slurm")
 #: SLURM commands ``--executor slurm`` calls: sbatch submits, srun runs each job's step, squeue gives job states.
 SLURM_COMMANDS = ("sbatch", "srun", "squeue")
 #: SLURM job states in which a job may still produce its result (a requeued job passes through them again).
@@ -41,6 +53,9 @@ RESULT_GRACE_S = 10.0
 #: How :func:`run_job` marks a cell's own error, so that the submitting command can show it on one line.
 FAILED = "lfbench cell failed: "
 _log = logging.getLogger(__name__)
+Log = Callable[[str], None]
+Item = TypeVar("Item")
+Result = TypeVar("Result")
 
 
 # --------------------------------------------------------------------------- GPUs of worker processes
@@ -79,11 +94,12 @@ def init_worker(threads: int, gpu_queue=None) -> None:
     torch.set_num_threads(threads)
 
 
-# --------------------------------------------------------------------------- submitit
+# --------------------------------------------------------------------------- the interface
 
 @dataclass(frozen=True)
 class ClusterOptions:
-    """Resources of each cell's job (``lfbench ablate --executor ...``)."""
+    """How the cells run (``lfbench ablate --executor NAME ...``): the executor's name (one of
+    :data:`EXECUTORS`) and the resources of each job of an executor that submits jobs."""
 
     executor: str = "local"
     gpus_per_job: int = 0
@@ -93,50 +109,132 @@ class ClusterOptions:
     max_parallel: int = 0  # slurm array parallelism (0: no limit)
 
     def __post_init__(self) -> None:
-        if self.executor not in EXECUTORS:
-            raise SpecError(f"Unknown executor {self.executor!r}. Available: {', '.join(EXECUTORS)}")
+        EXECUTORS.get(self.executor)  # SpecError: Unknown executor 'x'. Available: ...
         if self.gpus_per_job < 0 or self.cpus_per_job < 0 or self.timeout_min < 1 or self.max_parallel < 0:
             raise SpecError("--gpus-per-job, --cpus-per-job and --max-parallel must be >= 0, --timeout-min >= 1")
 
 
-def make_executor(options: ClusterOptions, folder: Path, threads: int):
-    """A submitit executor writing its logs and pickles under ``folder``."""
+class Executor(ABC):
+    """Runs a function over items (the cells, or one batch of test timings) and hands each result to a
+    callback as it comes. ``jobs``: items at a time (where the executor runs several on this machine);
+    ``folder``: where an executor keeps its files (logs, pickles; OUT/submitit); ``log``: progress lines."""
+
+    #: what ``lfbench ablate --help`` says of it
+    help: ClassVar[str] = ""
+    #: whether each item runs as a job with its own resources (--gpus-per-job, --cpus-per-job, ...)
+    submits_jobs: ClassVar[bool] = False
+
+    def __init__(self, options: ClusterOptions, *, jobs: int = 1, folder: Path | None = None,
+                 log: Log = _log.info) -> None:
+        self.options = options
+        self.jobs = jobs
+        self.folder = folder
+        self.log = log
+
+    def check(self) -> None:
+        """One SpecError line, before any work, when this executor cannot run here (nothing by default)."""
+        return None
+
+    def runs_here(self, count: int) -> bool:
+        """Whether a map over ``count`` items runs them in this process (where they may show progress bars)."""
+        return False
+
+    @property
+    def cpus_per_item(self) -> int:
+        """CPUs each item gets from the executor (0: this machine's cores are shared out by ``--jobs``)."""
+        return self.options.cpus_per_job if self.submits_jobs else 0
+
+    @abstractmethod
+    def map(self, fn: Callable[[Item], Result], items: Sequence[Item], *, labels: Sequence[str], threads: int,
+            on_done: Callable[[Result], None], on_start: Callable[[str], None] | None = None,
+            cost: Callable[[Item], float] | None = None) -> None:
+        """``fn(item)`` for every item, each result to ``on_done`` as it comes. ``labels`` name the items in
+        messages; ``threads``: torch threads (a job's CPUs) per item; ``on_start(label)`` is called before an
+        item runs in this process; ``cost(item)``: its relative cost, where items are started longest first.
+        A failure raises: at once in this process, or after the other jobs ended, as one LFBenchError."""
+
+
+class InProcess(Executor):
+    """One item after the other, in this process."""
+
+    help = "one cell after the other in this process"
+
+    def check(self) -> None:
+        if self.jobs > 1:
+            raise SpecError(f"--executor {self.options.executor} runs one cell at a time: --jobs {self.jobs} needs "
+                            "--executor pool")
+
+    def runs_here(self, count: int) -> bool:
+        return True
+
+    def map(self, fn, items, *, labels, threads, on_done, on_start=None, cost=None) -> None:
+        for item, label in zip(items, labels, strict=True):
+            if on_start is not None:
+                on_start(label)
+            on_done(fn(item))
+
+
+class ProcessPool(Executor):
+    """``jobs`` items at a time, each in a worker process of this machine with ``threads`` torch threads and
+    its own GPU (round-robin over the visible CUDA devices; the CPU when there are none); the longest first.
+    One job, or one item, runs in this process (:class:`InProcess`)."""
+
+    help = "--jobs N worker processes on this machine, each with its own GPU (the default)"
+
+    def runs_here(self, count: int) -> bool:
+        return self.jobs <= 1 or count <= 1
+
+    def map(self, fn, items, *, labels, threads, on_done, on_start=None, cost=None) -> None:
+        if self.runs_here(len(items)):
+            InProcess(self.options, log=self.log).map(fn, items, labels=labels, threads=threads, on_done=on_done,
+                                                      on_start=on_start)
+            return
+        import multiprocessing
+
+        ordered = sorted(items, key=cost, reverse=True) if cost is not None else list(items)
+        ctx = multiprocessing.get_context("spawn")
+        gpus = worker_gpus(self.jobs, visible_gpus())
+        queue = ctx.Queue()
+        for gpu in gpus:
+            queue.put(gpu)
+        if gpus[0] is not None:
+            self.log(f"{self.jobs} worker(s) on GPU(s) {', '.join(str(g) for g in gpus)} (round-robin)")
+        pool = ProcessPoolExecutor(max_workers=self.jobs, mp_context=ctx, initializer=init_worker,
+                                   initargs=(threads, queue))
+        try:
+            # At most `jobs` items are handed to the pool at a time: a pool queues submitted calls into its
+            # workers ahead of time, where cancel_futures cannot reach them, so submitting every cell at once
+            # made Ctrl-C (which stops the running cells at a checkpoint) start the pre-queued ones.
+            waiting = iter(ordered)
+            running: set[Future] = set()
+            for item in itertools.islice(waiting, self.jobs):
+                running.add(pool.submit(fn, item))
+            while running:
+                done, running = wait(running, return_when=FIRST_COMPLETED)
+                for fut in done:
+                    on_done(fut.result())  # a failed item stops the run (the waiting ones never start)
+                    running.update(pool.submit(fn, item) for item in itertools.islice(waiting, 1))
+        finally:
+            pool.shutdown(wait=True, cancel_futures=True)
+
+
+# --------------------------------------------------------------------------- submitit
+
+def _submitit():
     try:
         import submitit
     except ImportError:
         raise SpecError('--executor needs submitit: pip install -e ".[cluster]" (or pip install submitit)') from None
-    if options.executor == "local":
-        ex = submitit.LocalExecutor(folder=str(folder))
-        ex.update_parameters(timeout_min=options.timeout_min, gpus_per_node=options.gpus_per_job,
-                             cpus_per_task=options.cpus_per_job or threads)
-        return ex
-    ex = submitit.SlurmExecutor(folder=str(folder))
-    params: dict[str, Any] = {"time": options.timeout_min, "cpus_per_task": options.cpus_per_job or threads,
-                              "ntasks_per_node": 1, "nodes": 1,
-                              "setup": [f"export {k}={v}" for k, v in SAFE_PATH.items()]}  # not from the job's cwd
-    if options.gpus_per_job:
-        params["gpus_per_node"] = options.gpus_per_job
-    if options.partition:
-        params["partition"] = options.partition
-    if options.max_parallel:
-        params["array_parallelism"] = options.max_parallel
-    ex.update_parameters(**params)
-    return ex
+    return submitit
 
 
-def check_executor(options: ClusterOptions) -> None:
-    """One SpecError line, before any work, when the executor cannot run here: submitit is not installed, or
-    (``slurm``) SLURM's commands are not on PATH (sbatch submits, srun runs each job's step, squeue says what
-    became of a job that ended without a result)."""
-    try:
-        import submitit  # noqa: F401
-    except ImportError:
-        raise SpecError('--executor needs submitit: pip install -e ".[cluster]" (or pip install submitit)') from None
-    if options.executor == "slurm":
-        missing = [c for c in SLURM_COMMANDS if shutil.which(c) is None]
-        if missing:
-            raise SpecError(f"--executor slurm: no {', '.join(missing)} on PATH; run lfbench ablate where SLURM's "
-                            "commands are (e.g. a login node), or use --executor local or --jobs N")
+def make_executor(options: ClusterOptions, folder: Path, threads: int):
+    """A submitit executor of ``options.executor`` (``local`` or ``slurm``) writing its logs and pickles under
+    ``folder``."""
+    executor = EXECUTORS.get(options.executor)(options, folder=folder)
+    if not isinstance(executor, Submitit):
+        raise SpecError(f"--executor {options.executor} does not submit jobs through submitit")
+    return executor.submitit_executor(threads)
 
 
 def run_job(fn: Callable[[Any], Any], arg: Any, label: str) -> Any:
@@ -167,81 +265,142 @@ def _stop_at_a_checkpoint(signum, frame) -> None:
     os.kill(os.getpid(), signal.SIGTERM)
 
 
-def run_as_jobs(fn: Callable[[Any], Any], args: Sequence[Any], labels: Sequence[str], options: ClusterOptions,
-                folder: Path, threads: int, on_done: Callable[[Any], None]) -> None:
-    """Run ``fn(arg)`` for each arg as one job (one job array on SLURM, at most ``max_parallel`` running, logs in
-    ``folder``) and wait for all; ``on_done`` sees each result as it comes. A job that fails, or ends without a
-    result (cancelled, timed out, killed), is reported after the other jobs finish: one LFBenchError naming
-    each such job by its label and its log (re-running the command resumes them). A job the scheduler
-    requeues is waited for."""
-    folder.mkdir(parents=True, exist_ok=True)
-    executor = make_executor(options, folder, threads)
-    if options.executor == "slurm":
-        executor.update_parameters(job_name="lfbench-ablate")
-    sbatch_errors = io.StringIO()
-    try:
-        # the jobs import lfbench as installed, not from the current folder; submitit prints sbatch's
-        # complaint, then raises it
-        with safe_path_environ(), contextlib.redirect_stderr(sbatch_errors):
-            jobs = executor.map_array(run_job, [fn] * len(args), args, labels)
-    except Exception as exc:  # noqa: BLE001 - the scheduler refused the jobs (partition, limits, ...)
-        raise SpecError(f"submitting the jobs failed: {_last_line(str(exc) or sbatch_errors.getvalue())}") from None
-    _log.info(f"submitted {len(jobs)} job(s) through submitit ({options.executor}); logs in {folder}")
-    for label, job in zip(labels, jobs, strict=True):
-        _log.info(f"{label}: job {job.job_id}, log {job.paths.stderr}")
-    failed = []
-    for k, job, ended in _wait(jobs, options.executor):
-        if ended is not None:
-            failed.append(f"{labels[k]} (job {job.job_id}) ended{' ' + ended if ended else ''} without a result "
-                          f"(cancelled, timed out, pre-empted or killed; its log: {job.paths.stderr})")
-            continue
-        try:
-            result = job.result()
-        except Exception as exc:  # noqa: BLE001 - a job's failure is reported per cell
-            failed.append(f"{labels[k]} (job {job.job_id}) failed: {_reason(exc)} (its log: {job.paths.stderr})")
-            continue
-        on_done(result)
-    if failed:
-        raise LFBenchError(f"{len(failed)} of {len(jobs)} job(s) did not finish: {'; '.join(failed)}; run the same "
-                           "command again to resume them")
+class Submitit(Executor):
+    """Each item as one job through submitit's local executor (subprocesses of this machine), logs and
+    pickles in ``folder``; the base of :class:`Slurm`."""
 
+    help = "each cell as a submitit job in a local subprocess (the --executor slurm path, here)"
+    submits_jobs = True
 
-def submit_cells(fn: Callable[[Any], dict], tasks: Sequence[Any], options: ClusterOptions, folder: Path,
-                 threads: int, on_done: Callable[[dict], None]) -> None:
-    """:func:`run_as_jobs` of ``fn(task)`` for each cell's task, labelled ``cell ID``."""
-    run_as_jobs(fn, tasks, [f"cell {t.cell_id}" for t in tasks], options, folder, threads, on_done)
+    def check(self) -> None:
+        _submitit()
 
+    def submitit_executor(self, threads: int):
+        """The submitit executor, each job with ``threads`` CPUs unless --cpus-per-job says otherwise."""
+        options = self.options
+        ex = _submitit().LocalExecutor(folder=str(self.folder))
+        ex.update_parameters(timeout_min=options.timeout_min, gpus_per_node=options.gpus_per_job,
+                             cpus_per_task=options.cpus_per_job or threads)
+        return ex
 
-def _wait(jobs: list, executor: str) -> Iterator[tuple[int, Any, str | None]]:
-    """(index, job, None) for each job with a result, as they come; (index, job, its final state or "") for a
-    job that ended without one. A SLURM job's state comes from squeue (submitit asks sacct, which needs an
-    accounting database that not every cluster has: without one, a job that ended without a result was
-    waited for forever); a pending, running or requeued job is waited for."""
-    pending = dict(enumerate(jobs))
-    ended_since: dict[int, float] = {}
-    start = time.monotonic()
-    while pending:
-        states = _slurm_states() if executor == "slurm" else {}
-        with contextlib.suppress(OSError):  # refresh a network file system's cached view of the folder
-            folder = jobs[0].paths.folder
-            folder.chmod(folder.stat().st_mode)
-        for k, job in list(pending.items()):
-            if job.paths.result_pickle.exists():
-                del pending[k]
-                yield k, job, None
+    def map(self, fn, items, *, labels, threads, on_done, on_start=None, cost=None) -> None:
+        """Run ``fn(item)`` for each item as one job and wait for all; ``on_done`` sees each result as it comes.
+        A job that fails, or ends without a result (cancelled, timed out, killed), is reported after the other
+        jobs finish: one LFBenchError naming each such job by its label and its log (re-running the command
+        resumes them). A job the scheduler requeues is waited for."""
+        if not items:
+            return
+        if self.folder is None:
+            raise ValueError(f"--executor {self.options.executor} needs a folder for its jobs' files")
+        folder = Path(self.folder)
+        folder.mkdir(parents=True, exist_ok=True)
+        jobs = self._submit(self.submitit_executor(threads), fn, items, labels)
+        self._log_submitted(jobs, labels, folder)
+        failed = []
+        for k, job, ended in self._wait(jobs):
+            if ended is not None:
+                failed.append(f"{labels[k]} (job {job.job_id}) ended{' ' + ended if ended else ''} without a "
+                              f"result (cancelled, timed out, pre-empted or killed; its log: {job.paths.stderr})")
                 continue
-            if executor == "slurm":
-                state = "UNKNOWN" if states is None else states.get(job.job_id, "(gone from squeue)")
-                ended = state not in _ACTIVE and state != "UNKNOWN"
-            else:
-                state, ended = "", job.done()
-            if not ended:
-                ended_since.pop(k, None)
-            elif time.monotonic() - ended_since.setdefault(k, time.monotonic()) > RESULT_GRACE_S:
-                del pending[k]  # its result file would have appeared by now, even on a slow shared file system
-                yield k, job, state
-        if pending:
-            time.sleep(min(30.0, max(1.0, (time.monotonic() - start) / 20)))
+            try:
+                result = job.result()
+            except Exception as exc:  # noqa: BLE001 - a job's failure is reported per cell
+                failed.append(f"{labels[k]} (job {job.job_id}) failed: {_reason(exc)} (its log: {job.paths.stderr})")
+                continue
+            on_done(result)
+        if failed:
+            raise LFBenchError(f"{len(failed)} of {len(jobs)} job(s) did not finish: {'; '.join(failed)}; run the "
+                               "same command again to resume them")
+
+    def _submit(self, executor, fn: Callable[[Any], Any], items: Sequence[Any], labels: Sequence[str]) -> list:
+        """The submitted jobs (submitit Job objects), in the order of ``items``."""
+        errors = io.StringIO()
+        try:
+            # the jobs import lfbench as installed, not from the current folder; submitit prints sbatch's
+            # complaint, then raises it
+            with safe_path_environ(), contextlib.redirect_stderr(errors):
+                return executor.map_array(run_job, [fn] * len(items), items, labels)
+        except Exception as exc:  # noqa: BLE001 - the scheduler refused the jobs (partition, limits, ...)
+            raise SpecError(f"submitting the jobs failed: {_last_line(str(exc) or errors.getvalue())}") from None
+
+    def _log_submitted(self, jobs: list, labels: Sequence[str], folder: Path) -> None:
+        _log.info(f"submitted {len(jobs)} job(s) through submitit ({self.options.executor}); logs in {folder}")
+        for label, job in zip(labels, jobs, strict=True):
+            _log.info(f"{label}: job {job.job_id}, log {job.paths.stderr}")
+
+    def _poll(self) -> Callable[[Any], tuple[str, bool]]:
+        """Once per round of waiting: a function of a job without a result -> (its state, whether it ended).
+        Here: submitit's own ``job.done()``."""
+        return lambda job: ("", job.done())
+
+    def _wait(self, jobs: list) -> Iterator[tuple[int, Any, str | None]]:
+        """(index, job, None) for each job with a result, as they come; (index, job, its final state or "") for
+        a job that ended without one (by :meth:`_poll`, given a grace for its result file to appear)."""
+        pending = dict(enumerate(jobs))
+        ended_since: dict[int, float] = {}
+        start = time.monotonic()
+        while pending:
+            state_of = self._poll()
+            with contextlib.suppress(OSError):  # refresh a network file system's cached view of the folder
+                folder = jobs[0].paths.folder
+                folder.chmod(folder.stat().st_mode)
+            for k, job in list(pending.items()):
+                if job.paths.result_pickle.exists():
+                    del pending[k]
+                    yield k, job, None
+                    continue
+                state, ended = state_of(job)
+                if not ended:
+                    ended_since.pop(k, None)
+                elif time.monotonic() - ended_since.setdefault(k, time.monotonic()) > RESULT_GRACE_S:
+                    del pending[k]  # its result file would have appeared by now, even on a slow shared file system
+                    yield k, job, state
+            if pending:
+                time.sleep(min(30.0, max(1.0, (time.monotonic() - start) / 20)))
+
+
+class Slurm(Submitit):
+    """Each item as one task of one SLURM job array through submitit (at most ``max_parallel`` running). A
+    job's state comes from squeue (submitit asks sacct, which needs an accounting database that not every
+    cluster has: without one, a job that ended without a result was waited for forever)."""
+
+    help = "each cell as a task of a SLURM job array (through submitit; run where sbatch, srun and squeue are)"
+
+    def check(self) -> None:
+        """Also SLURM's commands on PATH: sbatch submits, srun runs each job's step, squeue says what became
+        of a job that ended without a result."""
+        super().check()
+        missing = [c for c in SLURM_COMMANDS if shutil.which(c) is None]
+        if missing:
+            raise SpecError(f"--executor slurm: no {', '.join(missing)} on PATH; run lfbench ablate where SLURM's "
+                            "commands are (e.g. a login node), or use --executor local or --jobs N")
+
+    def submitit_executor(self, threads: int):
+        options = self.options
+        ex = _submitit().SlurmExecutor(folder=str(self.folder))
+        params: dict[str, Any] = {"time": options.timeout_min, "cpus_per_task": options.cpus_per_job or threads,
+                                  "ntasks_per_node": 1, "nodes": 1, "job_name": "lfbench-ablate",
+                                  "setup": [f"export {k}={v}" for k, v in SAFE_PATH.items()]}  # not the job's cwd
+        if options.gpus_per_job:
+            params["gpus_per_node"] = options.gpus_per_job
+        if options.partition:
+            params["partition"] = options.partition
+        if options.max_parallel:
+            params["array_parallelism"] = options.max_parallel
+        ex.update_parameters(**params)
+        return ex
+
+    def _poll(self) -> Callable[[Any], tuple[str, bool]]:
+        """A job's state from squeue: pending, running or requeued is waited for, and so is every job while
+        squeue does not answer (UNKNOWN); a job squeue no longer lists has ended."""
+        states = _slurm_states()
+
+        def state_of(job) -> tuple[str, bool]:
+            state = "UNKNOWN" if states is None else states.get(job.job_id, "(gone from squeue)")
+            return state, state not in _ACTIVE and state != "UNKNOWN"
+
+        return state_of
+
 
 
 def _slurm_states() -> dict[str, str] | None:
@@ -271,5 +430,30 @@ def _last_line(text: str) -> str:
     return lines[-1] if lines else "no message"
 
 
-__all__ = ["EXECUTORS", "SLURM_COMMANDS", "ClusterOptions", "visible_gpus", "worker_gpus", "init_worker",
-           "check_executor", "make_executor", "run_job", "run_as_jobs", "submit_cells"]
+# --------------------------------------------------------------------------- the registry
+
+#: Every executor by name; ``lfbench ablate --executor`` offers these.
+EXECUTORS: Registry[type[Executor]] = Registry("executor", Executor)
+EXECUTORS.add("inline", InProcess)
+EXECUTORS.add("pool", ProcessPool)
+EXECUTORS.add("local", Submitit)
+EXECUTORS.add("slurm", Slurm)
+
+
+def executor_for(options: ClusterOptions | None, *, jobs: int = 1, folder: Path | None = None,
+                 log: Log = _log.info) -> Executor:
+    """The executor ``options`` name (None: ``pool``, which runs in this process with one job)."""
+    options = options if options is not None else ClusterOptions("pool")
+    return EXECUTORS.get(options.executor)(options, jobs=jobs, folder=folder, log=log)
+
+
+def run_as_jobs(fn: Callable[[Any], Any], args: Sequence[Any], labels: Sequence[str], options: ClusterOptions,
+                folder: Path, threads: int, on_done: Callable[[Any], None]) -> None:
+    """``fn(arg)`` for each arg through the executor ``options`` name (files in ``folder``), each result to
+    ``on_done`` (:meth:`Executor.map`)."""
+    executor_for(options, folder=folder).map(fn, args, labels=labels, threads=threads, on_done=on_done)
+
+
+__all__ = ["EXECUTORS", "SLURM_COMMANDS", "ClusterOptions", "Executor", "InProcess", "ProcessPool", "Submitit",
+           "Slurm", "executor_for", "visible_gpus", "worker_gpus", "init_worker", "make_executor", "run_job",
+           "run_as_jobs"]
