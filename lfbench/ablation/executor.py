@@ -28,7 +28,6 @@ import logging
 import os
 import shutil
 import signal
-import subprocess
 import threading
 import time
 from abc import ABC, abstractmethod
@@ -38,6 +37,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar, TypeVar
 
+from lfbench.ablation.scheduler import RETRIES_ENV, SchedulerError, SchedulerLimits, bounded_submission, squeue_states
 from lfbench.utils.errors import LFBenchError, SpecError
 from lfbench.utils.registry import Registry
 from lfbench.utils.subprocesses import SAFE_PATH, safe_path_environ
@@ -297,20 +297,34 @@ class Submitit(Executor):
         jobs = self._submit(self.submitit_executor(threads), fn, items, labels)
         self._log_submitted(jobs, labels, folder)
         failed = []
-        for k, job, ended in self._wait(jobs):
-            if ended is not None:
-                failed.append(f"{labels[k]} (job {job.job_id}) ended{' ' + ended if ended else ''} without a "
-                              f"result (cancelled, timed out, pre-empted or killed; its log: {job.paths.stderr})")
-                continue
-            try:
-                result = job.result()
-            except Exception as exc:  # noqa: BLE001 - a job's failure is reported per cell
-                failed.append(f"{labels[k]} (job {job.job_id}) failed: {_reason(exc)} (its log: {job.paths.stderr})")
-                continue
-            on_done(result)
+        seen: set[int] = set()
+        try:
+            for k, job, ended in self._wait(jobs):
+                seen.add(k)
+                self._collect(k, job, ended, labels, failed, on_done)
+        except SchedulerError as exc:
+            waiting = ", ".join(f"job {job.job_id} ({labels[k]})" for k, job in enumerate(jobs) if k not in seen)
+            raise SchedulerError(f"{exc}: stopped waiting for {waiting}, which may still run (squeue / scancel once "
+                                 "SLURM answers); finished cells are kept: run the same command again to resume the "
+                                 "others") from None
         if failed:
             raise LFBenchError(f"{len(failed)} of {len(jobs)} job(s) did not finish: {'; '.join(failed)}; run the "
                                "same command again to resume them")
+
+    @staticmethod
+    def _collect(k: int, job, ended: str | None, labels: Sequence[str], failed: list[str],
+                 on_done: Callable[[Any], None]) -> None:
+        """A job that ended: its result to ``on_done``, or a line naming it into ``failed``."""
+        if ended is not None:
+            failed.append(f"{labels[k]} (job {job.job_id}) ended{' ' + ended if ended else ''} without a result "
+                          f"(cancelled, timed out, pre-empted or killed; its log: {job.paths.stderr})")
+            return
+        try:
+            result = job.result()
+        except Exception as exc:  # noqa: BLE001 - a job's failure is reported per cell
+            failed.append(f"{labels[k]} (job {job.job_id}) failed: {_reason(exc)} (its log: {job.paths.stderr})")
+            return
+        on_done(result)
 
     def _submit(self, executor, fn: Callable[[Any], Any], items: Sequence[Any], labels: Sequence[str]) -> list:
         """The submitted jobs (submitit Job objects), in the order of ``items``."""
@@ -374,6 +388,7 @@ class Slurm(Submitit):
         if missing:
             raise SpecError(f"--executor slurm: no {', '.join(missing)} on PATH; run lfbench ablate where SLURM's "
                             "commands are (e.g. a login node), or use --executor local or --jobs N")
+        SchedulerLimits.from_env()  # a bad LFBENCH_SCHEDULER_* is one line before any work
 
     def submitit_executor(self, threads: int):
         options = self.options
@@ -390,10 +405,31 @@ class Slurm(Submitit):
         ex.update_parameters(**params)
         return ex
 
+    def _submit(self, executor, fn: Callable[[Any], Any], items: Sequence[Any], labels: Sequence[str]) -> list:
+        """As submitit submits, with sbatch bounded by LFBENCH_SCHEDULER_TIMEOUT_S (lfbench.ablation.scheduler)."""
+        with bounded_submission(SchedulerLimits.from_env().timeout_s):
+            return super()._submit(executor, fn, items, labels)
+
+    def _wait(self, jobs: list) -> Iterator[tuple[int, Any, str | None]]:
+        self._limits = SchedulerLimits.from_env()
+        self._failures = 0  # squeue calls in a row that failed
+        yield from super()._wait(jobs)
+
     def _poll(self) -> Callable[[Any], tuple[str, bool]]:
         """A job's state from squeue: pending, running or requeued is waited for, and so is every job while
-        squeue does not answer (UNKNOWN); a job squeue no longer lists has ended."""
-        states = _slurm_states()
+        squeue does not answer (UNKNOWN), with a warning, up to LFBENCH_SCHEDULER_RETRIES times in a row (then
+        SchedulerError naming squeue and why); a job squeue no longer lists has ended."""
+        try:
+            states: dict[str, str] | None = squeue_states(self._limits.timeout_s)
+            self._failures = 0
+        except SchedulerError as exc:
+            self._failures += 1
+            if self._failures > self._limits.retries:
+                times = f"{self._failures} time{'s' if self._failures != 1 else ''}"
+                raise SchedulerError(f"squeue failed {times} in a row ({exc})") from None
+            _log.warning(f"job states unknown: squeue failed ({exc}); asking again ({self._failures} of "
+                         f"{self._limits.retries}, {RETRIES_ENV})")
+            states = None
 
         def state_of(job) -> tuple[str, bool]:
             state = "UNKNOWN" if states is None else states.get(job.job_id, "(gone from squeue)")
@@ -401,19 +437,6 @@ class Slurm(Submitit):
 
         return state_of
 
-
-
-def _slurm_states() -> dict[str, str] | None:
-    """Job id (``123``, ``123_4`` for array tasks) -> state of this user's jobs the controller knows: pending,
-    running, requeued, and finished ones for MinJobAge (300 s by default); None when squeue does not answer."""
-    try:
-        proc = subprocess.run(["squeue", "--noheader", "--array", "--states=all", "--format=%i %T",
-                               f"--user={os.getuid()}"], capture_output=True, text=True, timeout=120)
-    except (OSError, subprocess.TimeoutExpired):
-        return None
-    if proc.returncode != 0:
-        return None
-    return {f[0]: f[1] for f in (line.split() for line in proc.stdout.splitlines()) if len(f) >= 2}
 
 
 def _reason(exc: BaseException) -> str:
