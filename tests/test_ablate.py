@@ -484,7 +484,7 @@ def test_each_worker_gets_its_own_gpu_round_robin(monkeypatch, tmp_path):
     import queue
     import sys
 
-    from lfbench.ablation import executor
+    from lfbench.ablation import executor, jobs
 
     assert executor.worker_gpus(3, ["0", "1"]) == ["0", "1", "0"]
     assert executor.worker_gpus(2, []) == [None, None]  # no CUDA: every worker on the CPU
@@ -509,7 +509,7 @@ def test_each_worker_gets_its_own_gpu_round_robin(monkeypatch, tmp_path):
         executor.ClusterOptions("pbs")
     monkeypatch.setitem(sys.modules, "submitit", None)  # not installed
     with pytest.raises(SpecError, match=r"--executor needs submitit: pip install -e \"\.\[cluster\]\""):
-        executor.make_executor(executor.ClusterOptions("local"), tmp_path, 1)
+        jobs.make_executor(executor.ClusterOptions("local"), tmp_path, 1)
 
 
 def test_the_shared_stage1_waits_for_another_process_holding_its_lock(tmp_path, monkeypatch):

@@ -13,7 +13,7 @@ from types import SimpleNamespace
 
 import pytest
 
-from lfbench.ablation import executor
+from lfbench.ablation import executor, jobs
 from lfbench.ablation.scheduler import RETRIES_ENV, TIMEOUT_ENV, SchedulerError, SchedulerLimits
 from lfbench.utils.errors import SpecError
 
@@ -112,14 +112,14 @@ def test_squeue_that_fails_or_hangs_is_retried_with_a_line_then_named(slurm, tmp
     bin_dir = slurm(sbatch=SUBMITTED, squeue=UNREACHABLE if how == "fails" else slurm.hang("squeue"))
     reason = ("slurm_load_jobs error: Unable to contact slurm controller (connect failure)" if how == "fails"
               else f"squeue did not answer within 1 s ({TIMEOUT_ENV})")
-    with caplog.at_level(logging.WARNING, logger="lfbench.ablation.executor"):
+    with caplog.at_level(logging.WARNING, logger="lfbench.ablation.jobs"):
         outcome = within(60, lambda: no_op_job(tmp_path / "jobs", []))
     error = outcome["error"]
     assert isinstance(error, SchedulerError)
     assert str(error) == (f"squeue failed 3 times in a row ({reason}): stopped waiting for job 4242 (no-op), "
                           "which may still run (squeue / scancel once SLURM answers); finished cells are kept: run "
                           "the same command again to resume the others")
-    assert [r.getMessage() for r in caplog.records if r.name == "lfbench.ablation.executor"] == [
+    assert [r.getMessage() for r in caplog.records if r.name == "lfbench.ablation.jobs"] == [
         f"job states unknown: squeue failed ({reason}); asking again ({k} of 2, {RETRIES_ENV})" for k in (1, 2)]
     assert outcome["seconds"] < 30
     calls = (bin_dir / "calls.log").read_text().split()
@@ -138,7 +138,7 @@ def test_jobs_that_finished_before_squeue_failed_are_kept(slurm, tmp_path, monke
         paths = SimpleNamespace(result_pickle=tmp_path / f"{k}.pkl", folder=tmp_path, stderr=tmp_path / f"{k}.err")
         return SimpleNamespace(job_id=f"77_{k}", paths=paths, result=lambda: f"result {k}")
 
-    monkeypatch.setattr(executor.Slurm, "_submit", lambda self, ex, fn, items, labels: [job(0), job(1)])
+    monkeypatch.setattr(jobs.Slurm, "_submit", lambda self, ex, fn, items, labels: [job(0), job(1)])
     slurm_ex = executor.executor_for(executor.ClusterOptions("slurm"), folder=tmp_path / "jobs")
     results: list = []
     outcome = within(60, lambda: slurm_ex.map(int, ["0", "1"], labels=["cell a", "cell b"], threads=1,
@@ -152,7 +152,7 @@ def test_a_squeue_that_answers_again_resets_the_count(slurm, tmp_path, monkeypat
     job that squeue no longer lists then ends the wait as before (no result: one line naming it)."""
     bin_dir = slurm(sbatch=SUBMITTED, squeue=f"""n=$(grep -c squeue {os.fspath(tmp_path)}/bin/calls.log)
 case $n in 3|6) echo "4242 RUNNING";; 1|2|4|5) exit 1;; esac""")
-    monkeypatch.setattr(executor, "RESULT_GRACE_S", 0.0)
+    monkeypatch.setattr(jobs, "RESULT_GRACE_S", 0.0)
     outcome = within(60, lambda: no_op_job(tmp_path / "jobs", []))
     assert "no-op (job 4242) ended (gone from squeue) without a result" in str(outcome["error"])
     assert (bin_dir / "calls.log").read_text().split().count("squeue") >= 7
