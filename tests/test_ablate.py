@@ -484,7 +484,7 @@ def test_each_worker_gets_its_own_gpu_round_robin(monkeypatch, tmp_path):
     import queue
     import sys
 
-    from lfbench.ablation import executor
+    from lfbench.ablation import executor, jobs
 
     assert executor.worker_gpus(3, ["0", "1"]) == ["0", "1", "0"]
     assert executor.worker_gpus(2, []) == [None, None]  # no CUDA: every worker on the CPU
@@ -505,11 +505,11 @@ def test_each_worker_gets_its_own_gpu_round_robin(monkeypatch, tmp_path):
         assert os.environ["CUDA_VISIBLE_DEVICES"] == "6"
     finally:
         torch.set_num_threads(threads)
-    with pytest.raises(SpecError, match="Unknown executor 'pbs'. Available: local, slurm"):
+    with pytest.raises(SpecError, match="Unknown executor 'pbs'. Available: inline, local, pool, slurm"):
         executor.ClusterOptions("pbs")
     monkeypatch.setitem(sys.modules, "submitit", None)  # not installed
     with pytest.raises(SpecError, match=r"--executor needs submitit: pip install -e \"\.\[cluster\]\""):
-        executor.make_executor(executor.ClusterOptions("local"), tmp_path, 1)
+        jobs.make_executor(executor.ClusterOptions("local"), tmp_path, 1)
 
 
 def test_the_shared_stage1_waits_for_another_process_holding_its_lock(tmp_path, monkeypatch):
@@ -540,7 +540,7 @@ def test_ctrl_c_during_a_parallel_ablation_starts_no_further_cells(tmp_path, mon
     checkpoint) must find no other cell already handed over."""
     from concurrent.futures import Future
 
-    from lfbench.ablation import runner
+    from lfbench.ablation import executor, runner
     from lfbench.ablation.cell import CellTask
 
     class Pool:  # records what is handed over; every call "finishes" at once
@@ -565,13 +565,14 @@ def test_ctrl_c_during_a_parallel_ablation_starts_no_further_cells(tmp_path, mon
     tasks = [CellTask(cell_id=f"c{i}", values={}, config=config, fingerprint="f", eval_fingerprint="e",
                       cell_dir=str(tmp_path / f"c{i}"), data_links={}, stage1_dir=None, scenes=(), evaluation=None,
                       threads=1) for i in range(5)]
-    monkeypatch.setattr(runner, "ProcessPoolExecutor", Pool)
+    pool = executor.executor_for(executor.ClusterOptions("pool"), jobs=2)
+    monkeypatch.setattr(executor, "ProcessPoolExecutor", Pool)
     monkeypatch.setattr(runner, "_report", interrupted)
     with pytest.raises(KeyboardInterrupt):
-        runner.run_cells(tasks, jobs=2, progress=False, log=lambda message: None)
+        runner.run_cells(tasks, pool, progress=False, log=lambda message: None)
     assert len(Pool.submitted) == 2  # was 5: every cell was queued into the pool at once
 
     Pool.submitted = []
     monkeypatch.setattr(runner, "_report", lambda marker, log: None)
-    runner.run_cells(tasks, jobs=2, progress=False, log=lambda message: None)
+    runner.run_cells(tasks, pool, progress=False, log=lambda message: None)
     assert sorted(Pool.submitted) == [t.cell_id for t in tasks]  # without an interrupt every cell runs once

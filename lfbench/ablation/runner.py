@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import contextlib
 import functools
-import itertools
 import json
 import logging
 import os
@@ -35,13 +34,12 @@ import shlex
 import shutil
 import sys
 from collections.abc import Callable
-from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 from lfbench.ablation.cell import MAPS, CellTask, is_done, load_scenes, read_marker, run_cell
-from lfbench.ablation.executor import ClusterOptions
+from lfbench.ablation.executor import ClusterOptions, Executor, executor_for
 from lfbench.ablation.report import report_writers, run_writers
 from lfbench.ablation.spec import AblationSpec, Cell, SyntheticEval, sha256_of
 from lfbench.method.registry import create_from_spec
@@ -199,14 +197,10 @@ def _cost_estimate(task: CellTask) -> float:
     return d * steps * (1.6 if model.get("interpolation") == "phase" else 1.0)
 
 
-def run_cells(tasks: list[CellTask], jobs: int, progress: bool | None, log: Log,
-              cluster: ClusterOptions | None = None, out: Path | None = None) -> list[dict[str, Any]]:
-    """Run the unfinished cells: ``jobs`` at a time in separate processes (1: in this process), each process
-    with its own GPU (round-robin over the visible CUDA devices; the CPU when there are none); or, with
-    ``cluster``, one submitit job per cell (logs in OUT/submitit)."""
+def run_cells(tasks: list[CellTask], executor: Executor, progress: bool | None, log: Log) -> list[dict[str, Any]]:
+    """Run the unfinished cells through ``executor`` (lfbench.ablation.executor: in this process, ``--jobs``
+    worker processes each with its own GPU, or one submitit job per cell); returns every cell's marker."""
     from tqdm import tqdm
-
-    from lfbench.ablation.executor import init_worker, submit_cells, visible_gpus, worker_gpus
 
     pending = [t for t in tasks if not is_done(t)]
     for t in tasks:
@@ -214,50 +208,18 @@ def run_cells(tasks: list[CellTask], jobs: int, progress: bool | None, log: Log,
             log(f"cell {t.cell_id}: finished earlier, skipped")
     bar = tqdm(total=len(tasks), initial=len(tasks) - len(pending), desc="cells", unit="cell",
                disable=None if progress is None else not progress, file=sys.stderr, dynamic_ncols=True)
+
+    def done(marker: dict[str, Any]) -> None:
+        _report(marker, log)
+        bar.update(1)
+
     try:
-        if cluster is not None and pending:
-            quiet = [replace(t, progress=False) for t in pending]
-            folder = (out or Path(quiet[0].cell_dir).parent.parent) / "submitit"
-
-            def done(marker: dict[str, Any]) -> None:
-                _report(marker, log)
-                bar.update(1)
-
-            submit_cells(run_cell, quiet, cluster, folder, quiet[0].threads, done)
-        elif jobs <= 1 or len(pending) <= 1:
-            for t in pending:
-                bar.set_postfix_str(t.cell_id[-50:])
-                _report(run_cell(t), log)
-                bar.update(1)
-        else:
-            import multiprocessing
-
-            quiet = sorted((replace(t, progress=False) for t in pending), key=_cost_estimate, reverse=True)
-            ctx = multiprocessing.get_context("spawn")
-            gpus = worker_gpus(jobs, visible_gpus())
-            queue = ctx.Queue()
-            for gpu in gpus:
-                queue.put(gpu)
-            if gpus[0] is not None:
-                log(f"{jobs} worker(s) on GPU(s) {', '.join(str(g) for g in gpus)} (round-robin)")
-            pool = ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=init_worker,
-                                       initargs=(quiet[0].threads, queue))
-            try:
-                # At most `jobs` cells are handed to the pool at a time: a pool queues submitted calls into its
-                # workers ahead of time, where cancel_futures cannot reach them, so submitting every cell at once
-                # made Ctrl-C (which stops the running cells at a checkpoint) start the pre-queued ones.
-                waiting = iter(quiet)
-                running: set[Future] = set()
-                for t in itertools.islice(waiting, jobs):
-                    running.add(pool.submit(run_cell, t))
-                while running:
-                    done, running = wait(running, return_when=FIRST_COMPLETED)
-                    for fut in done:
-                        _report(fut.result(), log)  # a failed cell stops the run (the waiting ones never start)
-                        bar.update(1)
-                        running.update(pool.submit(run_cell, t) for t in itertools.islice(waiting, 1))
-            finally:
-                pool.shutdown(wait=True, cancel_futures=True)
+        if pending:
+            here = executor.runs_here(len(pending))
+            cells = pending if here else [replace(t, progress=False) for t in pending]
+            executor.map(run_cell, cells, labels=[f"cell {t.cell_id}" for t in cells], threads=cells[0].threads,
+                         on_done=done, on_start=lambda label: bar.set_postfix_str(label.removeprefix("cell ")[-50:]),
+                         cost=_cost_estimate)
     finally:
         bar.close()
     return [read_marker(t.cell_dir) or {} for t in tasks]
@@ -269,22 +231,21 @@ def _report(marker: dict[str, Any], log: Log) -> None:
 
 
 def time_cells(tasks: list[CellTask], threads: int, progress: bool | None, log: Log,
-               cluster: ClusterOptions | None = None, out: Path | None = None) -> list[dict[str, Any]]:
-    """Test time of every finished cell, one at a time (cached in CELL/timing.json): in this process, or with
-    ``cluster``, in one job on a cell's resources (logs in OUT/submitit), so that the time is that of the
-    device the cells ran on, not of the machine that submitted them (e.g. a login node without a GPU)."""
+               executor: Executor) -> list[dict[str, Any]]:
+    """Test time of every finished cell, one at a time (cached in CELL/timing.json), as one item of
+    ``executor``: in this process, or (an executor that submits jobs) in one job on a cell's resources, so
+    that the time is that of the device the cells ran on, not of the machine that submitted them (e.g. a
+    login node without a GPU)."""
     from tqdm import tqdm
 
-    if cluster is not None and tasks:
-        from lfbench.ablation.executor import run_as_jobs
-
-        folder = (out or Path(tasks[0].cell_dir).parent.parent) / "submitit"
-        timings: list[dict[str, Any]] = []
-        run_as_jobs(functools.partial(_time_all, threads=threads), [tasks], ["test time"], cluster, folder, threads,
-                    timings.extend)
-    else:
-        timings = _time_all(tqdm(tasks, desc="test time", unit="cell", file=sys.stderr, leave=False,
-                                 disable=None if progress is None else not progress), threads)
+    timings: list[dict[str, Any]] = []
+    if tasks:
+        batch = tasks
+        if executor.runs_here(1):
+            batch = tqdm(tasks, desc="test time", unit="cell", file=sys.stderr, leave=False,
+                         disable=None if progress is None else not progress)
+        executor.map(functools.partial(_time_all, threads=threads), [batch], labels=["test time"], threads=threads,
+                     on_done=timings.extend)
     for t, timing in zip(tasks, timings, strict=True):
         log(f"cell {t.cell_id}: test time {timing['test_s']:.2f} s for 9x9x{timing['time_size']}x{timing['time_size']}"
             f" ({timing['device']}, {threads} thread{'s' if threads != 1 else ''})")
@@ -346,11 +307,9 @@ def run_ablation(spec: AblationSpec, out: str | Path, *, jobs: int = 1, progress
     (``--cells``, several processes or machines) add up."""
     if jobs < 1:
         raise SpecError(f"--jobs must be >= 1, got {jobs}")
-    if cluster is not None:
-        from lfbench.ablation.executor import check_executor
-
-        check_executor(cluster)  # before any work: no data generated, nothing submitted
     out = Path(out)
+    executor = executor_for(cluster, jobs=jobs, folder=out / "submitit", log=log)
+    executor.check()  # before any work: no data generated, nothing submitted
     check_training_data(spec, out)
     prepare_output_folder(out)
     with _set_lock(out):
@@ -358,7 +317,7 @@ def run_ablation(spec: AblationSpec, out: str | Path, *, jobs: int = 1, progress
         read_manifest(out)
     check_folders(spec, out)
     cores = available_cores()
-    per_job = cluster.cpus_per_job if cluster is not None else 0  # a cluster job's CPUs, not this machine's cores
+    per_job = executor.cpus_per_item  # a cluster job's CPUs, not this machine's cores
     threads = spec.budget.threads or per_job or max(1, cores // jobs)
     log(f"{spec.title}: {len(spec.cells)} cell(s), {len(spec.methods)} extra method(s), budget "
         f"{spec.budget_label()}; {jobs} process(es) x {threads} thread(s) on {cores} core(s)")
@@ -368,8 +327,8 @@ def run_ablation(spec: AblationSpec, out: str | Path, *, jobs: int = 1, progress
     if spec.shared_stage1 and spec.cells:
         stage1 = run_shared_stage1(spec, out, links[spec.cells[0].id], spec.budget.threads or cores, progress, log)
     tasks = make_tasks(spec, out, links, scenes, threads, stage1, progress)
-    markers = run_cells(tasks, jobs, progress, log, cluster, out)
-    timings = time_cells(tasks, spec.evaluation.threads or per_job or cores, progress, log, cluster, out)
+    markers = run_cells(tasks, executor, progress, log)
+    timings = time_cells(tasks, spec.evaluation.threads or per_job or cores, progress, log, executor)
     markers = [{**m, **{k: v for k, v in t.items() if k != "key"}} for m, t in zip(markers, timings, strict=True)]
     combined = Results(meta={"ablation": {"title": spec.title, "spec": str(spec.source), "table": spec.table,
                                           "budget": spec.budget_label(), "shared_stage1": spec.shared_stage1,

@@ -14,7 +14,8 @@ with its own GPU (round-robin over the visible CUDA devices; the CPU when there 
 stage 1 is trained once under a file lock, and OUT/results.json is merged under one, so several ablate
 processes on one OUT (e.g. different --cells) add up. ``--executor slurm`` submits one job per cell
 through submitit (``--gpus-per-job``, ``--partition``, ...; ``--executor local``: the same path as local
-processes); re-running the command resumes unfinished cells.
+processes); re-running the command resumes unfinished cells. The executors (``--executor``'s choices) are
+those of lfbench.ablation.executor.EXECUTORS.
 The paper's tables come from --paper DIR, else $LFBENCH_PAPER_DIR, else $LFBENCH_HCI_ROOT/../paper;
 without them the tables have no paper columns.
 """
@@ -25,7 +26,7 @@ import argparse
 import dataclasses
 from pathlib import Path
 
-from lfbench.ablation.executor import ClusterOptions
+from lfbench.ablation.executor import EXECUTORS, ClusterOptions
 from lfbench.cli.argtypes import int_range
 from lfbench.utils.errors import SpecError
 from lfbench.utils.tomlfile import toml_text
@@ -49,8 +50,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="rewrite the tables and figures from the finished cells in OUT (train nothing)")
     p.add_argument("--html", action="store_true",
                    help="also write the HTML report OUT/html/index.html (leaderboard of the cells, their maps)")
-    p.add_argument("--executor", choices=["local", "slurm"], default=None,
-                   help="run each cell as a submitit job: slurm (a cluster) or local (subprocesses here)")
+    p.add_argument("--executor", choices=EXECUTORS.names(), default=None,
+                   help="where the cells run: " + "; ".join(f"{name}: {EXECUTORS.get(name).help}"
+                                                            for name in EXECUTORS.names()))
     p.add_argument("--gpus-per-job", type=int, default=0, metavar="N", help="GPUs of each cell's job (--executor)")
     p.add_argument("--cpus-per-job", type=int, default=0, metavar="N",
                    help="CPUs of each cell's job (--executor; default: the spec's threads per cell)")
