@@ -13,8 +13,8 @@ import functools
 import os
 import re
 import warnings
-from collections.abc import Iterable, Iterator
-from dataclasses import dataclass
+from collections.abc import Iterable, Iterator, Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TypeVar
 
@@ -307,10 +307,13 @@ class Benchmark:
     """The scenes under a data root laid out as ROOT/<category>/<scene>/parameters.cfg.
 
     Category folders other than the four HCI ones are kept under their own name ('other' kind).
+    ``splits``: split name -> the categories it selects (default the paper's HCI splits, :data:`SPLITS`;
+    a dataset whose category folders are its splits gives none).
     """
 
     root: Path
     scenes: tuple[Scene, ...]
+    splits: Mapping[str, tuple[str, ...]] = field(default_factory=lambda: SPLITS, compare=False, hash=False)
 
     @classmethod
     def discover(cls, root: str | Path) -> Benchmark:
@@ -347,9 +350,9 @@ class Benchmark:
 
     def split(self, name: str) -> list[Scene]:
         """The paper's splits: train = additional, validation = stratified + training, test = test."""
-        if name not in SPLITS:
-            raise DataError(f"unknown split {name!r}; choose from {', '.join(SPLITS)}")
-        return self.by_category(*SPLITS[name])
+        if name not in self.splits:
+            raise DataError(f"unknown split {name!r}; choose from {', '.join(self.splits)}")
+        return self.by_category(*self.splits[name])
 
     def select(self, names: list[str] | None) -> list[Scene]:
         """Scenes by name (or category name, or split name); all scenes when ``names`` is empty.
@@ -358,7 +361,7 @@ class Benchmark:
             return check_scene_names(self.scenes)
         out: list[Scene] = []
         for n in names:
-            if n in SPLITS:
+            if n in self.splits:
                 hits = self.split(n)
             else:
                 hits = [s for s in self.scenes if n in (s.name, s.category)]
