@@ -16,7 +16,8 @@ HELP = "predict a disparity map for a scene or sample folder or a VIEWS.npy"
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--method", required=True, metavar="SPEC", help="method spec name[:key=value,...]")
-    p.add_argument("--input", required=True, type=Path, help="scene folder (HCI layout), UrbanLF-Syn sample folder (ImageN/) or VIEWS.npy (H, W, 81)")
+    p.add_argument("--input", required=True, type=Path,
+                   help="scene folder (HCI layout), UrbanLF-Syn sample folder (ImageN/) or VIEWS.npy (H, W, 81)")
     p.add_argument("--out", required=True, type=Path, help="OUT.pfm or OUT.npy")
     add_method_device(p)
     p.add_argument("--extras", action="store_true",

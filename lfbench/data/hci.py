@@ -13,6 +13,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from lfbench.data.dataset import Dataset, DatasetProtocol
+from lfbench.data.pattern import matches_at_depth
 from lfbench.data.scene import HIGHRES, LOWRES, Benchmark
 
 __all__ = ["HCIDataset", "HCI_PROTOCOL", "HCI_HIGHRES_SCENES"]
@@ -38,11 +39,7 @@ class HCIDataset(Dataset):
 
     @classmethod
     def matches(cls, root: Path) -> bool:
-        if (root / _MARKER).is_file():
-            return True
-        children = [p for p in root.iterdir() if p.is_dir()]
-        return any((c / _MARKER).is_file() for c in children) or any(
-            (g / _MARKER).is_file() for c in children for g in c.iterdir() if g.is_dir())
+        return matches_at_depth(root, lambda folder: (folder / _MARKER).is_file())
 
     @classmethod
     def open(cls, root: Path) -> Benchmark:
