@@ -42,8 +42,9 @@ def urban_copy(urban_root: Path, tmp_path: Path) -> Path:
 
 def test_builtin_datasets_come_through_the_entry_point_group():
     eps = {ep.name: ep.value for ep in metadata.entry_points(group="lfbench.datasets")}
-    assert eps == {"hci": "lfbench.data.hci:HCIDataset", "urbanlf-syn": "lfbench.data.urbanlf:UrbanLFSyn"}
-    assert DATASETS.names() == ["hci", "urbanlf-syn"]
+    assert eps == {"hci": "lfbench.data.hci:HCIDataset", "urbanlf-syn": "lfbench.data.urbanlf:UrbanLFSyn",
+                   "toml": "lfbench.data.generic:GenericDataset"}
+    assert DATASETS.names() == ["hci", "toml", "urbanlf-syn"]
     assert DATASETS.get("hci") is HCIDataset and DATASETS.get("urbanlf-syn") is UrbanLFSyn
 
 
@@ -123,7 +124,7 @@ def test_root_of_no_layout_or_several_is_one_line(tmp_path: Path, urban_root: Pa
     assert_one_error_line(rc, err, "not laid out as dataset 'hci'")
     rc, _, err = run_cli(capsys, "evaluate", "--data", urban_root, "--dataset", "nope", "--method", "gt",
                          "--out", tmp_path / "o")
-    assert_one_error_line(rc, err, "Unknown dataset 'nope'", "hci, urbanlf-syn")
+    assert_one_error_line(rc, err, "Unknown dataset 'nope'", "hci, toml, urbanlf-syn")
     assert not (tmp_path / "o").exists()
     # --dataset resolves the ambiguity
     rc, _, err = run_cli(capsys, "evaluate", "--data", both, "--dataset", "urbanlf-syn", "--method", "gt",

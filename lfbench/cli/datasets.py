@@ -23,6 +23,8 @@ def run(args: argparse.Namespace) -> int:
             continue
         print(f"{name}: {dataset.summary}")
         print(f"  layout: {dataset.layout}")
+        if dataset.protocol_from_data():
+            print("  protocol: declared by the data; when it does not say:")
         for line in dataset.protocol.describe():
             print(f"  {line}")
     for name, error in sorted(DATASETS.load_errors.items()):

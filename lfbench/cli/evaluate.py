@@ -75,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
     from lfbench.utils.errors import DataError, SpecError
 
     dataset, bench = open_dataset(args.data, args.dataset)  # one line for a root of no (or several) layouts
-    protocol = dataset.protocol
+    protocol = dataset.protocol_for(args.data)
     methods = [create_from_spec(spec, {"device": args.device}, method_range_params(protocol.disparity_range))
                for spec in args.method]  # errors before any work
     if args.label is not None:

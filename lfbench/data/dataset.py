@@ -103,6 +103,17 @@ class Dataset:
         """The scenes under ``root`` (DataError naming the file for anything malformed)."""
         raise NotImplementedError
 
+    @classmethod
+    def protocol_for(cls, root: Path) -> DatasetProtocol:
+        """The protocol of the data under ``root``: :attr:`protocol`, unless the data declares its own (the
+        generic TOML adapter reads it from the root)."""
+        return cls.protocol
+
+    @classmethod
+    def protocol_from_data(cls) -> bool:
+        """Whether :meth:`protocol_for` reads the protocol from the data (then :attr:`protocol` is its default)."""
+        return cls.protocol_for.__func__ is not Dataset.protocol_for.__func__  # type: ignore[attr-defined]
+
 
 #: Every dataset adapter, by name (the ``lfbench.datasets`` entry points fill it).
 DATASETS: Registry[type[Dataset]] = Registry("dataset", Dataset, group=DATASET_GROUP)

@@ -21,7 +21,7 @@ from PIL import Image
 
 from lfbench.data.npyfile import read_npy
 from lfbench.data.pfm import read_pfm
-from lfbench.data.scene import LOWRES, LightField, read_png, read_rgb, rgb_to_gray
+from lfbench.data.scene import LOWRES, PNGViews, read_png
 from lfbench.utils.errors import DataError
 
 __all__ = ["GT_FORMATS", "ViewLayout", "PatternScene", "png_size"]
@@ -95,7 +95,7 @@ def _npy_header(path: Path) -> tuple[tuple[int, ...], np.dtype]:
     return tuple(shape), dtype
 
 
-class PatternScene(LightField):
+class PatternScene(PNGViews):
     """One scene folder of a :class:`ViewLayout`, checked when made, its pixels read when asked for."""
 
     layout: ViewLayout
@@ -118,8 +118,7 @@ class PatternScene(LightField):
     def angular_size(self) -> tuple[int, int]:
         return self.layout.angular
 
-    def view_path(self, row: int, col: int) -> Path:
-        """The file of the view at 0-based angular ``row``, ``col``."""
+    def view_file(self, row: int, col: int) -> Path:
         return self.path / self.layout.view_name(row, col)
 
     def _check_views(self) -> tuple[int, int]:
@@ -136,7 +135,7 @@ class PatternScene(LightField):
             more = f" and {len(missing) - 3} more" if len(missing) > 3 else ""
             raise DataError(f"missing {len(missing)} of {len(names)} views: {', '.join(missing[:3])}{more}",
                             self.path)
-        centre = self.view_path(*self.layout.centre)
+        centre = self.view_file(*self.layout.centre)
         size = png_size(centre)
         for name in names:
             got = png_size(self.path / name)
@@ -210,31 +209,6 @@ class PatternScene(LightField):
 
     def valid_mask(self) -> np.ndarray | None:
         return None
-
-    @functools.cached_property
-    def _rgb(self) -> np.ndarray:
-        (v, u), (h, w) = self.angular_size, self.spatial_size
-        views = np.empty((v, u, h, w, 3), dtype=np.float32)
-        for r in range(v):
-            for c in range(u):
-                views[r, c] = read_rgb(self.view_path(r, c), size=(h, w))
-        return views
-
-    def rgb_views(self) -> np.ndarray:
-        """(V, U, H, W, 3) float32 RGB in [0, 1]; ``[r, c]`` is the view at row r, column c."""
-        return self._rgb
-
-    @functools.cached_property
-    def _gray(self) -> np.ndarray:
-        return rgb_to_gray(self._rgb)
-
-    def gray_views(self) -> np.ndarray:
-        return self._gray
-
-    def center_view(self) -> np.ndarray:
-        if "_rgb" in self.__dict__:
-            return self._rgb[self.layout.centre]
-        return read_rgb(self.view_path(*self.layout.centre), size=self.spatial_size)
 
 
 def sample_order(path: Path) -> tuple[int, str]:
