@@ -131,7 +131,8 @@ def detect_dataset(root: str | Path) -> type[Dataset]:
         raise DataError("data root not found", root)
     hits = [name for name in DATASETS.names() if DATASETS.get(name).matches(root)]
     if not hits:
-        raise DataError(f"no known dataset layout ({', '.join(DATASETS.names())}; see `lfbench datasets`)", root)
+        raise DataError(f"no scenes found: no known dataset layout ({', '.join(DATASETS.names()) or 'none installed'}; "
+                        "see `lfbench datasets`)", root)
     if len(hits) > 1:
         raise DataError(f"the layout matches several datasets ({', '.join(hits)}): choose one with --dataset NAME",
                         root)
