@@ -18,13 +18,17 @@ matches none or several in one line (:class:`~lfbench.utils.errors.DataError`, e
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 from lfbench.data.scene import LOWRES, Benchmark
 from lfbench.utils.errors import DataError, SpecError
 from lfbench.utils.registry import Registry
+
+if TYPE_CHECKING:  # lfbench.scoring imports lfbench.data: imported where the rules are made
+    from lfbench.scoring.rules import ScoringRules
 
 __all__ = ["DATASET_GROUP", "DATASETS", "Dataset", "DatasetProtocol", "detect_dataset", "get_dataset",
            "open_dataset", "method_range_params"]
@@ -61,7 +65,7 @@ class DatasetProtocol:
         if self.border_px < 0:
             raise ValueError(f"border must be >= 0 px, got {self.border_px}")
 
-    def scoring_rules(self, *, toolkit: bool = False, allow_highres: bool = True):  # -> ScoringRules
+    def scoring_rules(self, *, toolkit: bool = False, allow_highres: bool = True) -> ScoringRules:
         """The :class:`~lfbench.scoring.rules.ScoringRules` of this protocol (border, high-resolution scenes)."""
         from lfbench.scoring.rules import ScoringRules
 
@@ -157,7 +161,7 @@ def open_dataset(root: str | Path, name: str | None = None) -> tuple[type[Datase
     return dataset, dataset.open(root)
 
 
-def method_range_params(disparity_range: tuple[float, float]):
+def method_range_params(disparity_range: tuple[float, float]) -> Callable[[Any, dict[str, Any]], dict[str, float]]:
     """A ``defaults`` hook for :func:`lfbench.method.registry.create_from_spec`: the dataset's disparity range
     as ``{"d_min": lo, "d_max": hi}`` for a method that has both parameters when the spec sets neither and the
     range differs from the method's defaults (so that the label names the range searched, and stays as it
@@ -166,7 +170,7 @@ def method_range_params(disparity_range: tuple[float, float]):
     (UrbanLF-Syn's [-0.5, 1.6] at the plane sweep's 0.25 px: [-0.5, 1.75]), so that the whole range is searched."""
     lo, hi = (float(v) for v in disparity_range)
 
-    def defaults(info, params: dict) -> dict[str, float]:
+    def defaults(info: Any, params: dict[str, Any]) -> dict[str, float]:
         keys = {"d_min", "d_max"}
         if not keys <= set(info.params) or keys & set(params):
             return {}
