@@ -247,3 +247,21 @@ def test_synth_command_writes_the_urbanlf_layout(tmp_path: Path, capsys):
     rc, _, err = run_cli(capsys, "synth", "--size", "40x24", "--out", tmp_path / "h")
     assert_one_error_line(rc, err, "--size 40x24: the HCI layout has square views")
     assert not (tmp_path / "h").exists()
+
+
+def test_jobs_score_urbanlf_scenes_in_workers_with_the_same_numbers(urban_root: Path, tmp_path: Path, capsys):
+    import pickle
+
+    scene = UrbanLFScene(urban_root / "val" / "Image1", category="val")
+    scene.gray_views()  # loaded views do not travel: the scene pickles as its folder and layout
+    again = pickle.loads(pickle.dumps(scene))
+    assert len(pickle.dumps(scene)) < 2000 and "_rgb" not in again.__dict__
+    assert (again.path, again.category, again.spatial_size, type(again)) == (scene.path, "val", (H, W), UrbanLFScene)
+    runs = {}
+    for jobs in ("1", "2"):
+        out = tmp_path / f"j{jobs}"
+        rc, _, err = run_cli(capsys, "evaluate", "--data", urban_root, "--method", "constant:value=0.25",
+                             "--method", "gt", "--jobs", jobs, "--out", out, "--no-progress")
+        assert rc == 0, err
+        runs[jobs] = json.loads((out / "results.json").read_text())["records"]
+    assert runs["1"] == runs["2"] and len(runs["1"]) == 2 * 2 * 4

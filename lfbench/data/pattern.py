@@ -114,6 +114,11 @@ class PatternScene(PNGViews):
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.category}/{self.name})"
 
+    def __reduce__(self):
+        """Pickled as its folder, layout and category, reopened (and checked again) where it is unpickled: a
+        scoring worker (lfbench.runs.pool) gets the scene, never its loaded views."""
+        return _reopen, (type(self), self.path, self.layout, self.category)
+
     @property
     def angular_size(self) -> tuple[int, int]:
         return self.layout.angular
@@ -209,6 +214,12 @@ class PatternScene(PNGViews):
 
     def valid_mask(self) -> np.ndarray | None:
         return None
+
+
+def _reopen(cls: type[PatternScene], path: Path, layout: ViewLayout, category: str) -> PatternScene:
+    scene = cls.__new__(cls)
+    PatternScene.__init__(scene, path, layout, category)
+    return scene
 
 
 def sample_order(path: Path) -> tuple[int, str]:
