@@ -202,6 +202,7 @@ _META_TYPES: dict[str, tuple[type, str]] = {
     "data_root": (str, "a folder name (a string)"), "created": (str, "a string"),
     "lfbench_version": (str, "a string"), "ablation": (dict, "an object"),
     "scenes": (list, "a list of folder names"), "methods": (dict, "an object"),
+    "dataset": (str, "a dataset name (a string; see `lfbench datasets`)"),
 }
 
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 import importlib.util
 import io
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -270,3 +271,18 @@ def install_example_plugin(tmp: Path) -> tuple[Path, Path, dict[str, str]]:
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in (str(site), os.environ.get("PYTHONPATH")) if p),
            "OMP_NUM_THREADS": "1"}
     return src, site, env
+
+
+README = Path(__file__).resolve().parent.parent / "README.md"
+
+
+def readme_section(heading: str) -> str:
+    """The README's ``## heading`` section, up to the next ``## `` heading."""
+    text = README.read_text(encoding="utf-8")
+    start = text.index(f"## {heading}")
+    return text[start:text.index("\n## ", start + 3)]
+
+
+def code_blocks(section: str) -> list[tuple[str, str]]:
+    """(language, body) of every fenced code block of ``section``."""
+    return [(m[1], m[2]) for m in re.finditer(r"```(\w*)\n(.*?)```", section, re.S)]

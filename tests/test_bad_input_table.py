@@ -162,6 +162,10 @@ CASES: list[tuple[str, Callable[[Path], list], tuple[str, ...], tuple[str, ...]]
      ("r.json", "nested"), ("rep",)),
     ("report-runs-malformed", lambda t: ["report", _file(t, "r.json", '{"records": [], "runs": [7]}'), "--out",
                                          t / "rep"], ("r.json", "run 0 is malformed"), ("rep",)),
+    ("evaluate-dataset", lambda t: ["evaluate", "--data", t, "--dataset", "nope", "--method", "gt", "--out", t / "o"],
+     ("Unknown dataset 'nope'",), ("o",)),
+    ("synth-layout-size", lambda t: ["synth", "--out", t / "s", "--layout", "urbanlf-syn", "--size", "64x200000"],
+     ("size must be an integer",), ("s",)),
     ("synth-size", lambda t: ["synth", "--out", t / "s", "--size", "200000"], ("size must be an integer",), ("s",)),
     ("synth-scenes", lambda t: ["synth", "--out", t / "s", "--scenes", "100000000"], ("scenes must be",), ("s",)),
     ("demo-size", lambda t: ["demo", "--out", t / "d", "--size", "8"], ("size must be an integer",), ()),
@@ -221,9 +225,9 @@ CASES: list[tuple[str, Callable[[Path], list], tuple[str, ...], tuple[str, ...]]
 
 
 def test_every_command_has_a_row():
-    """A new command must add its bad-input rows here (``methods`` takes no input)."""
+    """A new command must add its bad-input rows here (``methods`` and ``datasets`` take no input)."""
     covered = {case[0].split("-")[0] for case in CASES}
-    expected = {name.split("-")[0] for name in BUILTIN_COMMANDS if name != "methods"}
+    expected = {name.split("-")[0] for name in BUILTIN_COMMANDS if name not in ("methods", "datasets")}
     assert expected <= covered, sorted(expected - covered)
 
 

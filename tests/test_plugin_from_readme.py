@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import json
 import os
-import re
 import shlex
 import subprocess
 import sys
@@ -16,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from helpers import install_package, isolate_registries
+from helpers import code_blocks, install_package, isolate_registries, readme_section
 
 from lfbench.data.scene import Benchmark
 
@@ -27,20 +26,13 @@ pytestmark = pytest.mark.slow
 
 
 def _section() -> str:
-    text = README.read_text(encoding="utf-8")
-    start = text.index("## Plugins: your own network or method")
-    return text[start:text.index("\n## ", start + 3)]
-
-
-def _blocks(section: str) -> list[tuple[str, str]]:
-    """(language, body) of every fenced code block of ``section``."""
-    return [(m[1], m[2]) for m in re.finditer(r"```(\w*)\n(.*?)```", section, re.S)]
+    return readme_section("Plugins: your own network or method")
 
 
 def _files(section: str) -> dict[str, str]:
     """The blocks whose first line is ``# file: PATH``: PATH -> text."""
     out = {}
-    for _, body in _blocks(section):
+    for _, body in code_blocks(section):
         first, _, rest = body.partition("\n")
         if first.startswith("# file: "):
             out[first.removeprefix("# file: ").strip()] = rest
@@ -49,7 +41,7 @@ def _files(section: str) -> dict[str, str]:
 
 def _commands(section: str) -> list[list[str]]:
     """The ``lfbench ...`` lines of the bash block that runs the README's plugin (comments stripped)."""
-    block = next(body for lang, body in _blocks(section) if lang == "bash" and "epinet" in body)
+    block = next(body for lang, body in code_blocks(section) if lang == "bash" and "epinet" in body)
     return [shlex.split(line.split("  #")[0]) for line in block.splitlines() if line.startswith("lfbench ")]
 
 

@@ -35,6 +35,7 @@ BUILTIN_COMMANDS = {
     "evaluate": "lfbench.cli.evaluate",
     "predict": "lfbench.cli.predict",
     "methods": "lfbench.cli.methods",
+    "datasets": "lfbench.cli.datasets",
     "info": "lfbench.cli.info",
     "demo": "lfbench.cli.demo",
     "report": "lfbench.cli.report",

@@ -11,12 +11,17 @@ from pathlib import Path
 
 from lfbench.cli.argtypes import add_method_device, int_range
 
-HELP = "score methods on HCI scenes (results.json, results.csv, tables)"
+HELP = "score methods on a dataset's scenes (results.json, results.csv, tables)"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--data", required=True, type=Path, metavar="ROOT",
-                   help="data root laid out as ROOT/<category>/<scene>/ (HCI layout)")
+                   help="data root of a known dataset (its layout is detected: see `lfbench datasets`), e.g. "
+                        "ROOT/<category>/<scene>/ (HCI) or ROOT/<split>/ImageN/ (UrbanLF-Syn)")
+    p.add_argument("--dataset", metavar="NAME",
+                   help="read ROOT as this dataset instead of detecting its layout (see `lfbench datasets`); it "
+                        "sets the scoring protocol (border, metrics, resolutions) and the disparity range a method "
+                        "searches where its spec does not set one")
     p.add_argument("--method", required=True, action="append", metavar="SPEC",
                    help="method spec name[:key=value,...]; repeat for several (see `lfbench methods`). Results "
                         "name it by its spec, a weights file by its content (weights=sha256:...), so that they "
@@ -32,7 +37,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "without pixels to the toolkit's (counted as missed dots), which changes missed_dots even "
                         "for finite predictions (docs/benchmark-rules.md, deliberate differences)")
     p.add_argument("--lowres-only", action="store_true",
-                   help="score every scene at 512x512, even where high-resolution ground truth exists")
+                   help="score every scene at its views' resolution (HCI: 512x512), even where high-resolution "
+                        "ground truth exists")
     p.add_argument("--all-metrics", action="store_true",
                    help="also score the region and stratified metrics wherever the scene has their mask files, "
                         "and the toolkit's runtime and runtime_log (log10 s) wherever the method reports a "
@@ -59,16 +65,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from lfbench.data.scene import Benchmark
+    from lfbench.data.dataset import method_range_params, open_dataset
     from lfbench.method.registry import create_from_spec
     from lfbench.reports import writers as w
     from lfbench.reports.html import SITE_DIR, check_site_dir
     from lfbench.reports.tables import per_scene_table, render
     from lfbench.runs.folder import evaluate_to_folder
-    from lfbench.scoring.rules import ScoringRules
+    from lfbench.scoring.metrics import get_metric
     from lfbench.utils.errors import DataError, SpecError
 
-    methods = [create_from_spec(spec, {"device": args.device}) for spec in args.method]  # errors before any work
+    dataset, bench = open_dataset(args.data, args.dataset)  # one line for a root of no (or several) layouts
+    protocol = dataset.protocol_for(args.data)
+    methods = [create_from_spec(spec, {"device": args.device}, method_range_params(protocol.disparity_range))
+               for spec in args.method]  # errors before any work
     if args.label is not None:
         if len(args.label) != len(methods):
             raise SpecError(f"--label: {len(args.label)} label(s) for {len(methods)} --method(s); give one per method")
@@ -77,17 +86,21 @@ def run(args: argparse.Namespace) -> int:
         methods = [m.with_label(label) for m, label in zip(methods, args.label, strict=True)]
     if args.html:
         check_site_dir(args.out / SITE_DIR)
-    scenes = Benchmark.discover(args.data).select([s for s in args.scenes.split(",") if s.strip()])
+    scenes = bench.select([s for s in args.scenes.split(",") if s.strip()])
     scenes = [s for s in scenes if s.has_gt()]
     if not scenes:
-        raise DataError("none of the selected scenes has ground truth (gt_disp_lowres.pfm)", args.data)
-    rules = ScoringRules(toolkit=args.toolkit_nonfinite, allow_highres=not args.lowres_only)
+        raise DataError(f"none of the selected scenes has ground truth ({dataset.name} layout: {dataset.layout})",
+                        args.data)
+    rules = protocol.scoring_rules(toolkit=args.toolkit_nonfinite, allow_highres=not args.lowres_only)
+    metrics = [get_metric(m) for m in protocol.metrics]
     writers = [*([w.SceneFigures()] if args.figures else []), *([w.Maps()] if args.save_maps or args.html else []),
                w.Tables(),
                *([w.BootstrapCIs(w.CIOptions(resamples=args.ci_resamples, block=args.ci_block))] if args.ci else []),
                *([w.UncertaintyRatings()] if args.uncertainty else []), *([w.Site()] if args.html else [])]
-    meta = {"data_root": str(args.data), "methods": {m.label: m.provenance() for m in methods}}
-    results = evaluate_to_folder(methods, scenes, args.out, rules=rules, all_metrics=args.all_metrics, writers=writers,
+    meta = {"data_root": str(args.data), "dataset": dataset.name,
+            "methods": {m.label: m.provenance() for m in methods}}
+    results = evaluate_to_folder(methods, scenes, args.out, rules=rules, metrics=metrics,
+                                 all_metrics=args.all_metrics, writers=writers,
                                  meta=meta, progress=not args.no_progress, jobs=args.jobs)
     if args.out / "table_uncertainty.md" in results.files:
         print((args.out / "table_uncertainty.md").read_text(encoding="utf-8"))

@@ -11,12 +11,13 @@ from pathlib import Path
 
 from lfbench.cli.argtypes import add_method_device
 
-HELP = "predict a disparity map for a scene folder or a VIEWS.npy"
+HELP = "predict a disparity map for a scene or sample folder or a VIEWS.npy"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--method", required=True, metavar="SPEC", help="method spec name[:key=value,...]")
-    p.add_argument("--input", required=True, type=Path, help="scene folder (HCI layout) or VIEWS.npy (H, W, 81)")
+    p.add_argument("--input", required=True, type=Path,
+                   help="scene folder (HCI layout), UrbanLF-Syn sample folder (ImageN/) or VIEWS.npy (H, W, 81)")
     p.add_argument("--out", required=True, type=Path, help="OUT.pfm or OUT.npy")
     add_method_device(p)
     p.add_argument("--extras", action="store_true",
@@ -35,7 +36,11 @@ def load_input(path: Path):
     from lfbench.utils.errors import DataError
 
     if path.is_dir():
-        return Scene(path)
+        from lfbench.data.urbanlf import CENTRE, UrbanLFScene, view_name
+
+        if (path / "parameters.cfg").is_file() or not (path / view_name(CENTRE, CENTRE)).is_file():
+            return Scene(path)
+        return UrbanLFScene(path)  # an UrbanLF-Syn sample folder (1_1.png .. 9_9.png)
     if path.suffix != ".npy":
         raise DataError("input must be a scene folder or a .npy file", path)
 

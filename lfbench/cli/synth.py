@@ -1,9 +1,11 @@
-"""Generate synthetic light fields in the HCI layout with exact ground truth (no dataset needed).
+"""Generate synthetic light fields with exact ground truth (no dataset needed), in the HCI layout or
+UrbanLF-Syn's.
 
-Writes DIR/<category>/synth_<seed>_<i>/ for i = 0..K-1: input_Cam000..png, parameters.cfg,
-gt_disp_lowres.pfm, gt_depth_lowres.pfm and evaluation masks (<mask>_lowres.png). The same seed,
-size and angular resolution always give the same files. An existing scene folder is an error
-unless --force.
+--layout hci (default): DIR/<category>/synth_<seed>_<i>/ for i = 0..K-1: input_Cam000..png,
+parameters.cfg, gt_disp_lowres.pfm, gt_depth_lowres.pfm and evaluation masks (<mask>_lowres.png).
+--layout urbanlf-syn: DIR/<category, default val>/Image<i>/ for i = 1..K: 9x9 views u_v.png of WxH px
+(default 640x480), 5_5_disparity.npy and 5_5_depth.npy. The same seed, size and angular resolution
+always give the same files. An existing scene folder is an error unless --force.
 """
 
 from __future__ import annotations
@@ -11,15 +13,20 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-HELP = "generate synthetic HCI-format scenes with exact ground truth"
+HELP = "generate synthetic scenes (HCI or UrbanLF-Syn layout) with exact ground truth"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", required=True, type=Path, metavar="DIR", help="data root to write into")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    p.add_argument("--size", type=int, default=128, metavar="S", help="views are S x S px (default 128)")
+    p.add_argument("--layout", choices=("hci", "urbanlf-syn"), default="hci",
+                   help="the dataset layout written (default hci; urbanlf-syn: 9x9 views, non-square sizes)")
+    p.add_argument("--size", type=_size, default=None, metavar="S|WxH",
+                   help="views are S x S px, or W x H px with --layout urbanlf-syn (default 128; urbanlf-syn: "
+                        "640x480)")
     p.add_argument("--scenes", type=int, default=4, metavar="K", help="number of scenes (default 4)")
-    p.add_argument("--category", default="synthetic", metavar="NAME", help="category folder (default synthetic)")
+    p.add_argument("--category", default=None, metavar="NAME",
+                   help="category (split) folder (default synthetic; urbanlf-syn: val)")
     p.add_argument("--angular", type=int, default=9, metavar="A", help="A x A views, odd (default 9)")
     p.add_argument("--force", action="store_true", help="overwrite existing scene folders")
     p.add_argument("--workers", type=int, default=None, metavar="N",
@@ -27,13 +34,40 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
+def _size(text: str) -> tuple[int, int]:
+    """'S' -> (S, S); 'WxH' -> (W, H)."""
+    parts = text.lower().split("x")
+    if len(parts) not in (1, 2) or not all(p.strip().isdigit() for p in parts):
+        raise argparse.ArgumentTypeError(f"expected S or WxH in px, e.g. 128 or 640x480, got {text[:40]!r}")
+    w = int(parts[0])
+    return w, int(parts[-1])
+
+
 def run(args: argparse.Namespace) -> int:
     import time
 
     from lfbench.data.synth import write_benchmark
+    from lfbench.utils.errors import SpecError
     from lfbench.utils.hardware import available_cores
 
     start = time.perf_counter()
+    if args.layout == "urbanlf-syn":
+        from lfbench.data.synth_urbanlf import write_urbanlf
+
+        if args.angular != 9:
+            raise SpecError("--layout urbanlf-syn writes 9x9 views: leave out --angular")
+        width, height = args.size or (640, 480)
+        paths = write_urbanlf(args.out, seed=args.seed, width=width, height=height, scenes=args.scenes,
+                              split=args.category or "val", force=args.force)
+        for path in paths:
+            print(path)
+        print(f"wrote {len(paths)} UrbanLF-Syn sample(s) of {width}x{height} px, 9x9 views "
+              f"in {time.perf_counter() - start:.1f} s")
+        return 0
+    width, height = args.size or (128, 128)
+    if width != height:
+        raise SpecError(f"--size {width}x{height}: the HCI layout has square views (use --layout urbanlf-syn)")
+    args.size, args.category = width, args.category or "synthetic"
     paths = write_benchmark(args.out, seed=args.seed, size=args.size, scenes=args.scenes, category=args.category,
                             angular=args.angular, force=args.force, progress=not args.no_progress,
                             workers=available_cores() if args.workers is None else args.workers)

@@ -13,8 +13,8 @@ import functools
 import os
 import re
 import warnings
-from collections.abc import Iterable, Iterator
-from dataclasses import dataclass
+from collections.abc import Iterable, Iterator, Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TypeVar
 
@@ -186,7 +186,49 @@ class ArrayLightField(LightField):
         return self.gt
 
 
-class Scene(LightField):
+class PNGViews(LightField):
+    """A light field whose views are PNG files, one per view (:meth:`view_file`), all ``spatial_size`` (H, W):
+    read on first use, kept as RGB and gray."""
+
+    spatial_size: tuple[int, int]
+
+    def view_file(self, row: int, col: int) -> Path:
+        """The file of the view at 0-based angular ``row``, ``col``."""
+        raise NotImplementedError
+
+    def _views_ready(self) -> None:
+        """Called before the views are read (e.g. a check that every file is there)."""
+
+    @functools.cached_property
+    def _rgb(self) -> np.ndarray:
+        self._views_ready()
+        v, u = self.angular_size
+        h, w = self.spatial_size
+        views = np.empty((v, u, h, w, 3), dtype=np.float32)
+        for r in range(v):
+            for c in range(u):
+                views[r, c] = read_rgb(self.view_file(r, c), size=(h, w))
+        return views
+
+    def rgb_views(self) -> np.ndarray:
+        """(V, U, H, W, 3) float32 RGB in [0, 1]; ``[r, c]`` is the view at angular row r, column c."""
+        return self._rgb
+
+    @functools.cached_property
+    def _gray(self) -> np.ndarray:
+        return rgb_to_gray(self._rgb)
+
+    def gray_views(self) -> np.ndarray:
+        return self._gray
+
+    def center_view(self) -> np.ndarray:
+        v, u = self.angular_size
+        if "_rgb" in self.__dict__:
+            return self._rgb[v // 2, u // 2]
+        return read_rgb(self.view_file(v // 2, u // 2), size=self.spatial_size)
+
+
+class Scene(PNGViews):
     """An HCI scene folder, loaded lazily: nothing is read until asked for."""
 
     def __init__(self, path: str | Path, category: str | None = None) -> None:
@@ -224,33 +266,11 @@ class Scene(LightField):
             more = f" and {len(missing) - 3} more" if len(missing) > 3 else ""
             raise DataError(f"missing {len(missing)} of {v * u} views: {shown}{more}", self.path)
 
-    @functools.cached_property
-    def _rgb(self) -> np.ndarray:
+    def view_file(self, row: int, col: int) -> Path:
+        return self.view_path(row * self.angular_size[1] + col)
+
+    def _views_ready(self) -> None:
         self._check_views()
-        v, u = self.angular_size
-        h, w = self.spatial_size
-        views = np.empty((v, u, h, w, 3), dtype=np.float32)
-        for k in range(v * u):
-            views[k // u, k % u] = read_rgb(self.view_path(k), size=(h, w))
-        return views
-
-    def rgb_views(self) -> np.ndarray:
-        """(V, U, H, W, 3) float32 RGB in [0, 1]."""
-        return self._rgb
-
-    @functools.cached_property
-    def _gray(self) -> np.ndarray:
-        return rgb_to_gray(self._rgb)
-
-    def gray_views(self) -> np.ndarray:
-        return self._gray
-
-    def center_view(self) -> np.ndarray:
-        v, u = self.angular_size
-        k = (v // 2) * u + u // 2
-        if "_rgb" in self.__dict__:
-            return self._rgb[v // 2, u // 2]
-        return read_rgb(self.view_path(k), size=self.spatial_size)
 
     def has_gt(self, resolution: str = LOWRES) -> bool:
         return (self.path / f"gt_disp_{resolution}.pfm").is_file()
@@ -312,10 +332,13 @@ class Benchmark:
     """The scenes under a data root laid out as ROOT/<category>/<scene>/parameters.cfg.
 
     Category folders other than the four HCI ones are kept under their own name ('other' kind).
+    ``splits``: split name -> the categories it selects (default the paper's HCI splits, :data:`SPLITS`;
+    a dataset whose category folders are its splits gives none).
     """
 
     root: Path
     scenes: tuple[Scene, ...]
+    splits: Mapping[str, tuple[str, ...]] = field(default_factory=lambda: SPLITS, compare=False, hash=False)
 
     @classmethod
     def discover(cls, root: str | Path) -> Benchmark:
@@ -352,9 +375,9 @@ class Benchmark:
 
     def split(self, name: str) -> list[Scene]:
         """The paper's splits: train = additional, validation = stratified + training, test = test."""
-        if name not in SPLITS:
-            raise DataError(f"unknown split {name!r}; choose from {', '.join(SPLITS)}")
-        return self.by_category(*SPLITS[name])
+        if name not in self.splits:
+            raise DataError(f"unknown split {name!r}; choose from {', '.join(self.splits)}")
+        return self.by_category(*self.splits[name])
 
     def select(self, names: list[str] | None) -> list[Scene]:
         """Scenes by name (or category name, or split name); all scenes when ``names`` is empty.
@@ -363,7 +386,7 @@ class Benchmark:
             return check_scene_names(self.scenes)
         out: list[Scene] = []
         for n in names:
-            if n in SPLITS:
+            if n in self.splits:
                 hits = self.split(n)
             else:
                 hits = [s for s in self.scenes if n in (s.name, s.category)]

@@ -213,12 +213,18 @@ class MethodRegistry(Registry[MethodInfo]):
             return name
         return next((n for n in trainable_names() if find_trainable(n).method_name == name), None)
 
-    def create_from_spec(self, spec: str, runtime: Mapping[str, Any] | None = None) -> Any:
+    def create_from_spec(self, spec: str, runtime: Mapping[str, Any] | None = None,
+                         defaults: Callable[[MethodInfo, dict[str, Any]], Mapping[str, Any]] | None = None) -> Any:
         """The method of ``name:key=value,...``; ``runtime`` (e.g. ``{"device": "cuda"}`` from ``--device``)
-        fills the parameters the method has and the spec leaves out, without entering its label."""
+        fills the parameters the method has and the spec leaves out, without entering its label.
+        ``defaults(info, params)``: parameters the spec leaves out that are set anyway and recorded (they
+        enter the label), e.g. the disparity range a dataset declares (lfbench.data.dataset)."""
         name, raw = parse_spec(spec)
         info = self.info(name)
-        return self._create(name, coerce_params(raw, info.params, name), runtime or {})
+        params = coerce_params(raw, info.params, name)
+        if defaults is not None:
+            params = {**{k: v for k, v in defaults(info, params).items() if k in info.params}, **params}
+        return self._create(name, params, runtime or {})
 
 
 #: Every registered method, by name (the ``lfbench.methods`` entry points fill it).
@@ -247,9 +253,11 @@ def create(name: str, **params: Any) -> Any:
     return _global().create(name, **params)
 
 
-def create_from_spec(spec: str, runtime: Mapping[str, Any] | None = None) -> Any:
-    """Create a method from ``name:key=value,key=value`` (``runtime``: see MethodRegistry.create_from_spec)."""
-    return _global().create_from_spec(spec, runtime)
+def create_from_spec(spec: str, runtime: Mapping[str, Any] | None = None,
+                     defaults: Callable[[MethodInfo, dict[str, Any]], Mapping[str, Any]] | None = None) -> Any:
+    """Create a method from ``name:key=value,key=value`` (``runtime``, ``defaults``: see
+    MethodRegistry.create_from_spec)."""
+    return _global().create_from_spec(spec, runtime, defaults)
 
 
 def list_methods() -> list[MethodInfo]:

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from lfbench.data.scene import Benchmark
+from lfbench.data.dataset import open_dataset
 from lfbench.reports.maps import load_scene_maps, map_folders
 from lfbench.reports.paper import PaperTables
 from lfbench.reports.tables import TABLE_FORMATS
@@ -105,7 +105,7 @@ def _load_maps(run: RunOutputs, maps: Path, data: str | Path | None, results_pat
     root = data or (Path(meta["data_root"]) if meta.get("data_root") else None)
     if root is None:
         raise DataError("--maps needs --data ROOT (the results do not record their data root)", results_path)
-    run.scenes = Benchmark.discover(root).named(run.results.scenes)
+    run.scenes = open_dataset(root, meta.get("dataset"))[1].named(run.results.scenes)
     run.maps = map_folders(maps, run.results.methods)
     run.scene_maps = {s.name: load_scene_maps(s, run.maps, run.rules.border_px) for s in run.scenes if s.has_gt()}
 

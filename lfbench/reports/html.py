@@ -34,7 +34,7 @@ import jinja2
 import numpy as np
 import pandas as pd
 
-from lfbench.data.scene import Benchmark
+from lfbench.data.dataset import open_dataset
 from lfbench.reports import figures as fig
 from lfbench.reports import toolkit_figures as tk
 from lfbench.reports.leaderboard import all_metric_ranks, metric_table, overall_ranks
@@ -571,7 +571,7 @@ def site_inputs(results: Results, folder: Path, *, data_root: str | Path | None 
     if scenes is not None:
         scenes = list(scenes)
     elif root is not None and (data_root is not None or root.is_dir()):
-        scenes = Benchmark.discover(root).named(results.scenes)
+        scenes = open_dataset(root, results.meta.get("dataset"))[1].named(results.scenes)
     elif root is not None:
         notes.append(f"The data root {root} recorded in the results is not here: no maps are shown "
                      "(give --data ROOT).")

@@ -23,14 +23,17 @@ from dataclasses import dataclass
 from typing import Any
 
 from lfbench.data.disparity import EVALUATION_BORDER_PX
+from lfbench.data.hci import HCI_HIGHRES_SCENES
 from lfbench.data.scene import HIGHRES, LOWRES, Scene
 from lfbench.scoring.base import Metric
 
 __all__ = ["BENCHMARK_HIGHRES_SCENES", "ScoringRules", "metric_resolution"]
 
-#: The scenes the benchmark scores at high resolution (where their high-resolution ground truth exists):
-#: the default of :attr:`ScoringRules.highres_scenes`, and how the paper's numbers were scored.
-BENCHMARK_HIGHRES_SCENES = frozenset({"backgammon", "dots", "stripes"})
+#: The scenes the HCI benchmark scores at high resolution (where their high-resolution ground truth exists):
+#: the default of :attr:`ScoringRules.highres_scenes`, and how the paper's numbers were scored. Declared by
+#: the HCI dataset adapter (lfbench.data.hci); other datasets feed theirs through their protocol
+#: (:meth:`lfbench.data.dataset.DatasetProtocol.scoring_rules`).
+BENCHMARK_HIGHRES_SCENES = HCI_HIGHRES_SCENES
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,186 @@
+"""The dataset seam: a dataset adapter turns a data root into scenes and declares how they are scored.
+
+An adapter is a :class:`Dataset` subclass registered in the entry-point group ``lfbench.datasets`` (the
+built-in HCI and UrbanLF-Syn adapters go through the same group, as built-in methods go through
+``lfbench.methods``). It answers three things:
+
+- :meth:`Dataset.matches`: whether a folder is laid out as this dataset (detection; cheap, by file names);
+- :meth:`Dataset.open`: the scenes under the folder, as a :class:`~lfbench.data.scene.Benchmark` of
+  :class:`~lfbench.data.scene.LightField` scenes (views, angular size, spatial size of any aspect ratio,
+  optional ground truth, masks);
+- :attr:`Dataset.protocol`: its scoring protocol (:class:`DatasetProtocol`): border, resolutions, which
+  metrics apply, the scenes scored at high resolution, the disparity range a method should search.
+
+:func:`open_dataset` detects the layout of a root (or takes the adapter named) and refuses a root that
+matches none or several in one line (:class:`~lfbench.utils.errors.DataError`, exit 2).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, ClassVar
+
+from lfbench.data.scene import LOWRES, Benchmark
+from lfbench.utils.errors import DataError, SpecError
+from lfbench.utils.registry import Registry
+
+if TYPE_CHECKING:  # lfbench.scoring imports lfbench.data: imported where the rules are made
+    from lfbench.scoring.rules import ScoringRules
+
+__all__ = ["DATASET_GROUP", "DATASETS", "Dataset", "DatasetProtocol", "detect_dataset", "get_dataset",
+           "open_dataset", "method_range_params"]
+
+DATASET_GROUP = "lfbench.datasets"
+
+
+@dataclass(frozen=True)
+class DatasetProtocol:
+    """How a dataset's scenes are scored and what a method should search.
+
+    ``border_px``: pixels ignored at every border at low resolution (scaled with resolution);
+    ``metrics``: the ids of the metrics scored on every scene (lfbench.scoring.metrics);
+    ``resolutions``: the resolutions numbers may be scored at ('lowres', and 'highres' where the dataset
+    has high-resolution ground truth); ``highres_scenes``: the scenes scored at high resolution when their
+    high-resolution ground truth exists; ``disparity_range``: (min, max) px per view step a method should
+    search; ``spatial_size``: (H, W) px of its views where the dataset fixes one (None: any);
+    ``angular_size``: (V, U) views where fixed; ``reference_view``: the view scored (words).
+    """
+
+    border_px: int
+    metrics: tuple[str, ...]
+    disparity_range: tuple[float, float]
+    resolutions: tuple[str, ...] = (LOWRES,)
+    highres_scenes: frozenset[str] = frozenset()
+    spatial_size: tuple[int, int] | None = None
+    angular_size: tuple[int, int] | None = None
+    reference_view: str = "centre view"
+
+    def __post_init__(self) -> None:
+        lo, hi = self.disparity_range
+        if not lo < hi:
+            raise ValueError(f"disparity range must be (min, max) with min < max, got {self.disparity_range}")
+        if self.border_px < 0:
+            raise ValueError(f"border must be >= 0 px, got {self.border_px}")
+
+    def scoring_rules(self, *, toolkit: bool = False, allow_highres: bool = True) -> ScoringRules:
+        """The :class:`~lfbench.scoring.rules.ScoringRules` of this protocol (border, high-resolution scenes)."""
+        from lfbench.scoring.rules import ScoringRules
+
+        return ScoringRules(border_px=self.border_px, highres_scenes=self.highres_scenes, toolkit=toolkit,
+                            allow_highres=allow_highres and "highres" in self.resolutions)
+
+    def describe(self) -> list[str]:
+        """The protocol as lines for ``lfbench datasets``."""
+        size = f"{self.spatial_size[1]}x{self.spatial_size[0]} px (W x H)" if self.spatial_size else "any"
+        views = f"{self.angular_size[1]}x{self.angular_size[0]}" if self.angular_size else "any"
+        lo, hi = self.disparity_range
+        lines = [f"views: {views}, {size}; scored: {self.reference_view}, {self.border_px} px border",
+                 f"metrics: {', '.join(self.metrics)}", f"resolutions: {', '.join(self.resolutions)}",
+                 f"disparity range: [{lo:g}, {hi:g}] px per view step"]
+        if self.highres_scenes:
+            lines.append(f"high-resolution scenes: {', '.join(sorted(self.highres_scenes))}")
+        return lines
+
+
+class Dataset:
+    """A dataset adapter (subclass it and register it in the entry-point group ``lfbench.datasets``)."""
+
+    #: the name ``--dataset`` takes
+    name: ClassVar[str] = ""
+    #: one line for ``lfbench datasets``
+    summary: ClassVar[str] = ""
+    #: how its scenes are scored
+    protocol: ClassVar[DatasetProtocol]
+    #: how a data root is laid out (one line)
+    layout: ClassVar[str] = ""
+
+    @classmethod
+    def matches(cls, root: Path) -> bool:
+        """Whether ``root`` is laid out as this dataset (by file names only: no file is decoded)."""
+        raise NotImplementedError
+
+    @classmethod
+    def open(cls, root: Path) -> Benchmark:
+        """The scenes under ``root`` (DataError naming the file for anything malformed)."""
+        raise NotImplementedError
+
+    @classmethod
+    def protocol_for(cls, root: Path) -> DatasetProtocol:
+        """The protocol of the data under ``root``: :attr:`protocol`, unless the data declares its own (the
+        generic TOML adapter reads it from the root)."""
+        return cls.protocol
+
+    @classmethod
+    def protocol_from_data(cls) -> bool:
+        """Whether :meth:`protocol_for` reads the protocol from the data (then :attr:`protocol` is its default)."""
+        return cls.protocol_for.__func__ is not Dataset.protocol_for.__func__  # type: ignore[attr-defined]
+
+
+#: Every dataset adapter, by name (the ``lfbench.datasets`` entry points fill it).
+DATASETS: Registry[type[Dataset]] = Registry("dataset", Dataset, group=DATASET_GROUP)
+
+
+def get_dataset(name: str) -> type[Dataset]:
+    """The adapter registered as ``name`` (SpecError listing the others otherwise)."""
+    return DATASETS.get(name)
+
+
+def detect_dataset(root: str | Path) -> type[Dataset]:
+    """The one adapter whose layout ``root`` matches; DataError (one line) when none or several do."""
+    root = Path(root)
+    if not root.is_dir():
+        raise DataError("data root not found", root)
+    hits = [name for name in DATASETS.names() if DATASETS.get(name).matches(root)]
+    if not hits:
+        raise DataError(f"no scenes found: no known dataset layout ({', '.join(DATASETS.names()) or 'none installed'}; "
+                        "see `lfbench datasets`)", root)
+    if len(hits) > 1:
+        raise DataError(f"the layout matches several datasets ({', '.join(hits)}): choose one with --dataset NAME",
+                        root)
+    return DATASETS.get(hits[0])
+
+
+def open_dataset(root: str | Path, name: str | None = None) -> tuple[type[Dataset], Benchmark]:
+    """The adapter (``name``, else detected) and the scenes of ``root``. A named adapter whose layout the
+    root does not match is a DataError too (one line)."""
+    root = Path(root)
+    if name is None:
+        dataset = detect_dataset(root)
+    else:
+        try:
+            dataset = get_dataset(name)
+        except SpecError as exc:
+            raise DataError(str(exc)) from None
+        if not root.is_dir():
+            raise DataError("data root not found", root)
+        if not dataset.matches(root):
+            raise DataError(f"not laid out as dataset {name!r} ({dataset.layout})", root)
+    return dataset, dataset.open(root)
+
+
+def method_range_params(disparity_range: tuple[float, float]) -> Callable[[Any, dict[str, Any]], dict[str, float]]:
+    """A ``defaults`` hook for :func:`lfbench.method.registry.create_from_spec`: the dataset's disparity range
+    as ``{"d_min": lo, "d_max": hi}`` for a method that has both parameters when the spec sets neither and the
+    range differs from the method's defaults (so that the label names the range searched, and stays as it
+    was where they agree: HCI's [-4, 4] is the plane sweep's default). A method with an ``interval`` searches
+    a grid from ``d_min``: ``d_max`` is then raised to the first grid point at or above the dataset's maximum
+    (UrbanLF-Syn's [-0.5, 1.6] at the plane sweep's 0.25 px: [-0.5, 1.75]), so that the whole range is searched."""
+    lo, hi = (float(v) for v in disparity_range)
+
+    def defaults(info: Any, params: dict[str, Any]) -> dict[str, float]:
+        keys = {"d_min", "d_max"}
+        if not keys <= set(info.params) or keys & set(params):
+            return {}
+        top = hi
+        if "interval" in info.params:
+            step = float(params.get("interval", info.params["interval"].default))
+            if step > 0:
+                top = round(lo + math.ceil(round((hi - lo) / step, 9)) * step, 9)
+        if (info.params["d_min"].default, info.params["d_max"].default) == (lo, top):
+            return {}
+        return {"d_min": lo, "d_max": top}
+
+    return defaults

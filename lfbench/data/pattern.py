@@ -1,0 +1,251 @@
+"""Scenes whose views are named by a pattern: one folder per scene, one PNG per view, one ground-truth file
+(:class:`ViewLayout`, :class:`PatternScene`). UrbanLF-Syn (lfbench.data.urbanlf) and the generic TOML
+dataset (lfbench.data.generic) are both such layouts.
+
+A pattern names a view by ``{v}`` (angular row) and ``{u}`` (angular column), as lfbench's ``views[v, u]``,
+or by ``{k}`` = v * U + u (row-major); indices start at ``first`` (0 or 1). A scene is checked when it is
+made, without decoding a pixel: every view present, no other file the pattern matches, all views of the
+centre view's size (PNG headers), the ground truth's shape (its header, .npy and PNG). A non-finite
+ground-truth value is found when it is read. Each problem is one DataError naming the file.
+"""
+
+from __future__ import annotations
+
+import functools
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from PIL import Image
+
+from lfbench.data.npyfile import read_npy
+from lfbench.data.pfm import read_pfm
+from lfbench.data.scene import LOWRES, PNGViews, read_png
+from lfbench.utils.errors import DataError
+
+__all__ = ["GT_FORMATS", "ViewLayout", "PatternScene", "png_size"]
+
+GT_FORMATS = ("pfm", "npy", "png16")
+_FIELD = re.compile(r"\{([uvk])\}")
+
+
+@dataclass(frozen=True)
+class ViewLayout:
+    """How a scene folder names its views and ground truth.
+
+    ``pattern``: view file name with ``{v}``/``{u}`` (row, column) or ``{k}`` (row-major index);
+    ``angular``: (V, U) rows and columns of views; ``first``: the first index (0 or 1);
+    ``gt_file``: the centre view's ground-truth disparity file (None: no ground truth);
+    ``gt_format``: 'pfm', 'npy' or 'png16' (16-bit PNG: disparity = value * ``gt_scale`` + ``gt_offset``).
+    """
+
+    pattern: str
+    angular: tuple[int, int]
+    first: int = 0
+    gt_file: str | None = None
+    gt_format: str = "npy"
+    gt_scale: float = 1.0
+    gt_offset: float = 0.0
+
+    def view_name(self, row: int, col: int) -> str:
+        """The file of the view at 0-based angular ``row``, ``col``."""
+        u_count = self.angular[1]
+        return self.pattern.format(v=row + self.first, u=col + self.first, k=row * u_count + col + self.first)
+
+    @property
+    def centre(self) -> tuple[int, int]:
+        """0-based (row, column) of the centre view."""
+        return self.angular[0] // 2, self.angular[1] // 2
+
+    @functools.cached_property
+    def regex(self) -> re.Pattern[str]:
+        """Every file name the pattern could give (any indices)."""
+        parts = _FIELD.split(self.pattern)
+        return re.compile("".join(r"\d+" if i % 2 else re.escape(p) for i, p in enumerate(parts)) + "$")
+
+    def names(self) -> list[str]:
+        """Every view's file name, row by row."""
+        v, u = self.angular
+        return [self.view_name(r, c) for r in range(v) for c in range(u)]
+
+
+def png_size(path: Path, what: str = "view image") -> tuple[int, int]:
+    """(H, W) of a PNG from its header; DataError naming the file when it is not a readable PNG."""
+    try:
+        with Image.open(path) as img:
+            w, h = img.size
+            if img.format != "PNG":
+                raise DataError(f"{what} is a {img.format} file, expected a PNG", path)
+    except FileNotFoundError:
+        raise DataError(f"missing {what}", path) from None
+    except (OSError, ValueError, SyntaxError) as exc:
+        raise DataError(f"cannot read {what}: {' '.join(str(exc).split())[:120]}", path) from None
+    return h, w
+
+
+def _npy_header(path: Path) -> tuple[tuple[int, ...], np.dtype]:
+    try:
+        with open(path, "rb") as f:
+            version = np.lib.format.read_magic(f)
+            read = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+            shape, _, dtype = read(f, max_header_size=10000)
+    except (ValueError, OSError, EOFError, SyntaxError, TypeError):
+        raise DataError("cannot read .npy: bad magic or header", path) from None
+    return tuple(shape), dtype
+
+
+class PatternScene(PNGViews):
+    """One scene folder of a :class:`ViewLayout`, checked when made, its pixels read when asked for."""
+
+    layout: ViewLayout
+
+    def __init__(self, path: str | Path, layout: ViewLayout, category: str = "other") -> None:
+        self.path = Path(path)
+        if not self.path.is_dir():
+            raise DataError("scene folder not found", self.path)
+        self.layout = layout
+        self.name = self.path.name
+        self.category = category
+        self.params = None  # no camera parameters: the metrics that need them do not apply
+        self.spatial_size = self._check_views()
+        self._check_gt_header()
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({self.category}/{self.name})"
+
+    def __reduce__(self):
+        """Pickled as its folder, layout and category, reopened (and checked again) where it is unpickled: a
+        scoring worker (lfbench.runs.pool) gets the scene, never its loaded views."""
+        return _reopen, (type(self), self.path, self.layout, self.category)
+
+    @property
+    def angular_size(self) -> tuple[int, int]:
+        return self.layout.angular
+
+    def view_file(self, row: int, col: int) -> Path:
+        return self.path / self.layout.view_name(row, col)
+
+    def _check_views(self) -> tuple[int, int]:
+        """(H, W) of the views; DataError for a missing, unexpected or differently sized view."""
+        names = self.layout.names()
+        expected = set(names)
+        present = {p.name for p in self.path.iterdir() if self.layout.regex.match(p.name)}
+        extra = sorted(present - expected)
+        if extra:
+            raise DataError(f"unexpected view {extra[0]} (the layout has {names[0]} .. {names[-1]})",
+                            self.path / extra[0])
+        missing = [n for n in names if n not in present]
+        if missing:
+            more = f" and {len(missing) - 3} more" if len(missing) > 3 else ""
+            raise DataError(f"missing {len(missing)} of {len(names)} views: {', '.join(missing[:3])}{more}",
+                            self.path)
+        centre = self.view_file(*self.layout.centre)
+        size = png_size(centre)
+        for name in names:
+            got = png_size(self.path / name)
+            if got != size:
+                raise DataError(f"view is {got[1]}x{got[0]}, the centre view {centre.name} is {size[1]}x{size[0]}",
+                                self.path / name)
+        return size
+
+    @property
+    def gt_path(self) -> Path | None:
+        return self.path / self.layout.gt_file if self.layout.gt_file else None
+
+    def _gt_problem(self, shape: tuple[int, ...], dtype: np.dtype) -> str | None:
+        h, w = self.spatial_size
+        if shape != (h, w):
+            return f"ground truth has shape {shape}, expected ({h}, {w}) (the views' H, W)"
+        if dtype.kind not in "fiu":
+            return f"ground truth is {dtype}, expected numbers (disparities)"
+        return None
+
+    def _check_gt_header(self) -> None:
+        """The ground truth's shape (and dtype) from its header, where the format has a cheap one."""
+        path = self.gt_path
+        if path is None or not path.is_file():
+            return
+        fmt = self.layout.gt_format
+        if fmt == "npy":
+            problem = self._gt_problem(*_npy_header(path))
+        elif fmt == "png16":
+            problem = self._gt_problem(png_size(path, "ground truth"), np.dtype(np.uint16))
+        else:
+            return  # PFM: read_pfm checks the shape from the header before reading the data
+        if problem:
+            raise DataError(problem, path)
+
+    def has_gt(self, resolution: str = LOWRES) -> bool:
+        return resolution == LOWRES and self.gt_path is not None and self.gt_path.is_file()
+
+    @functools.cached_property
+    def _gt(self) -> np.ndarray | None:
+        path = self.gt_path
+        if path is None or not path.is_file():
+            return None
+        fmt, (h, w) = self.layout.gt_format, self.spatial_size
+        if fmt == "npy":
+            gt = read_npy(path, check=self._gt_problem).astype(np.float64)
+        elif fmt == "pfm":
+            gt = read_pfm(path, shape=(h, w), what="ground truth")
+            if gt.ndim != 2:
+                raise DataError("ground truth is a 3-channel PF map, expected a gray Pf map", path)
+        else:
+            raw = read_png(path, "ground truth", size=(h, w))
+            if raw.dtype != np.uint16 or raw.ndim != 2:
+                raise DataError("ground truth is not a 16-bit gray PNG", path)
+            gt = raw.astype(np.float64) * self.layout.gt_scale + self.layout.gt_offset
+        bad = int(np.count_nonzero(~np.isfinite(gt)))
+        if bad:
+            raise DataError(f"ground truth has {bad} non-finite values of {gt.size} (NaN or inf): it cannot be "
+                            "scored against", path)
+        return np.asarray(gt, dtype=np.float32)
+
+    def gt_disparity(self, resolution: str = LOWRES) -> np.ndarray | None:
+        """The centre view's disparity (H, W) float32 px per view step, or None."""
+        return self._gt if resolution == LOWRES else None
+
+    def mask_names(self, resolution: str = LOWRES) -> list[str]:
+        return []
+
+    def mask(self, name: str, resolution: str = LOWRES) -> np.ndarray:
+        raise DataError(f"this layout has no evaluation mask {name!r}", self.path)
+
+    def valid_mask(self) -> np.ndarray | None:
+        return None
+
+
+def _reopen(cls: type[PatternScene], path: Path, layout: ViewLayout, category: str) -> PatternScene:
+    scene = cls.__new__(cls)
+    PatternScene.__init__(scene, path, layout, category)
+    return scene
+
+
+def sample_order(path: Path) -> tuple[int, str]:
+    """Folders in natural order: Image2 before Image10."""
+    digits = re.sub(r"\D", "", path.name)
+    return (int(digits) if digits else -1, path.name)
+
+
+def find_scene_dirs(root: Path, is_scene) -> list[tuple[Path, str]]:
+    """(folder, category) of the scene folders under ``root``: ``root`` itself, its children (``root`` a
+    category folder) or its grandchildren (ROOT/<category>/<scene>), in natural order."""
+    if is_scene(root):
+        return [(root, root.parent.name or "other")]
+    found = []
+    for child in sorted((p for p in root.iterdir() if p.is_dir()), key=sample_order):
+        if is_scene(child):
+            found.append((child, root.name or "other"))
+            continue
+        found += [(g, child.name) for g in sorted((p for p in child.iterdir() if p.is_dir() and is_scene(p)),
+                                                   key=sample_order)]
+    return found
+
+
+def matches_at_depth(root: Path, is_scene) -> bool:
+    """Whether ``root``, a child or a grandchild of it is a scene folder (by ``is_scene``)."""
+    if is_scene(root):
+        return True
+    children = [p for p in root.iterdir() if p.is_dir()]
+    return any(is_scene(c) for c in children) or any(is_scene(g) for c in children for g in c.iterdir() if g.is_dir())

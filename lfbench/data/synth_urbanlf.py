@@ -1,0 +1,75 @@
+"""Synthetic scenes written in the UrbanLF-Syn layout (``lfbench synth --layout urbanlf-syn``), with exact
+ground truth, for tests and demos of non-square light fields.
+
+Each scene is :func:`lfbench.data.synth.generate_scene` rendered square at max(W, H) px and cropped to the
+centre H x W px: the same window in every view, so the disparity between views is unchanged and the
+centre view's ground truth stays exact. Written as ``OUT/<split>/Image<k>/`` with 9x9 views ``u_v.png``
+(u = angular row, v = column, 1..9), the centre view's ``5_5_disparity.npy`` and ``5_5_depth.npy``
+(float32, px per view step and m); the other views' disparity files of the released data are not written
+(lfbench scores the centre view). The generator's disparities span about [-2.2, 2.3] px, wider than
+UrbanLF-Syn's [-0.47, 1.55]: a demo's method should search the wider range (``planesweep:d_min=-3,d_max=3``).
+"""
+
+from __future__ import annotations
+
+import io
+import shutil
+from pathlib import Path
+
+import numpy as np
+
+from lfbench.data.synth import _png_bytes, check_args, generate_scene, quantize, scene_seed
+from lfbench.data.urbanlf import ANGULAR, gt_name, view_name
+from lfbench.utils.atomic import fresh_dir, replace_dir, write_bytes
+from lfbench.utils.errors import DataError, SpecError
+
+__all__ = ["write_urbanlf", "write_urbanlf_scene"]
+
+
+def _npy_bytes(array: np.ndarray) -> bytes:
+    buf = io.BytesIO()
+    np.save(buf, np.ascontiguousarray(array, dtype=np.float32), allow_pickle=False)
+    return buf.getvalue()
+
+
+def write_urbanlf_scene(folder: str | Path, seed: int, width: int, height: int) -> Path:
+    """Generate one 9x9 scene of ``width`` x ``height`` px and write it as the sample folder ``folder``
+    (written beside it, renamed into place when whole)."""
+    folder = Path(folder)
+    size = max(width, height)
+    scene = generate_scene(seed, size=size, angular=ANGULAR, name=folder.name, category=folder.parent.name)
+    y0, x0 = (size - height) // 2, (size - width) // 2
+    crop = (slice(y0, y0 + height), slice(x0, x0 + width))
+    q = quantize(scene.views[:, :, crop[0], crop[1]])
+    folder.parent.mkdir(parents=True, exist_ok=True)
+    tmp = fresh_dir(folder.parent, f".{folder.name}.", ".tmp")
+    try:
+        for r in range(ANGULAR):
+            for c in range(ANGULAR):
+                write_bytes(tmp / view_name(r + 1, c + 1), _png_bytes(q[r, c]))
+        write_bytes(tmp / gt_name(), _npy_bytes(scene.disparity[crop]))
+        write_bytes(tmp / "5_5_depth.npy", _npy_bytes(scene.depth[crop]))
+        replace_dir(tmp, folder)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return folder
+
+
+def write_urbanlf(out: str | Path, *, seed: int = 0, width: int = 640, height: int = 480, scenes: int = 2,
+                  split: str = "val", force: bool = False) -> list[Path]:
+    """Write ``scenes`` scenes as ``OUT/<split>/Image<i>/`` (i = 1..K) and return their folders. An existing
+    sample folder is an error unless ``force`` (all are checked before anything is generated)."""
+    for side in (width, height):
+        check_args(side, ANGULAR)
+    check_args(max(width, height), ANGULAR)
+    if not split or split in (".", "..") or "/" in split or "\\" in split:
+        raise SpecError(f"invalid split name {split!r}")
+    if int(scenes) != scenes or scenes < 1:
+        raise SpecError(f"scenes must be a positive integer, got {scenes}")
+    targets = [Path(out) / split / f"Image{i + 1}" for i in range(scenes)]
+    if not force:
+        for t in targets:
+            if t.exists():
+                raise DataError("sample folder already exists (use --force to overwrite)", t)
+    return [write_urbanlf_scene(t, scene_seed(seed, i), width, height) for i, t in enumerate(targets)]

@@ -1,0 +1,83 @@
+"""UrbanLF-Syn (the LFNAT 2023 depth challenge's synthetic urban set) as a dataset adapter (``urbanlf-syn``).
+
+Layout as released: ``ROOT/<split>/ImageN/`` for the splits train / val / test, one folder per sample,
+views ``u_v.png`` with u, v = 1..9 (``5_5.png`` the centre view), per-view disparity ``u_v_disparity.npy``
+(and depth / label files beside them, not read); the test split comes without disparity. ROOT may also be
+one split folder or one sample folder. lfbench reads ``u_v.png`` as angular row u, column v (top to
+bottom, left to right) and scores the centre view's ``5_5_disparity.npy`` (px per view step, read as the
+HCI sign: positive = nearer than the focus plane). docs/datasets.md gives what public sources say about
+these conventions and where they are silent.
+
+Protocol (the challenge's): centre view, 15 px border, BadPix 0.01 / 0.03 / 0.07 and MSE x100, 640x480
+views, disparity searched in [-0.5, 1.6] px (the released range is [-0.47, 1.55]).
+
+Every scene is checked when it is opened as :class:`lfbench.data.pattern.PatternScene` checks a scene.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from lfbench.data.dataset import Dataset, DatasetProtocol
+from lfbench.data.pattern import PatternScene, ViewLayout, find_scene_dirs, matches_at_depth
+from lfbench.data.scene import Benchmark, check_scene_names
+from lfbench.utils.errors import DataError
+
+__all__ = ["URBANLF_LAYOUT", "URBANLF_PROTOCOL", "URBANLF_SPLITS", "UrbanLFScene", "UrbanLFSyn", "view_name",
+           "gt_name"]
+
+ANGULAR = 9
+CENTRE = 5  # 1-based index of the centre view along each axis
+URBANLF_SPLITS = ("train", "val", "test")
+
+
+def view_name(row: int, col: int) -> str:
+    """The file of the view at 1-based angular row ``row``, column ``col``: ``'<row>_<col>.png'``."""
+    return f"{row}_{col}.png"
+
+
+def gt_name(row: int = CENTRE, col: int = CENTRE) -> str:
+    """The disparity file of a view (default the centre's): ``'<row>_<col>_disparity.npy'``."""
+    return f"{row}_{col}_disparity.npy"
+
+
+#: ``u_v.png`` read as angular row u, column v (lfbench's ``{v}_{u}`` with 1-based indices).
+URBANLF_LAYOUT = ViewLayout(pattern="{v}_{u}.png", angular=(ANGULAR, ANGULAR), first=1, gt_file=gt_name(),
+                            gt_format="npy")
+
+URBANLF_PROTOCOL = DatasetProtocol(
+    border_px=15, metrics=("badpix_0.01", "badpix_0.03", "badpix_0.07", "mse_x100"),
+    disparity_range=(-0.5, 1.6), spatial_size=(480, 640), angular_size=(ANGULAR, ANGULAR),
+    reference_view="centre view 5_5.png")
+
+
+class UrbanLFScene(PatternScene):
+    """One UrbanLF-Syn sample folder (``ImageN/``): ``rgb_views()[r, c]`` is ``<r+1>_<c+1>.png``."""
+
+    def __init__(self, path: str | Path, category: str = "other") -> None:
+        super().__init__(path, URBANLF_LAYOUT, category)
+
+
+def _is_sample(folder: Path) -> bool:
+    return (folder / view_name(CENTRE, CENTRE)).is_file()
+
+
+class UrbanLFSyn(Dataset):
+    """UrbanLF-Syn (Sheng et al., TCSVT 2022), the LFNAT 2023 light-field depth challenge's data."""
+
+    name = "urbanlf-syn"
+    summary = "UrbanLF-Syn: ROOT/<train|val|test>/ImageN/ with u_v.png views and u_v_disparity.npy"
+    layout = "ROOT/<split>/ImageN/ with 1_1.png .. 9_9.png and 5_5_disparity.npy"
+    protocol = URBANLF_PROTOCOL
+
+    @classmethod
+    def matches(cls, root: Path) -> bool:
+        return matches_at_depth(root, _is_sample)
+
+    @classmethod
+    def open(cls, root: Path) -> Benchmark:
+        root = Path(root)
+        scenes = [UrbanLFScene(folder, category) for folder, category in find_scene_dirs(root, _is_sample)]
+        if not scenes:
+            raise DataError("no UrbanLF-Syn samples found (expected <root>/<split>/ImageN/5_5.png)", root)
+        return Benchmark(root=root, scenes=tuple(check_scene_names(scenes)), splits={})  # type: ignore[arg-type]

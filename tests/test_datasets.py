@@ -1,0 +1,267 @@
+"""The dataset seam (issue 30): adapters in the entry-point group ``lfbench.datasets``, layout detection,
+UrbanLF-Syn read and scored by its protocol on non-square views, the plane sweep's range from the dataset,
+and bad input in the UrbanLF-Syn layout (one line naming the file, exit 2, nothing written)."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from importlib import metadata
+from pathlib import Path
+
+import numpy as np
+import pytest
+from helpers import assert_one_error_line, run_cli
+from PIL import Image
+
+from lfbench.data.dataset import DATASETS, detect_dataset, method_range_params, open_dataset
+from lfbench.data.hci import HCIDataset
+from lfbench.data.synth import generate_scene, quantize, write_benchmark
+from lfbench.data.synth_urbanlf import write_urbanlf
+from lfbench.data.urbanlf import UrbanLFScene, UrbanLFSyn
+from lfbench.method.registry import create_from_spec
+from lfbench.utils.errors import DataError
+
+W, H = 48, 32  # non-square, small: 81 views render in well under a second
+
+
+@pytest.fixture(scope="module")
+def urban_root(tmp_path_factory) -> Path:
+    root = tmp_path_factory.mktemp("urban")
+    write_urbanlf(root, seed=3, width=W, height=H, scenes=2, split="val")
+    return root
+
+
+@pytest.fixture()
+def urban_copy(urban_root: Path, tmp_path: Path) -> Path:
+    """A writable copy of one sample as ROOT/val/Image1 (to be broken by a test)."""
+    dst = tmp_path / "root" / "val" / "Image1"
+    shutil.copytree(urban_root / "val" / "Image1", dst)
+    return dst
+
+
+def test_builtin_datasets_come_through_the_entry_point_group():
+    eps = {ep.name: ep.value for ep in metadata.entry_points(group="lfbench.datasets")}
+    assert eps == {"hci": "lfbench.data.hci:HCIDataset", "urbanlf-syn": "lfbench.data.urbanlf:UrbanLFSyn",
+                   "toml": "lfbench.data.generic:GenericDataset"}
+    assert DATASETS.names() == ["hci", "toml", "urbanlf-syn"]
+    assert DATASETS.get("hci") is HCIDataset and DATASETS.get("urbanlf-syn") is UrbanLFSyn
+
+
+def test_datasets_command_lists_the_protocols(capsys):
+    rc, out, err = run_cli(capsys, "datasets")
+    assert rc == 0, err
+    assert "urbanlf-syn: UrbanLF-Syn" in out and "hci: HCI 4D" in out
+    assert "views: 9x9, 640x480 px (W x H); scored: centre view 5_5.png, 15 px border" in out
+    assert "disparity range: [-0.5, 1.6] px per view step" in out
+    assert "disparity range: [-4, 4] px per view step" in out
+    assert "metrics: badpix_0.01, badpix_0.03, badpix_0.07, mse_x100\n" in out
+    assert "high-resolution scenes: backgammon, dots, stripes" in out
+
+
+def test_protocols_feed_the_scoring_rules():
+    hci = HCIDataset.protocol.scoring_rules()
+    assert (hci.border_px, hci.highres_scenes, hci.allow_highres) == (15, {"backgammon", "dots", "stripes"}, True)
+    from lfbench.scoring.rules import ScoringRules
+    assert hci == ScoringRules()  # HCI's protocol is the benchmark's default rules, field for field
+    urban = UrbanLFSyn.protocol.scoring_rules(toolkit=True)
+    assert (urban.border_px, urban.highres_scenes, urban.allow_highres, urban.toolkit) == (15, frozenset(), False, True)
+
+
+def test_synth_urbanlf_layout_is_exact_and_non_square(urban_root: Path):
+    sample = urban_root / "val" / "Image1"
+    views = sorted(p.name for p in sample.glob("*_*.png"))
+    assert len(views) == 81 and "1_1.png" in views and "9_9.png" in views
+    assert Image.open(sample / "5_5.png").size == (W, H)
+    gt = np.load(sample / "5_5_disparity.npy")
+    assert gt.shape == (H, W) and gt.dtype == np.float32
+    # the written files are the generator's square scene cropped to the centre H x W in every view
+    from lfbench.data.synth import scene_seed
+    square = generate_scene(scene_seed(3, 0), size=W, angular=9)
+    y0 = (W - H) // 2
+    np.testing.assert_array_equal(gt, square.disparity[y0:y0 + H])
+    np.testing.assert_array_equal(np.asarray(Image.open(sample / "2_7.png")), quantize(square.views[1, 6, y0:y0 + H]))
+
+
+def test_urbanlf_scene_reads_rows_and_columns(urban_root: Path):
+    scene = UrbanLFScene(urban_root / "val" / "Image1", category="val")
+    assert scene.angular_size == (9, 9) and scene.spatial_size == (H, W)
+    views = scene.gray_views()
+    assert views.shape == (9, 9, H, W)
+    row3_col8 = np.asarray(Image.open(urban_root / "val" / "Image1" / "3_8.png").convert("RGB"), np.float32) / 255
+    np.testing.assert_allclose(scene.rgb_views()[2, 7], row3_col8)
+    assert scene.center_view().shape == (H, W, 3)
+    assert scene.has_gt() and scene.gt_disparity().shape == (H, W) and scene.mask_names() == []
+
+
+@pytest.mark.parametrize("level", ["root", "split", "sample"])
+def test_detection_at_each_level(urban_root: Path, level: str):
+    root = {"root": urban_root, "split": urban_root / "val", "sample": urban_root / "val" / "Image2"}[level]
+    assert detect_dataset(root) is UrbanLFSyn
+    dataset, bench = open_dataset(root)
+    assert dataset is UrbanLFSyn
+    assert bench.names == (["Image1", "Image2"] if level != "sample" else ["Image2"])
+    assert {s.category for s in bench} == {"val"}
+    assert [s.name for s in bench.select(["val"])] == bench.names  # a split is a category here
+
+
+def test_hci_layout_detected(tmp_path: Path):
+    write_benchmark(tmp_path, seed=0, size=16, scenes=1, angular=3)
+    assert detect_dataset(tmp_path) is HCIDataset
+
+
+def test_root_of_no_layout_or_several_is_one_line(tmp_path: Path, urban_root: Path, capsys):
+    (tmp_path / "empty").mkdir()
+    rc, _, err = run_cli(capsys, "evaluate", "--data", tmp_path / "empty", "--method", "gt", "--out", tmp_path / "o")
+    assert_one_error_line(rc, err, "no known dataset layout", "empty")
+    both = tmp_path / "both"
+    shutil.copytree(urban_root / "val", both / "val")
+    write_benchmark(both, seed=0, size=16, scenes=1, angular=3)
+    rc, _, err = run_cli(capsys, "evaluate", "--data", both, "--method", "gt", "--out", tmp_path / "o")
+    assert_one_error_line(rc, err, "matches several datasets (hci, urbanlf-syn)", "--dataset")
+    rc, _, err = run_cli(capsys, "evaluate", "--data", urban_root, "--dataset", "hci", "--method", "gt",
+                         "--out", tmp_path / "o")
+    assert_one_error_line(rc, err, "not laid out as dataset 'hci'")
+    rc, _, err = run_cli(capsys, "evaluate", "--data", urban_root, "--dataset", "nope", "--method", "gt",
+                         "--out", tmp_path / "o")
+    assert_one_error_line(rc, err, "Unknown dataset 'nope'", "hci, toml, urbanlf-syn")
+    assert not (tmp_path / "o").exists()
+    # --dataset resolves the ambiguity
+    rc, _, err = run_cli(capsys, "evaluate", "--data", both, "--dataset", "urbanlf-syn", "--method", "gt",
+                         "--out", tmp_path / "o", "--no-progress")
+    assert rc == 0, err
+
+
+def test_evaluate_scores_urbanlf_by_its_protocol(urban_root: Path, tmp_path: Path, capsys):
+    out = tmp_path / "out"
+    rc, _, err = run_cli(capsys, "evaluate", "--data", urban_root, "--method", "gt", "--method", "constant:value=0.5",
+                         "--out", out, "--no-progress", "--save-maps", "--figures", "--html")
+    assert rc == 0, err
+    data = json.loads((out / "results.json").read_text())
+    assert data["meta"]["dataset"] == "urbanlf-syn"
+    assert data["meta"]["scoring"]["border_px"] == 15 and data["meta"]["scoring"]["highres_scenes"] == []
+    recs = {(r["method"], r["scene"], r["metric"]): r for r in data["records"]}
+    assert {r["metric"] for r in data["records"]} == {"badpix_0.01", "badpix_0.03", "badpix_0.07", "mse_x100"}
+    assert {r["resolution"] for r in data["records"]} == {"lowres"}
+    for scene in ("Image1", "Image2"):
+        assert recs[("gt", scene, "mse_x100")]["value"] == 0.0
+        assert recs[("gt", scene, "badpix_0.07")]["value"] == 0.0
+        gt = np.load(urban_root / "val" / scene / "5_5_disparity.npy")[15:-15, 15:-15]  # 2 x 18 px scored
+        err_ = np.abs(gt.astype(np.float64) - 0.5)
+        assert recs[("constant:value=0.5", scene, "mse_x100")]["value"] == pytest.approx(100 * np.mean(err_**2),
+                                                                                          rel=1e-5)
+        assert recs[("constant:value=0.5", scene, "badpix_0.07")]["value"] == pytest.approx(
+            100 * np.mean(err_ > 0.07), abs=1e-9)
+    saved = out / "maps" / "constant_value_0.5" / "disp_maps"
+    maps = sorted(saved.glob("*.pfm")) if saved.is_dir() else sorted((out / "maps").rglob("*.pfm"))
+    from lfbench.data.pfm import read_pfm
+    assert maps and all(read_pfm(p).shape == (H, W) for p in maps)
+    assert (out / "html" / "index.html").is_file()
+    pngs = list((out / "figures").rglob("*.png"))
+    assert pngs
+
+
+def test_planesweep_range_follows_the_dataset():
+    urban = method_range_params(UrbanLFSyn.protocol.disparity_range)
+    hci = method_range_params(HCIDataset.protocol.disparity_range)
+    m = create_from_spec("planesweep", {"device": "cpu"}, urban)  # the 0.25 px grid from -0.5 covering 1.6
+    assert m.label == "planesweep:d_min=-0.5,d_max=1.75"
+    assert float(m.disparities[0]) == pytest.approx(-0.5) and float(m.disparities[-1]) == pytest.approx(1.75)
+    fine = create_from_spec("planesweep:interval=0.1", {"device": "cpu"}, urban)  # the paper's interval
+    assert fine.label == "planesweep:d_min=-0.5,d_max=1.6,interval=0.1"
+    assert len(fine.disparities) == 22 and float(fine.disparities[-1]) == pytest.approx(1.6)
+    assert create_from_spec("planesweep", {"device": "cpu"}, hci).label == "planesweep"  # HCI labels unchanged
+    assert create_from_spec("planesweep:d_max=3", None, urban).label == "planesweep:d_max=3.0"  # the spec wins
+    assert create_from_spec("constant", None, urban).label == "constant"  # no range parameters: untouched
+
+
+# ------------------------------------------------------------------------------------------- bad input
+
+
+def _evaluate_fails(capsys, root: Path, tmp_path: Path, *fragments: str) -> None:
+    out = tmp_path / "out"
+    rc, _, err = run_cli(capsys, "evaluate", "--data", root, "--method", "gt", "--out", out, "--no-progress")
+    assert_one_error_line(rc, err, *fragments)
+    assert not out.exists()
+
+
+def test_missing_view(urban_copy: Path, tmp_path: Path, capsys):
+    (urban_copy / "3_4.png").unlink()
+    (urban_copy / "9_9.png").unlink()
+    _evaluate_fails(capsys, urban_copy.parents[1], tmp_path, "missing 2 of 81 views: 3_4.png, 9_9.png", "Image1")
+
+
+def test_extra_view(urban_copy: Path, tmp_path: Path, capsys):
+    shutil.copy(urban_copy / "1_1.png", urban_copy / "10_1.png")
+    _evaluate_fails(capsys, urban_copy.parents[1], tmp_path, "unexpected view 10_1.png", "Image1/10_1.png")
+
+
+def test_views_of_mixed_sizes(urban_copy: Path, tmp_path: Path, capsys):
+    Image.new("RGB", (W, H + 2)).save(urban_copy / "7_2.png")
+    _evaluate_fails(capsys, urban_copy.parents[1], tmp_path, f"view is {W}x{H + 2}", f"5_5.png is {W}x{H}",
+                    "7_2.png")
+
+
+def test_ground_truth_of_the_wrong_shape(urban_copy: Path, tmp_path: Path, capsys):
+    np.save(urban_copy / "5_5_disparity.npy", np.zeros((W, H), np.float32))
+    _evaluate_fails(capsys, urban_copy.parents[1], tmp_path, f"shape ({W}, {H}), expected ({H}, {W})",
+                    "5_5_disparity.npy")
+
+
+def test_ground_truth_not_finite(urban_copy: Path, tmp_path: Path, capsys):
+    gt = np.load(urban_copy / "5_5_disparity.npy")
+    gt[4, 5] = np.nan
+    gt[6, 7] = np.inf
+    np.save(urban_copy / "5_5_disparity.npy", gt)
+    _evaluate_fails(capsys, urban_copy.parents[1], tmp_path, "2 non-finite values", "5_5_disparity.npy")
+
+
+def test_ground_truth_not_a_npy(urban_copy: Path):
+    (urban_copy / "5_5_disparity.npy").write_bytes(b"not an array")
+    with pytest.raises(DataError, match="bad magic or header"):
+        UrbanLFScene(urban_copy)
+
+
+def test_test_split_without_ground_truth_is_not_scored(urban_copy: Path, tmp_path: Path, capsys):
+    (urban_copy / "5_5_disparity.npy").unlink()
+    scene = UrbanLFScene(urban_copy)
+    assert not scene.has_gt() and scene.gt_disparity() is None
+    _evaluate_fails(capsys, urban_copy.parents[1], tmp_path, "none of the selected scenes has ground truth")
+
+
+def test_predict_reads_an_urbanlf_sample_folder(urban_root: Path, tmp_path: Path, capsys):
+    out = tmp_path / "gt.npy"
+    rc, _, err = run_cli(capsys, "predict", "--method", "gt", "--input", urban_root / "val" / "Image1", "--out", out)
+    assert rc == 0, err
+    np.testing.assert_array_equal(np.load(out), np.load(urban_root / "val" / "Image1" / "5_5_disparity.npy"))
+
+
+def test_synth_command_writes_the_urbanlf_layout(tmp_path: Path, capsys):
+    rc, out, err = run_cli(capsys, "synth", "--layout", "urbanlf-syn", "--size", "40x24", "--scenes", "1",
+                           "--out", tmp_path / "u", "--seed", "3")
+    assert rc == 0, err
+    assert "wrote 1 UrbanLF-Syn sample(s) of 40x24 px, 9x9 views" in out
+    sample = tmp_path / "u" / "val" / "Image1"
+    assert Image.open(sample / "9_1.png").size == (40, 24) and np.load(sample / "5_5_disparity.npy").shape == (24, 40)
+    assert detect_dataset(tmp_path / "u") is UrbanLFSyn
+    rc, _, err = run_cli(capsys, "synth", "--size", "40x24", "--out", tmp_path / "h")
+    assert_one_error_line(rc, err, "--size 40x24: the HCI layout has square views")
+    assert not (tmp_path / "h").exists()
+
+
+def test_jobs_score_urbanlf_scenes_in_workers_with_the_same_numbers(urban_root: Path, tmp_path: Path, capsys):
+    import pickle
+
+    scene = UrbanLFScene(urban_root / "val" / "Image1", category="val")
+    scene.gray_views()  # loaded views do not travel: the scene pickles as its folder and layout
+    again = pickle.loads(pickle.dumps(scene))
+    assert len(pickle.dumps(scene)) < 2000 and "_rgb" not in again.__dict__
+    assert (again.path, again.category, again.spatial_size, type(again)) == (scene.path, "val", (H, W), UrbanLFScene)
+    runs = {}
+    for jobs in ("1", "2"):
+        out = tmp_path / f"j{jobs}"
+        rc, _, err = run_cli(capsys, "evaluate", "--data", urban_root, "--method", "constant:value=0.25",
+                             "--method", "gt", "--jobs", jobs, "--out", out, "--no-progress")
+        assert rc == 0, err
+        runs[jobs] = json.loads((out / "results.json").read_text())["records"]
+    assert runs["1"] == runs["2"] and len(runs["1"]) == 2 * 2 * 4
