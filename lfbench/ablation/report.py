@@ -466,13 +466,17 @@ def report_writers(spec: AblationSpec, markers: Sequence[dict[str, Any]], result
 
 
 def _tables_i_ii(spec: AblationSpec, results: Results, paper: PaperTables | None) -> Tables:
-    """Tables I/II of every cell and method, with the paper's beside them when it reports an evaluation scene."""
-    caption = caption_lines(spec, "Tables I/II")
+    """Tables I/II of every cell and method, with the paper's beside them when it reports an evaluation scene.
+    Only the tables beside a paper are called its "Tables I/II" (a spec with ``table = "none"`` and no
+    paper's numbers names no paper's tables)."""
+    caption = caption_lines(spec, "every cell and method, per scene (table_per_scene) and averaged over the scenes "
+                                  "(table_average)")
     covered = paper is not None and any(s in paper.scenes for s in results.scenes)
     if not covered:
         return Tables(caption=caption)
     note = [paper.reference.benchmark_note] if paper.reference is not None else []
-    return Tables(caption=caption, paper=paper, paper_methods=spec.paper_methods or (), paper_caption=[*caption, *note])
+    return Tables(caption=caption, paper=paper, paper_methods=spec.paper_methods or (),
+                  paper_caption=[*caption_lines(spec, "Tables I/II beside the paper's"), *note])
 
 
 def write_report(spec: AblationSpec, out: str | Path, results: Results, markers: Sequence[dict[str, Any]], *,

@@ -15,8 +15,10 @@ HELP = "score methods on HCI scenes (results.json, results.csv, tables)"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--data", required=True, type=Path, metavar="ROOT",
-                   help="data root laid out as ROOT/<category>/<scene>/ (HCI layout)")
+    p.add_argument("--data", required=True, type=Path, action="append", metavar="ROOT",
+                   help="data root laid out as ROOT/<category>/<scene>/ (HCI layout); repeat to score the scenes of "
+                        "several roots into one results file (scenes keep their names: two selected scenes of one "
+                        "name are refused, select one by category with --scenes)")
     p.add_argument("--method", required=True, action="append", metavar="SPEC",
                    help="method spec name[:key=value,...]; repeat for several (see `lfbench methods`). Results "
                         "name it by its spec, a weights file by its content (weights=sha256:...), so that they "
@@ -77,16 +79,19 @@ def run(args: argparse.Namespace) -> int:
         methods = [m.with_label(label) for m, label in zip(methods, args.label, strict=True)]
     if args.html:
         check_site_dir(args.out / SITE_DIR)
-    scenes = Benchmark.discover(args.data).select([s for s in args.scenes.split(",") if s.strip()])
+    scenes = Benchmark.discover_all(args.data).select([s for s in args.scenes.split(",") if s.strip()])
     scenes = [s for s in scenes if s.has_gt()]
     if not scenes:
-        raise DataError("none of the selected scenes has ground truth (gt_disp_lowres.pfm)", args.data)
+        raise DataError("none of the selected scenes has ground truth (gt_disp_lowres.pfm)",
+                        ", ".join(map(str, args.data)))
     rules = ScoringRules(toolkit=args.toolkit_nonfinite, allow_highres=not args.lowres_only)
     writers = [*([w.SceneFigures()] if args.figures else []), *([w.Maps()] if args.save_maps or args.html else []),
                w.Tables(),
                *([w.BootstrapCIs(w.CIOptions(resamples=args.ci_resamples, block=args.ci_block))] if args.ci else []),
                *([w.UncertaintyRatings()] if args.uncertainty else []), *([w.Site()] if args.html else [])]
-    meta = {"data_root": str(args.data), "methods": {m.label: m.provenance() for m in methods}}
+    meta = {"data_root": str(args.data[0]), "methods": {m.label: m.provenance() for m in methods}}
+    if len(args.data) > 1:  # readers take every root from here (Results.data_roots); data_root: the first
+        meta["data_roots"] = [str(r) for r in args.data]
     results = evaluate_to_folder(methods, scenes, args.out, rules=rules, all_metrics=args.all_metrics, writers=writers,
                                  meta=meta, progress=not args.no_progress, jobs=args.jobs)
     if args.out / "table_uncertainty.md" in results.files:

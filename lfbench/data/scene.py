@@ -307,10 +307,35 @@ class Benchmark:
     """The scenes under a data root laid out as ROOT/<category>/<scene>/parameters.cfg.
 
     Category folders other than the four HCI ones are kept under their own name ('other' kind).
+    ``others``: further roots whose scenes this one holds too (:meth:`discover_all`).
     """
 
     root: Path
     scenes: tuple[Scene, ...]
+    others: tuple[Path, ...] = ()
+
+    @classmethod
+    def discover_all(cls, roots: Iterable[str | Path]) -> Benchmark:
+        """The scenes of several data roots as one benchmark, in the order of ``roots``. Scenes keep their
+        own names (results key a scene by its name): two selected scenes of one name in different roots are
+        refused by :meth:`select` and :meth:`named` (DataError naming both folders, :func:`check_scene_names`),
+        never renamed; a root given twice is refused here."""
+        roots = [Path(r) for r in roots]
+        if not roots:
+            raise DataError("no data root given")
+        seen: dict[Path, Path] = {}
+        for root in roots:
+            key = root.resolve()
+            if key in seen:
+                raise DataError(f"data root given twice (also as {seen[key]})", root)
+            seen[key] = root
+        scenes = tuple(s for root in roots for s in cls.discover(root).scenes)
+        return cls(root=roots[0], scenes=scenes, others=tuple(roots[1:]))
+
+    @property
+    def roots(self) -> tuple[Path, ...]:
+        """Every data root this benchmark's scenes come from."""
+        return (self.root, *self.others)
 
     @classmethod
     def discover(cls, root: str | Path) -> Benchmark:
@@ -363,7 +388,8 @@ class Benchmark:
             else:
                 hits = [s for s in self.scenes if n in (s.name, s.category)]
             if not hits:
-                raise DataError(f"no scene {n!r}; available: {', '.join(self.names)}", self.root)
+                raise DataError(f"no scene {n!r}; available: {', '.join(self.names)}",
+                                ", ".join(str(r) for r in self.roots))
             out += [s for s in hits if s not in out]
         return check_scene_names(out)
 

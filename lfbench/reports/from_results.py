@@ -99,13 +99,12 @@ def report_from_results(results_path: str | Path, out: str | Path, *,
 
 
 def _load_maps(run: RunOutputs, maps: Path, data: str | Path | None, results_path: Path) -> None:
-    """The results' scenes of the data root (``data``, else the one the results record) and their saved
+    """The results' scenes of the data root (``data``, else the roots the results record) and their saved
     maps under ``maps``, into ``run`` (scenes, maps, scene_maps)."""
-    meta = run.results.meta
-    root = data or (Path(meta["data_root"]) if meta.get("data_root") else None)
-    if root is None:
+    roots = [Path(data)] if data else run.results.data_roots
+    if not roots:
         raise DataError("--maps needs --data ROOT (the results do not record their data root)", results_path)
-    run.scenes = Benchmark.discover(root).named(run.results.scenes)
+    run.scenes = Benchmark.discover_all(roots).named(run.results.scenes)
     run.maps = map_folders(maps, run.results.methods)
     run.scene_maps = {s.name: load_scene_maps(s, run.maps, run.rules.border_px) for s in run.scenes if s.has_gt()}
 
