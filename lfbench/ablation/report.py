@@ -434,7 +434,7 @@ class AblationSite(Site):
         if maps != "all":
             notes.append(f"Maps drawn with --maps {maps}: "
                          + ("none." if maps == "none" else "the best cell's (BadPix(0.07)) and the extra methods'.")
-                         + " `lfbench ablate SPEC --report-only --html --maps all` draws every cell's.")
+                         + " (lfbench ablate SPEC --report-only --html --maps all draws every cell's.)")
         super().__init__(title=spec.title, notes=notes)
         self.tables = tables
 
