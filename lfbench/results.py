@@ -83,7 +83,7 @@ class Results:
         """Methods that are reference lines, not competitors: the oracles of the run (``meta.references``,
         recorded from :attr:`lfbench.Method.oracle`); for results written before that was recorded, a method
         labelled ``gt`` or made from the spec ``gt``. Reports leave them out of ranks and comparisons."""
-        if "references" in self.meta:
+        if self.meta.get("references") is not None:
             return [m for m in self.methods if m in self.meta["references"]]
         specs = {label: (p or {}).get("spec") if isinstance(p, dict) else None
                  for label, p in (self.meta.get("methods") or {}).items()}

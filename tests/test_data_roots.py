@@ -90,3 +90,20 @@ def test_the_report_finds_the_scenes_of_every_recorded_root(roots, tmp_path, cap
     for scene in ("boxes", "dots"):
         page = (rep / "html" / f"scene-{scene}.html").read_text(encoding="utf-8")
         assert f'src="img/{scene}/centre.png"' in page and f'src="img/{scene}/gt.disp.png"' in page
+
+
+@pytest.mark.parametrize(("key", "value", "message"), [
+    ("data_roots", [1], "'meta.data_roots' must be folder names"),
+    ("data_roots", "ROOT", "'meta.data_roots' must be a list of folder names"),
+    ("references", [None], "'meta.references' must be method labels"),
+])
+def test_recorded_roots_and_references_are_checked_where_they_are_read(roots, tmp_path, capsys, key, value, message):
+    out = tmp_path / "run"
+    assert main(["evaluate", "--data", str(roots[0]), "--method", "gt", "--out", str(out), "--no-progress"]) == 0
+    data = json.loads((out / "results.json").read_text())
+    data["meta"][key] = value
+    (out / "results.json").write_text(json.dumps(data))
+    capsys.readouterr()
+    assert main(["report", str(out), "--out", str(tmp_path / "rep")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and message in err[0] and "results.json" in err[0]
