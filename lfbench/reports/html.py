@@ -15,7 +15,9 @@ Layout of the site folder (``OUT/html`` by default)::
     assets/                 site.css, site.js
     img/                    PNG images (maps are drawn from the saved maps at low resolution)
 
-Every number states its resolution (lowres / highres) as the tables do. The site is written into a
+Every number states its resolution (lowres / highres) as the tables do. A reference method (the oracle
+``gt``, ``Results.references``) is shown in rows of its own with its numbers and maps, never ranked and never in
+the pairwise comparisons, heatmaps over methods, BadPix series or radar chart. The site is written into a
 temporary folder and renamed into place when complete.
 """
 
