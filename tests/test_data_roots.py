@@ -90,6 +90,15 @@ def test_the_report_finds_the_scenes_of_every_recorded_root(roots, tmp_path, cap
     for scene in ("boxes", "dots"):
         page = (rep / "html" / f"scene-{scene}.html").read_text(encoding="utf-8")
         assert f'src="img/{scene}/centre.png"' in page and f'src="img/{scene}/gt.disp.png"' in page
+    # the roots moved: give them again, one --data each
+    moved = [tmp_path / "moved_hci", tmp_path / "moved_synthetic"]
+    for old, new in zip(roots, moved, strict=True):
+        old.rename(new)
+    rep2 = tmp_path / "rep2"
+    assert main(["report", str(out), "--out", str(rep2), "--html", "--maps", str(out / "maps"), "--data",
+                 str(moved[0]), "--data", str(moved[1])]) == 0, capsys.readouterr().err
+    for scene in ("boxes", "dots"):
+        assert f'src="img/{scene}/gt.disp.png"' in (rep2 / "html" / f"scene-{scene}.html").read_text(encoding="utf-8")
 
 
 @pytest.mark.parametrize(("key", "value", "message"), [

@@ -332,6 +332,13 @@ class Benchmark:
         scenes = tuple(s for root in roots for s in cls.discover(root).scenes)
         return cls(root=roots[0], scenes=scenes, others=tuple(roots[1:]))
 
+    @staticmethod
+    def root_list(roots: str | Path | Iterable[str | Path] | None) -> list[Path]:
+        """``roots`` (one data root, several, or None for none) as a list of paths."""
+        if roots is None:
+            return []
+        return [Path(roots)] if isinstance(roots, str | Path) else [Path(r) for r in roots]
+
     @property
     def roots(self) -> tuple[Path, ...]:
         """Every data root this benchmark's scenes come from."""

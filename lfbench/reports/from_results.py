@@ -61,12 +61,12 @@ class ReportOutcome:
 def report_from_results(results_path: str | Path, out: str | Path, *,
                         formats: Sequence[tuple[str, str]] = TABLE_FORMATS, paper: PaperTables | None = None,
                         paper_methods: Sequence[str] = (), curves: str | Path | None = None,
-                        maps: str | Path | None = None, data: str | Path | None = None,
+                        maps: str | Path | None = None, data: str | Path | Sequence[str | Path] | None = None,
                         figure_formats: Sequence[str] = ("png",), html: bool = False) -> ReportOutcome:
     """Tables, figures (and the HTML report) into ``out`` from the results at ``results_path`` (a
     results.json or its folder). ``paper``: the paper's tables (lfbench.reports.paper.load_paper) or
     None, showing ``paper_methods`` (default: the paper's own default methods); ``data``: the scenes'
-    data root for ``maps`` (default: the one the results record). Everything a wrong input can fail on
+    data root, or several, for ``maps`` (default: the roots the results record). Everything a wrong input can fail on
     is checked before the first file is written."""
     results_path, out = Path(results_path), Path(out)
     results = Results.read(results_path)
@@ -98,10 +98,11 @@ def report_from_results(results_path: str | Path, out: str | Path, *,
                          html_index=outputs.final(site.index) if html else None)
 
 
-def _load_maps(run: RunOutputs, maps: Path, data: str | Path | None, results_path: Path) -> None:
+def _load_maps(run: RunOutputs, maps: Path, data: str | Path | Sequence[str | Path] | None,
+               results_path: Path) -> None:
     """The results' scenes of the data root (``data``, else the roots the results record) and their saved
     maps under ``maps``, into ``run`` (scenes, maps, scene_maps)."""
-    roots = [Path(data)] if data else run.results.data_roots
+    roots = Benchmark.root_list(data) or run.results.data_roots
     if not roots:
         raise DataError("--maps needs --data ROOT (the results do not record their data root)", results_path)
     run.scenes = Benchmark.discover_all(roots).named(run.results.scenes)

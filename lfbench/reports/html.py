@@ -562,13 +562,14 @@ def site_inputs_from_dir(results_path: str | Path, *, data_root: str | Path | No
                        paper_methods=paper_methods, title=title)
 
 
-def site_inputs(results: Results, folder: Path, *, data_root: str | Path | None = None,
+def site_inputs(results: Results, folder: Path, *, data_root: str | Path | Sequence[str | Path] | None = None,
                 maps: str | Path | Mapping[str, Path] | None = None, scenes: Sequence[Any] | None = None,
                 scene_maps: Mapping[str, SceneMaps] | None = None, paper: Any = None,
                 paper_methods: Sequence[str] = (), title: str | None = None) -> SiteInputs:
     """:func:`site_inputs_from_dir` for ``results`` already read from the results folder ``folder``.
     ``maps``: a folder of submission folders, or method label -> submission folder (those that hold
-    maps are used); ``scenes``: the results' scenes of the data root when already discovered (then
+    maps are used); ``data_root``: one data root or several (default: those the results record); ``scenes``:
+    the results' scenes of the data root when already discovered (then
     ``data_root`` is not searched again); ``scene_maps``: their saved maps when already loaded (SiteInputs)."""
     ci = None
     if (folder / "ci.csv").is_symlink():
@@ -581,11 +582,12 @@ def site_inputs(results: Results, folder: Path, *, data_root: str | Path | None 
         maps_dir = Path(maps) if maps is not None else folder / MAPS_DIR
         folders = (map_folders(maps_dir, results.methods, within=None if maps is not None else folder)
                    if (maps is not None or maps_dir.is_dir()) else {})
-    roots = [Path(data_root)] if data_root is not None else results.data_roots
+    given = Benchmark.root_list(data_root)
+    roots = given or results.data_roots
     notes = []
     if scenes is not None:
         scenes = list(scenes)
-    elif roots and (data_root is not None or all(r.is_dir() for r in roots)):
+    elif roots and (given or all(r.is_dir() for r in roots)):
         scenes = Benchmark.discover_all(roots).named(results.scenes)
     elif roots:
         missing = ", ".join(str(r) for r in roots if not r.is_dir())
