@@ -71,6 +71,30 @@ class Results:
     def metrics(self) -> list[str]:
         return list(dict.fromkeys(r.metric for r in self.records))
 
+    @property
+    def data_roots(self) -> list[Path]:
+        """The data roots the results were scored on (``meta.data_roots`` when several, else
+        ``meta.data_root``); empty when the results do not record one."""
+        roots = self.meta.get("data_roots") or ([self.meta["data_root"]] if self.meta.get("data_root") else [])
+        return [Path(r) for r in roots]
+
+    @property
+    def references(self) -> list[str]:
+        """Methods that are reference lines, not competitors: the oracles of the run (``meta.references``,
+        recorded from :attr:`lfbench.Method.oracle`); for results written before that was recorded, a method
+        labelled ``gt`` or made from the spec ``gt``. Reports leave them out of ranks and comparisons."""
+        if self.meta.get("references") is not None:
+            return [m for m in self.methods if m in self.meta["references"]]
+        specs = {label: (p or {}).get("spec") if isinstance(p, dict) else None
+                 for label, p in (self.meta.get("methods") or {}).items()}
+        return [m for m in self.methods if m == "gt" or specs.get(m) == "gt"]
+
+    @property
+    def competitors(self) -> list[str]:
+        """The methods that are ranked and compared: :attr:`methods` less :attr:`references`."""
+        refs = set(self.references)
+        return [m for m in self.methods if m not in refs]
+
     def value(self, method: str, scene: str, metric: str) -> float:
         for r in self.records:
             if (r.method, r.scene, r.metric) == (method, scene, metric):
@@ -203,6 +227,7 @@ _META_TYPES: dict[str, tuple[type, str]] = {
     "lfbench_version": (str, "a string"), "ablation": (dict, "an object"),
     "scenes": (list, "a list of folder names"), "methods": (dict, "an object"),
     "dataset": (str, "a dataset name (a string; see `lfbench datasets`)"),
+    "data_roots": (list, "a list of folder names"), "references": (list, "a list of method labels"),
 }
 
 
@@ -214,6 +239,10 @@ def _check_meta(meta: dict[str, Any], path: Path) -> None:
             raise DataError(f"'meta.{key}' must be {text}, got {type(meta[key]).__name__}", path)
     if "\0" in (meta.get("data_root") or "") or any(not isinstance(s, str) for s in meta.get("scenes") or []):
         raise DataError("'meta.data_root' and 'meta.scenes' must be folder names", path)
+    if any(not isinstance(r, str) or not r or "\0" in r for r in meta.get("data_roots") or []):
+        raise DataError("'meta.data_roots' must be folder names", path)
+    if any(not isinstance(r, str) for r in meta.get("references") or []):
+        raise DataError("'meta.references' must be method labels (strings)", path)
     try:
         ScoringRules.from_meta(meta)  # the recorded rules, as every reader takes them
     except ValueError as exc:

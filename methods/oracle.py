@@ -10,7 +10,9 @@ from lfbench.utils.errors import DataError
 
 @register_method("gt")
 class GroundTruthOracle(Method):
-    """Oracle: the scene's own low-resolution ground truth (every metric is perfect)."""
+    """Oracle: the scene's own low-resolution ground truth (every metric is perfect; a reference, not ranked)."""
+
+    oracle = True
 
     def __init__(self) -> None:
         super().__init__()

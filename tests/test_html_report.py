@@ -112,13 +112,14 @@ def _table_rows(page: str, table_id: str) -> list[str]:
 
 def test_index_ranks_methods_and_states_resolutions_and_intervals(site):
     page = (site / "html" / "index.html").read_text(encoding="utf-8")
-    # the oracle is best, the noisy submission worst, on average rank
-    assert _table_rows(page, "table-overview") == ["gt", "published:good", "published:bad"]
+    # the good submission is best, the noisy one worst, on average rank; the oracle is a reference row below
+    assert _table_rows(page, "table-overview") == ["published:good", "published:bad", "gt"]
     overview = page.split('id="table-overview"', 1)[1].split("</table>", 1)[0]
     gt_row = re.search(r'data-v="gt">.*?</tr>', overview, re.S).group(0)
-    assert re.findall(r'data-v="([-0-9.e]+)">', gt_row)[1:6] == ["0.0"] * 5  # the oracle's means, highres dots too
+    assert re.findall(r'data-v="([-0-9.e]+)">', gt_row)[0:5] == ["0.0"] * 5  # the oracle's means, highres dots too
+    assert overview.split('<tbody class="reference">', 1)[1].count('scope="row"') == 1  # gt, apart and unranked
     section = page.split('id="table-badpix_0.07"', 1)[1].split("</table>", 1)[0]
-    assert section.count("#1</span>") == len(SCENES)  # the oracle ranks first on each scene
+    assert section.count("#1</span>") == len(SCENES)  # the good submission ranks first on each scene
     assert '<span class="res">lowres</span>' in section.split("boxes", 1)[1].split("</th>", 1)[0]
     assert '<span class="res">highres</span>' in section.split("dots", 1)[1].split("</th>", 1)[0]
     assert "Mean<span class=\"res\">highres+lowres</span>" in section  # the mean says what it averages
@@ -154,7 +155,9 @@ def test_report_rebuilds_the_site_with_the_papers_labelled_columns(site, tmp_pat
     assert "&lt;NA&gt;" not in page and ">nan" not in page  # numbers the paper does not give read '–'
     assert (out / "figures" / "toolkit" / "radar.svg").is_file()
     assert (out / "figures" / "toolkit" / "error_heatmaps.png").is_file()
-    assert (out / "figures" / "toolkit" / f"pairwise_gt_vs_{safe_name('published:good')}.png").is_file()
+    pair = f"pairwise_{safe_name('published:good')}_vs_{safe_name('published:bad')}.png"
+    assert (out / "figures" / "toolkit" / pair).is_file()
+    assert not list((out / "figures" / "toolkit").glob("pairwise_gt_*"))  # the oracle is compared with nothing
     assert "HTML report:" in stdout
 
 
@@ -202,6 +205,144 @@ def test_a_copied_results_json_gives_a_site_with_the_scenes_and_says_there_are_n
     assert 'src="img/boxes/centre.png"' in scene and 'src="img/boxes/gt.png"' in scene
     assert "disp.png" not in scene and "#1</span>" in scene  # no method's maps, the ranks
     assert (tmp_path / "rep" / "table_average.md").is_file()
+
+
+def test_the_oracle_is_a_reference_row_never_ranked_nor_compared(site):
+    """Issue 32.4: the ground-truth oracle is the line the others are measured against, not a competitor: it
+    took rank 1 everywhere and was one side of the pairwise comparisons. It is recorded as a reference, shown in
+    rows of its own without ranks, and left out of the ranks, the pairwise maps, the heatmaps and the radar."""
+    assert json.loads((site / "results.json").read_text())["meta"]["references"] == ["gt"]
+    html = site / "html"
+    index = (html / "index.html").read_text(encoding="utf-8")
+    for table in ("table-overview", "table-badpix_0.07", "table-mse_x100"):
+        body = index.split(f'id="{table}"', 1)[1].split("</table>", 1)[0]
+        ranked, reference = body.split('<tbody class="reference">', 1)
+        assert 'data-v="gt"' not in ranked and 'data-v="gt"' in reference and ">reference</span>" in reference
+        assert "#1</span>" not in reference and 'class="rank"' not in reference  # values, no ranks
+    section = index.split('id="table-badpix_0.07"', 1)[1].split("</table>", 1)[0]
+    good = re.search(r'data-v="published:good">.*?</tr>', section, re.S).group(0)
+    assert good.count("#1</span>") == len(SCENES)  # the best competitor takes rank 1, not the oracle
+    assert "2 methods and 1 reference (not ranked) on 2 scenes" in index
+    scene = (html / "scene-boxes.html").read_text(encoding="utf-8")
+    pairs = re.findall(r"A = ([^ ]+) \(blue.*?B = ([^ ]+) \(red", scene)
+    assert pairs == [("published:good", "published:bad")]  # gt took part in two of three pairs
+    assert "over 2 methods" in scene  # the heatmaps over the competitors
+    table = scene.split('id="table-scene"', 1)[1].split("</table>", 1)[0]
+    assert table.split('<tbody class="reference">', 1)[1].count('scope="row"') == 1
+    oracle_page = (html / "method-gt.html").read_text(encoding="utf-8")
+    assert "not ranked among the 2 methods" in oracle_page and "#1</span>" not in oracle_page
+    assert "radar_gt.png" not in oracle_page
+
+
+def test_leaderboard_ranks_leave_out_the_references():
+    from lfbench.reports.leaderboard import metric_ranks, overall_ranks
+    from lfbench.results import Record, Results
+
+    records = [Record(m, s, "badpix_0.07", v, "lowres")
+               for m, vals in {"gt": (0.0, 0.0), "a": (5.0, 3.0), "b": (4.0, 6.0)}.items()
+               for s, v in zip(("s1", "s2"), vals, strict=True)]
+    results = Results(records=records, meta={"references": ["gt"]})
+    ranks = metric_ranks(results, "badpix_0.07").set_index(["method", "scene"])["rank"]
+    assert ranks[("b", "s1")] == 1 and ranks[("a", "s1")] == 2 and ranks[("a", "s2")] == 1
+    assert np.isnan(ranks[("gt", "s1")]) and np.isnan(ranks[("gt", "s2")])
+    assert overall_ranks(results).to_dict() | {"gt": 0} == {"gt": 0, "a": 1.5, "b": 1.5}
+    assert results.references == ["gt"] and results.competitors == ["a", "b"]
+    # results written before references were recorded: the method made from the spec gt (under any label)
+    old = Results(records=records, meta={"methods": {"gt": {"spec": "gt"}, "a": {"spec": "planesweep"}}})
+    assert old.references == ["gt"]
+    relabelled = Results(records=[Record("truth", "s1", "badpix_0.07", 0.0, "lowres")],
+                         meta={"methods": {"truth": {"spec": "gt"}}})
+    assert relabelled.references == ["truth"]
+
+
+def test_scene_pages_draw_the_badpix_series_full_width_and_method_pages_have_colour_bars(site):
+    """Issue 32.4: the per-scene BadPix(t) chart was one cell of a three-column grid (a thumbnail of an 8 inch
+    wide figure); method pages had no colour bars for their disparity and error maps."""
+    scene = (site / "html" / "scene-boxes.html").read_text(encoding="utf-8")
+    wide = scene.split('<div class="wide-figure">', 1)[1].split("</div>", 1)[0]
+    assert 'src="img/boxes/badpix_series.png"' in wide
+    for grid in scene.split('<div class="grid3')[1:]:
+        assert "badpix_series.png" not in grid.split("</div>", 1)[0]
+    page = (site / "html" / f"method-{safe_name('published:good')}.html").read_text(encoding="utf-8")
+    rows = page.split('<div class="method-row">')[1:]
+    assert len(rows) == len(SCENES)
+    def disparity_range(text: str) -> list[str]:
+        return re.findall(r'<span class="(?:lo|hi)">(-?[0-9.]+)</span>', text)[:2]
+
+    for name, row in zip(SCENES, rows, strict=True):
+        assert f'href="scene-{name}.html"' in row.split("</h3>", 1)[0]
+        legend = row.split('<div class="grid3 row-legend">', 1)[1]
+        bars = re.findall(r'<img src="(img/colorbar_[^"]+)"', legend)
+        assert len(bars) == 2 and (site / "html" / bars[0]).is_file()  # disparity and gt - pred
+        assert "disparity (px)" in legend and "gt − pred (px)" in legend and "sw bad" in legend
+        scene_legend = (site / "html" / f"scene-{name}.html").read_text(encoding="utf-8").split('class="legend"')[1]
+        assert disparity_range(legend) == disparity_range(scene_legend)  # the scene's own scale
+
+
+def test_scene_pages_without_saved_maps_have_no_empty_map_headings(site, tmp_path):
+    """Issue 32.4: a report built without saved maps showed the maps' column headings (disparity, BadPix map,
+    signed error) over nothing; now the scene is shown as a scene, with a line saying why there are no maps."""
+    there = tmp_path / "there"
+    there.mkdir()
+    shutil.copy(site / "results.json", there / "results.json")
+    rc, _, err = _run(["report", str(there), "--out", str(tmp_path / "rep"), "--html"])
+    assert rc == 0, err
+    html = tmp_path / "rep" / "html"
+    scene = (html / "scene-boxes.html").read_text(encoding="utf-8")
+    assert "col-heads" not in scene and "BadPix(0.07) map" not in scene and "<h2>Maps" not in scene
+    assert 'id="no-method-maps"' in scene and 'src="img/boxes/gt.png"' in scene
+    assert "sw bad" not in scene  # no BadPix key without BadPix maps
+    method = (html / "method-gt.html").read_text(encoding="utf-8")
+    assert 'id="no-method-maps"' in method and "col-heads" not in method
+
+
+def _site_with_a_wide_section(site: Path, out: Path) -> Path:
+    """The fixture's results with a further table as an ablation's "against the baselines": many number
+    columns with long names, then long verdict texts."""
+    import pandas as pd
+
+    from lfbench.reports.html import SiteSection, build_site, site_inputs_from_dir
+
+    columns = {f"{m}, synthetic (mean of 3), {w}": [12.5, 13.25] for m in ("BadPix(0.07)", "MSE x100")
+               for w in ("cell", "cell 95% high", "Plane sweep", "Zero map")}
+    verdict = ("does not beat: BadPix(0.07) on synthetic (mean of 3) (100.000 vs 53.086); MSE x100 on synthetic "
+               "(mean of 3) (154.354 vs 150.206)")
+    table = pd.DataFrame({"seeds": [3, 3], **columns, "vs Plane sweep": [verdict, "beats"],
+                          "vs Zero map": [verdict, verdict]}, index=pd.Index(["interval=1", "interval=0.5"],
+                                                                            name="variant"))
+    inputs = site_inputs_from_dir(site)
+    inputs.sections = [SiteSection("baselines", "Against the baselines", table, ["a caption"])]
+    return build_site(inputs, out)
+
+
+def test_text_cells_of_further_tables_keep_a_readable_width(site, tmp_path):
+    index = _site_with_a_wide_section(site, tmp_path / "html").read_text(encoding="utf-8")
+    table = index.split('id="table-baselines"', 1)[1].split("</table>", 1)[0]
+    assert index.count('class="sortable section-table" id="table-baselines"') == 1
+    assert table.count('<td class="text"') == 4  # the verdicts
+    css = (tmp_path / "html" / "assets" / "site.css").read_text(encoding="utf-8")
+    assert re.search(r"\.section-table td\.text \{[^}]*min-width: 24rem", css)
+
+
+def test_ablation_tables_name_the_papers_tables_only_beside_the_paper(tmp_path):
+    """Issue 32.4: with table = "none" and no paper's numbers the captions said "Tables I/II"."""
+    from test_ablate import write_spec
+
+    from lfbench.ablation import report as ablation_report
+    from lfbench.ablation.spec import load_spec
+    from lfbench.reports.paper import load_paper
+    from lfbench.results import Record, Results
+
+    spec = load_spec(write_spec(tmp_path / "spec", 'title = "tiny"\ntable = "none"\n[[grid]]\ninterval = [1]\n'))
+    results = Results(records=[Record("interval=1", "dots", "badpix_0.07", 5.0, "lowres")])
+    tables = ablation_report._tables_i_ii(spec, results, None)
+    assert tables.caption[0] == ("tiny: every cell and method, per scene (table_per_scene) and averaged over the "
+                                 "scenes (table_average)")
+    assert not [line for line in tables.caption if "Tables I/II" in line]
+    paper = load_paper(write_paper(tmp_path / "paper"))
+    beside = ablation_report._tables_i_ii(spec, results, paper)
+    assert beside.paper_caption[0] == "tiny: Tables I/II beside the paper's"
+    assert "Tables I/II" not in beside.caption[0]
 
 
 def test_report_refuses_unknown_figure_formats_before_writing(site, tmp_path, capsys):
@@ -273,19 +414,19 @@ def test_site_in_a_headless_browser(site, browser, tmp_path):
 
     # sort the BadPix(0.07) table by the first scene's column: ascending, then descending
     table = "table-badpix_0\\.07"
-    assert order(table) == ["gt", "published:good", "published:bad"]
+    assert order(table) == ["published:good", "published:bad", "gt"]
     header = browser.find_elements(By.CSS_SELECTOR, f"#{table} thead th")[1]
     header.find_element(By.CSS_SELECTOR, "button").click()
     values = [float(td.get_attribute("data-v"))
-              for td in browser.find_elements(By.CSS_SELECTOR, f"#{table} tbody tr td:nth-of-type(1)")]
-    assert values == sorted(values) and order(table) == ["gt", "published:good", "published:bad"]
+              for td in browser.find_elements(By.CSS_SELECTOR, f"#{table} tbody:first-of-type tr td:nth-of-type(1)")]
+    assert values == sorted(values) and order(table) == ["published:good", "published:bad", "gt"]
     assert header.get_attribute("aria-sort") == "ascending"
     header.find_element(By.CSS_SELECTOR, "button").click()
-    assert order(table) == ["published:bad", "published:good", "gt"]
+    assert order(table) == ["published:bad", "published:good", "gt"]  # the reference row stays apart
     assert header.get_attribute("aria-sort") == "descending"
     # sort by method name
     browser.find_elements(By.CSS_SELECTOR, f"#{table} thead th")[0].find_element(By.CSS_SELECTOR, "button").click()
-    assert order(table) == sorted(["gt", "published:good", "published:bad"])
+    assert order(table) == ["published:bad", "published:good", "gt"]
     browser.save_screenshot(str(tmp_path / "index_sorted.png"))
     assert (tmp_path / "index.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
@@ -302,3 +443,27 @@ def test_site_in_a_headless_browser(site, browser, tmp_path):
     browser.get((html / f"method-{safe_name('published:good')}.html").as_uri())
     assert _images_loaded(browser) == []
     assert _errors(browser) == []
+
+
+def test_pages_read_well_at_1400_by_1000(site, browser, tmp_path):
+    """Issue 32.4, in the browser at 1400 x 1000: the per-scene BadPix(t) chart is drawn at a readable width,
+    a method page's colour bars are shown, and the rows of a wide further table (an ablation's verdicts against
+    the baselines) stay a few lines tall (they were ~400 px, their text one word per line)."""
+    from selenium.webdriver.common.by import By
+
+    browser.set_window_size(1400, 1000)
+    html = site / "html"
+    browser.get((html / "scene-boxes.html").as_uri())
+    series = browser.find_element(By.CSS_SELECTOR, 'img[alt="BadPix series"]')
+    assert series.size["width"] >= 800, series.size  # was about 330 px, a third of the grid
+    browser.save_screenshot(str(tmp_path / "scene.png"))
+    browser.get((html / f"method-{safe_name('published:good')}.html").as_uri())
+    bars = browser.find_elements(By.CSS_SELECTOR, ".method-row .row-legend .cbar img")
+    assert len(bars) == 2 * len(SCENES) and all(b.size["width"] >= 200 and b.size["height"] >= 8 for b in bars)
+    assert _images_loaded(browser) == []
+    wide = _site_with_a_wide_section(site, tmp_path / "wide")
+    browser.get(wide.as_uri())
+    heights = [row.size["height"] for row in browser.find_elements(By.CSS_SELECTOR, "#table-baselines tbody tr")]
+    assert len(heights) == 2 and max(heights) <= 120, heights
+    assert _errors(browser) == []
+    browser.set_window_size(1366, 768)

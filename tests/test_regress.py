@@ -310,3 +310,32 @@ def test_huge_integers_in_golden_or_new_results_are_one_line(tmp_path, capsys, v
     assert main(["regress", str(path.with_name("golden_ok.json")), str(new)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and str(new) in err[0] and ("digits" in err[0] or "64-bit" in err[0]), err
+
+
+def test_a_golden_file_beaten_beyond_tolerance_passes_with_a_stale_hint_naming_the_records(golden, tmp_path, capsys):
+    """Issue 32.6: new values better than golden by more than the tolerance pass, and one hint line says the
+    golden file is stale, naming those records (a golden file that is not refreshed would let them fall back)."""
+    _results(**{"badpix_0.07": 4.0, "mse_x100": 1.9}).write(tmp_path / "new")
+    assert main(["regress", str(golden), str(tmp_path / "new")]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert lines[-2] == "OK: 2 compared, 0 regressions, 2 improved beyond tolerance"
+    assert lines[-1].startswith("hint: the golden file is stale: 2 records better than golden by more than the "
+                                "tolerance (planesweep/synth_0/badpix_0.07, planesweep/synth_0/mse_x100)")
+    assert f"lfbench regress {golden} {tmp_path / 'new'} --update" in lines[-1]
+    # within tolerance, or a regression beside the improvement: no hint
+    _results(**{"badpix_0.07": 4.995}).write(tmp_path / "close")
+    assert main(["regress", str(golden), str(tmp_path / "close")]) == 0
+    assert "hint" not in capsys.readouterr().out
+    _results(**{"badpix_0.07": 4.0, "mse_x100": 3.0}).write(tmp_path / "mixed")
+    assert main(["regress", "--quiet", str(golden), str(tmp_path / "mixed")]) == 1
+    assert "hint" not in capsys.readouterr().out
+
+
+def test_the_stale_hint_names_the_first_records_and_counts_the_rest(tmp_path):
+    from lfbench.runs.regress import check
+
+    golden = tmp_path / "golden.json"
+    make_golden(Results(records=[Record("m", f"s{i}", "mse_x100", 5.0, "lowres") for i in range(7)]), 0.01, golden)
+    better = Results(records=[Record("m", f"s{i}", "mse_x100", 1.0, "lowres") for i in range(7)])
+    hint = check(read_golden(golden), better).stale_hint(shown=2)
+    assert "7 records better than golden" in hint and "(m/s0/mse_x100, m/s1/mse_x100 and 5 more)" in hint

@@ -22,7 +22,8 @@ try:
 except SystemExit as exc:
     code = exc.code
 print(json.dumps({"code": code, "modules": sorted(m for m in sys.modules
-                  if m.split(".")[0] in ("torch", "scipy", "lfbench_methods"))}), file=sys.stderr)
+                  if m.split(".")[0] in ("torch", "scipy", "lfbench_methods", "numpy", "PIL", "lfbench"))}),
+      file=sys.stderr)
 """
 
 
@@ -67,3 +68,28 @@ def test_a_command_that_needs_torch_still_gets_it(tmp_path):
     """The light start-up does not hide a network from the commands that run one."""
     code, modules = _imports("info", "subfocal", cwd=tmp_path)
     assert code == 0 and "torch" in modules and "lfbench_methods.subfocal.network" in modules
+
+
+@pytest.mark.parametrize("args", [["--help"], ["evaluate", "--help"], ["regress", "--help"], ["train", "--help"]])
+def test_help_imports_neither_numpy_nor_other_commands(args, tmp_path):
+    """Issue 32.5: `import lfbench` imported the whole public API (numpy, PIL, the method and metric registries)
+    and `lfbench --help` imported every command's module for its one-line help (the bench and ablate modules
+    brought the trainable networks' registry): about a second before any work. The public names are imported
+    on first use, and the help lines are read from the command modules' sources."""
+    code, modules = _imports(*args, cwd=tmp_path)
+    assert code == 0
+    assert not [m for m in modules if m.split(".")[0] in ("numpy", "PIL", "torch")], modules
+    commands = {m.rsplit(".", 1)[1] for m in modules if m.startswith("lfbench.cli.")} - {"argtypes"}
+    assert commands == ({args[0]} if args[0] != "--help" else set()), commands
+
+
+def test_the_public_api_is_imported_on_first_use(tmp_path):
+    probe = ("import sys, lfbench; before = 'numpy' in sys.modules; from lfbench import Method, read_pfm, get_metric; "
+             "import lfbench.method.base as b; print(before, lfbench.Method is b.Method, callable(read_pfm), "
+             "get_metric('badpix_0.07').id, sorted(set(lfbench.__all__) - set(dir(lfbench))))")
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    assert out.stdout.split() == ["False", "True", "True", "badpix_0.07", "[]"], out.stderr
+    with pytest.raises(AttributeError, match="no attribute 'nope'"):
+        import lfbench
+
+        lfbench.nope  # noqa: B018

@@ -66,11 +66,12 @@ from lfbench.reports.writers import (
 )
 from lfbench.results import Results
 from lfbench.scoring.metrics import get_metric
-from lfbench.utils.errors import DataError
+from lfbench.utils.errors import DataError, SpecError
 from lfbench.utils.names import file_name
 from lfbench.utils.outputs import check_within
 
-__all__ = ["AblationFigures", "AblationSite", "AblationTables", "cell_frame", "load_paper_tables", "report_writers",
+__all__ = ["MAP_CHOICES", "AblationFigures", "AblationSite", "AblationTables", "best_cell", "cell_frame", "check_maps",
+           "drawn_map_folders", "load_paper_tables", "report_writers",
            "run_writers", "saved_map_folders", "spec_reference", "write_report"]
 
 METRICS = ("badpix_0.07", "badpix_0.03", "badpix_0.01", "mse_x100")
@@ -427,10 +428,14 @@ class AblationSite(Site):
     """The ablation's site: the leaderboard of the cells and extra methods, their maps, and the tables of
     :class:`AblationTables` (means over seeds with intervals, orderings, verdicts against each baseline)."""
 
-    def __init__(self, spec: AblationSpec, tables: AblationTables, folder: Path) -> None:
-        super().__init__(title=spec.title, notes=[
-            f"Ablation {spec.source}: budget {spec.budget_label()}; one method per cell (its id) and per extra "
-            f"method. Training curves: tensorboard --logdir {folder / 'cells'}."])
+    def __init__(self, spec: AblationSpec, tables: AblationTables, folder: Path, maps: str = "all") -> None:
+        notes = [f"Ablation {spec.source}: budget {spec.budget_label()}; one method per cell (its id) and per extra "
+                 f"method. Training curves: tensorboard --logdir {folder / 'cells'}."]
+        if maps != "all":
+            notes.append(f"Maps drawn with --maps {maps}: "
+                         + ("none." if maps == "none" else "the best cell's (BadPix(0.07)) and the extra methods'.")
+                         + " (lfbench ablate SPEC --report-only --html --maps all draws every cell's.)")
+        super().__init__(title=spec.title, notes=notes)
         self.tables = tables
 
     def inputs(self, run: RunOutputs) -> SiteInputs:
@@ -447,51 +452,96 @@ def saved_map_folders(spec: AblationSpec, folder: Path) -> dict[str, Path]:
     return maps | {m.label: folder / "methods" / file_name(m.label) / "maps" for m in spec.methods}
 
 
+#: What ``lfbench ablate --maps`` draws from the saved maps (error-map figures, the site's maps): every cell's,
+#: only the best cell's (and the extra methods'), or none. The cells save their maps in every case (a PFM per
+#: scene, cheap beside drawing), so ``--report-only --maps all`` draws them later.
+MAP_CHOICES = ("all", "best", "none")
+
+
+def check_maps(maps: str) -> None:
+    """SpecError unless ``maps`` is one of :data:`MAP_CHOICES`."""
+    if maps not in MAP_CHOICES:
+        raise SpecError(f"--maps must be one of {', '.join(MAP_CHOICES)}, got {maps!r}")
+
+
+def best_cell(spec: AblationSpec, results: Results, metric: str = "badpix_0.07") -> str | None:
+    """The cell with the best mean of ``metric`` over its scenes (the first in the spec's order on a tie), or
+    None when no cell has a finite value of it."""
+    frame = results.to_frame()
+    frame = frame[(frame["metric"] == metric) & frame["method"].isin([c.id for c in spec.cells])]
+    means = frame.groupby("method", sort=False)["value"].mean().dropna()
+    if means.empty:
+        return None
+    order = {c.id: i for i, c in enumerate(spec.cells)}
+    sign = -1.0 if get_metric(metric).higher_is_better else 1.0
+    return min(means.index, key=lambda m: (sign * float(means[m]), order[m]))
+
+
+def drawn_map_folders(spec: AblationSpec, results: Results, folder: Path, maps: str = "all") -> dict[str, Path]:
+    """The saved maps the report draws (label -> submission folder), as ``maps`` (:data:`MAP_CHOICES`) says:
+    ``all`` of them, the ``best`` cell's (:func:`best_cell`) and the extra methods', or ``none``."""
+    check_maps(maps)
+    saved = saved_map_folders(spec, folder)
+    if maps == "all":
+        return saved
+    if maps == "none":
+        return {}
+    keep = {best_cell(spec, results), *(m.label for m in spec.methods)}
+    return {label: path for label, path in saved.items() if label in keep}
+
+
 def report_writers(spec: AblationSpec, markers: Sequence[dict[str, Any]], results: Results, *,
                    paper: str | Path | None = None, folder: Path, html: bool = False,
-                   log: Log = _log.info) -> list[OutputWriter]:
+                   log: Log = _log.info, maps: str = "all") -> list[OutputWriter]:
     """The writers of an ablation's tables and figures (and, with ``html``, its site), in order. ``paper``:
     the paper's tables folder (--paper; None: found as lfbench.reports.paper.find_paper_dir says) when
-    the spec has a reference (:func:`spec_reference`); ``folder``: the ablation's folder."""
+    the spec has a reference (:func:`spec_reference`); ``folder``: the ablation's folder; ``maps``: whose
+    saved maps are drawn (:data:`MAP_CHOICES`; ``none``: no error-map figures at all)."""
     reference = spec_reference(spec, paper)
     tables = load_paper_tables(paper, log, reference) if reference is not None else None
     ablation = AblationTables(spec, markers, tables, reference, log)
     writers: list[OutputWriter] = [ablation, _tables_i_ii(spec, results, tables),
                                    AblationFigures(spec, markers, tables, reference)]
-    if spec.evaluation.error_maps:
+    if spec.evaluation.error_maps and maps != "none":
         writers.append(SceneFigures(ERROR_MAPS_DIR, files=True))
     if html:
-        writers.append(AblationSite(spec, ablation, folder))
+        writers.append(AblationSite(spec, ablation, folder, maps))
     return writers
 
 
 def _tables_i_ii(spec: AblationSpec, results: Results, paper: PaperTables | None) -> Tables:
-    """Tables I/II of every cell and method, with the paper's beside them when it reports an evaluation scene."""
-    caption = caption_lines(spec, "Tables I/II")
+    """Tables I/II of every cell and method, with the paper's beside them when it reports an evaluation scene.
+    Only the tables beside a paper are called its "Tables I/II" (a spec with ``table = "none"`` and no
+    paper's numbers names no paper's tables)."""
+    caption = caption_lines(spec, "every cell and method, per scene (table_per_scene) and averaged over the scenes "
+                                  "(table_average)")
     covered = paper is not None and any(s in paper.scenes for s in results.scenes)
     if not covered:
         return Tables(caption=caption)
     note = [paper.reference.benchmark_note] if paper.reference is not None else []
-    return Tables(caption=caption, paper=paper, paper_methods=spec.paper_methods or (), paper_caption=[*caption, *note])
+    return Tables(caption=caption, paper=paper, paper_methods=spec.paper_methods or (),
+                  paper_caption=[*caption_lines(spec, "Tables I/II beside the paper's"), *note])
 
 
 def write_report(spec: AblationSpec, out: str | Path, results: Results, markers: Sequence[dict[str, Any]], *,
-                 paper: str | Path | None = None, log: Log = _log.info, folder: str | Path | None = None) -> list[Path]:
+                 paper: str | Path | None = None, log: Log = _log.info, folder: str | Path | None = None,
+                 maps: str = "all") -> list[Path]:
     """Every table and figure of the run straight into ``out`` (:func:`report_writers` without the site);
     returns the files written. ``folder``: the ablation's folder, whose cells' and methods' saved maps the
-    error maps are drawn from (default ``out``)."""
+    error maps are drawn from (default ``out``); ``maps``: whose (:data:`MAP_CHOICES`)."""
     out = Path(out)
     folder = Path(folder) if folder is not None else out
-    writers = report_writers(spec, markers, results, paper=paper, folder=folder, log=log)
-    return run_writers(writers, spec, results, out, folder)
+    writers = report_writers(spec, markers, results, paper=paper, folder=folder, log=log, maps=maps)
+    return run_writers(writers, spec, results, out, folder, maps=maps)
 
 
 def run_writers(writers: Sequence[OutputWriter], spec: AblationSpec, results: Results, stage: Path, folder: Path,
-                scenes: Sequence[Any] = ()) -> list[Path]:
+                scenes: Sequence[Any] = (), *, maps: str = "all") -> list[Path]:
     """Run the ablation's ``writers`` into ``stage``: the saved maps of its cells and methods under
-    ``folder`` are handed to them as predictions (the error maps), on the evaluation scenes the results
-    record; ``scenes``: the evaluation scenes, for the site."""
-    run = RunOutputs(stage=stage, results=results, scenes=scenes, source=folder, maps=saved_map_folders(spec, folder))
+    ``folder`` (those ``maps`` selects, :func:`drawn_map_folders`) are handed to them as predictions (the
+    error maps), on the evaluation scenes the results record; ``scenes``: the evaluation scenes, for the site."""
+    run = RunOutputs(stage=stage, results=results, scenes=scenes, source=folder,
+                     maps=drawn_map_folders(spec, results, folder, maps))
     for writer in writers:
         writer.start(run)
     if spec.evaluation.error_maps:

@@ -40,7 +40,7 @@ from typing import Any
 
 from lfbench.ablation.cell import MAPS, CellTask, is_done, load_scenes, read_marker, run_cell
 from lfbench.ablation.executor import ClusterOptions, Executor, executor_for
-from lfbench.ablation.report import report_writers, run_writers
+from lfbench.ablation.report import check_maps, report_writers, run_writers
 from lfbench.ablation.spec import AblationSpec, Cell, SyntheticEval, sha256_of
 from lfbench.method.registry import create_from_spec
 from lfbench.reports.writers import Maps
@@ -299,14 +299,16 @@ class AblationRun:
 
 def run_ablation(spec: AblationSpec, out: str | Path, *, jobs: int = 1, progress: bool | None = None,
                  paper: str | Path | None = None, log: Log = _log.info,
-                 cluster: ClusterOptions | None = None, html: bool = False) -> AblationRun:
+                 cluster: ClusterOptions | None = None, html: bool = False, maps: str = "all") -> AblationRun:
     """Run (or resume) every cell and extra method of ``spec`` into ``out``; write the combined results,
     tables and figures (and, with ``html``, the HTML report) as one set. ``paper``: the paper's tables
     folder (None: lfbench.reports.paper.find_paper_dir). ``cluster``: run the cells as submitit jobs (see
     lfbench.ablation.executor). OUT/results.json is merged under a file lock: runs of different cells
-    (``--cells``, several processes or machines) add up."""
+    (``--cells``, several processes or machines) add up. ``maps``: whose saved maps the error-map figures and
+    the site draw (lfbench.ablation.report.MAP_CHOICES: all, best, none)."""
     if jobs < 1:
         raise SpecError(f"--jobs must be >= 1, got {jobs}")
+    check_maps(maps)
     out = Path(out)
     executor = executor_for(cluster, jobs=jobs, folder=out / "submitit", log=log)
     executor.check()  # before any work: no data generated, nothing submitted
@@ -335,14 +337,18 @@ def run_ablation(spec: AblationSpec, out: str | Path, *, jobs: int = 1, progress
                                           "cells": markers}})
     for t in tasks:
         combined.extend(Results.read(Path(t.cell_dir)))  # the folder: its results.json may not lead out of it
+    references = []
     for res in run_methods(spec, out, scenes, log):
         combined.extend(res)
+        references += res.meta.get("references", [])  # an oracle among the [[methods]]: a reference line
+    combined.meta["references"] = references
     combined.meta["scenes"] = [s for s, _ in scenes]
     with _set_lock(out), staged_outputs(out) as outputs:
         merged = merge_results(out, combined, outputs.stage)
         if spec.text:
             write_text(outputs.stage / "spec.toml", spec.text)
-        written = _write_set(spec, out, outputs, combined, markers, paper=paper, html=html, log=log, scenes=scenes)
+        written = _write_set(spec, out, outputs, combined, markers, paper=paper, html=html, log=log, scenes=scenes,
+                             maps=maps)
     if len(merged.methods) > len(combined.methods):
         log(f"{out / 'results.json'}: {len(combined.methods)} of {len(merged.methods)} cells/methods from this run "
             "(the others from earlier runs); `lfbench ablate SPEC --report-only` tabulates them all")
@@ -370,15 +376,15 @@ def _set_lock(out: Path):
 
 def _write_set(spec: AblationSpec, out: Path, outputs: OutputSet, results: Results, markers: list[dict[str, Any]], *,
                paper: str | Path | None, html: bool, log: Log, keep: tuple[str, ...] = (),
-               scenes: tuple[tuple[str, str], ...] | None = None) -> list[Path]:
+               scenes: tuple[tuple[str, str], ...] | None = None, maps: str = "all") -> list[Path]:
     """The ablation's writers (tables, figures and, with ``html``, the site, drawn from the staged
     results.json) into the staging folder, then the commit of the staged entries; returns the final paths
     of what the writers wrote. ``scenes``: the evaluation scenes (prepared here when None and the site needs
-    them)."""
+    them); ``maps``: whose saved maps are drawn (lfbench.ablation.report.drawn_map_folders)."""
     stage = outputs.stage
-    writers = report_writers(spec, markers, results, paper=paper, folder=out, html=html, log=log)
+    writers = report_writers(spec, markers, results, paper=paper, folder=out, html=html, log=log, maps=maps)
     site_scenes = load_scenes(scenes if scenes is not None else prepare_evaluation(spec, out, log)) if html else ()
-    staged = run_writers(writers, spec, results, stage, out, site_scenes)
+    staged = run_writers(writers, spec, results, stage, out, site_scenes, maps=maps)
     books = [stage / name for name in ("results.json", "results.csv", "spec.toml") if (stage / name).is_file()]
     written = outputs.commit_written([*staged, *books], keep=keep)[:len(staged)]
     log(f"wrote {len(written)} files into {out} (results.json, table_*.md/.tex/.csv, figures/)")
@@ -411,17 +417,19 @@ def merge_results(out: Path, new: Results, dest: Path | None = None) -> Results:
 
 
 def report_only(spec: AblationSpec, out: str | Path, *, paper: str | Path | None = None,
-                log: Log = _log.info, html: bool = False) -> list[Path]:
+                log: Log = _log.info, html: bool = False, maps: str = "all") -> list[Path]:
     """Rewrite the tables and figures (and, with ``html``, the site) from OUT/results.json and the cells'
     markers (nothing is run), as one set that keeps results.json. A cell whose folder is gone (e.g. a
     results/ copy that keeps only results.json) uses the marker that results.json recorded for it, so the
     tables of a committed run can be rebuilt from its results.json."""
+    check_maps(maps)
     out = Path(out)
     with _set_lock(out) if out.is_dir() else contextlib.nullcontext():
-        return _report_only(spec, out, paper=paper, log=log, html=html)
+        return _report_only(spec, out, paper=paper, log=log, html=html, maps=maps)
 
 
-def _report_only(spec: AblationSpec, out: Path, *, paper: str | Path | None, log: Log, html: bool) -> list[Path]:
+def _report_only(spec: AblationSpec, out: Path, *, paper: str | Path | None, log: Log, html: bool,
+                 maps: str = "all") -> list[Path]:
     from lfbench.ablation.cell import TIMING
 
     recover(out)  # a cut commit is finished (or a journal that is not lfbench's refused) before reading
@@ -441,7 +449,7 @@ def _report_only(spec: AblationSpec, out: Path, *, paper: str | Path | None, log
     results.meta["scenes"] = evaluation_scene_dirs(spec, out, results.meta.get("scenes", []))
     with staged_outputs(out) as outputs:
         return _write_set(spec, out, outputs, results, markers, paper=paper, html=html, log=log,
-                          keep=("results.json", "results.csv", "spec.toml"))
+                          keep=("results.json", "results.csv", "spec.toml"), maps=maps)
 
 
 def evaluation_scene_dirs(spec: AblationSpec, out: Path, recorded: list[Any]) -> list[str]:

@@ -102,12 +102,15 @@ def load_command(commands: Registry[Any], name: str) -> Any:
 
 
 def command_help(commands: Registry[Any], name: str) -> str:
-    """The one-line help of a command for ``lfbench --help``: a built-in's ``HELP`` (its module is light);
-    a plugin's read from its source without importing it (or from the module, if imported already)."""
+    """The one-line help of a command for ``lfbench --help``, read from its module's source without importing
+    it (or from the module, if imported already): ``lfbench --help`` imports no command. A built-in command
+    whose HELP is not a string literal is imported for it."""
     target = commands.target(name)
-    if target is None or name in BUILTIN_COMMANDS:
+    if target is None:
         return getattr(load_command(commands, name), "HELP", "")
     text = static_help(target)
+    if name in BUILTIN_COMMANDS and text is None:
+        return getattr(load_command(commands, name), "HELP", "")
     if text is None:
         print(f"lfbench: warning: plugin command {name!r} ({target}): its HELP could not be read", file=sys.stderr)
         return "(plugin command)"

@@ -50,6 +50,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="rewrite the tables and figures from the finished cells in OUT (train nothing)")
     p.add_argument("--html", action="store_true",
                    help="also write the HTML report OUT/html/index.html (leaderboard of the cells, their maps)")
+    p.add_argument("--maps", choices=["all", "best", "none"], default="all",
+                   help="whose saved maps the error-map figures and the HTML report draw: every cell's (default), only "
+                        "the best cell's by BadPix(0.07) and the [[methods]]', or none (drawing maps can take longer "
+                        "than training short cells; the cells save their maps anyway, so --report-only --maps all "
+                        "draws them later)")
+    p.add_argument("--no-maps", dest="maps", action="store_const", const="none", help="the same as --maps none")
     p.add_argument("--executor", choices=EXECUTORS.names(), default=None,
                    help="where the cells run: " + "; ".join(f"{name}: {EXECUTORS.get(name).help}"
                                                             for name in EXECUTORS.names()))
@@ -89,7 +95,7 @@ def run(args: argparse.Namespace) -> int:
     if args.report_only:
         from lfbench.ablation.runner import report_only
 
-        report_only(spec, out, paper=args.paper, html=args.html)
+        report_only(spec, out, paper=args.paper, html=args.html, maps=args.maps)
     else:
         from lfbench.ablation.runner import run_ablation
 
@@ -98,7 +104,8 @@ def run(args: argparse.Namespace) -> int:
             cluster = ClusterOptions(args.executor, gpus_per_job=args.gpus_per_job, cpus_per_job=args.cpus_per_job,
                                      timeout_min=args.timeout_min, partition=args.partition,
                                      max_parallel=args.max_parallel)
-        run_ablation(spec, out, jobs=args.jobs, progress=progress, paper=args.paper, cluster=cluster, html=args.html)
+        run_ablation(spec, out, jobs=args.jobs, progress=progress, paper=args.paper, cluster=cluster, html=args.html,
+                     maps=args.maps)
     if args.html:
         from lfbench.reports.html import SITE_DIR
 

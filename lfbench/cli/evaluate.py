@@ -15,9 +15,11 @@ HELP = "score methods on a dataset's scenes (results.json, results.csv, tables)"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--data", required=True, type=Path, metavar="ROOT",
+    p.add_argument("--data", required=True, type=Path, action="append", metavar="ROOT",
                    help="data root of a known dataset (its layout is detected: see `lfbench datasets`), e.g. "
-                        "ROOT/<category>/<scene>/ (HCI) or ROOT/<split>/ImageN/ (UrbanLF-Syn)")
+                        "ROOT/<category>/<scene>/ (HCI) or ROOT/<split>/ImageN/ (UrbanLF-Syn); repeat to score the "
+                        "scenes of several roots of one dataset into one results file (scenes keep their names: two "
+                        "selected scenes of one name are refused, select one by category with --scenes)")
     p.add_argument("--dataset", metavar="NAME",
                    help="read ROOT as this dataset instead of detecting its layout (see `lfbench datasets`); it "
                         "sets the scoring protocol (border, metrics, resolutions) and the disparity range a method "
@@ -65,7 +67,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from lfbench.data.dataset import method_range_params, open_dataset
+    from lfbench.data.dataset import method_range_params, open_datasets
     from lfbench.method.registry import create_from_spec
     from lfbench.reports import writers as w
     from lfbench.reports.html import SITE_DIR, check_site_dir
@@ -74,8 +76,7 @@ def run(args: argparse.Namespace) -> int:
     from lfbench.scoring.metrics import scored_metrics
     from lfbench.utils.errors import DataError, SpecError
 
-    dataset, bench = open_dataset(args.data, args.dataset)  # one line for a root of no (or several) layouts
-    protocol = dataset.protocol_for(args.data)
+    dataset, protocol, bench = open_datasets(args.data, args.dataset)  # one line for a root of no (or several) layouts
     methods = [create_from_spec(spec, {"device": args.device}, method_range_params(protocol.disparity_range))
                for spec in args.method]  # errors before any work
     if args.label is not None:
@@ -90,15 +91,17 @@ def run(args: argparse.Namespace) -> int:
     scenes = [s for s in scenes if s.has_gt()]
     if not scenes:
         raise DataError(f"none of the selected scenes has ground truth ({dataset.name} layout: {dataset.layout})",
-                        args.data)
+                        ", ".join(map(str, args.data)))
     rules = protocol.scoring_rules(toolkit=args.toolkit_nonfinite, allow_highres=not args.lowres_only)
     metrics = scored_metrics(protocol.metrics)
     writers = [*([w.SceneFigures()] if args.figures else []), *([w.Maps()] if args.save_maps or args.html else []),
                w.Tables(),
                *([w.BootstrapCIs(w.CIOptions(resamples=args.ci_resamples, block=args.ci_block))] if args.ci else []),
                *([w.UncertaintyRatings()] if args.uncertainty else []), *([w.Site()] if args.html else [])]
-    meta = {"data_root": str(args.data), "dataset": dataset.name,
+    meta = {"data_root": str(args.data[0]), "dataset": dataset.name,
             "methods": {m.label: m.provenance() for m in methods}}
+    if len(args.data) > 1:  # readers take every root from here (Results.data_roots); data_root: the first
+        meta["data_roots"] = [str(r) for r in args.data]
     results = evaluate_to_folder(methods, scenes, args.out, rules=rules, metrics=metrics,
                                  all_metrics=args.all_metrics, writers=writers,
                                  meta=meta, progress=not args.no_progress, jobs=args.jobs)

@@ -77,4 +77,7 @@ def run(args: argparse.Namespace) -> int:
         if f.failed or not args.quiet:
             print(f.message)
     print(result.summary())
+    hint = result.stale_hint(args.golden, args.new)
+    if hint:
+        print(hint)
     return 0 if result.passed else 1

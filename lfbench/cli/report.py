@@ -41,8 +41,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="BadPix curves CSV (default: RESULTS_DIR/figures/badpix_series.csv when present)")
     p.add_argument("--maps", type=Path, metavar="DIR",
                    help="saved maps (OUT/maps of `evaluate --save-maps`): draw per-scene overviews from them")
-    p.add_argument("--data", type=Path, metavar="ROOT",
-                   help="the data root of the scenes, for --maps (default: the one recorded in the results)")
+    p.add_argument("--data", type=Path, action="append", metavar="ROOT",
+                   help="the data root of the scenes, for --maps and the site (default: the ones recorded in the "
+                        "results); repeat for results scored on several roots")
     p.add_argument("--html", action="store_true",
                    help="also write a static HTML report OUT/html/index.html (opens offline, no server)")
     p.add_argument("--figure-format", default="png", metavar="FMTS",

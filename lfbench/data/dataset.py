@@ -17,8 +17,9 @@ matches none or several in one line (:class:`~lfbench.utils.errors.DataError`, e
 
 from __future__ import annotations
 
+import dataclasses
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar
@@ -30,7 +31,7 @@ from lfbench.utils.registry import Registry
 if TYPE_CHECKING:  # lfbench.scoring imports lfbench.data: imported where the rules are made
     from lfbench.scoring.rules import ScoringRules
 
-__all__ = ["DATASET_GROUP", "DATASETS", "Dataset", "DatasetProtocol", "detect_dataset", "get_dataset",
+__all__ = ["DATASET_GROUP", "DATASETS", "Dataset", "DatasetProtocol", "detect_dataset", "get_dataset", "open_datasets",
            "open_dataset", "method_range_params"]
 
 DATASET_GROUP = "lfbench.datasets"
@@ -159,6 +160,34 @@ def open_dataset(root: str | Path, name: str | None = None) -> tuple[type[Datase
         if not dataset.matches(root):
             raise DataError(f"not laid out as dataset {name!r} ({dataset.layout})", root)
     return dataset, dataset.open(root)
+
+
+def open_datasets(roots: Sequence[str | Path], name: str | None = None
+                  ) -> tuple[type[Dataset], DatasetProtocol, Benchmark]:
+    """The adapter, the scoring protocol and the scenes of one or several data roots scored together (one
+    results file). Every root must be of one dataset with one protocol (DataError naming the root that is
+    not); a root given twice is refused; scenes keep their names (two selected scenes of one name are refused
+    when selected, lfbench.data.scene.check_scene_names)."""
+    roots = [Path(r) for r in roots]
+    if not roots:
+        raise DataError("no data root given")
+    seen: dict[Path, Path] = {}
+    for root in roots:
+        key = root.resolve()
+        if key in seen:
+            raise DataError(f"data root given twice (also as {seen[key]})", root)
+        seen[key] = root
+    dataset, first = open_dataset(roots[0], name)
+    protocol = dataset.protocol_for(roots[0])
+    scenes = list(first.scenes)
+    for root in roots[1:]:
+        other, bench = open_dataset(root, name or dataset.name)
+        if other.protocol_for(root) != protocol:
+            raise DataError(f"scored by another protocol than {roots[0]} (one results file holds one dataset's "
+                            "numbers): evaluate it on its own", root)
+        scenes += bench.scenes
+    combined = dataclasses.replace(first, scenes=tuple(scenes), others=tuple(roots[1:]))
+    return dataset, protocol, combined
 
 
 def method_range_params(disparity_range: tuple[float, float]) -> Callable[[Any, dict[str, Any]], dict[str, float]]:

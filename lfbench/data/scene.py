@@ -334,11 +334,25 @@ class Benchmark:
     Category folders other than the four HCI ones are kept under their own name ('other' kind).
     ``splits``: split name -> the categories it selects (default the paper's HCI splits, :data:`SPLITS`;
     a dataset whose category folders are its splits gives none).
+    ``others``: further roots whose scenes this one holds too (lfbench.data.dataset.open_datasets).
     """
 
     root: Path
     scenes: tuple[Scene, ...]
     splits: Mapping[str, tuple[str, ...]] = field(default_factory=lambda: SPLITS, compare=False, hash=False)
+    others: tuple[Path, ...] = ()
+
+    @staticmethod
+    def root_list(roots: str | Path | Iterable[str | Path] | None) -> list[Path]:
+        """``roots`` (one data root, several, or None for none) as a list of paths."""
+        if roots is None:
+            return []
+        return [Path(roots)] if isinstance(roots, str | Path) else [Path(r) for r in roots]
+
+    @property
+    def roots(self) -> tuple[Path, ...]:
+        """Every data root this benchmark's scenes come from."""
+        return (self.root, *self.others)
 
     @classmethod
     def discover(cls, root: str | Path) -> Benchmark:
@@ -391,7 +405,8 @@ class Benchmark:
             else:
                 hits = [s for s in self.scenes if n in (s.name, s.category)]
             if not hits:
-                raise DataError(f"no scene {n!r}; available: {', '.join(self.names)}", self.root)
+                raise DataError(f"no scene {n!r}; available: {', '.join(self.names)}",
+                                ", ".join(str(r) for r in self.roots))
             out += [s for s in hits if s not in out]
         return check_scene_names(out)
 

@@ -49,6 +49,9 @@ class Method:
     #: label carries ``sha256:<first 12 hex digits>`` of the file instead of its path, so that results keep
     #: their keys when the file moves (the path is kept in :meth:`provenance`).
     content_params: ClassVar[tuple[str, ...]] = ()
+    #: True for a method that knows the answer (the ``gt`` oracle): reports show it as a reference line, never
+    #: as a competitor (no rank, not in pairwise comparisons); runs record it in ``results.meta["references"]``.
+    oracle: ClassVar[bool] = False
 
     _name: str = ""
     _params: dict[str, Any] = {}  # replaced, never mutated

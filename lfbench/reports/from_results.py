@@ -21,7 +21,8 @@ from pathlib import Path
 
 import pandas as pd
 
-from lfbench.data.dataset import open_dataset
+from lfbench.data.dataset import open_datasets
+from lfbench.data.scene import Benchmark
 from lfbench.reports.maps import load_scene_maps, map_folders
 from lfbench.reports.paper import PaperTables
 from lfbench.reports.tables import TABLE_FORMATS
@@ -61,12 +62,12 @@ class ReportOutcome:
 def report_from_results(results_path: str | Path, out: str | Path, *,
                         formats: Sequence[tuple[str, str]] = TABLE_FORMATS, paper: PaperTables | None = None,
                         paper_methods: Sequence[str] = (), curves: str | Path | None = None,
-                        maps: str | Path | None = None, data: str | Path | None = None,
+                        maps: str | Path | None = None, data: str | Path | Sequence[str | Path] | None = None,
                         figure_formats: Sequence[str] = ("png",), html: bool = False) -> ReportOutcome:
     """Tables, figures (and the HTML report) into ``out`` from the results at ``results_path`` (a
     results.json or its folder). ``paper``: the paper's tables (lfbench.reports.paper.load_paper) or
     None, showing ``paper_methods`` (default: the paper's own default methods); ``data``: the scenes'
-    data root for ``maps`` (default: the one the results record). Everything a wrong input can fail on
+    data root, or several, for ``maps`` (default: the roots the results record). Everything a wrong input can fail on
     is checked before the first file is written."""
     results_path, out = Path(results_path), Path(out)
     results = Results.read(results_path)
@@ -98,14 +99,14 @@ def report_from_results(results_path: str | Path, out: str | Path, *,
                          html_index=outputs.final(site.index) if html else None)
 
 
-def _load_maps(run: RunOutputs, maps: Path, data: str | Path | None, results_path: Path) -> None:
-    """The results' scenes of the data root (``data``, else the one the results record) and their saved
+def _load_maps(run: RunOutputs, maps: Path, data: str | Path | Sequence[str | Path] | None,
+               results_path: Path) -> None:
+    """The results' scenes of the data root (``data``, else the roots the results record) and their saved
     maps under ``maps``, into ``run`` (scenes, maps, scene_maps)."""
-    meta = run.results.meta
-    root = data or (Path(meta["data_root"]) if meta.get("data_root") else None)
-    if root is None:
+    roots = Benchmark.root_list(data) or run.results.data_roots
+    if not roots:
         raise DataError("--maps needs --data ROOT (the results do not record their data root)", results_path)
-    run.scenes = open_dataset(root, meta.get("dataset"))[1].named(run.results.scenes)
+    run.scenes = open_datasets(roots, run.results.meta.get("dataset"))[2].named(run.results.scenes)
     run.maps = map_folders(maps, run.results.methods)
     run.scene_maps = {s.name: load_scene_maps(s, run.maps, run.rules.border_px) for s in run.scenes if s.has_gt()}
 

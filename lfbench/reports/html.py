@@ -15,7 +15,9 @@ Layout of the site folder (``OUT/html`` by default)::
     assets/                 site.css, site.js
     img/                    PNG images (maps are drawn from the saved maps at low resolution)
 
-Every number states its resolution (lowres / highres) as the tables do. The site is written into a
+Every number states its resolution (lowres / highres) as the tables do. A reference method (the oracle
+``gt``, ``Results.references``) is shown in rows of its own with its numbers and maps, never ranked and never in
+the pairwise comparisons, heatmaps over methods, BadPix series or radar chart. The site is written into a
 temporary folder and renamed into place when complete.
 """
 
@@ -23,7 +25,7 @@ from __future__ import annotations
 
 import math
 import shutil
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass, field
 from importlib.resources import files
 from pathlib import Path
@@ -34,7 +36,8 @@ import jinja2
 import numpy as np
 import pandas as pd
 
-from lfbench.data.dataset import open_dataset
+from lfbench.data.dataset import open_datasets
+from lfbench.data.scene import Benchmark
 from lfbench.reports import figures as fig
 from lfbench.reports import toolkit_figures as tk
 from lfbench.reports.leaderboard import all_metric_ranks, metric_table, overall_ranks
@@ -139,7 +142,9 @@ def _cell(value: Any, rank: Any = None, resolution: str | None = None, ci: tuple
 
 def _metric_section(results: Results, metric: str, ci: Mapping, scene_pages: Mapping[str, str],
                     method_pages: Mapping[str, str], ranks: Mapping[str, pd.DataFrame]) -> dict[str, Any]:
+    """One metric's table: a row per method (reference rows flagged, shown apart and unranked)."""
     info = describe_metric(metric)
+    references = set(results.references)
     table = metric_table(results, metric, ranks=ranks[metric])
     scenes = list(dict.fromkeys(s for s, k in table.columns if s not in ("mean", "average rank")))
     header = []
@@ -158,7 +163,7 @@ def _metric_section(results: Results, metric: str, ci: Mapping, scene_pages: Map
         mean_ci = ci.get((method, "(mean)", metric))
         rows.append({"method": method, "href": method_pages.get(method), "cells": cells,
                      "mean": _cell(r[("mean", "value")], ci=mean_ci), "mean_res": r[("mean", "resolution")],
-                     "avg_rank": _cell(r[("average rank", "value")])})
+                     "avg_rank": _cell(r[("average rank", "value")]), "reference": method in references})
     mean_res = "+".join(sorted({x for row in rows for x in str(row["mean_res"]).split("+") if x and x != "nan"}))
     return {"id": metric, "name": info.name, "unit": info.unit, "description": info.description,
             "direction": "higher is better" if info.higher_is_better else "lower is better",
@@ -203,6 +208,8 @@ def _overview(results: Results, method_pages: Mapping[str, str], paper: Any,
         n = df.loc[df["method"] == method, "scene"].nunique()
         rows.append({"method": method, "href": method_pages.get(method), "rank": _cell(ranks.get(method)),
                      "cells": cells, "runtime": _cell(float(np.mean(rt)) if rt else float("nan")), "scenes": n})
+    references = [r for r in rows if r["method"] in set(results.references)]  # not ranked: rows of their own
+    rows = [r for r in rows if r not in references]
     rows.sort(key=lambda r: (r["rank"]["v"] == "", float(r["rank"]["v"] or 0)))
     for pos, row in enumerate(rows, start=1):
         row["pos"] = pos
@@ -212,7 +219,7 @@ def _overview(results: Results, method_pages: Mapping[str, str], paper: Any,
         for label in table.index[len(results.methods):]:
             paper_rows.append({"method": label, "cells": [_cell(table.loc[label].get(m)) for m in metrics],
                                "scenes": int(table.loc[label, "scenes"])})
-    return {"columns": columns, "rows": rows, "paper_rows": paper_rows}
+    return {"columns": columns, "rows": rows, "reference_rows": references, "paper_rows": paper_rows}
 
 
 def _section_table(section: SiteSection) -> dict[str, Any]:
@@ -266,8 +273,9 @@ def _legend(images: _Images, disp_range: tuple[float, float]) -> list[dict[str, 
 
 
 def _scene_images(sm: SceneMaps, images: _Images, threshold: float, pair_threshold: float,
-                  order: Sequence[str]) -> dict[str, Any]:
-    """Draw one scene's panels; returns what the scene page and method pages show."""
+                  order: Sequence[str], references: Collection[str] = ()) -> dict[str, Any]:
+    """Draw one scene's panels; returns what the scene page and method pages show. ``references``
+    (oracles) get their maps but take no part in the heatmaps over methods or the pairwise comparisons."""
     d = f"img/{fig.safe_name(sm.name)}"
     out: dict[str, Any] = {"centre": images.rgb(f"{d}/centre.png", sm.centre), "gt": None, "methods": {},
                            "pairs": [], "heatmaps": None, "series": None,
@@ -286,6 +294,7 @@ def _scene_images(sm: SceneMaps, images: _Images, threshold: float, pair_thresho
             entry["badpix"] = images.rgb(f"{stem}.badpix.png", panels.badpix)
             entry["error"] = images.rgb(f"{stem}.error.png", panels.error)
         out["methods"][label] = entry
+    labels = [m for m in labels if m not in references]
     if sm.gt is None or not labels:
         return out
     preds = [sm.preds[m] for m in labels]
@@ -383,6 +392,7 @@ def _write_site(inputs: SiteInputs, root: Path, threshold: float, pair_threshold
     method_pages = {m: page_name("method", m) for m in methods}
     ci = _ci_lookup(inputs.ci)
     metrics = metric_order(results.metrics)
+    references = set(results.references)  # oracles: reference rows, never ranked or compared
     ranks = all_metric_ranks(results)  # every table below ranks from these
     orders = {s: _scene_order(results, s, ranks) for s in scene_names}
     sections = [_metric_section(results, m, ci, scene_pages, method_pages, ranks) for m in metrics]
@@ -407,9 +417,9 @@ def _write_site(inputs: SiteInputs, root: Path, threshold: float, pair_threshold
         if sm is None:
             sm = load_scene_maps(scene, inputs.maps, border)
         order = [m for m in orders[name] if m in sm.preds]
-        drawn[name] = _scene_images(sm, images, threshold, pair_threshold, order)
+        drawn[name] = _scene_images(sm, images, threshold, pair_threshold, order, references)
         drawn[name]["legend"] = _legend(images, sm.disp_range)
-        for label in order:
+        for label in (m for m in order if m not in references):  # an oracle's BadPix(t) is 0: no line
             if hasattr(scene, "has_gt"):
                 c = fig.scene_curve(label, scene, sm.preds[label], rules)
                 if c is not None:
@@ -427,13 +437,13 @@ def _write_site(inputs: SiteInputs, root: Path, threshold: float, pair_threshold
                              "BadPix series, mean over scenes", colours=colours)
         figures["series"] = "img/badpix_series.png"
     else:
-        averaged = fig.curves_from_records(results)
+        averaged = {m: c for m, c in fig.curves_from_records(results).items() if m not in references}
         if averaged:
             fig.plot_mean_series(averaged, root / "img" / "badpix_series.png",
                                  "BadPix at the thresholds in the results, mean over scenes", markers=True,
                                  colours=colours)
             figures["series"] = "img/badpix_series.png"
-    radar = tk.radar_scores(results)
+    radar = tk.radar_scores(results, methods=results.competitors)
     radar_ok = len(radar.index) >= 3
     if radar_ok:
         tk.plot_radar(radar, root / "img" / "radar.png", colours=colours)
@@ -465,7 +475,8 @@ def _write_site(inputs: SiteInputs, root: Path, threshold: float, pair_threshold
             radar_src = rel
         write_text(root / method_pages[m], env.get_template("method.html").render(
             **common, page="method", method=m, method_table=_method_table(results, m, scene_pages, ci, ranks),
-            radar=radar_src, maps=[{"scene": s, "href": scene_pages[s], **drawn[s]["methods"][m]}
+            radar=radar_src, maps=[{"scene": s, "href": scene_pages[s], "legend": drawn[s]["legend"],
+                                    **drawn[s]["methods"][m]}
                                    for s in scene_names if s in drawn and m in drawn[s]["methods"]],
             threshold=threshold))
 
@@ -487,7 +498,9 @@ def _scene_order(results: Results, scene: str, metric_ranks: Mapping[str, pd.Dat
 
 def _scene_table(results: Results, scene: str, method_pages: Mapping[str, str], ranks: Mapping[str, pd.DataFrame],
                  order: Sequence[str]) -> dict[str, Any]:
-    """Rows method (in the scene's ``order``), columns metric: the value with its rank on this scene."""
+    """Rows method (in the scene's ``order``), columns metric: the value with its rank on this scene; the
+    reference methods (oracles) in rows of their own, unranked."""
+    references = set(results.references)
     metrics = [m for m in metric_order(results.metrics)]
     cols, by = [], {}
     for m in metrics:
@@ -504,13 +517,16 @@ def _scene_table(results: Results, scene: str, method_pages: Mapping[str, str], 
             continue
         cells = [_cell(*by.get((method, c["id"]), (float("nan"), None)), best=by.get((method, c["id"]),
                                                                                      (0, 0))[1] == 1) for c in cols]
-        rows.append({"method": method, "href": method_pages.get(method), "cells": cells})
-    return {"columns": cols, "rows": rows}
+        rows.append({"method": method, "href": method_pages.get(method), "cells": cells,
+                     "reference": method in references})
+    return {"columns": cols, "rows": [r for r in rows if not r["reference"]],
+            "reference_rows": [r for r in rows if r["reference"]]}
 
 
 def _method_table(results: Results, method: str, scene_pages: Mapping[str, str], ci: Mapping,
                   ranks: Mapping[str, pd.DataFrame]) -> dict[str, Any]:
-    """Rows scene, columns metric: the method's value and rank among all methods on that scene."""
+    """Rows scene, columns metric: the method's value and rank among the ranked methods on that scene
+    (a reference method, an oracle, has values and no ranks)."""
     metrics = metric_order(results.metrics)
     by, res = {}, {}
     for m in metrics:
@@ -529,7 +545,8 @@ def _method_table(results: Results, method: str, scene_pages: Mapping[str, str],
             v, rank, _ = by.get((s, c["id"]), (float("nan"), None, 0))
             cells.append(_cell(v, rank, res.get((s, c["id"])), ci.get((method, s, c["id"])), best=rank == 1))
         rows.append({"scene": s, "href": scene_pages.get(s), "cells": cells})
-    return {"columns": cols, "rows": rows, "n_methods": len(results.methods)}
+    return {"columns": cols, "rows": rows, "n_methods": len(results.competitors),
+            "reference": method in results.references}
 
 
 # --------------------------------------------------------------------------- from a results folder
@@ -546,13 +563,14 @@ def site_inputs_from_dir(results_path: str | Path, *, data_root: str | Path | No
                        paper_methods=paper_methods, title=title)
 
 
-def site_inputs(results: Results, folder: Path, *, data_root: str | Path | None = None,
+def site_inputs(results: Results, folder: Path, *, data_root: str | Path | Sequence[str | Path] | None = None,
                 maps: str | Path | Mapping[str, Path] | None = None, scenes: Sequence[Any] | None = None,
                 scene_maps: Mapping[str, SceneMaps] | None = None, paper: Any = None,
                 paper_methods: Sequence[str] = (), title: str | None = None) -> SiteInputs:
     """:func:`site_inputs_from_dir` for ``results`` already read from the results folder ``folder``.
     ``maps``: a folder of submission folders, or method label -> submission folder (those that hold
-    maps are used); ``scenes``: the results' scenes of the data root when already discovered (then
+    maps are used); ``data_root``: one data root or several (default: those the results record); ``scenes``:
+    the results' scenes of the data root when already discovered (then
     ``data_root`` is not searched again); ``scene_maps``: their saved maps when already loaded (SiteInputs)."""
     ci = None
     if (folder / "ci.csv").is_symlink():
@@ -565,15 +583,16 @@ def site_inputs(results: Results, folder: Path, *, data_root: str | Path | None 
         maps_dir = Path(maps) if maps is not None else folder / MAPS_DIR
         folders = (map_folders(maps_dir, results.methods, within=None if maps is not None else folder)
                    if (maps is not None or maps_dir.is_dir()) else {})
-    root = Path(data_root) if data_root is not None else (
-        Path(results.meta["data_root"]) if results.meta.get("data_root") else None)
+    given = Benchmark.root_list(data_root)
+    roots = given or results.data_roots
     notes = []
     if scenes is not None:
         scenes = list(scenes)
-    elif root is not None and (data_root is not None or root.is_dir()):
-        scenes = open_dataset(root, results.meta.get("dataset"))[1].named(results.scenes)
-    elif root is not None:
-        notes.append(f"The data root {root} recorded in the results is not here: no maps are shown "
+    elif roots and (given or all(r.is_dir() for r in roots)):
+        scenes = open_datasets(roots, results.meta.get("dataset"))[2].named(results.scenes)
+    elif roots:
+        missing = ", ".join(str(r) for r in roots if not r.is_dir())
+        notes.append(f"The data root {missing} recorded in the results is not here: no maps are shown "
                      "(give --data ROOT).")
     scenes = scenes or []
     if not folders:

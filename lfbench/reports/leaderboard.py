@@ -6,12 +6,14 @@ hand-ranked cases.
 Ranking as on the benchmark's site: on each scene, methods are ranked by the metric's value (lower is
 better unless the metric says otherwise), 1 = best, ties share the best rank ("min" ranking), a
 method without a finite value on a scene is not ranked there. The average rank of a method is the
-mean of its ranks over the scenes (or scene x metric pairs) where it is ranked.
+mean of its ranks over the scenes (or scene x metric pairs) where it is ranked. A reference method
+(the ``gt`` oracle, ``Results.references``) keeps its values but is never ranked: an oracle is the
+line the others are measured against, not a competitor that takes rank 1.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 
 import numpy as np
 import pandas as pd
@@ -21,23 +23,25 @@ from lfbench.scoring.metrics import describe_metric
 __all__ = ["all_metric_ranks", "metric_ranks", "metric_table", "overall_ranks"]
 
 
-def metric_ranks(results, metric: str) -> pd.DataFrame:
+def metric_ranks(results, metric: str, *, references: Collection[str] | None = None) -> pd.DataFrame:
     """Long frame of one metric: columns method, scene, value, resolution, rank (float, NaN where
-    the value is not finite)."""
+    the value is not finite and for the ``references``, default ``results.references``: they are
+    not ranked and do not move the others' ranks)."""
+    refs = set(results.references if references is None else references)
     df = results.to_frame()
     df = df[df["metric"] == metric][["method", "scene", "value", "resolution"]].copy()
     if df.empty:
         return df.assign(rank=pd.Series(dtype=float))
     ascending = not describe_metric(metric).higher_is_better
-    finite = df["value"].where(np.isfinite(df["value"].astype(float)))
+    finite = df["value"].where(np.isfinite(df["value"].astype(float)) & ~df["method"].isin(refs))
     df["rank"] = finite.groupby(df["scene"]).rank(method="min", ascending=ascending)
     return df.reset_index(drop=True)
 
 
-def all_metric_ranks(results) -> dict[str, pd.DataFrame]:
+def all_metric_ranks(results, *, references: Collection[str] | None = None) -> dict[str, pd.DataFrame]:
     """:func:`metric_ranks` of every metric in the results, computed once for every table that
     ranks (metric id -> long frame)."""
-    return {m: metric_ranks(results, m) for m in results.metrics}
+    return {m: metric_ranks(results, m, references=references) for m in results.metrics}
 
 
 def metric_table(results, metric: str, *, ranks: pd.DataFrame | None = None) -> pd.DataFrame:

@@ -304,7 +304,7 @@ def write_toolkit_figures(results: Any, scenes: Sequence[Any], maps: Mapping[str
                           threshold: float = PAIRWISE_THRESHOLD) -> list[Path]:
     """The toolkit's figures for papers into ``out_dir``: ``radar`` (from the results), and from the saved
     ``maps`` (method label -> submission folder) on ``scenes``: ``error_heatmaps`` and
-    ``pairwise_<A>_vs_<B>`` for every pair of methods, each in ``formats``."""
+    ``pairwise_<A>_vs_<B>`` for every pair of methods but the references (oracles), each in ``formats``."""
     return toolkit_figures_from_scene_maps(results, (load_scene_maps(scene, maps, border_px) for scene in scenes),
                                            out_dir, formats=formats, threshold=threshold)
 
@@ -313,10 +313,10 @@ def toolkit_figures_from_scene_maps(results: Any, scene_maps: Iterable[Any], out
                                     formats: Sequence[str] = ("png",),
                                     threshold: float = PAIRWISE_THRESHOLD) -> list[Path]:
     """:func:`write_toolkit_figures` from maps already loaded (lfbench.reports.maps.SceneMaps, one per
-    scene)."""
+    scene). Reference methods (the oracle, ``results.references``) are compared with nothing."""
     out = Path(out_dir)
     written: list[Path] = []
-    scores = radar_scores(results)
+    scores = radar_scores(results, methods=results.competitors)
     if len(scores.index) >= 3:
         written += plot_radar(scores, out / "radar", formats=formats, colours=method_colours(results.methods))
     gts, masks, centres, preds = {}, {}, {}, {}
@@ -325,9 +325,9 @@ def toolkit_figures_from_scene_maps(results: Any, scene_maps: Iterable[Any], out
             continue
         gts[sm.name], masks[sm.name], centres[sm.name] = sm.gt, sm.mask, sm.centre
         preds[sm.name] = sm.preds
-    if not gts:
+    labels = [m for m in results.competitors if any(m in p for p in preds.values())]
+    if not gts or not labels:  # nothing to compare (no maps, or only the references' maps)
         return written
-    labels = [m for m in results.methods if any(m in p for p in preds.values())]
     names, pair_names = file_names(labels, "method label"), FileNames("method pair")
     pairs = [(a, b, pair_names.claim(f"{a} vs {b}", f"pairwise_{names[a]}_vs_{names[b]}"))
              for i, a in enumerate(labels) for b in labels[i + 1:]]  # every name checked before drawing

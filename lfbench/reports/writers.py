@@ -309,7 +309,8 @@ class Site(OutputWriter):
     Written last: it reads what the other writers staged (and the staged results.json, when the set has
     one, as it will be committed). ``index`` is its index.html after the write."""
 
-    def __init__(self, *, data_root: str | Path | None = None, maps: str | Path | Mapping[str, Path] | None = None,
+    def __init__(self, *, data_root: str | Path | Sequence[str | Path] | None = None,
+                 maps: str | Path | Mapping[str, Path] | None = None,
                  paper: PaperTables | None = None, paper_methods: Sequence[str] = (), title: str | None = None,
                  notes: Sequence[str] = (), sections: Sequence[SiteSection] = ()) -> None:
         self.data_root, self.maps, self.paper, self.paper_methods = data_root, maps, paper, list(paper_methods)

@@ -78,6 +78,10 @@ def evaluate_to_folder(methods: Sequence[Method], scenes: Sequence[Scene], out: 
         if label is not None:
             results.records = [replace(r, method=label) for r in results.records]
             results.runs = [replace(r, method=label) for r in results.runs]
+        references = [label if label is not None else m.label
+                      for m in [*methods, *(m for group, _ in more for m in group)] if m.oracle]
+        if references:  # shown as reference lines by the reports, never ranked (Results.references)
+            results.meta["references"] = list(dict.fromkeys(references))
         results.meta.update(meta or {})
         staged = [*results.write(outputs.stage), *write_outputs(writers, run)]
         results.files = outputs.commit_written(staged)

@@ -105,6 +105,19 @@ class GateResult:
         return text
 
 
+    def stale_hint(self, golden: str | Path = "GOLDEN", new: str | Path = "NEW", *, shown: int = 5) -> str | None:
+        """One line when the gate passed and some new values are better than golden by more than their
+        tolerance: the golden file is stale (it would let those records fall back unnoticed). Names the
+        first ``shown`` records and the command that refreshes it; None otherwise."""
+        better = ["/".join(f.key) for f in self.findings if f.kind == "better"]
+        if not better or not self.passed:
+            return None
+        names = ", ".join(better[:shown]) + (f" and {len(better) - shown} more" if len(better) > shown else "")
+        return (f"hint: the golden file is stale: {len(better)} record{'s' if len(better) != 1 else ''} better than "
+                f"golden by more than the tolerance ({names}); if the improvement is meant, refresh it with "
+                f"`lfbench regress {golden} {new} --update`")
+
+
 def read_golden(path: str | Path) -> list[GoldenRecord]:
     """Golden records of ``path``, validated: every value and tolerance a finite JSON number (no NaN,
     Infinity or "NaN" strings), tolerance >= 0, a known metric id, resolution lowres/highres, no
