@@ -416,8 +416,8 @@ def test_region_badpix_and_mse_metrics_score_their_mask():
 
 
 def test_badpix_family_and_registry_lookups():
-    """Kills, in the `badpix_<t>` family: exponent ids (of tiny thresholds) refused (`"." in text or` -> `and`), negative or
-    infinite thresholds accepted, threshold 0 refused (`t >= 0` -> `t > 0`); and `in` / list_metrics /
+    """Kills, in the `badpix_<t>` family: exponent ids (tiny thresholds) refused (`"." in text or` -> `and`), negative
+    or infinite thresholds accepted, threshold 0 refused (`t >= 0` -> `t > 0`); and `in` / list_metrics /
     aggregate changes."""
     from lfbench.scoring.metrics import METRICS, find_metric, get_metric, list_metrics
 

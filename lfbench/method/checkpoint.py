@@ -154,5 +154,5 @@ def _is_name(text: str) -> bool:
     return 0 < len(text) <= 40 and all(c.isascii() and (c.isalnum() or c in "_-.") for c in text)
 
 
-__all__ = ["check_checkpoint_file", "MAX_CHECKPOINT_BYTES", "read_checkpoint", "read_weights", "is_weights", "sniff", "WEIGHTS_FORMAT", "LEGACY_WEIGHTS_FORMATS",
-           "CHECKPOINT_FORMAT"]
+__all__ = ["check_checkpoint_file", "MAX_CHECKPOINT_BYTES", "read_checkpoint", "read_weights", "is_weights", "sniff",
+           "WEIGHTS_FORMAT", "LEGACY_WEIGHTS_FORMATS", "CHECKPOINT_FORMAT"]
