@@ -110,17 +110,27 @@ def write_train_config(task: CellTask) -> Path:
 def link_data(task: CellTask) -> None:
     """Make CELL/data/<category> point at the shared generated scenes (the trainer then skips
     generating them); without symlink support each cell generates its own copy."""
-    data = task.path / "data"
     for category, folder in task.data_links.items():
-        link = data / category
-        if link.is_symlink() and link.resolve() != Path(folder).resolve():
-            raise DataError("symbolic link to another folder than the ablation's generated scenes (not allowed)",
-                            link)
-        if link.exists() or link.is_symlink():
-            continue
-        data.mkdir(parents=True, exist_ok=True)
-        with contextlib.suppress(OSError):
-            link.symlink_to(Path(folder).resolve(), target_is_directory=True)
+        link_data_folder(task.path / "data" / category, Path(folder))
+
+
+def link_data_folder(link: Path, target: Path) -> None:
+    """Make ``link`` a relative symbolic link to the generated scenes ``target`` (so that an ablation folder
+    moved or copied as a whole still resumes). A link that leads elsewhere (an absolute one of a folder that
+    was moved, or any other) is replaced by the right one, never followed; a real folder (a copy made where
+    symbolic links are not supported) is kept. Without symlink support nothing is linked."""
+    if link.is_symlink():
+        try:
+            if link.resolve(strict=True) == target.resolve():
+                return
+        except (OSError, RuntimeError):  # dangling or a loop: replaced
+            pass
+        link.unlink()
+    elif link.exists():
+        return
+    link.parent.mkdir(parents=True, exist_ok=True)
+    with contextlib.suppress(OSError):
+        link.symlink_to(os.path.relpath(target.resolve(), link.parent.resolve()), target_is_directory=True)
 
 
 def seed_from_stage1(task: CellTask) -> float:

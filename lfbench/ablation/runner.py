@@ -40,7 +40,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-from lfbench.ablation.cell import MAPS, CellTask, is_done, load_scenes, read_marker, run_cell
+from lfbench.ablation.cell import MAPS, CellTask, is_done, link_data_folder, load_scenes, read_marker, run_cell
 from lfbench.ablation.executor import ClusterOptions
 from lfbench.ablation.report import report_writers, run_writers
 from lfbench.ablation.spec import AblationSpec, Cell, SyntheticEval, sha256_of
@@ -154,14 +154,7 @@ def _shared_stage1(spec: AblationSpec, folder: Path, links: dict[str, str], thre
         raise SpecError(f"{path} holds another stage-1 config; use another --out folder")
     write_text(path, toml_text(cfg, f"The shared stage 1 of {spec.source}: written by lfbench ablate."))
     for category, target in links.items():
-        link = folder / "data" / category
-        if link.is_symlink() and link.resolve() != Path(target).resolve():
-            raise DataError("symbolic link to another folder than the ablation's generated scenes (not allowed)",
-                            link)
-        if not (link.exists() or link.is_symlink()):
-            link.parent.mkdir(parents=True, exist_ok=True)
-            with contextlib.suppress(OSError):
-                link.symlink_to(Path(target).resolve(), target_is_directory=True)
+        link_data_folder(folder / "data" / category, Path(target))
     marker = folder / "done.json"
     if marker.is_file():
         return folder
@@ -184,11 +177,23 @@ def make_tasks(spec: AblationSpec, out: Path, links: dict[str, dict[str, str]], 
         config["training"]["threads"] = threads
         tasks.append(CellTask(
             cell_id=cell.id, values=cell.values, config=config, fingerprint=cell.fingerprint,
-            eval_fingerprint=sha256_of([spec.evaluation.fingerprint(), [s for s, _ in scenes]]),
+            eval_fingerprint=sha256_of([spec.evaluation.fingerprint(), scene_keys(scenes, out)]),
             cell_dir=str(out / "cells" / cell.id), data_links=links[cell.id],
             stage1_dir=str(stage1) if stage1 is not None else None, scenes=scenes, evaluation=spec.evaluation,
             threads=threads, progress=progress))
     return tasks
+
+
+def scene_keys(scenes: tuple[tuple[str, str], ...], out: Path) -> list[str]:
+    """The evaluation scenes as fingerprints name them: a scene generated inside OUT by its path relative to OUT
+    (``OUT/eval_data/...``), so that a folder moved or copied as a whole keeps its finished cells; any other by
+    its path as given."""
+    root = out.resolve()
+    keys = []
+    for folder, _ in scenes:
+        path = Path(folder).resolve()
+        keys.append("OUT/" + path.relative_to(root).as_posix() if path.is_relative_to(root) else folder)
+    return keys
 
 
 def _cost_estimate(task: CellTask) -> float:
@@ -309,7 +314,7 @@ def run_methods(spec: AblationSpec, out: Path, scenes: tuple[tuple[str, str], ..
     out_list = []
     for m in spec.methods:
         folder = out / "methods" / file_name(m.label)
-        key = sha256_of([m.spec, ev.fingerprint(), [s for s, _ in scenes]])
+        key = sha256_of([m.spec, ev.fingerprint(), scene_keys(scenes, out)])
         marker = folder / "method.json"
         done = read_json(marker, "method marker") if marker.is_file() else None
         if isinstance(done, dict) and done.get("key") == key:
