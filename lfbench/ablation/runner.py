@@ -57,6 +57,7 @@ from lfbench.utils.jsonfile import json_text, read_json
 from lfbench.utils.log import log_to_file
 from lfbench.utils.names import file_name
 from lfbench.utils.outputs import OutputSet, prepare_output_folder, read_manifest, recover, staged_outputs
+from lfbench.utils.readfile import file_sha256
 from lfbench.utils.tomlfile import toml_text
 
 Log = Callable[[str], None]
@@ -213,7 +214,7 @@ def run_cells(tasks: list[CellTask], jobs: int, progress: bool | None, log: Log,
 
     from lfbench.ablation.executor import init_worker, submit_cells, visible_gpus, worker_gpus
 
-    pending = [t for t in tasks if not is_done(t)]
+    pending = [t for t in tasks if not is_done(t, warn=False)]  # run_cell says why a cell is re-made
     for t in tasks:
         if t not in pending:
             log(f"cell {t.cell_id}: finished earlier, skipped")
@@ -314,21 +315,39 @@ def run_methods(spec: AblationSpec, out: Path, scenes: tuple[tuple[str, str], ..
     out_list = []
     for m in spec.methods:
         folder = out / "methods" / file_name(m.label)
-        key = sha256_of([m.spec, ev.fingerprint(), scene_keys(scenes, out)])
+        method = create_from_spec(m.spec)
+        # the method's files (weights) by content: other weights under the same path are another method
+        content = {k: v["sha256"] for k, v in method.provenance().items() if isinstance(v, dict)}
+        key = sha256_of([m.spec, content, ev.fingerprint(), scene_keys(scenes, out)])
         marker = folder / "method.json"
         done = read_json(marker, "method marker") if marker.is_file() else None
         if isinstance(done, dict) and done.get("key") == key:
-            out_list.append(Results.read(folder))
-            log(f"method {m.label}: finished earlier, skipped")
-            continue
-        res = evaluate_to_folder([create_from_spec(m.spec)], loaded, folder, rules=rules, label=m.label,
+            changed = _results_changed(folder, done)
+            if changed is None:
+                out_list.append(Results.read(folder))
+                log(f"method {m.label}: finished earlier, skipped")
+                continue
+            log(f"method {m.label}: {changed}; scored again")
+        res = evaluate_to_folder([method], loaded, folder, rules=rules, label=m.label,
                                  writers=[Maps(MAPS, per_method=False, uncertainty=True)], progress=False,
                                  meta={"method": {"label": m.label, "spec": m.spec}})
         if res.records:  # a method that served no scene (e.g. weights not there yet) is tried again next time
-            write_text(marker, json_text({"label": m.label, "spec": m.spec, "key": key}, indent=2) + "\n")
+            record = {"label": m.label, "spec": m.spec, "key": key,
+                      "results_sha256": file_sha256(folder / "results.json", "method results")}
+            write_text(marker, json_text(record, indent=2) + "\n")
         log(f"method {m.label}: scored on {len(res.scenes)} scene(s)")
         out_list.append(res)
     return out_list
+
+
+def _results_changed(folder: Path, marker: dict[str, Any]) -> str | None:
+    """Why ``folder``'s results.json is not the one its marker recorded (``results_sha256``), or None."""
+    path = folder / "results.json"
+    try:
+        digest = file_sha256(path, "method results")
+    except DataError as exc:
+        return str(exc)
+    return None if digest == marker.get("results_sha256") else f"{path} is not the file its method.json recorded"
 
 
 # --------------------------------------------------------------------------- the whole run

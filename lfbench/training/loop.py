@@ -65,7 +65,7 @@ from lfbench.training.validate import check_validation_area, validate
 from lfbench.utils.atomic import fresh_dir, write_text
 from lfbench.utils.errors import DataError, Interrupted, LFBenchError, SpecError
 from lfbench.utils.hardware import available_cores, require_bf16, set_fp32_numerics
-from lfbench.utils.jsonfile import json_text
+from lfbench.utils.jsonfile import json_text, read_json
 from lfbench.utils.malloc import retain_freed_memory
 from lfbench.utils.names import file_name
 from lfbench.utils.outputs import read_manifest, recover, staged_outputs
@@ -543,9 +543,12 @@ class Trainer:
         paths = self.paths
         if state is not None and state["stage"] >= len(self.cfg.stages) and paths.final.is_file() \
                 and paths.summary.is_file():
-            self.log(f"{paths.out}: training already complete ({state['global_step']} steps); final weights in "
-                     f"{paths.final}")
-            return {"final": str(paths.final), "steps": state["global_step"], "resumed": True}
+            changed = self._exports_changed(state)
+            if changed is None:
+                self.log(f"{paths.out}: training already complete ({state['global_step']} steps); final weights in "
+                         f"{paths.final}")
+                return {"final": str(paths.final), "steps": state["global_step"], "resumed": True}
+            self.log(f"{changed}: re-exported from {paths.checkpoint}")
         self._prepare_folder(state)
         sampler, validation = self._load_data()
         model = self._build(sampler, init)
@@ -553,6 +556,25 @@ class Trainer:
         self._place(model)
         self._fit(model, sampler, validation, start_stage, start_step, opt_state, local_batch)
         return self._export_final(model, resumed=state is not None)
+
+    def _exports_changed(self, state: dict) -> str | None:
+        """Why the finished run's final.pt / summary.json are not what its checkpoint ended with (None when they
+        are): the weights' state dict must be the checkpoint's model (``state_sha256``), of this config's network,
+        and the summary must count the checkpoint's steps. A file copied over from another run is re-exported."""
+        paths = self.paths
+        try:
+            final = ckpt.load(paths.final, ckpt.WEIGHTS_FORMAT)
+            summary = read_json(paths.summary, "training summary")
+        except LFBenchError as exc:
+            return str(exc)
+        if not isinstance(final.get("state_dict"), dict) or \
+                ckpt.state_sha256(final["state_dict"]) != ckpt.state_sha256(state["model"]):
+            return f"{paths.final} does not hold the weights of {paths.checkpoint}"
+        if final.get("method") != get_trainable(self.cfg.method).method_name:
+            return f"{paths.final} holds another network's weights"
+        if not isinstance(summary, dict) or summary.get("steps") != state["global_step"]:
+            return f"{paths.summary} does not record the {state['global_step']} steps of {paths.checkpoint}"
+        return None
 
     def _setup(self) -> int:
         """Thread count; the samples of a step per process (the batch must split over processes and micro-batches)."""
