@@ -56,7 +56,14 @@ from lfbench.utils.hardware import available_cores
 from lfbench.utils.jsonfile import json_text, read_json
 from lfbench.utils.log import log_to_file
 from lfbench.utils.names import file_name
-from lfbench.utils.outputs import OutputSet, prepare_output_folder, read_manifest, recover, staged_outputs
+from lfbench.utils.outputs import (
+    OutputSet,
+    check_output_entries,
+    prepare_output_folder,
+    read_manifest,
+    recover,
+    staged_outputs,
+)
 from lfbench.utils.readfile import file_sha256
 from lfbench.utils.tomlfile import toml_text
 
@@ -377,6 +384,7 @@ def run_ablation(spec: AblationSpec, out: str | Path, *, jobs: int = 1, progress
     out = Path(out)
     check_training_data(spec, out)
     prepare_output_folder(out)
+    check_output_entries(out)
     with _set_lock(out):
         recover(out)  # a cut commit of an earlier run is finished (or its journal refused) before any work
         read_manifest(out)

@@ -68,7 +68,7 @@ from lfbench.utils.hardware import available_cores, require_bf16, set_fp32_numer
 from lfbench.utils.jsonfile import json_text, read_json
 from lfbench.utils.malloc import retain_freed_memory
 from lfbench.utils.names import file_name
-from lfbench.utils.outputs import read_manifest, recover, staged_outputs
+from lfbench.utils.outputs import check_output_entries, read_manifest, recover, staged_outputs
 from lfbench.utils.readfile import read_text
 from lfbench.utils.threads import torch_threads
 from lfbench.utils.tomlfile import MAX_TOML_BYTES
@@ -894,6 +894,7 @@ def train(cfg: TrainConfig, out: str | Path, *, require_checkpoint: bool = False
     """
     check_model(cfg)
     check_data(cfg, RunPaths(Path(out)).data)
+    check_output_entries(Path(out))  # no device, FIFO or socket where the run writes its files
     retain_freed_memory()  # fewer page faults per step (glibc); results unchanged
     with torch_threads(None):  # the run sets its own thread count; the caller's comes back afterwards
         ctx = setup(cfg.training.device)
