@@ -5,6 +5,7 @@ flag; a hypothesis test feeds random bytes to the file readers behind the comman
 from __future__ import annotations
 
 import json
+import os
 from collections.abc import Callable
 from pathlib import Path
 
@@ -79,6 +80,22 @@ def _wide_ci(tmp: Path) -> Path:
     row = ",".join(["m", "s", "mse_x100", "1", "0.5", "1.5", "10", "lowres"] + [""] * 99_992)
     _file(tmp, "res/ci.csv", "method,scene,metric,value,low,high,n_pixels,resolution\n" + f"{row}\n" * 3)
     return folder
+
+
+def _fifo(tmp: Path, name: str) -> Path:
+    path = tmp / name
+    path.parent.mkdir(parents=True, exist_ok=True)
+    os.mkfifo(path)
+    return path
+
+
+def _sparse(tmp: Path, name: str, size: int = 50 * 1024**3) -> Path:
+    """A sparse file of ``size`` bytes behind a zip header (no disk used)."""
+    path = tmp / name
+    with open(path, "wb") as f:
+        f.write(b"PK\x03\x04")
+        f.truncate(size)
+    return path
 
 
 VICTIM = "victim"  # a folder beside OUT that a hostile output folder points at: it must stay as it was
@@ -198,6 +215,24 @@ CASES: list[tuple[str, Callable[[Path], list], tuple[str, ...], tuple[str, ...]]
     ("new-plugin-bad-name", lambda t: ["new-plugin", "Bad Name", "--out", t / "p"], ("plugin name 'Bad Name'",),
      ("p",)),
     ("new-plugin-taken", lambda t: ["new-plugin", "subfocal", "--out", t / "p"], ("registered already",), ("p",)),
+    # a write target that is not a regular file (issue 31; every command: test_write_targets.py)
+    ("regress-update-fifo", lambda t: ["regress", "--update", _fifo(t, "g.json"), _file(t, "r.json", RESULTS)],
+     ("g.json", "is a FIFO, not a regular file"), ()),
+    ("predict-out-fifo", lambda t: ["predict", "--method", "gt", "--input", _scene(t), "--out", _fifo(t, "o.pfm")],
+     ("o.pfm", "is a FIFO"), ()),
+    ("bench-json-fifo", lambda t: ["bench", "inference", "--size", "16", "--json", _fifo(t, "b.json")],
+     ("b.json", "is a FIFO"), ()),
+    ("evaluate-out-holds-fifo", lambda t: ["evaluate", "--data", _scene(t), "--method", "gt", "--out",
+                                           _fifo(t, "out/results.json").parent], ("results.json", "is a FIFO"),
+     ("out/results.csv",)),
+    # one spelling per metric id (issue 31): another spelling of a threshold is an unknown metric, not MISSING
+    ("regress-golden-metric-spelling", lambda t: ["regress", _file(t, "g.json", '[{"method": "m", "scene": "s", '
+                                                  '"metric": "badpix_0.0700", "value": 1, "tolerance": 0, '
+                                                  '"resolution": "lowres"}]'), _file(t, "r.json", RESULTS)],
+     ("g.json", "unknown metric 'badpix_0.0700'"), ()),
+    ("predict-weights-huge", lambda t: ["predict", "--method", f"subfocal:weights={_sparse(t, 'w.pt')}", "--input",
+                                        _scene(t), "--out", t / "o.pfm"], ("w.pt", "larger than the 8 GiB"),
+     ("o.pfm",)),
     # hostile output folders (issue 20.1): every command that reads one or writes a set into one
     ("evaluate-hostile-out", lambda t: ["evaluate", "--data", _scene(t), "--method", "gt", "--out", _hostile(t)],
      (".lfbench-commit.json", "nothing was changed"), ()),

@@ -291,3 +291,46 @@ def test_two_class_records_are_keyed_by_the_weights_content(nets, tmp_path, caps
     assert "OK: 5 compared, 0 regressions" in out + err and "NEW" not in out + err and "MISSING" not in out + err
     saved = json.loads((tmp_path / "at_b" / "results.json").read_text())["meta"]["methods"]
     assert saved[method.label]["weights"] == {"path": str(b), "sha256": digest}  # the path stays as provenance
+
+
+@pytest.mark.parametrize(("head", "size", "message"), [
+    (b"PK\x03\x04", 50 * 1024**3, "weights file of 50.0 GiB, larger than the 8 GiB lfbench reads"),
+    (b"\x80\x02", 50 * 1024**3, "weights file of 50.0 GiB, larger than the 8 GiB lfbench reads"),
+    (b"PK\x03\x04", 7 * 1024**3, "a damaged or incomplete file, not a readable torch checkpoint"),
+    (b"{", 7 * 1024**3, "a JSON file, not a torch checkpoint"),
+])
+def test_a_huge_or_foreign_weights_file_is_refused_before_it_is_hashed(nets, tmp_path, monkeypatch, head, size,
+                                                                       message):
+    """NAME:weights=FILE names the method by the file's hash: the file's kind and size are checked first, from
+    bounded reads, so a sparse file of 50 GB (or 7 GB of zeros behind a zip header) is one line, and is never
+    read whole (the hash function fails if called)."""
+    import lfbench.method.base as base
+    import lfbench.utils.readfile as readfile
+
+    path = tmp_path / "huge.pt"
+    with open(path, "wb") as f:
+        f.write(head)
+        f.truncate(size)  # sparse: no disk used
+    read = []
+    real_read = readfile.os.read
+
+    def counting_read(fd, n):
+        data = real_read(fd, n)
+        read.append(len(data))
+        return data
+
+    def no_hash(*args, **kwargs):
+        raise AssertionError("the file was hashed before it was checked")
+
+    method = create_from_spec(f"stack:weights={path}")
+    with monkeypatch.context() as patch:
+        patch.setattr(base, "file_sha256", no_hash)
+        patch.setattr(readfile.os, "read", counting_read)
+        with pytest.raises(DataError) as info:
+            method.label  # noqa: B018 - the label hashes the weights
+        assert str(info.value) == f"{path}: {message}"
+        with pytest.raises(DataError, match="not a readable torch checkpoint|larger than|not a torch checkpoint"):
+            method.provenance()
+    assert sum(read) < 1024**2  # bounded reads only
+    # real weights are still named by their content
+    assert create_from_spec(f"stack:weights={nets['stack']}").label.startswith("stack:weights=sha256:")

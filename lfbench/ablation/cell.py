@@ -2,8 +2,9 @@
 its final weights on the evaluation scenes with the method that runs the network's checkpoints
 (``lfbench.method.registry.network_runner``; ``subfocal`` for SubFocal), and write the marker
 ``cell.json`` last (atomically): a cell with a marker of the same config is finished and is not run
-again. The test time (one whole-scene prediction) is measured afterwards by :func:`time_cell`, one
-cell at a time, so that parallel cells do not slow each other's timings.
+again, as long as its ``final.pt`` and ``results.json`` are the files the marker recorded (else it is re-made).
+The test time (one whole-scene prediction) is measured afterwards by :func:`time_cell`, one cell at a time, so
+that parallel cells do not slow each other's timings.
 
 Files in OUT/cells/<cell id>/ (besides the trainer's checkpoint.pt, final.pt, metrics.jsonl,
 summary.json, ...): ``train.toml`` (the cell's training config: ``lfbench train train.toml --out
@@ -19,6 +20,7 @@ bit for bit that of an uninterrupted two-stage ``lfbench train`` of ``train.toml
 from __future__ import annotations
 
 import contextlib
+import logging
 import os
 import shlex
 import socket
@@ -35,12 +37,13 @@ from lfbench.utils.atomic import write_bytes, write_text
 from lfbench.utils.errors import DataError, SpecError
 from lfbench.utils.jsonfile import json_text, read_json
 from lfbench.utils.log import log_to_file
-from lfbench.utils.readfile import read_bytes
+from lfbench.utils.readfile import file_sha256, read_bytes
 from lfbench.utils.threads import torch_threads
 from lfbench.utils.tomlfile import toml_text
 
 MARKER, TRAIN_CONFIG, LOG, MAPS, TIMING = "cell.json", "train.toml", "log.txt", "maps", "timing.json"
 MAX_COPY_BYTES = 4 * 1024**3  # a shared stage-1 export copied into a cell (weights of at most 2 GiB, its log)
+_log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -79,16 +82,44 @@ def read_marker(cell_dir: str | Path) -> dict[str, Any] | None:
     return marker if isinstance(marker, dict) else None
 
 
-def is_done(task: CellTask) -> bool:
-    """True when the cell finished with this config and these evaluation settings. A marker of
-    another training config is a SpecError (the folder holds another experiment)."""
+def is_done(task: CellTask, *, warn: bool = True) -> bool:
+    """True when the cell finished with this config and these evaluation settings, and its artefacts are the
+    ones its marker recorded: ``final.pt`` holds the weights of ``final_sha256`` and ``results.json`` the bytes
+    of ``results_sha256`` (a file copied over from another cell, or changed, makes the cell unfinished: it is
+    re-made, its weights re-exported from its own training checkpoint, its scores re-made; one log line says
+    which file differed). A marker of another training config is a SpecError (the folder holds another
+    experiment). ``warn``: log the line (the run that re-makes the cell does)."""
     marker = read_marker(task.cell_dir)
     if marker is None:
         return False
     if marker.get("fingerprint") != task.fingerprint:
         raise SpecError(f"cell {task.cell_id} in {task.cell_dir} was trained with another config; use another "
                         "--out folder (or delete that cell folder)")
-    return marker.get("eval_fingerprint") == task.eval_fingerprint and (task.path / "results.json").is_file()
+    if marker.get("eval_fingerprint") != task.eval_fingerprint:
+        return False
+    changed = recorded_mismatch(task.path, marker)
+    if changed is not None:
+        if warn:
+            _log.warning("cell %s: %s; the cell is re-made", task.cell_id, changed)
+        return False
+    return True
+
+
+def recorded_mismatch(cell_dir: Path, marker: dict[str, Any]) -> str | None:
+    """Why the cell's ``final.pt`` or ``results.json`` is not what its ``marker`` recorded (None when both are)."""
+    final, results = cell_dir / "final.pt", cell_dir / "results.json"
+    for path, key, digest in ((results, "results_sha256", _file_digest), (final, "final_sha256", weights_digest)):
+        try:
+            actual = digest(path)
+        except DataError as exc:
+            return str(exc)
+        if actual != marker.get(key):
+            return f"{path} is not the file the cell recorded ({key})"
+    return None
+
+
+def _file_digest(path: Path) -> str:
+    return file_sha256(path, "cell results")
 
 
 def write_train_config(task: CellTask) -> Path:
@@ -110,17 +141,27 @@ def write_train_config(task: CellTask) -> Path:
 def link_data(task: CellTask) -> None:
     """Make CELL/data/<category> point at the shared generated scenes (the trainer then skips
     generating them); without symlink support each cell generates its own copy."""
-    data = task.path / "data"
     for category, folder in task.data_links.items():
-        link = data / category
-        if link.is_symlink() and link.resolve() != Path(folder).resolve():
-            raise DataError("symbolic link to another folder than the ablation's generated scenes (not allowed)",
-                            link)
-        if link.exists() or link.is_symlink():
-            continue
-        data.mkdir(parents=True, exist_ok=True)
-        with contextlib.suppress(OSError):
-            link.symlink_to(Path(folder).resolve(), target_is_directory=True)
+        link_data_folder(task.path / "data" / category, Path(folder))
+
+
+def link_data_folder(link: Path, target: Path) -> None:
+    """Make ``link`` a relative symbolic link to the generated scenes ``target`` (so that an ablation folder
+    moved or copied as a whole still resumes). A link that leads elsewhere (an absolute one of a folder that
+    was moved, or any other) is replaced by the right one, never followed; a real folder (a copy made where
+    symbolic links are not supported) is kept. Without symlink support nothing is linked."""
+    if link.is_symlink():
+        try:
+            if link.resolve(strict=True) == target.resolve():
+                return
+        except (OSError, RuntimeError):  # dangling or a loop: replaced
+            pass
+        link.unlink()
+    elif link.exists():
+        return
+    link.parent.mkdir(parents=True, exist_ok=True)
+    with contextlib.suppress(OSError):
+        link.symlink_to(os.path.relpath(target.resolve(), link.parent.resolve()), target_is_directory=True)
 
 
 def seed_from_stage1(task: CellTask) -> float:
@@ -231,13 +272,18 @@ def time_cell(cell_dir: str | Path, ev: Evaluation, threads: int, network: str =
     the median of ``time_repeats`` whole-scene predictions. Run one cell at a time, with nothing else
     of the ablation running, so that the cells' times compare."""
     path = Path(cell_dir) / TIMING
-    key = timing_key(ev, threads)
+    weights = Path(cell_dir) / "final.pt"
+    recorded = (read_marker(cell_dir) or {}).get("final_sha256")
+    if weights_digest(weights) != recorded:  # the weights timed are the ones the cell scored
+        raise DataError("not the weights the cell recorded (final_sha256 of its cell.json); run lfbench ablate "
+                        "again to re-make the cell", weights)
+    key = {**timing_key(ev, threads), "final_sha256": recorded}
     with contextlib.suppress(DataError):
         old = read_json(path, "cell timing")
         if isinstance(old, dict) and old.get("key") == key:
             return old
     with torch_threads(None):  # the method sets its own count; restore ours afterwards
-        method = make_method(Path(cell_dir) / "final.pt", ev, threads, network)
+        method = make_method(weights, ev, threads, network)
         times = time_whole_scene(method, ev.time_size, ev.time_repeats, ev.time_warmup)
     out = {"key": key, "test_s": float(np.median(times)), "test_s_all": times, "time_size": ev.time_size,
            "threads": threads, "device": key["device"], "host": socket.gethostname(),
@@ -287,18 +333,24 @@ def _run(task: CellTask) -> dict[str, Any]:
         "eval_fingerprint": task.eval_fingerprint, "steps": int(summary["steps"]),
         "train_s": train_s, "own_train_s": train_s - stage1_s, "stage1_s": stage1_s,
         "stage1_sha256": stage1_digest(task.stage1_dir) if task.stage1_dir else None,
-        "final_sha256": _weights_digest(task.path / "final.pt"),
+        "final_sha256": weights_digest(task.path / "final.pt"),
         "threads": task.threads, "device": resolve_device(task.evaluation.device),
         "eval_runtime_s": float(np.mean([r.runtime_s for r in results.runs])) if results.runs else None,
         "scenes": results.scenes,
     }
     results.meta["cell"] = {k: v for k, v in marker.items() if k not in ("fingerprint", "eval_fingerprint")}
     results.write(task.path)
+    marker["results_sha256"] = _file_digest(task.path / "results.json")  # what a later run re-uses, checked
     write_text(task.path / MARKER, json_text(marker, indent=2, sort_keys=True) + "\n")
     return marker
 
 
-def _weights_digest(path: Path) -> str:
+def weights_digest(path: Path) -> str:
+    """:func:`lfbench.training.checkpoint.state_sha256` of the weights file's state dict (the marker's
+    ``final_sha256``); DataError naming the file when it is not weights."""
     from lfbench.training import checkpoint as ckpt
 
-    return ckpt.state_sha256(ckpt.load(path)["state_dict"])
+    payload = ckpt.load(path)
+    if not isinstance(payload.get("state_dict"), dict):
+        raise DataError("not exported weights (no state_dict)", path)
+    return ckpt.state_sha256(payload["state_dict"])

@@ -38,7 +38,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-from lfbench.ablation.cell import MAPS, CellTask, is_done, load_scenes, read_marker, run_cell
+from lfbench.ablation.cell import MAPS, CellTask, is_done, link_data_folder, load_scenes, read_marker, run_cell
 from lfbench.ablation.executor import ClusterOptions, Executor, executor_for
 from lfbench.ablation.report import check_maps, report_writers, run_writers
 from lfbench.ablation.spec import AblationSpec, Cell, SyntheticEval, sha256_of
@@ -54,7 +54,15 @@ from lfbench.utils.hardware import available_cores
 from lfbench.utils.jsonfile import json_text, read_json
 from lfbench.utils.log import log_to_file
 from lfbench.utils.names import file_name
-from lfbench.utils.outputs import OutputSet, prepare_output_folder, read_manifest, recover, staged_outputs
+from lfbench.utils.outputs import (
+    OutputSet,
+    check_output_entries,
+    prepare_output_folder,
+    read_manifest,
+    recover,
+    staged_outputs,
+)
+from lfbench.utils.readfile import file_sha256
 from lfbench.utils.tomlfile import toml_text
 
 Log = Callable[[str], None]
@@ -152,14 +160,7 @@ def _shared_stage1(spec: AblationSpec, folder: Path, links: dict[str, str], thre
         raise SpecError(f"{path} holds another stage-1 config; use another --out folder")
     write_text(path, toml_text(cfg, f"The shared stage 1 of {spec.source}: written by lfbench ablate."))
     for category, target in links.items():
-        link = folder / "data" / category
-        if link.is_symlink() and link.resolve() != Path(target).resolve():
-            raise DataError("symbolic link to another folder than the ablation's generated scenes (not allowed)",
-                            link)
-        if not (link.exists() or link.is_symlink()):
-            link.parent.mkdir(parents=True, exist_ok=True)
-            with contextlib.suppress(OSError):
-                link.symlink_to(Path(target).resolve(), target_is_directory=True)
+        link_data_folder(folder / "data" / category, Path(target))
     marker = folder / "done.json"
     if marker.is_file():
         return folder
@@ -182,11 +183,23 @@ def make_tasks(spec: AblationSpec, out: Path, links: dict[str, dict[str, str]], 
         config["training"]["threads"] = threads
         tasks.append(CellTask(
             cell_id=cell.id, values=cell.values, config=config, fingerprint=cell.fingerprint,
-            eval_fingerprint=sha256_of([spec.evaluation.fingerprint(), [s for s, _ in scenes]]),
+            eval_fingerprint=sha256_of([spec.evaluation.fingerprint(), scene_keys(scenes, out)]),
             cell_dir=str(out / "cells" / cell.id), data_links=links[cell.id],
             stage1_dir=str(stage1) if stage1 is not None else None, scenes=scenes, evaluation=spec.evaluation,
             threads=threads, progress=progress))
     return tasks
+
+
+def scene_keys(scenes: tuple[tuple[str, str], ...], out: Path) -> list[str]:
+    """The evaluation scenes as fingerprints name them: a scene generated inside OUT by its path relative to OUT
+    (``OUT/eval_data/...``), so that a folder moved or copied as a whole keeps its finished cells; any other by
+    its path as given."""
+    root = out.resolve()
+    keys = []
+    for folder, _ in scenes:
+        path = Path(folder).resolve()
+        keys.append("OUT/" + path.relative_to(root).as_posix() if path.is_relative_to(root) else folder)
+    return keys
 
 
 def _cost_estimate(task: CellTask) -> float:
@@ -202,7 +215,7 @@ def run_cells(tasks: list[CellTask], executor: Executor, progress: bool | None, 
     worker processes each with its own GPU, or one submitit job per cell); returns every cell's marker."""
     from tqdm import tqdm
 
-    pending = [t for t in tasks if not is_done(t)]
+    pending = [t for t in tasks if not is_done(t, warn=False)]  # run_cell says why a cell is re-made
     for t in tasks:
         if t not in pending:
             log(f"cell {t.cell_id}: finished earlier, skipped")
@@ -270,21 +283,39 @@ def run_methods(spec: AblationSpec, out: Path, scenes: tuple[tuple[str, str], ..
     out_list = []
     for m in spec.methods:
         folder = out / "methods" / file_name(m.label)
-        key = sha256_of([m.spec, ev.fingerprint(), [s for s, _ in scenes]])
+        method = create_from_spec(m.spec)
+        # the method's files (weights) by content: other weights under the same path are another method
+        content = {k: v["sha256"] for k, v in method.provenance().items() if isinstance(v, dict)}
+        key = sha256_of([m.spec, content, ev.fingerprint(), scene_keys(scenes, out)])
         marker = folder / "method.json"
         done = read_json(marker, "method marker") if marker.is_file() else None
         if isinstance(done, dict) and done.get("key") == key:
-            out_list.append(Results.read(folder))
-            log(f"method {m.label}: finished earlier, skipped")
-            continue
-        res = evaluate_to_folder([create_from_spec(m.spec)], loaded, folder, rules=rules, label=m.label,
+            changed = _results_changed(folder, done)
+            if changed is None:
+                out_list.append(Results.read(folder))
+                log(f"method {m.label}: finished earlier, skipped")
+                continue
+            log(f"method {m.label}: {changed}; scored again")
+        res = evaluate_to_folder([method], loaded, folder, rules=rules, label=m.label,
                                  writers=[Maps(MAPS, per_method=False, uncertainty=True)], progress=False,
                                  meta={"method": {"label": m.label, "spec": m.spec}})
         if res.records:  # a method that served no scene (e.g. weights not there yet) is tried again next time
-            write_text(marker, json_text({"label": m.label, "spec": m.spec, "key": key}, indent=2) + "\n")
+            record = {"label": m.label, "spec": m.spec, "key": key,
+                      "results_sha256": file_sha256(folder / "results.json", "method results")}
+            write_text(marker, json_text(record, indent=2) + "\n")
         log(f"method {m.label}: scored on {len(res.scenes)} scene(s)")
         out_list.append(res)
     return out_list
+
+
+def _results_changed(folder: Path, marker: dict[str, Any]) -> str | None:
+    """Why ``folder``'s results.json is not the one its marker recorded (``results_sha256``), or None."""
+    path = folder / "results.json"
+    try:
+        digest = file_sha256(path, "method results")
+    except DataError as exc:
+        return str(exc)
+    return None if digest == marker.get("results_sha256") else f"{path} is not the file its method.json recorded"
 
 
 # --------------------------------------------------------------------------- the whole run
@@ -314,6 +345,7 @@ def run_ablation(spec: AblationSpec, out: str | Path, *, jobs: int = 1, progress
     executor.check()  # before any work: no data generated, nothing submitted
     check_training_data(spec, out)
     prepare_output_folder(out)
+    check_output_entries(out)
     with _set_lock(out):
         recover(out)  # a cut commit of an earlier run is finished (or its journal refused) before any work
         read_manifest(out)

@@ -379,6 +379,11 @@ def run(args: argparse.Namespace) -> int:
         from lfbench.utils.hardware import resolve_device
 
         args.device = str(resolve_device(args.device))  # SpecError (exit 2) before any case
+    from lfbench.utils.outputs import check_output_file
+
+    for name in ("json", "table"):  # before any case (a link: the file it leads to)
+        if getattr(args, name, None) is not None:
+            setattr(args, name, check_output_file(getattr(args, name)))
     records: list[dict] = []
     cases = _cases(args)
     _check_networks(args, cases)

@@ -60,6 +60,10 @@ def load_input(path: Path):
     return ArrayLightField.from_channels(arr.astype(np.float32), name=path.stem)
 
 
+#: The files ``--extras`` writes beside OUT (OUT without its suffix, then these).
+EXTRAS = (".distribution.npy", ".disparities.npy", ".uncertainty.npy")
+
+
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
@@ -71,7 +75,11 @@ def run(args: argparse.Namespace) -> int:
 
     if args.out.suffix not in (".pfm", ".npy"):
         raise DataError("output must end in .pfm or .npy", args.out)
-    check_output_file(args.out)  # before the work
+    args.out = check_output_file(args.out)  # before the work (a link: the file it leads to)
+    if args.extras:
+        stem = args.out.with_suffix("")
+        for suffix in EXTRAS:
+            check_output_file(Path(f"{stem}{suffix}"))
     method = create_from_spec(args.method, {"device": args.device})
     lf = load_input(args.input)
     reason = method.available_for(lf)
@@ -89,10 +97,9 @@ def run(args: argparse.Namespace) -> int:
         save(args.out, pred.disparity)
     if args.extras:
         stem = args.out.with_suffix("")
-        for suffix, arr in ((".distribution.npy", pred.distribution), (".disparities.npy", pred.disparity_values),
-                            (".uncertainty.npy", pred.uncertainty)):
+        for suffix, arr in zip(EXTRAS, (pred.distribution, pred.disparity_values, pred.uncertainty), strict=True):
             if arr is not None:
-                save(Path(f"{stem}{suffix}"), arr)
+                save(check_output_file(Path(f"{stem}{suffix}")), arr)
     nonfinite = int(pred.disparity.size - np.count_nonzero(np.isfinite(pred.disparity)))
     counted = f", {nonfinite} non-finite pixels" if nonfinite else ""
     print(f"{method.label}: wrote {args.out} ({pred.disparity.shape[1]}x{pred.disparity.shape[0]}, "

@@ -62,6 +62,10 @@ def run(args: argparse.Namespace) -> int:
     from lfbench.runs.regress import check, make_golden, read_golden
 
     tolerance = _parse_tolerance(args.tolerance)  # checked even without --update: a typo is an error
+    if args.update:
+        from lfbench.utils.outputs import check_output_file
+
+        args.golden = check_output_file(args.golden)  # before reading NEW (a link: the file it leads to)
     new = Results.read(args.new)
     if args.update:
         n = make_golden(new, tolerance, args.golden, source=args.new, allow_empty=args.allow_empty)

@@ -30,7 +30,9 @@ from __future__ import annotations
 
 import io
 import math
+import os
 import shutil
+import stat
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -42,7 +44,7 @@ from scipy import ndimage
 from lfbench.data.params import SceneParameters
 from lfbench.data.pfm import write_pfm
 from lfbench.data.scene import ArrayLightField, rgb_to_gray
-from lfbench.utils.atomic import fresh_dir, replace_dir, write_bytes
+from lfbench.utils.atomic import check_replaceable, fresh_dir, replace_dir, write_bytes
 from lfbench.utils.errors import DataError, SpecError
 
 GENERATOR_VERSION = "1"
@@ -862,10 +864,11 @@ def write_benchmark(out: str | Path, seed: int = 0, size: int = 128, scenes: int
             raise SpecError(f"invalid category name {cat!r}")
     out = Path(out)
     targets = [out / cat / scene_name(seed, i) for i, cat in enumerate(cats)]
-    if not force:
-        for t in targets:
-            if t.exists():
-                raise DataError("scene folder already exists (use --force to overwrite)", t)
+    for t in targets:
+        if not force and os.path.lexists(t):
+            raise DataError("scene folder already exists (use --force to overwrite)", t)
+        if os.path.lexists(t) and not stat.S_ISDIR(os.lstat(t).st_mode):  # --force replaces scene folders only
+            check_replaceable(t)  # a device, FIFO or socket is refused; a file or link is replaced
     jobs = [(targets[i], scene_seed(seed, i), size, angular, cats[i]) for i in range(scenes)]
     from tqdm import tqdm
 

@@ -90,9 +90,20 @@ class Method:
         each file named by a :attr:`content_params` parameter in place of its path; or the label the user
         gave (:meth:`with_label`)."""
         if self._label is None:
-            self._label = format_spec(self.name, {k: content_id(v) if k in self.content_params else v
+            self._label = format_spec(self.name, {k: self._content_id(k, v) if k in self.content_params else v
                                                   for k, v in self.params.items()})
         return self._label
+
+    def check_content(self, key: str, path: Path) -> None:
+        """Raise DataError naming ``path`` when the file of the :attr:`content_params` parameter ``key`` is not
+        one this method can use, from bounded reads only: called before the file is hashed for the method's
+        label (a network's weights: a torch checkpoint of bounded size). Default: no check."""
+
+    def _content_id(self, key: str, value: Any) -> Any:
+        """:func:`content_id` of a :attr:`content_params` value, after :meth:`check_content` of its file."""
+        if isinstance(value, str | Path) and Path(value).expanduser().is_file():
+            self.check_content(key, Path(value).expanduser())
+        return content_id(value)
 
     @property
     def spec(self) -> str:
@@ -114,6 +125,7 @@ class Method:
             value = self.params.get(key, getattr(self, key, None))
             if isinstance(value, str | Path) and Path(value).expanduser().is_file():
                 path = Path(value).expanduser().resolve()
+                self.check_content(key, path)
                 out[key] = {"path": str(path), "sha256": file_sha256(path, key)}
         return out
 

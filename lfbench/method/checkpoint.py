@@ -30,6 +30,9 @@ LEGACY_WEIGHTS_FORMATS = ("lfbench.subfocal.weights",)
 CHECKPOINT_FORMAT = "lfbench.train.checkpoint"
 
 _HEAD = 512  # bytes read to tell what a file is
+#: The largest checkpoint lfbench opens (weights and optimizer state of a network of ~700 million fp32
+#: parameters); a larger file is refused from its size, before anything reads or hashes it.
+MAX_CHECKPOINT_BYTES = 8 * 1024**3
 
 
 def sniff(head: bytes) -> str | None:
@@ -60,20 +63,39 @@ def sniff(head: bytes) -> str | None:
     return "a binary file of another kind"
 
 
-def read_checkpoint(path: str | Path, what: str = "checkpoint file") -> dict[str, Any]:
-    """The payload (a dict) of the torch checkpoint ``path``: ``torch.load(weights_only=True)`` on the
-    CPU. DataError naming the file and, in one line, what it is instead: missing, not a regular file (a
-    FIFO or device would block or never end), another kind of file, damaged, or holding Python objects
-    beyond tensors and plain values (refused, not unpickled)."""
-    import torch
-
+def check_checkpoint_file(path: str | Path, what: str = "checkpoint file") -> None:
+    """DataError naming ``path`` unless it may be a torch checkpoint, from bounded reads only (the first
+    512 bytes and, for torch's zip format, the archive's directory at its end): a regular file of at most
+    :data:`MAX_CHECKPOINT_BYTES`, of no other known kind (:func:`sniff`), and a zip archive that holds a
+    pickle. Run before anything reads the whole file: loading it, or hashing it for a method's name (a
+    sparse 50 GB file is refused here in microseconds)."""
     path = Path(path)
     check_regular_file(path, what)
+    size = os.path.getsize(path)
+    if size > MAX_CHECKPOINT_BYTES:
+        raise DataError(f"{what} of {size / 1024**3:.1f} GiB, larger than the {MAX_CHECKPOINT_BYTES // 1024**3} GiB "
+                        "lfbench reads", path)
     with open(path, "rb") as f:
         head = f.read(_HEAD)
     kind = sniff(head)
     if kind is not None:
         raise DataError(f"{kind}, not a torch checkpoint", path)
+    if head.startswith(b"PK\x03\x04"):
+        problem = _zip_problem(path)
+        if problem is not None:
+            raise DataError(f"{problem}, not a readable torch checkpoint", path)
+
+
+def read_checkpoint(path: str | Path, what: str = "checkpoint file") -> dict[str, Any]:
+    """The payload (a dict) of the torch checkpoint ``path``: ``torch.load(weights_only=True)`` on the
+    CPU, after :func:`check_checkpoint_file`. DataError naming the file and, in one line, what it is
+    instead: missing, not a regular file (a FIFO or device would block or never end), too large, another
+    kind of file, damaged, or holding Python objects beyond tensors and plain values (refused, not
+    unpickled)."""
+    import torch
+
+    path = Path(path)
+    check_checkpoint_file(path, what)
     try:
         payload = torch.load(path, map_location="cpu", weights_only=True)
     except pickle.UnpicklingError:  # torch's weights-only refusal (its advice is not passed on)
@@ -86,7 +108,9 @@ def read_checkpoint(path: str | Path, what: str = "checkpoint file") -> dict[str
     return payload
 
 
-def _damaged(path: Path) -> str:
+def _zip_problem(path: Path) -> str | None:
+    """What ``path`` is when it is not a zip archive holding torch's pickle (None when it is); reads the
+    archive's directory only (at its end), never its members."""
     try:
         with zipfile.ZipFile(path) as z:
             names = z.namelist()
@@ -94,7 +118,11 @@ def _damaged(path: Path) -> str:
         return "a damaged or incomplete file" if os.path.getsize(path) else "an empty file"
     if not any(n.endswith("data.pkl") for n in names):
         return "a zip archive"
-    return "a damaged torch file"
+    return None
+
+
+def _damaged(path: Path) -> str:
+    return _zip_problem(path) or "a damaged torch file"
 
 
 def is_weights(payload: dict[str, Any]) -> bool:
@@ -126,5 +154,5 @@ def _is_name(text: str) -> bool:
     return 0 < len(text) <= 40 and all(c.isascii() and (c.isalnum() or c in "_-.") for c in text)
 
 
-__all__ = ["read_checkpoint", "read_weights", "is_weights", "sniff", "WEIGHTS_FORMAT", "LEGACY_WEIGHTS_FORMATS",
-           "CHECKPOINT_FORMAT"]
+__all__ = ["check_checkpoint_file", "MAX_CHECKPOINT_BYTES", "read_checkpoint", "read_weights", "is_weights", "sniff",
+           "WEIGHTS_FORMAT", "LEGACY_WEIGHTS_FORMATS", "CHECKPOINT_FORMAT"]

@@ -24,6 +24,7 @@ import numpy as np
 
 from lfbench.data.scene import LightField
 from lfbench.method.base import Method, Prediction
+from lfbench.method.checkpoint import check_checkpoint_file
 from lfbench.method.params import Param, Range
 from lfbench.method.trainable import Trainable, contract_problem, get_trainable, plugin_failure
 from lfbench.utils.errors import DataError, LFBenchError, SpecError
@@ -98,6 +99,12 @@ class NetworkMethod(Method):
     def weights_path(self) -> Path | None:
         """The weights file to load (None: none given)."""
         return self.weights
+
+    def check_content(self, key: str, path: Path) -> None:
+        """The weights file must look like a torch checkpoint (kind and size from bounded reads:
+        :func:`lfbench.method.checkpoint.check_checkpoint_file`) before its hash names the method."""
+        if key == "weights":
+            check_checkpoint_file(path, "weights file")
 
     def explicit_arch(self) -> dict[str, Any]:
         """The network parameters the user gave (recorded by the registry in ``params``)."""

@@ -245,24 +245,38 @@ RUNTIME_METRICS: tuple[Metric, ...] = (
 
 
 def badpix_family(metric_id: str) -> Metric | None:
-    """``badpix_<t>`` for any threshold t in px ('badpix_0.04'); the toolkit's 'badpix_0040' is t x 1000."""
-    if not metric_id.startswith("badpix_"):
+    """``badpix_<t>`` for any threshold t >= 0 in px, spelled as the metric's id spells it (``f"badpix_{t:g}"``:
+    'badpix_0.04', 'badpix_0.1', 'badpix_0.015'), or the toolkit's id of it ('badpix_0040': t x 1000, as
+    ``"%0.3f"`` writes it). Any other spelling of a threshold ('badpix_0.0700', 'badpix_ 0.07', 'badpix_.07',
+    non-ASCII digits) is no id (None): one spelling per metric, so that records under another one are
+    refused as an unknown metric rather than read as a metric of their own."""
+    if not (metric_id.startswith("badpix_") and metric_id.isascii()):
         return None
     text = metric_id.split("_", 1)[1]
+    if text.isdigit():  # the toolkit's id ('badpix_0070'), else a whole threshold ('badpix_1')
+        metric = bad_pix_metric(int(text) / 1000.0)
+        if metric.toolkit_id == metric_id:
+            return metric
     try:
-        t = float(text) if "." in text or not text.isdigit() else int(text) / 1000.0
+        t = float(text)
     except ValueError:
         return None
-    return bad_pix_metric(t) if np.isfinite(t) and t >= 0 else None
+    if not (np.isfinite(t) and t >= 0) or text.startswith("-"):
+        return None
+    metric = bad_pix_metric(t)
+    return metric if metric.id == metric_id else None
 
 
-_QUANTILE_ID = re.compile(r"q(?P<p>\d{1,2}(?:\.\d{1,6})?)_x100|q_(?P<tk>\d{1,2})_100")
+_QUANTILE_ID = re.compile(r"q(?P<p>\d{1,2}(?:\.\d{1,6})?)_x100|q_(?P<tk>\d{1,2})_100", re.ASCII)
 
 
 def quantile_family(metric_id: str) -> Metric | None:
-    """``q<p>_x100`` for a percentage 0 <= p < 100 ('q50_x100', 'q2.5_x100'); the toolkit's 'q_50_100'."""
+    """``q<p>_x100`` for a percentage 0 <= p < 100 spelled as the metric's id spells it (``f"q{p:g}_x100"``:
+    'q50_x100', 'q12.5_x100'), or the toolkit's id of a whole percentage ('q_50_100'); any other spelling
+    ('q050_x100', 'q50.0_x100', 'q_05_100', non-ASCII digits) is no id (None)."""
     m = _QUANTILE_ID.fullmatch(metric_id)
     if m is None:
         return None
     p = float(m["p"] if m["p"] is not None else m["tk"])
-    return _quantile_metric(p) if f"q{p:g}_x100" == metric_id or m["tk"] is not None else None
+    metric = _quantile_metric(p)
+    return metric if metric_id in (metric.id, metric.toolkit_id) else None

@@ -70,9 +70,9 @@ from lfbench.training.validate import check_validation_area, validate
 from lfbench.utils.atomic import write_text
 from lfbench.utils.errors import DataError, LFBenchError, SpecError
 from lfbench.utils.hardware import require_bf16, set_fp32_numerics
-from lfbench.utils.jsonfile import json_text
+from lfbench.utils.jsonfile import json_text, read_json
 from lfbench.utils.malloc import retain_freed_memory
-from lfbench.utils.outputs import read_manifest, recover, staged_outputs
+from lfbench.utils.outputs import check_output_entries, read_manifest, recover, staged_outputs
 from lfbench.utils.readfile import read_text
 from lfbench.utils.threads import torch_threads
 from lfbench.utils.tomlfile import MAX_TOML_BYTES
@@ -211,9 +211,12 @@ class Trainer:
         paths = self.paths
         if state is not None and state["stage"] >= len(self.cfg.stages) and paths.final.is_file() \
                 and paths.summary.is_file():
-            self.log(f"{paths.out}: training already complete ({state['global_step']} steps); final weights in "
-                     f"{paths.final}")
-            return {"final": str(paths.final), "steps": state["global_step"], "resumed": True}
+            changed = self._exports_changed(state)
+            if changed is None:
+                self.log(f"{paths.out}: training already complete ({state['global_step']} steps); final weights in "
+                         f"{paths.final}")
+                return {"final": str(paths.final), "steps": state["global_step"], "resumed": True}
+            self.log(f"{changed}: re-exported from {paths.checkpoint}")
         self._prepare_folder(state)
         sampler, validation = self._load_data()
         model = self._build(sampler, init)
@@ -221,6 +224,25 @@ class Trainer:
         self._place(model)
         self._fit(model, sampler, validation, start_stage, start_step, opt_state, local_batch)
         return self._export_final(model, resumed=state is not None)
+
+    def _exports_changed(self, state: dict) -> str | None:
+        """Why the finished run's final.pt / summary.json are not what its checkpoint ended with (None when they
+        are): the weights' state dict must be the checkpoint's model (``state_sha256``), of this config's network,
+        and the summary must count the checkpoint's steps. A file copied over from another run is re-exported."""
+        paths = self.paths
+        try:
+            final = ckpt.load(paths.final, ckpt.WEIGHTS_FORMAT)
+            summary = read_json(paths.summary, "training summary")
+        except LFBenchError as exc:
+            return str(exc)
+        if not isinstance(final.get("state_dict"), dict) or \
+                ckpt.state_sha256(final["state_dict"]) != ckpt.state_sha256(state["model"]):
+            return f"{paths.final} does not hold the weights of {paths.checkpoint}"
+        if final.get("method") != get_trainable(self.cfg.method).method_name:
+            return f"{paths.final} holds another network's weights"
+        if not isinstance(summary, dict) or summary.get("steps") != state["global_step"]:
+            return f"{paths.summary} does not record the {state['global_step']} steps of {paths.checkpoint}"
+        return None
 
     def _setup(self) -> int:
         """Thread count; the samples of a step per process (the batch must split over processes and micro-batches)."""
@@ -540,6 +562,7 @@ def train(cfg: TrainConfig, out: str | Path, *, require_checkpoint: bool = False
     """
     check_model(cfg)
     check_data(cfg, RunPaths(Path(out)).data)
+    check_output_entries(Path(out))  # no device, FIFO or socket where the run writes its files
     retain_freed_memory()  # fewer page faults per step (glibc); results unchanged
     with torch_threads(None):  # the run sets its own thread count; the caller's comes back afterwards
         ctx = setup(cfg.training.device)

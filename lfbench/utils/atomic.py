@@ -12,7 +12,9 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import IO
 
-__all__ = ["FILE_MODE", "atomic_open", "fresh_dir", "replace_dir", "write_bytes", "write_text"]
+from lfbench.utils.errors import DataError
+
+__all__ = ["FILE_MODE", "atomic_open", "check_replaceable", "fresh_dir", "replace_dir", "write_bytes", "write_text"]
 
 
 #: The mode of a new file (rw-r--r--): a result is readable by others, as a file made by open() under
@@ -20,15 +22,39 @@ __all__ = ["FILE_MODE", "atomic_open", "fresh_dir", "replace_dir", "write_bytes"
 FILE_MODE = 0o644
 
 
+_KINDS = ((stat.S_ISDIR, "a folder"), (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
+          (stat.S_ISFIFO, "a FIFO"), (stat.S_ISSOCK, "a socket"))
+
+
+def check_replaceable(path: str | Path) -> None:
+    """DataError naming ``path`` unless a write may replace it: absent, a regular file, or a symbolic link (the
+    link itself is replaced, never followed). A device (a copy of ``/dev/null`` made with mknod), FIFO, socket or
+    folder is never replaced by a file. Every write of lfbench goes through :func:`atomic_open`, which checks
+    this; a command checks the files it names before its work (:func:`lfbench.utils.outputs.check_output_file`)."""
+    try:
+        mode = os.lstat(path).st_mode
+    except FileNotFoundError:
+        return
+    except OSError as exc:
+        raise DataError(f"cannot write: {exc.strerror or exc}", path) from None
+    if stat.S_ISREG(mode) or stat.S_ISLNK(mode):
+        return
+    kind = next((name for test, name in _KINDS if test(mode)), "not a regular file")
+    raise DataError(f"is {kind}, not a regular file: lfbench writes only regular files and does not replace it",
+                    path)
+
+
 @contextlib.contextmanager
 def atomic_open(path: str | Path, mode: str = "wb", *, file_mode: int | None = None, **kwargs) -> Iterator[IO]:
-    """Open a temporary file beside ``path``; on clean exit fsync it and rename it over ``path``.
+    """Open a temporary file beside ``path``; on clean exit fsync it and rename it over ``path`` (a regular
+    file, a symbolic link, which is replaced, or nothing: :func:`check_replaceable`).
 
     On an exception the temporary file is removed and ``path`` is left untouched. The file gets
     ``file_mode`` if given, else the mode of the file it replaces, else :data:`FILE_MODE` (set on the
     file itself: the process umask is never changed, which would race with other threads).
     """
     path = Path(path)
+    check_replaceable(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     if file_mode is None:
         try:

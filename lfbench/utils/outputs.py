@@ -35,12 +35,12 @@ from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from lfbench.utils.atomic import write_text
+from lfbench.utils.atomic import check_replaceable, write_text
 from lfbench.utils.errors import DataError, LFBenchError
 from lfbench.utils.jsonfile import parse_json
 
-__all__ = ["JOURNAL", "MANIFEST", "OutputSet", "check_complete", "check_output_file", "check_within",
-           "prepare_output_folder", "read_manifest", "recover", "staged_outputs"]
+__all__ = ["JOURNAL", "MANIFEST", "OutputSet", "check_complete", "check_output_entries", "check_output_file",
+           "check_within", "prepare_output_folder", "read_manifest", "recover", "staged_outputs"]
 
 STAGE_PREFIX = ".lfbench-stage."
 JOURNAL = ".lfbench-commit.json"
@@ -81,6 +81,7 @@ class OutputSet:
         self.name = name
         self.created = not self.out.exists()  # removed again by abort() when the run writes nothing
         prepare_output_folder(self.out)
+        check_output_entries(self.out)
         recover(self.out)
         read_manifest(self.out, name)  # a manifest that is not lfbench's is refused before the work
         try:
@@ -143,13 +144,41 @@ def prepare_output_folder(out: Path) -> None:
         raise DataError("output folder is not writable", out)
 
 
-def check_output_file(path: str | Path) -> None:
-    """DataError unless ``path`` can be written as a file: not a folder, its folder creatable and
-    writable. Checked before the work, so that minutes of computing are not lost to a typo."""
+def check_output_entries(out: Path) -> None:
+    """DataError naming the first entry at the top of the output folder ``out`` that a set's commit could
+    replace but that is not a regular file, folder or symbolic link (a device, FIFO or socket): lfbench
+    replaces only what it could have written. Checked before the work."""
+    if not out.is_dir():
+        return
+    for entry in sorted(out.iterdir()):
+        if not stat.S_ISDIR(os.lstat(entry).st_mode):
+            check_replaceable(entry)
+
+
+def check_output_file(path: str | Path) -> Path:
+    """The file a command writes when told to write ``path`` (``--out FILE``, ``--json FILE``, a golden file):
+    ``path`` itself, or, for a symbolic link, the file the link leads to (followed, so that the link stays and
+    its target is updated). DataError naming ``path`` unless that is a regular file or absent (never a folder,
+    a device such as a copy of ``/dev/null``, a FIFO or a socket: :func:`lfbench.utils.atomic.check_replaceable`)
+    and its folder creatable and writable. Checked before the work, so that minutes of computing are not lost
+    to a typo, and nothing but a regular file is ever replaced; write to the path it returns."""
     path = Path(path)
-    if path.is_dir():
+    target = path
+    if path.is_symlink():
+        try:
+            target = path.resolve(strict=False)
+        except (OSError, RuntimeError):  # a loop of links
+            raise DataError("symbolic link that leads nowhere (a loop)", path) from None
+    if target.is_dir():
         raise DataError("is a folder, expected a file path", path)
-    prepare_output_folder(path.parent)
+    try:
+        check_replaceable(target)
+    except DataError as exc:
+        if target == path:
+            raise
+        raise DataError(f"symbolic link to {target}, which {exc.args[0]}", path) from None
+    prepare_output_folder(target.parent)
+    return target
 
 
 @contextlib.contextmanager

@@ -41,7 +41,7 @@ def run(args: argparse.Namespace) -> int:
         raise SpecError(f"bad disparity grid: {exc}") from None
     from lfbench.utils.outputs import check_output_file
 
-    check_output_file(args.out)
+    args.out = check_output_file(args.out)  # before the work (a link: the file it leads to)
     net = load_keras_checkpoint(args.checkpoint, interval=args.interval, d_min=args.d_min, d_max=args.d_max)
     save_checkpoint(net, args.out, source=f"keras:{args.checkpoint.name}")
     cfg = net.config()
