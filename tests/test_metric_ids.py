@@ -37,7 +37,9 @@ def test_the_id_and_the_toolkit_id_name_the_metric(metric_id):
     canonical, number = CANONICAL[metric_id]
     metric = get_metric(metric_id)
     assert metric.id == canonical
-    assert metric.bootstrap.name in ("badpix", "quantile") and metric.bootstrap.param == pytest.approx(number)
+    definition = metric.pixelwise  # BadPix: its sample's threshold (px); a quantile: its family's percentage
+    named = getattr(definition.sample, "threshold", None)
+    assert (named if named is not None else definition.family.percentage) == pytest.approx(number)
     assert metric_id in (metric.id, metric.toolkit_id)
 
 
@@ -47,7 +49,7 @@ def test_the_families_spell_their_ids_as_documented():
                                                                                    "badpix_0015"]
     assert [get_metric(f"q{p:g}_x100").id for p in (50, 12.5)] == ["q50_x100", "q12.5_x100"]
     assert get_metric("q50_x100").toolkit_id == "q_50_100" and get_metric("q12.5_x100").toolkit_id is None
-    assert get_metric("badpix_70").bootstrap.param == 70.0  # a whole threshold in px, not the toolkit's 0.07
+    assert get_metric("badpix_70").pixelwise.sample.threshold == 70.0  # a whole threshold in px, not the toolkit's 0.07
 
 
 @pytest.mark.parametrize("metric_id", OTHER_SPELLINGS)
