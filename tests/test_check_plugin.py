@@ -22,8 +22,8 @@ from helpers import assert_one_error_line, install_example_plugin, install_packa
 from torch import nn
 
 from lfbench.method.params import Range
-from lfbench.method.plugin_check import FAIL, OK, SKIP, check_plugin
 from lfbench.method.trainable import Trainable, get_trainable, register_trainable
+from lfbench.runs.plugin_check import FAIL, OK, SKIP, check_plugin
 from lfbench.training.checkpoint import export_weights
 from lfbench.utils.errors import DataError, PluginError, SpecError
 

@@ -60,11 +60,12 @@ def test_datasets_command_lists_the_protocols(capsys):
 
 
 def test_protocols_feed_the_scoring_rules():
-    hci = HCIDataset.protocol.scoring_rules()
-    assert (hci.border_px, hci.highres_scenes, hci.allow_highres) == (15, {"backgammon", "dots", "stripes"}, True)
     from lfbench.scoring.rules import ScoringRules
+
+    hci = ScoringRules.of_protocol(HCIDataset.protocol)
+    assert (hci.border_px, hci.highres_scenes, hci.allow_highres) == (15, {"backgammon", "dots", "stripes"}, True)
     assert hci == ScoringRules()  # HCI's protocol is the benchmark's default rules, field for field
-    urban = UrbanLFSyn.protocol.scoring_rules(toolkit=True)
+    urban = ScoringRules.of_protocol(UrbanLFSyn.protocol, toolkit=True)
     assert (urban.border_px, urban.highres_scenes, urban.allow_highres, urban.toolkit) == (15, frozenset(), False, True)
 
 

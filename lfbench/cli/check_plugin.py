@@ -22,8 +22,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from lfbench.method.params import coerce_params, parse_spec
-    from lfbench.method.plugin_check import check_plugin, failed, summary
     from lfbench.method.trainable import get_trainable
+    from lfbench.runs.plugin_check import check_plugin, failed, summary
 
     name, raw = parse_spec(args.spec)
     trainable = get_trainable(name)  # SpecError listing the networks for an unknown name

@@ -74,9 +74,12 @@ def run(args: argparse.Namespace) -> int:
     from lfbench.reports.tables import per_scene_table, render
     from lfbench.runs.folder import evaluate_to_folder
     from lfbench.scoring.metrics import scored_metrics
+    from lfbench.scoring.rules import ScoringRules
     from lfbench.utils.errors import DataError, SpecError
 
-    dataset, protocol, bench = open_datasets(args.data, args.dataset)  # one line for a root of no (or several) layouts
+    # one line for a root of no (or several) layouts, or a dataset file naming no general metric, before any scene
+    dataset, protocol, bench = open_datasets(args.data, args.dataset,
+                                             check=lambda p: scored_metrics(p.metrics, p.source))
     methods = [create_from_spec(spec, {"device": args.device}, method_range_params(protocol.disparity_range))
                for spec in args.method]  # errors before any work
     if args.label is not None:
@@ -92,8 +95,8 @@ def run(args: argparse.Namespace) -> int:
     if not scenes:
         raise DataError(f"none of the selected scenes has ground truth ({dataset.name} layout: {dataset.layout})",
                         ", ".join(map(str, args.data)))
-    rules = protocol.scoring_rules(toolkit=args.toolkit_nonfinite, allow_highres=not args.lowres_only)
-    metrics = scored_metrics(protocol.metrics)
+    rules = ScoringRules.of_protocol(protocol, toolkit=args.toolkit_nonfinite, allow_highres=not args.lowres_only)
+    metrics = scored_metrics(protocol.metrics, protocol.source)
     writers = [*([w.SceneFigures()] if args.figures else []), *([w.Maps()] if args.save_maps or args.html else []),
                w.Tables(),
                *([w.BootstrapCIs(w.CIOptions(resamples=args.ci_resamples, block=args.ci_block))] if args.ci else []),

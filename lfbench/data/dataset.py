@@ -22,17 +22,14 @@ import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, ClassVar
+from typing import Any, ClassVar
 
 from lfbench.data.scene import LOWRES, Benchmark
 from lfbench.utils.errors import DataError, SpecError
 from lfbench.utils.registry import Registry
 
-if TYPE_CHECKING:  # lfbench.scoring imports lfbench.data: imported where the rules are made
-    from lfbench.scoring.rules import ScoringRules
-
-__all__ = ["DATASET_GROUP", "DATASETS", "Dataset", "DatasetProtocol", "detect_dataset", "get_dataset", "open_datasets",
-           "open_dataset", "method_range_params"]
+__all__ = ["DATASET_GROUP", "DATASETS", "Dataset", "DatasetProtocol", "detect_dataset", "get_dataset", "dataset_of",
+           "open_datasets", "open_dataset", "method_range_params"]
 
 DATASET_GROUP = "lfbench.datasets"
 
@@ -47,7 +44,8 @@ class DatasetProtocol:
     has high-resolution ground truth); ``highres_scenes``: the scenes scored at high resolution when their
     high-resolution ground truth exists; ``disparity_range``: (min, max) px per view step a method should
     search; ``spatial_size``: (H, W) px of its views where the dataset fixes one (None: any);
-    ``angular_size``: (V, U) views where fixed; ``reference_view``: the view scored (words).
+    ``angular_size``: (V, U) views where fixed; ``reference_view``: the view scored (words); ``source``: the
+    file that declared the protocol (errors in its metric ids name it: lfbench.scoring.metrics.scored_metrics).
     """
 
     border_px: int
@@ -58,6 +56,7 @@ class DatasetProtocol:
     spatial_size: tuple[int, int] | None = None
     angular_size: tuple[int, int] | None = None
     reference_view: str = "centre view"
+    source: Path | None = dataclasses.field(default=None, compare=False)  # the file that declared it, if any
 
     def __post_init__(self) -> None:
         lo, hi = self.disparity_range
@@ -65,13 +64,6 @@ class DatasetProtocol:
             raise ValueError(f"disparity range must be (min, max) with min < max, got {self.disparity_range}")
         if self.border_px < 0:
             raise ValueError(f"border must be >= 0 px, got {self.border_px}")
-
-    def scoring_rules(self, *, toolkit: bool = False, allow_highres: bool = True) -> ScoringRules:
-        """The :class:`~lfbench.scoring.rules.ScoringRules` of this protocol (border, high-resolution scenes)."""
-        from lfbench.scoring.rules import ScoringRules
-
-        return ScoringRules(border_px=self.border_px, highres_scenes=self.highres_scenes, toolkit=toolkit,
-                            allow_highres=allow_highres and "highres" in self.resolutions)
 
     def describe(self) -> list[str]:
         """The protocol as lines for ``lfbench datasets``."""
@@ -144,30 +136,37 @@ def detect_dataset(root: str | Path) -> type[Dataset]:
     return DATASETS.get(hits[0])
 
 
-def open_dataset(root: str | Path, name: str | None = None) -> tuple[type[Dataset], Benchmark]:
-    """The adapter (``name``, else detected) and the scenes of ``root``. A named adapter whose layout the
-    root does not match is a DataError too (one line)."""
+def dataset_of(root: str | Path, name: str | None = None) -> type[Dataset]:
+    """The adapter of ``root``: ``name``'s, else the one whose layout it matches (DataError, one line, for a
+    root of no layout or of several, or one that is not laid out as the named dataset)."""
     root = Path(root)
     if name is None:
-        dataset = detect_dataset(root)
-    else:
-        try:
-            dataset = get_dataset(name)
-        except SpecError as exc:
-            raise DataError(str(exc)) from None
-        if not root.is_dir():
-            raise DataError("data root not found", root)
-        if not dataset.matches(root):
-            raise DataError(f"not laid out as dataset {name!r} ({dataset.layout})", root)
-    return dataset, dataset.open(root)
+        return detect_dataset(root)
+    try:
+        dataset = get_dataset(name)
+    except SpecError as exc:
+        raise DataError(str(exc)) from None
+    if not root.is_dir():
+        raise DataError("data root not found", root)
+    if not dataset.matches(root):
+        raise DataError(f"not laid out as dataset {name!r} ({dataset.layout})", root)
+    return dataset
 
 
-def open_datasets(roots: Sequence[str | Path], name: str | None = None
+def open_dataset(root: str | Path, name: str | None = None) -> tuple[type[Dataset], Benchmark]:
+    """The adapter (``name``, else detected: :func:`dataset_of`) and the scenes of ``root``."""
+    dataset = dataset_of(root, name)
+    return dataset, dataset.open(Path(root))
+
+
+def open_datasets(roots: Sequence[str | Path], name: str | None = None, *,
+                  check: Callable[[DatasetProtocol], Any] | None = None
                   ) -> tuple[type[Dataset], DatasetProtocol, Benchmark]:
     """The adapter, the scoring protocol and the scenes of one or several data roots scored together (one
     results file). Every root must be of one dataset with one protocol (DataError naming the root that is
     not); a root given twice is refused; scenes keep their names (two selected scenes of one name are refused
-    when selected, lfbench.data.scene.check_scene_names)."""
+    when selected, lfbench.data.scene.check_scene_names). ``check``: called with the protocol before any scene
+    is opened (e.g. the metric ids a dataset's file declares)."""
     roots = [Path(r) for r in roots]
     if not roots:
         raise DataError("no data root given")
@@ -177,17 +176,18 @@ def open_datasets(roots: Sequence[str | Path], name: str | None = None
         if key in seen:
             raise DataError(f"data root given twice (also as {seen[key]})", root)
         seen[key] = root
-    dataset, first = open_dataset(roots[0], name)
+    dataset = dataset_of(roots[0], name)
     protocol = dataset.protocol_for(roots[0])
-    scenes = list(first.scenes)
     for root in roots[1:]:
-        other, bench = open_dataset(root, name or dataset.name)
+        other = dataset_of(root, name or dataset.name)
         if other.protocol_for(root) != protocol:
             raise DataError(f"scored by another protocol than {roots[0]} (one results file holds one dataset's "
                             "numbers): evaluate it on its own", root)
-        scenes += bench.scenes
-    combined = dataclasses.replace(first, scenes=tuple(scenes), others=tuple(roots[1:]))
-    return dataset, protocol, combined
+    if check is not None:
+        check(protocol)
+    benches = [dataset.open(root) for root in roots]
+    scenes = tuple(s for bench in benches for s in bench.scenes)
+    return dataset, protocol, dataclasses.replace(benches[0], scenes=scenes, others=tuple(roots[1:]))
 
 
 def method_range_params(disparity_range: tuple[float, float]) -> Callable[[Any, dict[str, Any]], dict[str, float]]:

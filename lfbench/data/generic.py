@@ -111,20 +111,13 @@ def read_dataset_spec(path: str | Path) -> tuple[ViewLayout, DatasetProtocol]:
     metrics = proto.get("metrics", list(DEFAULT_PROTOCOL.metrics))
     if not isinstance(metrics, list) or not metrics or not all(isinstance(m, str) for m in metrics):
         raise DataError(f"'protocol.metrics' must be a non-empty list of metric ids, got {metrics!r}", path)
-    from lfbench.scoring.metrics import find_metric
-
-    for metric in metrics:
-        found = find_metric(metric)
-        if found is None or found.resolution != "scene" or found.is_runtime:
-            raise DataError(f"'protocol.metrics': {metric!r} is not a general metric (e.g. badpix_0.07, mse_x100, "
-                            "q25_x100)", path)
     rng = proto.get("disparity_range", list(DEFAULT_PROTOCOL.disparity_range))
     if not isinstance(rng, list) or len(rng) != 2 or not all(_number(x) for x in rng) or not rng[0] < rng[1]:
         raise DataError(f"'protocol.disparity_range' must be [min, max] px with min < max, got {rng!r}", path)
 
     layout = ViewLayout(pattern=pattern, angular=(angular[0], angular[1]), first=first, gt_file=gt_file,
                         gt_format=fmt, gt_scale=float(scale), gt_offset=float(offset))
-    protocol = DatasetProtocol(border_px=border, metrics=tuple(metrics),
+    protocol = DatasetProtocol(border_px=border, metrics=tuple(metrics), source=path,  # ids checked where scored
                                disparity_range=(float(rng[0]), float(rng[1])), angular_size=layout.angular,
                                reference_view=f"centre view {layout.view_name(*layout.centre)}")
     return layout, protocol

@@ -14,6 +14,7 @@ step, :mod:`lfbench.scoring.general` documents their arithmetic and non-finite r
 from __future__ import annotations
 
 from collections.abc import Iterable
+from pathlib import Path
 
 from lfbench.scoring.base import METRICS_GROUP, NON_NEGATIVE, PERCENT, SCENE_AGGREGATES, Metric, MetricRegistry
 from lfbench.scoring.general import (
@@ -29,6 +30,7 @@ from lfbench.scoring.general import (
     quantile_x100,
 )
 from lfbench.scoring.pixelwise import Mean, OrderStatistic, PixelMetric, Proportion, Sample
+from lfbench.utils.errors import DataError
 
 __all__ = [
     "bad_pix",
@@ -92,10 +94,17 @@ def list_metrics(category: str | None = None) -> tuple[Metric, ...]:
     return METRICS.all(category)
 
 
-def scored_metrics(ids: Iterable[str]) -> list[Metric]:
+def scored_metrics(ids: Iterable[str], source: str | Path | None = None) -> list[Metric]:
     """The metrics a run scores: those of ``ids`` (a dataset protocol's), then every general metric a plugin
-    registered (an installed metric is scored by default, on every dataset), each once."""
-    chosen = [get_metric(m) for m in dict.fromkeys(ids)]
+    registered (an installed metric is scored by default, on every dataset), each once. ``source``: the file
+    that declared ``ids`` (a dataset's TOML file): an id that is not a general metric is a DataError naming it."""
+    chosen = []
+    for metric_id in dict.fromkeys(ids):
+        metric = find_metric(metric_id) if source is not None else get_metric(metric_id)
+        if metric is None or metric.resolution != "scene" or metric.is_runtime:
+            raise DataError(f"'protocol.metrics': {metric_id!r} is not a general metric (e.g. badpix_0.07, mse_x100, "
+                            "q25_x100)", source)
+        chosen.append(metric)
     own = {m.id for m in GENERAL_METRICS} | {m.id for m in chosen}
     return chosen + [m for m in list_metrics("general") if m.id not in own]
 

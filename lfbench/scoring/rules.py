@@ -22,6 +22,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from lfbench.data.dataset import DatasetProtocol
 from lfbench.data.disparity import EVALUATION_BORDER_PX
 from lfbench.data.hci import HCI_HIGHRES_SCENES
 from lfbench.data.scene import HIGHRES, LOWRES, Scene
@@ -50,6 +51,14 @@ class ScoringRules:
         recorded: every number carries its resolution."""
         return {"border_px": self.border_px, "toolkit_nonfinite": self.toolkit,
                 "highres_scenes": sorted(self.highres_scenes)}
+
+    @classmethod
+    def of_protocol(cls, protocol: DatasetProtocol, *, toolkit: bool = False,
+                    allow_highres: bool = True) -> ScoringRules:
+        """The rules of a dataset's scoring protocol (lfbench.data.dataset.DatasetProtocol): its border and
+        its high-resolution scenes (scored at high resolution only where the protocol has that resolution)."""
+        return cls(border_px=protocol.border_px, highres_scenes=protocol.highres_scenes, toolkit=toolkit,
+                   allow_highres=allow_highres and HIGHRES in protocol.resolutions)
 
     @classmethod
     def from_meta(cls, meta: Mapping[str, Any], **overrides: Any) -> ScoringRules:
