@@ -71,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
     from lfbench.reports.html import SITE_DIR, check_site_dir
     from lfbench.reports.tables import per_scene_table, render
     from lfbench.runs.folder import evaluate_to_folder
-    from lfbench.scoring.metrics import get_metric
+    from lfbench.scoring.metrics import scored_metrics
     from lfbench.utils.errors import DataError, SpecError
 
     dataset, bench = open_dataset(args.data, args.dataset)  # one line for a root of no (or several) layouts
@@ -92,7 +92,7 @@ def run(args: argparse.Namespace) -> int:
         raise DataError(f"none of the selected scenes has ground truth ({dataset.name} layout: {dataset.layout})",
                         args.data)
     rules = protocol.scoring_rules(toolkit=args.toolkit_nonfinite, allow_highres=not args.lowres_only)
-    metrics = [get_metric(m) for m in protocol.metrics]
+    metrics = scored_metrics(protocol.metrics)
     writers = [*([w.SceneFigures()] if args.figures else []), *([w.Maps()] if args.save_maps or args.html else []),
                w.Tables(),
                *([w.BootstrapCIs(w.CIOptions(resamples=args.ci_resamples, block=args.ci_block))] if args.ci else []),

@@ -57,6 +57,7 @@ __all__ = [
     "find_metric",
     "list_metrics",
     "describe_metric",
+    "scored_metrics",
     "metric_order",
 ]
 
@@ -89,6 +90,14 @@ def find_metric(metric_id: str) -> Metric | None:
 def list_metrics(category: str | None = None) -> tuple[Metric, ...]:
     """Every registered metric (optionally of one category: 'general', 'region', 'stratified')."""
     return METRICS.all(category)
+
+
+def scored_metrics(ids: Iterable[str]) -> list[Metric]:
+    """The metrics a run scores: those of ``ids`` (a dataset protocol's), then every general metric a plugin
+    registered (an installed metric is scored by default, on every dataset), each once."""
+    chosen = [get_metric(m) for m in dict.fromkeys(ids)]
+    own = {m.id for m in GENERAL_METRICS} | {m.id for m in chosen}
+    return chosen + [m for m in list_metrics("general") if m.id not in own]
 
 
 def describe_metric(metric_id: str) -> Metric:
