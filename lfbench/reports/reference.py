@@ -25,7 +25,7 @@ the one declared-option system (lfbench.utils.options: :class:`Reference`, :clas
     dataset = "urbanlf-syn"                  # shown beside results of this dataset (meta.dataset)
     scenes = { Image11 = "Img11" }           # a wide per-scene table: our scene -> column (of scene_metric)
     scene_metric = "badpix_0.07"
-    extra = { runtime_s = "runtime_s_9x9x256x256" }      # other columns: name -> CSV column
+    extra = { params_millions = "params_millions" }      # other columns: name -> CSV column
     labels = { figure_title = "..." }        # free text the table's consumers show
     names = { l1 = "baseline_l1" }           # our key value -> the paper's, where they differ
     best = "uafl"                            # the row (key value) the paper finds best

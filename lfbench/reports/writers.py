@@ -50,6 +50,8 @@ from lfbench.reports.figures import (
 from lfbench.reports.html import SITE_DIR, SiteInputs, SiteSection, build_site, site_inputs
 from lfbench.reports.maps import MAPS_DIR, MapSaver, SceneMaps
 from lfbench.reports.paper import PaperTables, average_with_paper, per_scene_with_paper
+from lfbench.reports.paper_scenes import RUN_RUNTIME_COLUMN, scene_table_with_paper, scene_tables
+from lfbench.reports.reference import PaperTable
 from lfbench.reports.plotting import method_colours
 from lfbench.reports.tables import TABLE_FORMATS, average_table, per_scene_table, write_table
 from lfbench.reports.toolkit_figures import toolkit_figures_from_scene_maps
@@ -157,11 +159,25 @@ class Tables(OutputWriter):
             self.tables["per_scene_paper"] = per_scene_with_paper(per_scene, self.paper, self.paper_methods)
             self.tables["average_paper"] = average_with_paper(average, self.paper, run.results.scenes,
                                                               self.paper_methods)
+        captions = {}
+        if self.paper is not None:  # the paper's per-scene tables of this dataset (e.g. Table III, UrbanLF-Syn)
+            for decl in scene_tables(self.paper, run.results.meta):
+                table = scene_table_with_paper(run.results, self.paper, decl)
+                if not table.empty:
+                    self.tables[f"{decl.id}_paper"] = table
+                    captions[f"{decl.id}_paper"] = [decl.caption, *self.scene_table_caption(decl)]
         written = []
         for name, table in self.tables.items():
-            caption = self.paper_caption if name.endswith("_paper") else self.caption
+            caption = captions.get(name) or (self.paper_caption if name.endswith("_paper") else self.caption)
             written += write_table(table, run.stage, f"table_{name}", caption, formats=self.formats)
         return written
+
+    @staticmethod
+    def scene_table_caption(decl: PaperTable) -> list[str]:
+        """What the rows of a per-scene paper table are (lfbench.reports.paper_scenes)."""
+        return [f"ours: {decl.scene_metric} on the samples {', '.join(decl.scenes)} of this run, their mean "
+                f"('{decl.scene_metric}', over the 'scenes' we have) and '{RUN_RUNTIME_COLUMN}' (at the data's "
+                "resolution); rows 'NAME (paper)': the paper's file as published"]
 
 
 # --------------------------------------------------------------------------- maps
