@@ -3,8 +3,8 @@ UrbanLF-Syn's.
 
 --layout hci (default): DIR/<category>/synth_<seed>_<i>/ for i = 0..K-1: input_Cam000..png,
 parameters.cfg, gt_disp_lowres.pfm, gt_depth_lowres.pfm and evaluation masks (<mask>_lowres.png).
---layout urbanlf-syn: DIR/<category, default val>/Image<i>/ for i = 1..K (or i in --numbers): 9x9 views u_v.png of WxH px
-(default 640x480), 5_5_disparity.npy and 5_5_depth.npy. The same seed, size and angular resolution
+--layout urbanlf-syn: DIR/<category, default val>/Image<i>/ for i = 1..K (or i in --numbers): 9x9 views u_v.png
+of WxH px (default 640x480), 5_5_disparity.npy and 5_5_depth.npy. The same seed, size and angular resolution
 always give the same files. An existing scene folder is an error unless --force.
 """
 

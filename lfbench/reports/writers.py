@@ -51,8 +51,8 @@ from lfbench.reports.html import SITE_DIR, SiteInputs, SiteSection, build_site, 
 from lfbench.reports.maps import MAPS_DIR, MapSaver, SceneMaps
 from lfbench.reports.paper import PaperTables, average_with_paper, per_scene_with_paper
 from lfbench.reports.paper_scenes import RUN_RUNTIME_COLUMN, scene_table_with_paper, scene_tables
-from lfbench.reports.reference import PaperTable
 from lfbench.reports.plotting import method_colours
+from lfbench.reports.reference import PaperTable
 from lfbench.reports.tables import TABLE_FORMATS, average_table, per_scene_table, write_table
 from lfbench.reports.toolkit_figures import toolkit_figures_from_scene_maps
 from lfbench.reports.uncertainty import write_uncertainty_report
