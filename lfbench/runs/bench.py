@@ -257,7 +257,8 @@ def bench_inference(size: int = 512, precision: str = "fp32", *, model: str = DE
     network's ``Trainable.infer`` on ``device``; best of ``repeat`` runs, or their mean (``statistic="mean"``,
     after one warm-up run: how a paper's runtime is usually measured, e.g. 9x9x256x256, mean of 50).
     ``params``: the network's parameters (e.g. SubFocal's interval, width; default: its defaults, random
-    weights unless ``weights`` names a checkpoint). max_memory_gb None: the device's budget (4 GB on the CPU, the free memory of a GPU)."""
+    weights unless ``weights`` names a checkpoint). max_memory_gb None: the device's budget (4 GB on the CPU,
+    the free memory of a GPU)."""
     import torch
 
     from lfbench.method.trainable import contract_problem
