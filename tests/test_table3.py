@@ -128,3 +128,14 @@ def test_bench_mean_is_the_mean_of_the_repeats_after_a_warm_up(monkeypatch):
     assert bench.timed(fn, 3)[0] == 1.0 and len(calls) == 3  # best of 3, no warm-up
     with pytest.raises(ValueError, match="statistic"):
         bench.timed(fn, 1, statistic="median")
+
+
+def test_the_site_shows_table3(urbanlf_run, tmp_path):
+    paper = write_paper3(tmp_path / "paper")
+    assert main(["report", str(urbanlf_run / "res"), "--out", str(tmp_path / "rep"), "--paper", str(paper),
+                 "--html"]) == 0
+    page = (tmp_path / "rep" / "html" / "index.html").read_text()
+    start = page.index("table3: ours beside the paper")
+    section = page[start:page.index("</table>", start)]
+    assert "mean of 50 runs" in section and "SubFocal (paper)" in section and "gt" in section
+    assert ">8.500<" in section and ">0.750<" in section  # LFattNet's Img70 and runtime, as the CSV has them
