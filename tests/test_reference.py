@@ -69,6 +69,7 @@ def test_the_core_spells_no_paper():
     (SHIPPED.read_text().replace('id = "table5"', 'id = "table4"'), "table id 'table4' declared twice"),
     (SHIPPED.read_text().replace('test_label = "paper (RTX 3090, 512x512)", ', ''),
      "'table4': labels.test_label is required"),
+    (SHIPPED.read_text().replace('scene_metric = "badpix_0.07"', ''), r"tables\[2\].scene_metric: is required"),
     (SHIPPED.read_text().replace('file = "table3_urbanlf.csv"', 'file = "table3_urbanlf.csv"\ncolumns = 3'),
      r"\[tables\[2\]\] unknown key\(s\): columns"),
 ])

@@ -129,14 +129,23 @@ def load_paper(path: str | Path, reference: Reference | None = None) -> PaperTab
     ``reference`` (default: the default reference). DataError naming the file when a table is missing or
     malformed."""
     folder = Path(path)
+    reference = reference or default_reference()
+    per_scene_file = _declared_file(reference, "table1", PER_SCENE_FILE)
+    average_file = _declared_file(reference, "table2", AVERAGE_FILE)
     if not folder.is_dir():
-        raise DataError("paper folder not found (expected table1_per_scene.csv, table2_average.csv)", folder)
-    per_scene = _read_csv(folder / PER_SCENE_FILE, ("method", "scene", "metric", "value"))
-    average = _read_csv(folder / AVERAGE_FILE, ("method", "metric", "value"))
+        raise DataError(f"paper folder not found (expected {per_scene_file}, {average_file})", folder)
+    per_scene = _read_csv(folder / per_scene_file, ("method", "scene", "metric", "value"))
+    average = _read_csv(folder / average_file, ("method", "metric", "value"))
     extra = {p.stem: _read_csv(p, None) for p in sorted(folder.glob("*.csv"))
-             if p.name not in (PER_SCENE_FILE, AVERAGE_FILE)}
-    return PaperTables(source=folder, per_scene=per_scene, average=average, extra=extra,
-                       reference=reference or default_reference())
+             if p.name not in (per_scene_file, average_file)}
+    return PaperTables(source=folder, per_scene=per_scene, average=average, extra=extra, reference=reference)
+
+
+def _declared_file(reference: Reference | None, table_id: str, default: str) -> str:
+    """The file the reference declares for its table ``table_id`` (Tables I/II: long tables of method, scene,
+    metric, value), else ``default``."""
+    table = reference.table(table_id) if reference is not None else None
+    return table.file if table is not None and table.file else default
 
 
 def paper_resolution(scene: str) -> str:

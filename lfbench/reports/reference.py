@@ -82,6 +82,13 @@ class PaperTable:
     names: dict[str, str] = option({}, help="our key value -> the paper's row, where they differ")
     best: str = option("", help="the row (key value) the paper finds best, as text")
 
+    @staticmethod
+    def check_options(values: dict, table: Table) -> None:
+        """A per-scene table names its file and its metric."""
+        for key in ("file", "scene_metric"):
+            if values["scenes"] and not values[key]:
+                table.fail(key, "is required with scenes")
+
     def label(self, name: str) -> str:
         """``labels[name]``; SpecError naming the table when the reference does not give it."""
         if name not in self.labels:
