@@ -76,6 +76,8 @@ def test_table3_is_ours_from_results_json_beside_the_papers_csv(urbanlf_run, tmp
         assert [row[c] for c in COLUMNS[:8]] == values[:8]
         assert row["badpix_0.07"] == values[8] and row["runtime_s_9x9x256x256"] == values[9]
         assert row["params_millions"] == values[10] and row["scenes"] == 8
+    assert not list((tmp_path / "rep").glob("table_*per_scene_paper*"))  # HCI's Tables I/II: not for UrbanLF
+    assert not list((tmp_path / "rep").glob("table_average_paper*"))
     md = (tmp_path / "rep" / "table_table3_paper.md").read_text()
     assert md.startswith(default_reference().table("table3").caption) and "mean of 50 runs" in md
 
@@ -139,3 +141,4 @@ def test_the_site_shows_table3(urbanlf_run, tmp_path):
     section = page[start:page.index("</table>", start)]
     assert "mean of 50 runs" in section and "SubFocal (paper)" in section and "gt" in section
     assert ">8.500<" in section and ">0.750<" in section  # LFattNet's Img70 and runtime, as the CSV has them
+    assert "Table II, 1 scenes" not in page  # HCI's Table II rows are not beside UrbanLF-Syn results

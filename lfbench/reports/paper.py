@@ -16,9 +16,10 @@ added here say so.
 from __future__ import annotations
 
 import os
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -75,6 +76,13 @@ class PaperTables:
             raise SpecError(f"the paper's tables in {self.source} come with no reference that names its methods: "
                             "name them (--paper-methods, [report] paper_methods)")
         return [self.resolve_method(m) for m in names]
+
+    def shows(self, table_id: str, meta: Mapping[str, Any]) -> bool:
+        """Whether the paper's table ``table_id`` stands beside results with ``meta``: unless its declaration
+        names a dataset and the results record another (e.g. the HCI Tables I/II beside UrbanLF-Syn results)."""
+        declared = self.reference.table(table_id) if self.reference is not None else None
+        dataset = meta.get("dataset")
+        return declared is None or not declared.dataset or not dataset or declared.dataset == dataset
 
     @property
     def methods(self) -> list[str]:

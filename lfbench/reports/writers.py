@@ -154,7 +154,8 @@ class Tables(OutputWriter):
     def write(self, run: RunOutputs) -> list[Path]:
         per_scene, average = per_scene_table(run.results), average_table(run.results)
         self.tables = {"per_scene": per_scene, "average": average}
-        if self.paper is not None and not per_scene.empty:
+        meta = run.results.meta
+        if self.paper is not None and not per_scene.empty and self.paper.shows("table1", meta):
             self.tables["per_scene_paper"] = per_scene_with_paper(per_scene, self.paper, self.paper_methods)
             self.tables["average_paper"] = average_with_paper(average, self.paper, run.results.scenes,
                                                               self.paper_methods)
@@ -342,9 +343,10 @@ class Site(OutputWriter):
     def inputs(self, run: RunOutputs) -> SiteInputs:
         staged = run.stage / "results.json"  # the results as this set commits them, else as given
         results = Results.read(run.stage) if staged.is_file() else run.results
+        paper = self.paper if self.paper is not None and self.paper.shows("table1", results.meta) else None
         inputs = site_inputs(results, run.folder, data_root=self.data_root, maps=self.maps,
                              scenes=list(run.scenes) if run.scenes else None, scene_maps=run.scene_maps,
-                             paper=self.paper, paper_methods=self.paper_methods, title=self.title)
+                             paper=paper, paper_methods=self.paper_methods, title=self.title)
         inputs.notes = [*self.notes, *inputs.notes]
         inputs.sections = [*self.sections, *paper_scene_sections(results, self.paper)]
         return inputs
