@@ -18,8 +18,8 @@ from lfbench.ablation.significance import comparisons
 from lfbench.ablation.spec import load_spec
 from lfbench.reports.paper import load_paper
 from lfbench.reports.reference import (
+    PaperTable,
     Reference,
-    Table5,
     default_reference,
     get_reference,
     list_references,
@@ -61,12 +61,17 @@ def test_the_core_spells_no_paper():
 @pytest.mark.parametrize("text, message", [
     ('name = "x"\n', "networks: is required"),
     (SHIPPED.read_text().replace('name = "subfocal-tci2023"', 'name = "x"\nnetwork = "subfocal"'),
-     "network: unknown key"),
-    (SHIPPED.read_text().replace('best = 0.1', 'best = "0.1"'), "beta.best: expected float"),
-    (SHIPPED.read_text().replace('methods = ["SubFocal"]', 'methods = "SubFocal"'),
-     "methods: expected a list of strings"),
-    (SHIPPED.read_text().replace('loss_names = { l1 = "baseline_l1" }', 'loss_names = { l1 = 1 }'),
-     "table5.loss_names: expected a table of strings"),
+     "unknown key\\(s\\): network"),
+    (SHIPPED.read_text().replace('best = "0.1"', 'best = "often"'), "'beta': best: expected a number"),
+    (SHIPPED.read_text().replace('methods = ["SubFocal"]', 'methods = "SubFocal"'), "methods: expected"),
+    (SHIPPED.read_text().replace('names = { l1 = "baseline_l1" }', 'names = { l1 = 1 }'),
+     r"tables\[4\].names: expected"),
+    (SHIPPED.read_text().replace('id = "table5"', 'id = "table4"'), "table id 'table4' declared twice"),
+    (SHIPPED.read_text().replace('test_label = "paper (RTX 3090, 512x512)", ', ''),
+     "'table4': labels.test_label is required"),
+    (SHIPPED.read_text().replace('scene_metric = "badpix_0.07"', ''), r"tables\[2\].scene_metric: is required"),
+    (SHIPPED.read_text().replace('file = "table3_urbanlf.csv"', 'file = "table3_urbanlf.csv"\ncolumns = 3'),
+     r"\[tables\[2\]\] unknown key\(s\): columns"),
 ])
 def test_a_reference_file_is_read_strictly(tmp_path, text, message):
     path = tmp_path / "ref.toml"
@@ -102,7 +107,8 @@ def test_labels_and_orderings_come_from_the_reference(tmp_path):
     spec = load_spec(write_spec(tmp_path, 'seeds = [1, 2]\ntable = "table5"\n[[grid]]\nloss = ["l1", "mse", "uafl"]\n'))
     other = Reference(name="other", networks=("subfocal",), methods=("OACC-Net",), label="paper (A100, 2 h)",
                       benchmark_note="paper: other, Tables I/II", ablation_note="paper: other",
-                      table5=Table5(file="table5_losses.csv", best_loss="mse", loss_names={"l1": "baseline_l1"}))
+                      tables=(PaperTable(id="table5", file="table5_losses.csv", keys=("loss",), best="mse",
+                                         names={"l1": "baseline_l1"}),))
     comps = comparisons("table5", cell_info(spec), other)
     assert {(c.claim, c.worse.split("_seed")[0]) for c in comps} == {
         ("MSE better than l1", "loss=l1"), ("MSE better than uafl", "loss=uafl")}

@@ -11,13 +11,16 @@ import pytest
 
 from lfbench.ablation import reference as ablation_reference
 from lfbench.ablation.spec import SpecFile
+from lfbench.reports import reference_doc
+from lfbench.reports.reference import Reference
 from lfbench.training import reference as training_reference
 from lfbench.training.config import TrainConfig
 from lfbench.utils.options import option_fields
 
 REPO = Path(__file__).resolve().parents[1]
 DOCS = [(training_reference, REPO / "docs" / "training-config.md", TrainConfig),
-        (ablation_reference, REPO / "docs" / "ablation-spec.md", SpecFile)]
+        (ablation_reference, REPO / "docs" / "ablation-spec.md", SpecFile),
+        (reference_doc, REPO / "docs" / "paper-reference.md", Reference)]
 
 
 def _keys(cls: type) -> set[str]:
@@ -31,7 +34,8 @@ def _keys(cls: type) -> set[str]:
     return out
 
 
-@pytest.mark.parametrize(("module", "path", "declared"), DOCS, ids=["training-config", "ablation-spec"])
+@pytest.mark.parametrize(("module", "path", "declared"), DOCS, ids=["training-config", "ablation-spec",
+                                                                              "paper-reference"])
 def test_the_committed_reference_is_what_the_declarations_generate(module, path, declared):
     text = path.read_text(encoding="utf-8")
     assert module.COMMAND in text.splitlines()[0]  # the header names the command that regenerates it

@@ -24,6 +24,8 @@ Examples:
   lfbench bench suite --quick --json quick.json
   lfbench bench inference --device cuda --interval 0.5 0.1 --precision fp32 bf16
   lfbench bench inference --model tinycnn:layers=3 --channels 4 8 --size 128   # a plugin's network
+  lfbench bench inference --size 256 --repeat 50 --mean --precision fp32 --interval 0.1 --d-min -0.5 \\
+      --d-max 1.6 --no-peak --json table3_runtime.json   # the runtime column of SubFocal's Table III
 
 --device (auto, cpu, cuda, cuda:K; default auto) places the peak, inference and training cases: on CUDA
 the clocks are read after torch.cuda.synchronize, peak_memory_gb is torch.cuda.max_memory_allocated and
@@ -150,7 +152,10 @@ def _inference_options(p: argparse.ArgumentParser, size: int) -> None:
                    help="memory budget of inference (default: 4 on the CPU, the GPU's free memory on CUDA)")
     p.add_argument("--tile", type=int_range(0, MAX_SIZE), default=0,
                    help="core tile size in px (0 = the network's choice: SubFocal's from --max-memory)")
-    p.add_argument("--repeat", type=_COUNT, default=1, help="runs per case (the best is kept)")
+    p.add_argument("--repeat", type=_COUNT, default=1, help="runs per case (the best is kept, or their mean: --mean)")
+    p.add_argument("--mean", action="store_true",
+                   help="seconds = the mean of the --repeat runs after one warm-up run, not the best (as papers "
+                        "report runtime: SubFocal's Table III is --size 256 --repeat 50 --mean)")
     p.add_argument("--no-peak", action="store_true", help="do not measure the conv3d peak around each case")
     _device_option(p)
 
@@ -276,7 +281,8 @@ def _cases(args: argparse.Namespace) -> list[tuple[str, dict]]:
                         cases += floors.cases()
                     cases.append(("inference", {"model": model, **net, "size": size, "precision": precision,
                                                 "weights": args.weights, "max_memory_gb": args.max_memory,
-                                                "tile": args.tile, "repeat": args.repeat, **th}))
+                                                "tile": args.tile, "repeat": args.repeat,
+                                                "statistic": "mean" if args.mean else "best", **th}))
             if peaks:  # the peaks again after the last case: each case sits between two peak measurements
                 cases += floors.cases()
         elif "peak" not in skip and "peak" in has:  # the suite without inference: peaks beside the training bench

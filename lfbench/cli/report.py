@@ -3,9 +3,11 @@ lfbench.reports.from_results.report_from_results).
 
 Writes OUT/table_per_scene.* and OUT/table_average.* (the same tables `lfbench evaluate` writes) and,
 with --paper, OUT/table_per_scene_paper.* and OUT/table_average_paper.* with the paper's numbers in
-labelled columns/rows. lfbench ships no copy of the paper's tables: --paper DIR names the folder
-(e.g. ../shared/data/paper); a bare --paper finds it through $LFBENCH_PAPER_DIR or
-$LFBENCH_HCI_ROOT/../paper. The BadPix series (t = 0 .. 0.1 px) come from the curves an
+labelled columns/rows (HCI results), and the reference's per-scene tables of the results' dataset, e.g.
+OUT/table_table3_paper.* beside UrbanLF-Syn results (SubFocal's Table III: our BadPix 0.07 on its eight
+samples and their mean beside its rows; lfbench.reports.paper_scenes). lfbench ships no copy of the
+paper's tables: --paper DIR names the folder (e.g. ../shared/data/paper); a bare --paper finds it
+through $LFBENCH_PAPER_DIR or $LFBENCH_HCI_ROOT/../paper. The BadPix series (t = 0 .. 0.1 px) come from the curves an
 `evaluate --figures` run saved (RESULTS_DIR/figures/badpix_series.csv, or --curves CSV); without them, from the BadPix
 thresholds the results hold (0.01, 0.03, 0.07). With --maps (maps saved by `evaluate --save-maps`)
 the per-scene overviews and exact curves are drawn from the saved maps.
@@ -31,8 +33,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", required=True, type=Path, metavar="DIR", help="output folder")
     p.add_argument("--paper", nargs="?", const="", metavar="DIR",
                    help="add the paper's numbers from DIR, a folder with table1_per_scene.csv and table2_average.csv "
-                        "(e.g. ../shared/data/paper); a bare --paper uses $LFBENCH_PAPER_DIR, else "
-                        "$LFBENCH_HCI_ROOT/../paper")
+                        "(and table3_urbanlf.csv for UrbanLF-Syn results; e.g. ../shared/data/paper); a bare --paper "
+                        "uses $LFBENCH_PAPER_DIR, else $LFBENCH_HCI_ROOT/../paper")
     p.add_argument("--paper-methods", default="", metavar="NAMES",
                    help="comma-separated paper methods to show (default: the paper's own, as its reference says; "
                         "e.g. SubFocal,SubFocal-L,OACC-Net)")

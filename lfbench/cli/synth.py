@@ -3,8 +3,8 @@ UrbanLF-Syn's.
 
 --layout hci (default): DIR/<category>/synth_<seed>_<i>/ for i = 0..K-1: input_Cam000..png,
 parameters.cfg, gt_disp_lowres.pfm, gt_depth_lowres.pfm and evaluation masks (<mask>_lowres.png).
---layout urbanlf-syn: DIR/<category, default val>/Image<i>/ for i = 1..K: 9x9 views u_v.png of WxH px
-(default 640x480), 5_5_disparity.npy and 5_5_depth.npy. The same seed, size and angular resolution
+--layout urbanlf-syn: DIR/<category, default val>/Image<i>/ for i = 1..K (or i in --numbers): 9x9 views u_v.png
+of WxH px (default 640x480), 5_5_disparity.npy and 5_5_depth.npy. The same seed, size and angular resolution
 always give the same files. An existing scene folder is an error unless --force.
 """
 
@@ -25,6 +25,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="views are S x S px, or W x H px with --layout urbanlf-syn (default 128; urbanlf-syn: "
                         "640x480)")
     p.add_argument("--scenes", type=int, default=4, metavar="K", help="number of scenes (default 4)")
+    p.add_argument("--numbers", type=_numbers, default=None, metavar="N,N,...",
+                   help="--layout urbanlf-syn: the sample numbers written (Image<N>/, e.g. 11,27,34,50,54,68,69,70, "
+                        "the paper's Table III samples); replaces --scenes")
     p.add_argument("--category", default=None, metavar="NAME",
                    help="category (split) folder (default synthetic; urbanlf-syn: val)")
     p.add_argument("--angular", type=int, default=9, metavar="A", help="A x A views, odd (default 9)")
@@ -43,6 +46,14 @@ def _size(text: str) -> tuple[int, int]:
     return w, int(parts[-1])
 
 
+def _numbers(text: str) -> list[int]:
+    """'11,27' -> [11, 27]."""
+    parts = [p.strip() for p in text.split(",") if p.strip()]
+    if not parts or not all(p.isdigit() and int(p) > 0 for p in parts):
+        raise argparse.ArgumentTypeError(f"expected positive sample numbers, e.g. 11,27,34, got {text[:40]!r}")
+    return [int(p) for p in parts]
+
+
 def run(args: argparse.Namespace) -> int:
     import time
 
@@ -58,12 +69,14 @@ def run(args: argparse.Namespace) -> int:
             raise SpecError("--layout urbanlf-syn writes 9x9 views: leave out --angular")
         width, height = args.size or (640, 480)
         paths = write_urbanlf(args.out, seed=args.seed, width=width, height=height, scenes=args.scenes,
-                              split=args.category or "val", force=args.force)
+                              split=args.category or "val", force=args.force, numbers=args.numbers)
         for path in paths:
             print(path)
         print(f"wrote {len(paths)} UrbanLF-Syn sample(s) of {width}x{height} px, 9x9 views "
               f"in {time.perf_counter() - start:.1f} s")
         return 0
+    if args.numbers is not None:
+        raise SpecError("--numbers names UrbanLF-Syn samples: use it with --layout urbanlf-syn")
     width, height = args.size or (128, 128)
     if width != height:
         raise SpecError(f"--size {width}x{height}: the HCI layout has square views (use --layout urbanlf-syn)")

@@ -16,9 +16,10 @@ added here say so.
 from __future__ import annotations
 
 import os
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -76,6 +77,13 @@ class PaperTables:
                             "name them (--paper-methods, [report] paper_methods)")
         return [self.resolve_method(m) for m in names]
 
+    def shows(self, table_id: str, meta: Mapping[str, Any]) -> bool:
+        """Whether the paper's table ``table_id`` stands beside results with ``meta``: unless its declaration
+        names a dataset and the results record another (e.g. the HCI Tables I/II beside UrbanLF-Syn results)."""
+        declared = self.reference.table(table_id) if self.reference is not None else None
+        dataset = meta.get("dataset")
+        return declared is None or not declared.dataset or not dataset or declared.dataset == dataset
+
     @property
     def methods(self) -> list[str]:
         return list(dict.fromkeys([*self.per_scene["method"], *self.average["method"]]))
@@ -129,14 +137,23 @@ def load_paper(path: str | Path, reference: Reference | None = None) -> PaperTab
     ``reference`` (default: the default reference). DataError naming the file when a table is missing or
     malformed."""
     folder = Path(path)
+    reference = reference or default_reference()
+    per_scene_file = _declared_file(reference, "table1", PER_SCENE_FILE)
+    average_file = _declared_file(reference, "table2", AVERAGE_FILE)
     if not folder.is_dir():
-        raise DataError("paper folder not found (expected table1_per_scene.csv, table2_average.csv)", folder)
-    per_scene = _read_csv(folder / PER_SCENE_FILE, ("method", "scene", "metric", "value"))
-    average = _read_csv(folder / AVERAGE_FILE, ("method", "metric", "value"))
+        raise DataError(f"paper folder not found (expected {per_scene_file}, {average_file})", folder)
+    per_scene = _read_csv(folder / per_scene_file, ("method", "scene", "metric", "value"))
+    average = _read_csv(folder / average_file, ("method", "metric", "value"))
     extra = {p.stem: _read_csv(p, None) for p in sorted(folder.glob("*.csv"))
-             if p.name not in (PER_SCENE_FILE, AVERAGE_FILE)}
-    return PaperTables(source=folder, per_scene=per_scene, average=average, extra=extra,
-                       reference=reference or default_reference())
+             if p.name not in (per_scene_file, average_file)}
+    return PaperTables(source=folder, per_scene=per_scene, average=average, extra=extra, reference=reference)
+
+
+def _declared_file(reference: Reference | None, table_id: str, default: str) -> str:
+    """The file the reference declares for its table ``table_id`` (Tables I/II: long tables of method, scene,
+    metric, value), else ``default``."""
+    table = reference.table(table_id) if reference is not None else None
+    return table.file if table is not None and table.file else default
 
 
 def paper_resolution(scene: str) -> str:

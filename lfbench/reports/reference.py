@@ -6,7 +6,8 @@ its method and registered through the entry-point group ``lfbench.references``, 
     subfocal-tci2023 = "lfbench_methods.subfocal:paper.toml"   # package : its TOML file
 
 A reference says what the paper's tables are and how ours line up with them; its numbers are not in it
-(they are the user's transcription, a folder of CSV files: lfbench.reports.paper). Layout of the file::
+(they are the user's transcription, a folder of CSV files: lfbench.reports.paper). The file is parsed by
+the one declared-option system (lfbench.utils.options: :class:`Reference`, :class:`PaperTable`)::
 
     name = "subfocal-tci2023"                # the registered name (the entry point's)
     networks = ["subfocal", "lfattnet"]      # trainable networks whose ablations it stands beside
@@ -15,21 +16,23 @@ A reference says what the paper's tables are and how ours line up with them; its
     benchmark_note = "..."                   # caption line of the tables with its Tables I/II
     ablation_note = "..."                    # caption line of the tables with its ablation numbers
 
-    [table4]                                 # its Table IV: rows (interval, interpolation)
-    file = "table4_interval_interp.csv"      # with columns interval, interpolation, badpix_0.07, mse_x100
-    train_hours = "train_hours_rtx3090"      # and its train time (h) and test time (s) columns
-    test_seconds = "test_seconds_512x512_rtx3090"
-    test_label = "paper (RTX 3090, 512x512)" # what its test time was measured on
-    figure_title = "..."; figure_time_label = "..."   # its panel of the accuracy-vs-time figure
+    [[tables]]                               # one generic declaration per table of the paper
+    id = "table3"                            # what lfbench calls it (table1 .. table5, beta, ...)
+    file = "table3_urbanlf.csv"              # its CSV in the paper folder ("" for a figure)
+    caption = "..."
+    keys = ["method"]                        # the CSV columns that identify a row
+    metrics = { "badpix_0.07" = "badpix_0.07_avg" }      # metric id -> the CSV column holding it
+    dataset = "urbanlf-syn"                  # shown beside results of this dataset (meta.dataset)
+    scenes = { Image11 = "Img11" }           # a wide per-scene table: our scene -> column (of scene_metric)
+    scene_metric = "badpix_0.07"
+    extra = { params_millions = "params_millions" }      # other columns: name -> CSV column
+    labels = { figure_title = "..." }        # free text the table's consumers show
+    names = { l1 = "baseline_l1" }           # our key value -> the paper's, where they differ
+    best = "uafl"                            # the row (key value) the paper finds best
 
-    [table5]                                 # its Table V: BadPix 0.07 per fine-tuning loss (columns loss, badpix_0.07)
-    file = "table5_losses.csv"
-    best_loss = "uafl"                       # the loss it finds best (at [beta] best when the loss has a beta)
-    loss_names = { l1 = "baseline_l1" }      # our loss name -> its row, where they differ
-
-    [beta]                                   # its beta sweep
-    best = 0.1                               # the beta it uses and finds best
-    note = "..."; curve_note = "..."         # what it says about beta: table caption, figure title
+The ablation tables read their paper table through adapters (:attr:`Reference.table4`,
+:attr:`Reference.table5`, :attr:`Reference.beta`: views of the generic tables ``table4``, ``table5``,
+``beta``); report's Table III reads the ``table3`` declaration directly (lfbench.reports.table3).
 
 Which reference an ablation uses: the spec's ``[report] reference``, else, when the spec asks for a
 paper table or paper methods (or ``--paper`` is given), the reference of the spec's network, else the
@@ -40,26 +43,69 @@ from __future__ import annotations
 
 import dataclasses
 import importlib.util
-import types
-import typing
 from dataclasses import dataclass, field
 from importlib import metadata
 from pathlib import Path
-from typing import Any
 
 from lfbench.method.trainable import DEFAULT_TRAINABLE
 from lfbench.utils.errors import SpecError
+from lfbench.utils.options import Table, option, parse_section
 from lfbench.utils.tomlfile import read_toml
 
-__all__ = ["ENTRY_POINT_GROUP", "BetaSweep", "Reference", "Table4", "Table5", "default_reference",
+__all__ = ["ENTRY_POINT_GROUP", "BetaSweep", "PaperTable", "Reference", "Table4", "Table5", "default_reference",
            "get_reference", "list_references", "read_reference", "reference_for_network"]
 
 ENTRY_POINT_GROUP = "lfbench.references"
 
 
+def _no_blank(value: str) -> str | None:
+    return "must not be empty" if not value.strip() else None
+
+
+@dataclass(frozen=True, kw_only=True)
+class PaperTable:
+    """One table of a paper, declared generically: where its numbers are and how they line up with ours."""
+
+    id: str = option(help="what lfbench calls the table (table1 .. table5, beta, ...)", check=_no_blank)
+    file: str = option("", help="its CSV file in the paper folder ('' for a figure whose values are not printed)")
+    caption: str = option("", help="caption line of the tables that show it")
+    keys: tuple[str, ...] = option((), help="the CSV columns that identify a row (join keys), e.g. method")
+    metrics: dict[str, str] = option({}, help="metric id -> the CSV column holding it")
+    dataset: str = option("", help="the dataset its numbers are of (a `lfbench datasets` name): report shows "
+                                  "the table beside results of that dataset ('' for an ablation's table)")
+    scenes: dict[str, str] = option({}, help="a wide per-scene table: our scene name -> the CSV column "
+                                            "holding its value of `scene_metric`")
+    scene_metric: str = option("", help="the metric id of the per-scene columns")
+    extra: dict[str, str] = option({}, help="other columns (runtime, parameters, train time): name -> CSV column")
+    labels: dict[str, str] = option({}, help="free text its consumers show (figure titles, axis labels): "
+                                            "name -> text")
+    names: dict[str, str] = option({}, help="our key value -> the paper's row, where they differ")
+    best: str = option("", help="the row (key value) the paper finds best, as text")
+
+    @staticmethod
+    def check_options(values: dict, table: Table) -> None:
+        """A per-scene table names its file and its metric."""
+        for key in ("file", "scene_metric"):
+            if values["scenes"] and not values[key]:
+                table.fail(key, "is required with scenes")
+
+    def label(self, name: str) -> str:
+        """``labels[name]``; SpecError naming the table when the reference does not give it."""
+        if name not in self.labels:
+            raise SpecError(f"reference table {self.id!r}: labels.{name} is required")
+        return self.labels[name]
+
+    def column(self, name: str) -> str:
+        """The CSV column of the extra column ``name``; SpecError when the reference does not give it."""
+        if name not in self.extra:
+            raise SpecError(f"reference table {self.id!r}: extra.{name} is required")
+        return self.extra[name]
+
+
 @dataclass(frozen=True)
 class Table4:
-    """A paper's Table IV: BadPix 0.07, MSE x100, train and test time per (interval, interpolation)."""
+    """Adapter: the paper's Table IV as the ablation tables read it (BadPix 0.07, MSE x100, train and test
+    time per (interval, interpolation)); a view of the generic table ``table4``."""
 
     file: str
     train_hours: str
@@ -68,88 +114,94 @@ class Table4:
     figure_title: str
     figure_time_label: str
 
+    @classmethod
+    def of(cls, t: PaperTable) -> Table4:
+        return cls(file=t.file, train_hours=t.column("train_hours"), test_seconds=t.column("test_seconds"),
+                   test_label=t.label("test_label"), figure_title=t.label("figure_title"),
+                   figure_time_label=t.label("figure_time_label"))
+
 
 @dataclass(frozen=True)
 class Table5:
-    """A paper's Table V: BadPix 0.07 per fine-tuning loss; ``best_loss`` the one it finds best."""
+    """Adapter: the paper's Table V (BadPix 0.07 per fine-tuning loss; ``best_loss`` the one it finds best);
+    a view of the generic table ``table5``."""
 
     file: str
     best_loss: str
     loss_names: dict[str, str] = field(default_factory=dict)
 
+    @classmethod
+    def of(cls, t: PaperTable) -> Table5:
+        return cls(file=t.file, best_loss=t.best, loss_names=dict(t.names))
+
 
 @dataclass(frozen=True)
 class BetaSweep:
-    """A paper's beta sweep: the ``best`` beta, and what it says about it (``note``: table caption,
-    ``curve_note``: figure title)."""
+    """Adapter: the paper's beta sweep, the ``best`` beta and what it says about it (``note``: table
+    caption, ``curve_note``: figure title); a view of the generic table ``beta``."""
 
     best: float
     note: str
     curve_note: str
 
+    @classmethod
+    def of(cls, t: PaperTable) -> BetaSweep:
+        try:
+            best = float(t.best)
+        except ValueError:
+            raise SpecError(f"reference table {t.id!r}: best: expected a number, got {t.best!r}") from None
+        return cls(best=best, note=t.caption, curve_note=t.label("curve_note"))
 
-@dataclass(frozen=True)
+
+def _unique_ids(tables: tuple[PaperTable, ...]) -> str | None:
+    ids = [t.id for t in tables]
+    twice = sorted({i for i in ids if ids.count(i) > 1})
+    return f"table id {twice[0]!r} declared twice" if twice else None
+
+
+@dataclass(frozen=True, kw_only=True)
 class Reference:
     """A paper lfbench puts beside ours (see the module docstring for the file layout)."""
 
-    name: str
-    networks: tuple[str, ...]
-    methods: tuple[str, ...]
-    label: str
-    benchmark_note: str
-    ablation_note: str
-    table4: Table4 | None = None
-    table5: Table5 | None = None
-    beta: BetaSweep | None = None
+    name: str = option(help="the registered name (the entry point's)", check=_no_blank)
+    networks: tuple[str, ...] = option(help="trainable networks whose ablations it stands beside")
+    methods: tuple[str, ...] = option(help="its methods shown beside ours in Tables I/II by default")
+    label: str = option(help="the label of its columns in the ablation tables")
+    benchmark_note: str = option(help="caption line of the tables with its Tables I/II")
+    ablation_note: str = option(help="caption line of the tables with its ablation numbers")
+    tables: tuple[PaperTable, ...] = option((), help="its tables (an array of tables)", check=_unique_ids)
     source: str = field(default="", compare=False)
 
+    def table(self, table_id: str) -> PaperTable | None:
+        """The declaration of the table ``table_id``, None when the paper has none."""
+        return next((t for t in self.tables if t.id == table_id), None)
 
-def _parse(cls: type, raw: Any, where: str, path: Path) -> Any:
-    """An instance of the dataclass ``cls`` from the TOML table ``raw``: every key declared by a field, of
-    the field's type (str, float, tuple of str, dict of str, or a nested dataclass table); SpecError
-    naming the file and key otherwise."""
-    if not isinstance(raw, dict):
-        raise SpecError(f"{where or 'the file'} must be a table", path)
-    hints = typing.get_type_hints(cls)
-    fields = {f.name: f for f in dataclasses.fields(cls) if f.name != "source"}
-    unknown = sorted(set(raw) - set(fields))
-    if unknown:
-        raise SpecError(f"{where + '.' if where else ''}{unknown[0]}: unknown key (known: {', '.join(fields)})", path)
-    values = {}
-    for name, f in fields.items():
-        key = f"{where}.{name}" if where else name
-        if name not in raw:
-            if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
-                raise SpecError(f"{key}: is required", path)
-            continue
-        values[name] = _value(hints[name], raw[name], key, path)
-    return cls(**values)
+    @property
+    def table4(self) -> Table4 | None:
+        t = self.table("table4")
+        return Table4.of(t) if t is not None else None
 
+    @property
+    def table5(self) -> Table5 | None:
+        t = self.table("table5")
+        return Table5.of(t) if t is not None else None
 
-def _value(kind: Any, value: Any, key: str, path: Path) -> Any:
-    options = [a for a in typing.get_args(kind) if a is not type(None)] if isinstance(kind, types.UnionType) else []
-    if options:
-        return _value(options[0], value, key, path)
-    if dataclasses.is_dataclass(kind):
-        return _parse(kind, value, key, path)
-    origin = typing.get_origin(kind)
-    if origin is tuple and isinstance(value, list) and all(isinstance(v, str) for v in value):
-        return tuple(value)
-    if origin is dict and isinstance(value, dict) and all(isinstance(v, str) for v in value.values()):
-        return dict(value)
-    if kind is float and isinstance(value, int | float) and not isinstance(value, bool):
-        return float(value)
-    if kind is str and isinstance(value, str):
-        return value
-    expected = {tuple: "a list of strings", dict: "a table of strings"}.get(origin, getattr(kind, "__name__", kind))
-    raise SpecError(f"{key}: expected {expected}, got {str(value)[:40]!r}", path)
+    @property
+    def beta(self) -> BetaSweep | None:
+        t = self.table("beta")
+        return BetaSweep.of(t) if t is not None else None
 
 
 def read_reference(path: str | Path) -> Reference:
     """The reference in the TOML file ``path`` (SpecError naming the file and key when it is not one)."""
     path = Path(path)
     raw, _ = read_toml(path, "reference")
-    return dataclasses.replace(_parse(Reference, raw, "", path), source=str(path))
+    ref = parse_section(Reference, Table(raw, "", str(path)))
+    try:  # the adapters' keys are checked when the file is read, not when a table first uses them
+        ref.table4, ref.table5, ref.beta  # noqa: B018
+    except SpecError as exc:
+        raise SpecError(str(exc), path) from None
+    return dataclasses.replace(ref, source=str(path))
 
 
 def list_references() -> dict[str, Reference]:

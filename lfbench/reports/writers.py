@@ -50,6 +50,7 @@ from lfbench.reports.figures import (
 from lfbench.reports.html import SITE_DIR, SiteInputs, SiteSection, build_site, site_inputs
 from lfbench.reports.maps import MAPS_DIR, MapSaver, SceneMaps
 from lfbench.reports.paper import PaperTables, average_with_paper, per_scene_with_paper
+from lfbench.reports.paper_scenes import RUN_RUNTIME_COLUMN, scene_table_with_paper, scene_tables
 from lfbench.reports.plotting import method_colours
 from lfbench.reports.tables import TABLE_FORMATS, average_table, per_scene_table, write_table
 from lfbench.reports.toolkit_figures import toolkit_figures_from_scene_maps
@@ -62,7 +63,7 @@ from lfbench.utils.atomic import write_text
 
 __all__ = ["FIGURES_DIR", "BootstrapCIs", "CIOptions", "CurveFigures", "Maps", "OutputWriter", "RunOutputs",
            "SceneFigures", "Site", "Tables", "ToolkitFigures", "UncertaintyRatings", "replay", "scene_map_predictions",
-           "write_outputs"]
+           "paper_scene_sections", "write_outputs"]
 
 log = logging.getLogger(__name__)
 
@@ -153,15 +154,38 @@ class Tables(OutputWriter):
     def write(self, run: RunOutputs) -> list[Path]:
         per_scene, average = per_scene_table(run.results), average_table(run.results)
         self.tables = {"per_scene": per_scene, "average": average}
-        if self.paper is not None and not per_scene.empty:
+        meta = run.results.meta
+        if self.paper is not None and not per_scene.empty and self.paper.shows("table1", meta):
             self.tables["per_scene_paper"] = per_scene_with_paper(per_scene, self.paper, self.paper_methods)
             self.tables["average_paper"] = average_with_paper(average, self.paper, run.results.scenes,
                                                               self.paper_methods)
+        captions = {}
+        for section in paper_scene_sections(run.results, self.paper):  # e.g. Table III beside UrbanLF-Syn results
+            self.tables[f"{section.id}_paper"] = section.table
+            captions[f"{section.id}_paper"] = list(section.caption)
         written = []
         for name, table in self.tables.items():
-            caption = self.paper_caption if name.endswith("_paper") else self.caption
+            caption = captions.get(name) or (self.paper_caption if name.endswith("_paper") else self.caption)
             written += write_table(table, run.stage, f"table_{name}", caption, formats=self.formats)
         return written
+
+
+def paper_scene_sections(results: Results, paper: PaperTables | None) -> list[SiteSection]:
+    """The paper's per-scene tables of the results' dataset beside ours (lfbench.reports.paper_scenes), as
+    sections: the report's table_<id>_paper files and tables on the site's index page."""
+    if paper is None:
+        return []
+    out = []
+    for decl in scene_tables(paper, results.meta):
+        table = scene_table_with_paper(results, paper, decl)
+        if not table.empty:
+            caption = [decl.caption, f"ours: {decl.scene_metric} on the samples {', '.join(decl.scenes)} of this "
+                       f"run, their mean ('{decl.scene_metric}', over the 'scenes' we have) and "
+                       f"'{RUN_RUNTIME_COLUMN}' (at the data's resolution); rows 'NAME (paper)': the paper's file "
+                       "as published"]
+            out.append(SiteSection(id=decl.id, title=f"{decl.id}: ours beside the paper", table=table,
+                                   caption=caption))
+    return out
 
 
 # --------------------------------------------------------------------------- maps
@@ -320,11 +344,12 @@ class Site(OutputWriter):
     def inputs(self, run: RunOutputs) -> SiteInputs:
         staged = run.stage / "results.json"  # the results as this set commits them, else as given
         results = Results.read(run.stage) if staged.is_file() else run.results
+        paper = self.paper if self.paper is not None and self.paper.shows("table1", results.meta) else None
         inputs = site_inputs(results, run.folder, data_root=self.data_root, maps=self.maps,
                              scenes=list(run.scenes) if run.scenes else None, scene_maps=run.scene_maps,
-                             paper=self.paper, paper_methods=self.paper_methods, title=self.title)
+                             paper=paper, paper_methods=self.paper_methods, title=self.title)
         inputs.notes = [*self.notes, *inputs.notes]
-        inputs.sections = self.sections
+        inputs.sections = [*self.sections, *paper_scene_sections(results, self.paper)]
         return inputs
 
     def write(self, run: RunOutputs) -> list[Path]:

@@ -138,19 +138,31 @@ def sync(device) -> None:
         torch.cuda.synchronize(device)
 
 
-def timed(fn: Callable[[], object], repeat: int, device=None) -> tuple[float, float]:
-    """(best wall time, mean CPU time) of ``repeat`` calls, s; on CUDA each call is timed from a synchronized
-    start to its synchronized end. CPU time counts the work itself and is much less inflated than wall time
-    when other processes compete for the cores."""
-    best = math.inf
+STATISTICS = ("best", "mean")  # what a bench's seconds are of its repeated runs
+
+
+def timed(fn: Callable[[], object], repeat: int, device=None, statistic: str = "best") -> tuple[float, float]:
+    """(wall time, mean CPU time) of ``repeat`` calls, s: the wall time is the best call's (``statistic``
+    "best") or the mean of all (``"mean"``, as papers report a runtime, e.g. SubFocal's Table III: mean of 50
+    runs; one untimed warm-up call first, so that one-off set-up is not in the mean). On CUDA each call is
+    timed from a synchronized start to its synchronized end. CPU time counts the work itself and is much less
+    inflated than wall time when other processes compete for the cores."""
+    if statistic not in STATISTICS:
+        raise ValueError(f"statistic must be one of {', '.join(STATISTICS)}, got {statistic!r}")
+    n = max(1, repeat)
+    if statistic == "mean":
+        fn()
+        sync(device)
+    walls = []
     cpu0 = cpu_seconds()
-    for _ in range(max(1, repeat)):
+    for _ in range(n):
         sync(device)
         t = time.perf_counter()
         fn()
         sync(device)
-        best = min(best, time.perf_counter() - t)
-    return best, (cpu_seconds() - cpu0) / max(1, repeat)
+        walls.append(time.perf_counter() - t)
+    wall = min(walls) if statistic == "best" else math.fsum(walls) / n
+    return wall, (cpu_seconds() - cpu0) / n
 
 
 def case_device(device: str = "cpu"):
@@ -240,11 +252,13 @@ def _described(record: dict, net, params: dict[str, Any]) -> dict:
 
 def bench_inference(size: int = 512, precision: str = "fp32", *, model: str = DEFAULT_MODEL, weights: str | None = None,
                     max_memory_gb: float | None = 4.0, tile: int = 0, threads: int = 0, repeat: int = 1, seed: int = 0,
-                    device: str = "cpu", **params: Any) -> dict:
+                    device: str = "cpu", statistic: str = "best", **params: Any) -> dict:
     """One size x size light field (random views, made on the CPU: the copy to ``device`` is timed) through the
-    network's ``Trainable.infer`` on ``device``; best of ``repeat`` runs. ``params``: the network's parameters
-    (e.g. SubFocal's interval, width; default: its defaults, random weights unless ``weights`` names a
-    checkpoint). max_memory_gb None: the device's budget (4 GB on the CPU, the free memory of a GPU)."""
+    network's ``Trainable.infer`` on ``device``; best of ``repeat`` runs, or their mean (``statistic="mean"``,
+    after one warm-up run: how a paper's runtime is usually measured, e.g. 9x9x256x256, mean of 50).
+    ``params``: the network's parameters (e.g. SubFocal's interval, width; default: its defaults, random
+    weights unless ``weights`` names a checkpoint). max_memory_gb None: the device's budget (4 GB on the CPU,
+    the free memory of a GPU)."""
     import torch
 
     from lfbench.method.trainable import contract_problem
@@ -264,13 +278,14 @@ def bench_inference(size: int = 512, precision: str = "fp32", *, model: str = DE
         outputs[:] = [trainable.infer(net, views, precision=precision, max_memory_gb=max_memory_gb, tile=tile,
                                       timings=phases)]
 
-    seconds, cpu = timed(run, repeat, dev)
+    seconds, cpu = timed(run, repeat, dev, statistic)
     problem = contract_problem(outputs[0], (size, size), getattr(net, "disparities", None))  # the one check
     if problem:
         raise SpecError(f"network {model!r} breaks the network contract on a {size}x{size} light field: {problem}")
     record = {"bench": "inference", "model": model, "size": size, **params, "network_params": list(params),
               "precision": precision, "seconds": seconds, **memory_fields(dev, baseline),
-              "cpu_seconds": cpu, "weights": weights or "random", "max_memory_gb": max_memory_gb}
+              "cpu_seconds": cpu, "weights": weights or "random", "max_memory_gb": max_memory_gb,
+              "repeat": max(1, repeat), "statistic": statistic}
     flops = trainable.flop_count(net, size, size)
     if flops:
         record.update({"gflops_per_s": flops["total"] / seconds / 1e9, "gflops_per_cpu_s": flops["total"] / cpu / 1e9,
