@@ -17,6 +17,7 @@ matches none or several in one line (:class:`~lfbench.utils.errors.DataError`, e
 
 from __future__ import annotations
 
+import logging
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -34,6 +35,7 @@ __all__ = ["DATASET_GROUP", "DATASETS", "Dataset", "DatasetProtocol", "detect_da
            "open_dataset", "method_range_params"]
 
 DATASET_GROUP = "lfbench.datasets"
+_log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -167,12 +169,22 @@ def method_range_params(disparity_range: tuple[float, float]) -> Callable[[Any, 
     range differs from the method's defaults (so that the label names the range searched, and stays as it
     was where they agree: HCI's [-4, 4] is the plane sweep's default). A method with an ``interval`` searches
     a grid from ``d_min``: ``d_max`` is then raised to the first grid point at or above the dataset's maximum
-    (UrbanLF-Syn's [-0.5, 1.6] at the plane sweep's 0.25 px: [-0.5, 1.75]), so that the whole range is searched."""
+    (UrbanLF-Syn's [-0.5, 1.6] at the plane sweep's 0.25 px: [-0.5, 1.75]), so that the whole range is searched.
+
+    A method whose weights fix its disparity grid (a network trained on it: the number and spacing of its
+    cost-volume disparities) says so with a classmethod ``range_from_weights(info, params) -> bool``; where it
+    answers True the dataset's range is not applied (it would contradict the weights) and the weights' range
+    is searched (logged). SubFocal: ``weights=`` given, or its shipped checkpoint is the one that loads."""
     lo, hi = (float(v) for v in disparity_range)
 
     def defaults(info: Any, params: dict[str, Any]) -> dict[str, float]:
         keys = {"d_min", "d_max"}
         if not keys <= set(info.params) or keys & set(params):
+            return {}
+        fixed = getattr(info.method_class, "range_from_weights", None)
+        if fixed is not None and fixed(info, params):
+            _log.info("%s: its weights fix the disparity range searched; the dataset's [%g, %g] px is not applied "
+                      "(weights trained on its range: lfbench train configs/subfocal_urbanlf.toml for UrbanLF-Syn)", info.name, lo, hi)
             return {}
         top = hi
         if "interval" in info.params:

@@ -57,9 +57,10 @@ def write_urbanlf_scene(folder: str | Path, seed: int, width: int, height: int) 
 
 
 def write_urbanlf(out: str | Path, *, seed: int = 0, width: int = 640, height: int = 480, scenes: int = 2,
-                  split: str = "val", force: bool = False) -> list[Path]:
-    """Write ``scenes`` scenes as ``OUT/<split>/Image<i>/`` (i = 1..K) and return their folders. An existing
-    sample folder is an error unless ``force`` (all are checked before anything is generated)."""
+                  split: str = "val", force: bool = False, first: int = 1) -> list[Path]:
+    """Write ``scenes`` scenes as ``OUT/<split>/Image<i>/`` (i = first..first+K-1; scene k's content from
+    ``scene_seed(seed, k)`` whatever ``first``) and return their folders. An existing sample folder is an
+    error unless ``force`` (all are checked before anything is generated)."""
     for side in (width, height):
         check_args(side, ANGULAR)
     check_args(max(width, height), ANGULAR)
@@ -67,7 +68,9 @@ def write_urbanlf(out: str | Path, *, seed: int = 0, width: int = 640, height: i
         raise SpecError(f"invalid split name {split!r}")
     if int(scenes) != scenes or scenes < 1:
         raise SpecError(f"scenes must be a positive integer, got {scenes}")
-    targets = [Path(out) / split / f"Image{i + 1}" for i in range(scenes)]
+    if int(first) != first or first < 0:
+        raise SpecError(f"first must be an integer >= 0, got {first}")
+    targets = [Path(out) / split / f"Image{first + i}" for i in range(scenes)]
     if not force:
         for t in targets:
             if t.exists():
