@@ -107,3 +107,12 @@ def test_the_smoke_config_reads_as_the_urbanlf_layout():
     cfg = TrainConfig.from_toml(Path(__file__).resolve().parents[1] / "configs" / "subfocal_urbanlf_cpu_smoke.toml")
     assert {s.layout for s in cfg.data.synthetic} == {"urbanlf-syn"}
     assert (cfg.model["d_min"], cfg.model["d_max"], cfg.model["interval"]) == (*URBAN, 0.1)
+
+
+def test_the_new_keys_leave_the_dicts_and_fingerprints_of_older_configs_alone():
+    old = TrainConfig.from_dict({"data": {"synthetic": [{"category": "s"}]}, "stages": [{"loss": "l1", "steps": 1}]})
+    d = old.to_dict()["data"]
+    assert "dataset" not in d and not {"width", "layout"} & set(d["synthetic"][0])
+    new = urban_config().to_dict()["data"]["synthetic"][0]
+    assert (new["layout"], new["width"]) == ("urbanlf-syn", W)
+    assert TrainConfig.from_dict(urban_config().to_dict()) == urban_config()
