@@ -183,8 +183,8 @@ def method_range_params(disparity_range: tuple[float, float]) -> Callable[[Any, 
             return {}
         fixed = getattr(info.method_class, "range_from_weights", None)
         if fixed is not None and fixed(info, params):
-            _log.info("%s: its weights fix the disparity range searched; the dataset's [%g, %g] px is not applied "
-                      "(weights trained on its range: lfbench train configs/subfocal_urbanlf.toml for UrbanLF-Syn)", info.name, lo, hi)
+            _log.info("%s: searches the disparity grid its weights were trained on (the dataset's [%g, %g] px is "
+                      "not laid over weights)", info.name, lo, hi)
             return {}
         top = hi
         if "interval" in info.params:
