@@ -123,13 +123,15 @@ class SyntheticSpec:
     seed: int = option(0, low=0, help="generator seed; scene i is synth_<seed>_<i>")
     size: int = option(128, low=16, high=MAX_SYNTH_SIZE, help="height of every scene, and its width unless "
                                                                   "width is given (px)")
-    width: int = option(0, low=0, high=MAX_SYNTH_SIZE, omit_default=True, help="width of every scene (px; 0: size, square scenes; "
-                                                            "another width needs layout = \"urbanlf-syn\")")
+    width: int = option(0, low=0, high=MAX_SYNTH_SIZE, omit_default=True,
+                        help="width of every scene (px; 0: size, square scenes; another width needs "
+                             "layout = \"urbanlf-syn\")")
     scenes: int = option(8, low=1, high=MAX_SCENES, help="number of scenes")
     layout: Literal["hci", "urbanlf-syn"] = option(
-        "hci", omit_default=True, help="the layout written: hci (OUT/data/<category>/synth_<seed>_<i>/, 9x9 input_CamNNN.png) or "
-                    "urbanlf-syn (OUT/data/<category>/Image<seed x 10000 + i + 1>/, 9x9 u_v.png, as lfbench synth "
-                    "--layout urbanlf-syn writes it)")
+        "hci", omit_default=True,
+        help="the layout written: hci (OUT/data/<category>/synth_<seed>_<i>/, 9x9 input_CamNNN.png) or urbanlf-syn "
+             "(OUT/data/<category>/Image<seed x 10000 + i + 1>/, 9x9 u_v.png, as lfbench synth --layout urbanlf-syn "
+             "writes it)")
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -158,12 +160,13 @@ def _stride_weights(values: dict[str, Any], index: int | None) -> tuple[float, .
 
 @dataclass(frozen=True)
 class DataConfig:
-    roots: tuple[str, ...] = option((), single=True, help="data roots, each in a dataset layout (`lfbench datasets`: "
-                                                          "HCI ROOT/<category>/<scene>, UrbanLF-Syn ROOT/<split>/ImageN, "
-                                                          "...), detected per root unless dataset is given")
-    dataset: str | None = option(None, check=_dataset, omit_default=True, help="the dataset adapter every root is read with (a name of "
-                                                            "`lfbench datasets`, e.g. \"urbanlf-syn\"); default: "
-                                                            "detected per root")
+    roots: tuple[str, ...] = option(
+        (), single=True, help="data roots, each in a dataset layout (`lfbench datasets`: HCI ROOT/<category>/<scene>, "
+                              "UrbanLF-Syn ROOT/<split>/ImageN, ...), detected per root unless dataset is given")
+    dataset: str | None = option(
+        None, check=_dataset, omit_default=True,
+        help="the dataset adapter every root is read with (a name of `lfbench datasets`, e.g. \"urbanlf-syn\"); "
+             "default: detected per root")
     synthetic: tuple[SyntheticSpec, ...] = option(
         (), single=True, help="synthetic scene sets generated into OUT/data/<category> (when train names scenes: "
                               "only the sets that train or validation select)")
