@@ -116,3 +116,17 @@ def test_the_new_keys_leave_the_dicts_and_fingerprints_of_older_configs_alone():
     new = urban_config().to_dict()["data"]["synthetic"][0]
     assert (new["layout"], new["width"]) == ("urbanlf-syn", W)
     assert TrainConfig.from_dict(urban_config().to_dict()) == urban_config()
+
+
+def test_a_plugin_network_with_d_min_and_d_max_keeps_its_weights_grid():
+    from types import SimpleNamespace
+
+    from lfbench.method.network_method import NetworkMethod
+    from lfbench.method.params import Param
+
+    params = {k: Param(k, float, v, "") for k, v in (("d_min", -4.0), ("d_max", 4.0))}
+    hook = method_range_params(URBAN)
+    plain = SimpleNamespace(name="sweepish", params=params, method_class=None)
+    network = SimpleNamespace(name="netish", params=params, method_class=NetworkMethod)
+    assert hook(plain, {}) == {"d_min": URBAN[0], "d_max": URBAN[1]}  # a method without weights follows the data
+    assert hook(network, {}) == {}  # the weights' stored config decides: a default laid over it would conflict
