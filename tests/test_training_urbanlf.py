@@ -130,3 +130,19 @@ def test_a_plugin_network_with_d_min_and_d_max_keeps_its_weights_grid():
     network = SimpleNamespace(name="netish", params=params, method_class=NetworkMethod)
     assert hook(plain, {}) == {"d_min": URBAN[0], "d_max": URBAN[1]}  # a method without weights follows the data
     assert hook(network, {}) == {}  # the weights' stored config decides: a default laid over it would conflict
+
+
+def test_a_root_of_no_known_layout_is_one_line_and_nothing_is_written(tmp_path):
+    import subprocess
+    import sys
+
+    (tmp_path / "empty" / "train").mkdir(parents=True)
+    cfg = tmp_path / "bad.toml"
+    cfg.write_text(f'[data]\nroots = ["{tmp_path / "empty"}"]\n[[stages]]\nloss = "l1"\nsteps = 1\n')
+    out = tmp_path / "out"
+    run = subprocess.run([sys.executable, "-m", "lfbench", "train", str(cfg), "--out", str(out)],
+                         capture_output=True, text=True, timeout=120)
+    assert run.returncode == 2 and "Traceback" not in run.stderr
+    lines = [line for line in run.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and "no known dataset layout" in lines[0] and str(tmp_path / "empty") in lines[0]
+    assert not out.exists()
