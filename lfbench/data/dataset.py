@@ -181,17 +181,17 @@ def method_range_params(disparity_range: tuple[float, float]) -> Callable[[Any, 
         keys = {"d_min", "d_max"}
         if not keys <= set(info.params) or keys & set(params):
             return {}
-        fixed = getattr(info.method_class, "range_from_weights", None)
-        if fixed is not None and fixed(info, params):
-            _log.info("%s: searches the disparity grid its weights were trained on (the dataset's [%g, %g] px is "
-                      "not laid over weights)", info.name, lo, hi)
-            return {}
         top = hi
         if "interval" in info.params:
             step = float(params.get("interval", info.params["interval"].default))
             if step > 0:
                 top = round(lo + math.ceil(round((hi - lo) / step, 9)) * step, 9)
         if (info.params["d_min"].default, info.params["d_max"].default) == (lo, top):
+            return {}
+        fixed = getattr(info.method_class, "range_from_weights", None)
+        if fixed is not None and fixed(info, params):
+            _log.info("%s: searches the disparity grid its weights were trained on (the dataset's [%g, %g] px is "
+                      "not laid over weights)", info.name, lo, hi)
             return {}
         return {"d_min": lo, "d_max": top}
 
