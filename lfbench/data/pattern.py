@@ -108,13 +108,13 @@ class PatternScene(PNGViews):
         self.name = self.path.name
         self.category = category
         self.params = None  # no camera parameters: the metrics that need them do not apply
-        self._size = self._check_views()
+        self._spatial_size = self._check_views()
         self._check_gt_header()
 
     @property
     def spatial_size(self) -> tuple[int, int]:
-        """(H, W) px of the views (checked when the scene was made; LightField's property reads the views)."""
-        return self._size
+        """(H, W) of every view, px (checked equal for all of them when the scene was made)."""
+        return self._spatial_size
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.category}/{self.name})"
