@@ -17,7 +17,6 @@ matches none or several in one line (:class:`~lfbench.utils.errors.DataError`, e
 
 from __future__ import annotations
 
-import logging
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -35,7 +34,6 @@ __all__ = ["DATASET_GROUP", "DATASETS", "Dataset", "DatasetProtocol", "detect_da
            "open_dataset", "method_range_params"]
 
 DATASET_GROUP = "lfbench.datasets"
-_log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -190,8 +188,11 @@ def method_range_params(disparity_range: tuple[float, float]) -> Callable[[Any, 
             return {}
         fixed = getattr(info.method_class, "range_from_weights", None)
         if fixed is not None and fixed(info, params):
-            _log.info("%s: searches the disparity grid its weights were trained on (the dataset's [%g, %g] px is "
-                      "not laid over weights)", info.name, lo, hi)
+            import logging  # here, not at the top: only this branch logs
+
+            logging.getLogger(__name__).info(
+                "%s: searches the disparity grid its weights were trained on (the dataset's [%g, %g] px is not "
+                "laid over weights)", info.name, lo, hi)
             return {}
         return {"d_min": lo, "d_max": top}
 

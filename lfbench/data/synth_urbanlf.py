@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import io
 import shutil
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -57,10 +58,10 @@ def write_urbanlf_scene(folder: str | Path, seed: int, width: int, height: int) 
 
 
 def write_urbanlf(out: str | Path, *, seed: int = 0, width: int = 640, height: int = 480, scenes: int = 2,
-                  split: str = "val", force: bool = False, first: int = 1) -> list[Path]:
-    """Write ``scenes`` scenes as ``OUT/<split>/Image<i>/`` (i = first..first+K-1; scene k's content from
-    ``scene_seed(seed, k)`` whatever ``first``) and return their folders. An existing sample folder is an
-    error unless ``force`` (all are checked before anything is generated)."""
+                  split: str = "val", force: bool = False, numbers: Sequence[int] | None = None) -> list[Path]:
+    """Write ``scenes`` scenes as ``OUT/<split>/Image<i>/`` (i = 1..K, or the sample ``numbers``, e.g. the
+    paper's Table III samples 11, 27, ...: then K = len(numbers)) and return their folders. An existing
+    sample folder is an error unless ``force`` (all are checked before anything is generated)."""
     for side in (width, height):
         check_args(side, ANGULAR)
     check_args(max(width, height), ANGULAR)
@@ -68,9 +69,11 @@ def write_urbanlf(out: str | Path, *, seed: int = 0, width: int = 640, height: i
         raise SpecError(f"invalid split name {split!r}")
     if int(scenes) != scenes or scenes < 1:
         raise SpecError(f"scenes must be a positive integer, got {scenes}")
-    if int(first) != first or first < 0:
-        raise SpecError(f"first must be an integer >= 0, got {first}")
-    targets = [Path(out) / split / f"Image{first + i}" for i in range(scenes)]
+    if numbers is not None:
+        numbers = list(numbers)
+        if not numbers or any(int(n) != n or n < 1 for n in numbers) or len(set(numbers)) != len(numbers):
+            raise SpecError(f"sample numbers must be distinct positive integers, got {numbers}")
+    targets = [Path(out) / split / f"Image{n}" for n in (numbers or range(1, scenes + 1))]
     if not force:
         for t in targets:
             if t.exists():

@@ -27,8 +27,9 @@ def _write_set(spec: SyntheticSpec, tmp: Path) -> None:
     """Write the scenes of ``spec`` into ``tmp/<category>`` in its layout."""
     h, w = spec.shape
     if spec.layout == "urbanlf-syn":
+        first = spec.first_index()
         write_urbanlf(tmp, seed=spec.seed, width=w, height=h, scenes=spec.scenes, split=spec.category,
-                      first=spec.first_index())
+                      numbers=range(first, first + spec.scenes))
     else:
         write_benchmark(tmp, seed=spec.seed, size=spec.size, scenes=spec.scenes, category=spec.category,
                         workers=available_cores())
