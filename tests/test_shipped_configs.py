@@ -26,6 +26,7 @@ from lfbench.training.config import TrainConfig
 REPO = Path(__file__).resolve().parents[1]
 SNAPSHOT = REPO / "tests" / "data" / "shipped_configs.json"
 HCI_ROOT = "/hci-root"  # $LFBENCH_HCI_ROOT while parsing: the shipped files name it
+URBANLF_ROOT = "/urbanlf-root"  # $LFBENCH_URBANLF_ROOT likewise (configs/subfocal_urbanlf.toml)
 CONFIGS = ("configs/*.toml", "examples/tiny_plugin/train_tiny.toml")
 SPECS = ("ablations/*.toml", "examples/tiny_plugin/ablate_channels.toml")
 
@@ -80,6 +81,7 @@ def example_plugin_registered() -> Iterator[None]:
     with pytest.MonkeyPatch.context() as mp:
         isolate_registries(mp)
         mp.setenv("LFBENCH_HCI_ROOT", HCI_ROOT)
+        mp.setenv("LFBENCH_URBANLF_ROOT", URBANLF_ROOT)
         mp.syspath_prepend(str(REPO / "examples" / "tiny_plugin"))
         try:
             importlib.import_module("lfbench_tiny.plugin")
@@ -137,6 +139,7 @@ def test_the_train_toml_of_every_shipped_cell_reads_back_as_its_config():
 
 if __name__ == "__main__":
     os.environ.setdefault("LFBENCH_HCI_ROOT", HCI_ROOT)
+    os.environ.setdefault("LFBENCH_URBANLF_ROOT", URBANLF_ROOT)
     data = snapshot()  # one line per file: a change shows as the files it touches
     sys.stdout.write("{\n" + ",\n".join(
         f"{json.dumps(kind)}: {{\n" + ",\n".join(f" {json.dumps(p)}: {json.dumps(v, sort_keys=True)}"

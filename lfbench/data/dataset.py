@@ -196,7 +196,12 @@ def method_range_params(disparity_range: tuple[float, float]) -> Callable[[Any, 
     range differs from the method's defaults (so that the label names the range searched, and stays as it
     was where they agree: HCI's [-4, 4] is the plane sweep's default). A method with an ``interval`` searches
     a grid from ``d_min``: ``d_max`` is then raised to the first grid point at or above the dataset's maximum
-    (UrbanLF-Syn's [-0.5, 1.6] at the plane sweep's 0.25 px: [-0.5, 1.75]), so that the whole range is searched."""
+    (UrbanLF-Syn's [-0.5, 1.6] at the plane sweep's 0.25 px: [-0.5, 1.75]), so that the whole range is searched.
+
+    A method whose weights fix its disparity grid (a network trained on it: the number and spacing of its
+    cost-volume disparities) says so with a classmethod ``range_from_weights(info, params) -> bool``; where it
+    answers True the dataset's range is not applied (it would contradict the weights) and the weights' range
+    is searched (logged). SubFocal: ``weights=`` given, or its shipped checkpoint is the one that loads."""
     lo, hi = (float(v) for v in disparity_range)
 
     def defaults(info: Any, params: dict[str, Any]) -> dict[str, float]:
@@ -209,6 +214,14 @@ def method_range_params(disparity_range: tuple[float, float]) -> Callable[[Any, 
             if step > 0:
                 top = round(lo + math.ceil(round((hi - lo) / step, 9)) * step, 9)
         if (info.params["d_min"].default, info.params["d_max"].default) == (lo, top):
+            return {}
+        fixed = getattr(info.method_class, "range_from_weights", None)
+        if fixed is not None and fixed(info, params):
+            import logging  # here, not at the top: only this branch logs
+
+            logging.getLogger(__name__).info(
+                "%s: searches the disparity grid its weights were trained on (the dataset's [%g, %g] px is not "
+                "laid over weights)", info.name, lo, hi)
             return {}
         return {"d_min": lo, "d_max": top}
 

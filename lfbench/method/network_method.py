@@ -121,6 +121,14 @@ class NetworkMethod(Method):
             return None
         return f"weights file {path} is not a regular file" if path.exists() else f"weights file {path} not found"
 
+    @classmethod
+    def range_from_weights(cls, info: Any, params: dict[str, Any]) -> bool:
+        """Whether the weights fix the disparity grid (lfbench.data.dataset.method_range_params): always, for a
+        network run from a weights file (its stored config decides every network parameter, d_min / d_max of a
+        network that has them included, and a given one that contradicts it is an error; without weights it
+        does not run). SubFocal, with shipped weights of one architecture only, narrows this."""
+        return True
+
     def conflicts(self, stored: dict[str, Any]) -> list[str]:
         """The given network parameters that the stored config contradicts, as ``key=given (checkpoint: stored)``."""
         out = []

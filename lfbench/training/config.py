@@ -27,8 +27,10 @@ Layout (every table optional except ``[[stages]]``; defaults are the authors' se
     default_scene_weight = 1.0              # scene sampling weight; scene_weights overrides per name
     scene_weights = { kitchen = 1 }
     random_gray = true                      # random RGB->gray weights per patch (else 0.299/0.587/0.114)
+    dataset = "urbanlf-syn"                 # optional: the adapter of every root (default: detected per root)
     [[data.synthetic]]                      # synthetic scenes generated into OUT/data/<category>
     category = "synthetic"; seed = 0; size = 128; scenes = 8
+    layout = "hci"; width = 0               # or "urbanlf-syn" (u_v.png views; width: non-square scenes)
 
     [augment]                               # the authors' order: gamma, flip, rotate, noise, clip
     enabled = true; gamma = [0.8, 1.2]; flip = 0.5; rotate = true; noise = 0.08333; noise_std = 0.4472
@@ -104,6 +106,14 @@ def _device(value: str) -> str | None:
     return None
 
 
+def _dataset(value: Any) -> str | None:
+    from lfbench.data.dataset import DATASETS
+
+    if value is None or value in DATASETS.names():
+        return None
+    return f"expected a dataset of `lfbench datasets` ({', '.join(DATASETS.names())}), got {str(value)[:40]!r}"
+
+
 @dataclass(frozen=True)
 class SyntheticSpec:
     """Synthetic scenes written by lfbench.data.synth into OUT/data/<category>."""
@@ -111,11 +121,36 @@ class SyntheticSpec:
     category: str = option("synthetic", check=_folder_name,
                            help="folder OUT/data/<category> and the category the scenes are selected by")
     seed: int = option(0, low=0, help="generator seed; scene i is synth_<seed>_<i>")
-    size: int = option(128, low=16, high=MAX_SYNTH_SIZE, help="height and width of every scene (px)")
+    size: int = option(128, low=16, high=MAX_SYNTH_SIZE, help="height of every scene, and its width unless "
+                                                                  "width is given (px)")
+    width: int = option(0, low=0, high=MAX_SYNTH_SIZE, omit_default=True,
+                        help="width of every scene (px; 0: size, square scenes; another width needs "
+                             "layout = \"urbanlf-syn\")")
     scenes: int = option(8, low=1, high=MAX_SCENES, help="number of scenes")
+    layout: Literal["hci", "urbanlf-syn"] = option(
+        "hci", omit_default=True,
+        help="the layout written: hci (OUT/data/<category>/synth_<seed>_<i>/, 9x9 input_CamNNN.png) or urbanlf-syn "
+             "(OUT/data/<category>/Image<seed x 10000 + i + 1>/, 9x9 u_v.png, as lfbench synth --layout urbanlf-syn "
+             "writes it)")
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(H, W) px of every scene of the set."""
+        return self.size, self.width or self.size
+
+    def first_index(self) -> int:
+        """The number of the set's first UrbanLF-Syn sample folder (``Image<first>``): distinct per seed."""
+        return self.seed * MAX_SCENES + 1
 
     def scene_names(self) -> tuple[str, ...]:
+        if self.layout == "urbanlf-syn":
+            return tuple(f"Image{self.first_index() + i}" for i in range(self.scenes))
         return tuple(scene_name(self.seed, i) for i in range(self.scenes))
+
+    @staticmethod
+    def check_options(values: dict[str, Any], t: Table) -> None:
+        if values["width"] not in (0, values["size"]) and values["layout"] != "urbanlf-syn":
+            t.fail("width", "the HCI layout has square scenes: leave width out or set layout = \"urbanlf-syn\"")
 
 
 def _stride_weights(values: dict[str, Any], index: int | None) -> tuple[float, ...]:
@@ -125,7 +160,13 @@ def _stride_weights(values: dict[str, Any], index: int | None) -> tuple[float, .
 
 @dataclass(frozen=True)
 class DataConfig:
-    roots: tuple[str, ...] = option((), single=True, help="HCI-layout data roots (ROOT/<category>/<scene>)")
+    roots: tuple[str, ...] = option(
+        (), single=True, help="data roots, each in a dataset layout (`lfbench datasets`: HCI ROOT/<category>/<scene>, "
+                              "UrbanLF-Syn ROOT/<split>/ImageN, ...), detected per root unless dataset is given")
+    dataset: str | None = option(
+        None, check=_dataset, omit_default=True,
+        help="the dataset adapter every root is read with (a name of `lfbench datasets`, e.g. \"urbanlf-syn\"); "
+             "default: detected per root")
     synthetic: tuple[SyntheticSpec, ...] = option(
         (), single=True, help="synthetic scene sets generated into OUT/data/<category> (when train names scenes: "
                               "only the sets that train or validation select)")

@@ -52,12 +52,13 @@ class SceneData:
 
 
 def read_views_uint8(scene: Scene) -> np.ndarray:
-    """All views of an HCI scene as uint8 RGB (H, W, N, 3), view k = input_Cam{k:03d}.png."""
+    """All views of a scene of any layout (PNG views) as uint8 RGB (H, W, N, 3), view k = angular row k // U,
+    column k % U (HCI: input_Cam{k:03d}.png; UrbanLF-Syn: <row+1>_<col+1>.png)."""
     v, u = scene.angular_size
     h, w = scene.spatial_size
     out = np.empty((h, w, v * u, 3), dtype=np.uint8)
     for k in range(v * u):  # one file per view: reading is per file by nature
-        path = scene.view_path(k)
+        path = scene.view_file(k // u, k % u)
         out[:, :, k] = read_png(path, "view image", "RGB", size=(h, w))
     return out
 
@@ -78,7 +79,7 @@ def load_scene_data(scene: Scene, invalid_area: Path | None = None) -> SceneData
     """
     gt = scene.gt_disparity()
     if gt is None:
-        raise DataError("training scene has no gt_disp_lowres.pfm", scene.path)
+        raise DataError("training scene has no ground truth disparity", scene.path)
     gt = np.asarray(gt, dtype=np.float32)
     blocked = ~np.isfinite(gt)
     valid = scene.valid_mask()  # refused unless the scene's size
@@ -253,7 +254,7 @@ def load_validation_scene(scene: Scene, max_size: int = 0) -> ValidationScene:
     """Gray views and ground truth of ``scene``, centre-cropped to ``max_size`` px if larger (0 = whole)."""
     gt = scene.gt_disparity()
     if gt is None:
-        raise DataError("validation scene has no gt_disp_lowres.pfm", scene.path)
+        raise DataError("validation scene has no ground truth disparity", scene.path)
     views = scene.gray_views()
     v, u, h, w = views.shape
     ch, cw = validation_size((h, w), max_size)

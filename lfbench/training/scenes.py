@@ -1,21 +1,38 @@
-"""The scenes a training run reads: the synthetic sets it generates, the HCI-layout roots it discovers, the
-training / validation selection, and the check of all of it before anything is generated or written."""
+"""The scenes a training run reads: the synthetic sets it generates, the data roots it opens through the
+dataset seam (lfbench.data.dataset: the layout of each root detected, or the adapter data.dataset names),
+the training / validation selection, and the check of all of it before anything is generated or written."""
 
 from __future__ import annotations
 
 import logging
 import os
 import shutil
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from lfbench.data.scene import Benchmark, Scene, check_scene_names
+from lfbench.data.dataset import open_dataset
+from lfbench.data.scene import SPLITS, Benchmark, Scene, check_scene_names
 from lfbench.data.synth import write_benchmark
-from lfbench.training.config import TrainConfig, expand_path
+from lfbench.data.synth_urbanlf import write_urbanlf
+from lfbench.data.urbanlf import UrbanLFSyn
+from lfbench.training.config import SyntheticSpec, TrainConfig, expand_path
 from lfbench.training.validate import check_validation_area
 from lfbench.utils.atomic import fresh_dir
 from lfbench.utils.errors import DataError, SpecError
 from lfbench.utils.hardware import available_cores
+
+
+def _write_set(spec: SyntheticSpec, tmp: Path) -> None:
+    """Write the scenes of ``spec`` into ``tmp/<category>`` in its layout."""
+    h, w = spec.shape
+    if spec.layout == "urbanlf-syn":
+        first = spec.first_index()
+        write_urbanlf(tmp, seed=spec.seed, width=w, height=h, scenes=spec.scenes, split=spec.category,
+                      numbers=range(first, first + spec.scenes))
+    else:
+        write_benchmark(tmp, seed=spec.seed, size=spec.size, scenes=spec.scenes, category=spec.category,
+                        workers=available_cores())
 
 
 def prepare_synthetic(cfg: TrainConfig, data_dir: Path, log=logging.getLogger(__name__).info) -> None:
@@ -27,11 +44,12 @@ def prepare_synthetic(cfg: TrainConfig, data_dir: Path, log=logging.getLogger(__
         if target.is_dir():
             continue
         data_dir.mkdir(parents=True, exist_ok=True)
-        log(f"generating {spec.scenes} synthetic scenes ({spec.size} px, seed {spec.seed}) into {target}")
+        h, w = spec.shape
+        log(f"generating {spec.scenes} synthetic scenes ({w}x{h} px, {spec.layout} layout, seed {spec.seed}) "
+            f"into {target}")
         tmp = fresh_dir(data_dir, f".{spec.category}.")
         try:
-            write_benchmark(tmp, seed=spec.seed, size=spec.size, scenes=spec.scenes, category=spec.category,
-                            workers=available_cores())
+            _write_set(spec, tmp)
             produced = tmp / spec.category
             if not produced.is_dir():
                 raise DataError(f"lfbench.data.synth wrote no {spec.category}/ folder", tmp)
@@ -40,18 +58,46 @@ def prepare_synthetic(cfg: TrainConfig, data_dir: Path, log=logging.getLogger(__
             shutil.rmtree(tmp, ignore_errors=True)
 
 
-def _roots(cfg: TrainConfig, data_dir: Path) -> list[Path]:
-    roots = [expand_path(r, cfg.source) for r in cfg.data.roots]
-    return [*roots, data_dir] if cfg.data.synthetic_in_use() else roots
+def _real_roots(cfg: TrainConfig) -> list[Path]:
+    return [expand_path(r, cfg.source) for r in cfg.data.roots]
+
+
+def _open_roots(cfg: TrainConfig) -> list[Benchmark]:
+    """The scenes of every configured root, each opened with data.dataset's adapter or the one its layout
+    matches (DataError, one line, for a root of no known layout or of several)."""
+    return [open_dataset(root, cfg.data.dataset)[1] for root in _real_roots(cfg)]
+
+
+def _open_synthetic(data_dir: Path, specs: Sequence[SyntheticSpec]) -> list[Benchmark]:
+    """The generated sets among ``specs`` under data_dir (HCI-layout sets through the HCI discovery of
+    data_dir, UrbanLF-Syn-layout sets through the urbanlf-syn adapter), only those generated already."""
+    there = [s for s in specs if (data_dir / s.category).is_dir()]
+    out = []
+    hci = {s.category for s in there if s.layout == "hci"}
+    if hci:
+        found = Benchmark.discover(data_dir)
+        out.append(Benchmark(root=data_dir, scenes=tuple(s for s in found.scenes if s.category in hci)))
+    for spec in there:
+        if spec.layout == "urbanlf-syn":
+            out.append(UrbanLFSyn.open(data_dir / spec.category))
+    return out
+
+
+def _combine(benches: Sequence[Benchmark], root: Path, hci: bool = False) -> Benchmark:
+    """One benchmark of the scenes of ``benches``; its splits: those of every part (HCI's train /
+    validation / test where an HCI root is among them, or ``hci``: HCI-layout sets are planned)."""
+    splits: dict[str, tuple[str, ...]] = dict(SPLITS) if hci or not benches else {}
+    for b in benches:
+        for name, cats in b.splits.items():
+            splits[name] = tuple(dict.fromkeys((*splits.get(name, ()), *cats)))
+    return Benchmark(root=root, scenes=tuple(s for b in benches for s in b.scenes), splits=splits)
 
 
 def discover(cfg: TrainConfig, data_dir: Path) -> Benchmark:
     """All scenes of the configured roots and the generated synthetic sets, as one benchmark."""
-    roots = _roots(cfg, data_dir)
-    scenes: list[Scene] = []
-    for root in roots:
-        scenes += Benchmark.discover(root).scenes
-    return Benchmark(root=roots[0], scenes=tuple(scenes))
+    benches = [*_open_roots(cfg), *_open_synthetic(data_dir, cfg.data.synthetic_in_use())]
+    roots = _real_roots(cfg)
+    return _combine(benches, roots[0] if roots else data_dir)
 
 
 def select_scenes(bench: Benchmark, cfg: TrainConfig) -> tuple[list[Scene], list[Scene]]:
@@ -84,15 +130,15 @@ def check_data(cfg: TrainConfig, data_dir: Path) -> None:
     """The config's data checked before anything is generated or written: the roots hold scenes, every
     data.train / data.validation name selects scenes of them or of the synthetic sets in use, the
     validation border leaves pixels to score, data.invalid_area is a folder (DataError / SpecError)."""
-    roots = _roots(cfg, data_dir)
-    real = [s for r in roots if r != data_dir for s in Benchmark.discover(r).scenes]
     in_use = cfg.data.synthetic_in_use()
-    if in_use and any(p.is_dir() for p in data_dir.glob("*")):  # generated before (a resumed or re-run folder)
-        real += Benchmark.discover(data_dir).scenes
-    planned = [PlannedScene(name, spec.category, data_dir / spec.category / name, (spec.size, spec.size))
-               for spec in in_use if not (data_dir / spec.category).is_dir() for name in spec.scene_names()]
+    to_write = [spec for spec in in_use if not (data_dir / spec.category).is_dir()]
+    bench = _combine([*_open_roots(cfg), *_open_synthetic(data_dir, in_use)], data_dir,  # generated before: a rerun
+                     hci=any(spec.layout == "hci" for spec in to_write))
+    planned = [PlannedScene(name, spec.category, data_dir / spec.category / name, spec.shape)
+               for spec in to_write for name in spec.scene_names()]
     try:
-        _, val = select_scenes(Benchmark(root=roots[0], scenes=(*real, *planned)), cfg)  # type: ignore[arg-type]
+        _, val = select_scenes(Benchmark(root=bench.root, scenes=(*bench.scenes, *planned),  # type: ignore[arg-type]
+                                         splits=bench.splits), cfg)
     except DataError as exc:  # a name of the config that selects nothing: the config's error
         raise SpecError(f"[data] {exc.args[0]}", cfg.source) from None
     check_validation_area(val, cfg.validation.border, cfg.validation.max_size, cfg.source)

@@ -133,10 +133,21 @@ class SubFocal(NetworkMethod):
 
     def _configured(self, values: dict | None = None) -> dict:
         """The architecture from the parameters alone (width: the paper's 150 unless given)."""
-        v = self.values if values is None else values
-        return {"d_min": float(v["d_min"]), "d_max": float(v["d_max"]), "interval": float(v["interval"]),
-                "interpolation": v["interpolation"], "width": int(v["width"] or PAPER_WIDTH),
-                "attention": bool(v["attention"]), "angular": 9}
+        return _architecture(self.values if values is None else values)
+
+    @classmethod
+    def range_from_weights(cls, info, params: dict) -> bool:
+        """Whether the weights this spec would load fix the disparity grid (d_min, d_max, interval are part of
+        the checkpoint's config: the network was trained on that grid), so that a dataset's disparity range
+        must not be applied (lfbench.data.dataset.method_range_params): ``weights=`` given, or the variant's
+        shipped checkpoint has the architecture of the spec's parameters."""
+        if params.get("weights") is not None:
+            return True
+        shipped = cls.WEIGHTS_DIR / f"{info.name}_small.pt"
+        if not shipped.is_file():
+            return False
+        values = {**{k: p.default for k, p in info.params.items()}, **params}
+        return not cls._differences(_architecture(values), _stored_config(shipped))
 
     @staticmethod
     def _differences(ours: dict, config: dict) -> list[str]:
@@ -248,6 +259,14 @@ class SubFocal(NetworkMethod):
 
 def _signature_defaults() -> dict:
     return {k: p.default for k, p in inspect.signature(SubFocal.__init__).parameters.items() if k != "self"}
+
+
+def _architecture(values: dict) -> dict:
+    """The architecture of a set of SubFocal parameters (width: the paper's 150 unless given)."""
+    v = values
+    return {"d_min": float(v["d_min"]), "d_max": float(v["d_max"]), "interval": float(v["interval"]),
+            "interpolation": v["interpolation"], "width": int(v["width"] or PAPER_WIDTH),
+            "attention": bool(v["attention"]), "angular": 9}
 
 
 def _stored_config(path: Path) -> dict:
