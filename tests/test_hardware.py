@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from helpers import write_scene
 
 from lfbench.cli import main
 from lfbench.method.registry import create, create_from_spec
@@ -166,7 +167,8 @@ def test_a_method_on_a_missing_gpu_is_refused_when_made(monkeypatch, capsys, tmp
     assert m.device == torch.device("cpu") and m.label == "planesweep:interval=0.5"
     assert create_from_spec("gt", {"device": "cuda"}).label == "gt"  # no device parameter: not passed
     assert create_from_spec("planesweep:device=cpu", {"device": "cuda"}).device.type == "cpu"  # the spec wins
-    assert main(["evaluate", "--data", str(tmp_path), "--method", "planesweep", "--device", "cuda:0",
+    write_scene(tmp_path / "data", size=24)  # a real data root: the device is what is refused
+    assert main(["evaluate", "--data", str(tmp_path / "data"), "--method", "planesweep", "--device", "cuda:0",
                  "--out", str(tmp_path / "out")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "device=cuda:0" in err[0] and not (tmp_path / "out").exists()
