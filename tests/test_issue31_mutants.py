@@ -8,6 +8,7 @@ kills are named in its docstring (mutmut's names, lfbench. left out)."""
 from __future__ import annotations
 
 import math
+import os
 
 import numpy as np
 import pytest
@@ -16,7 +17,7 @@ from lfbench.data.disparity import check_disparity, disparity_problem
 from lfbench.runs.regress import GoldenRecord, check
 from lfbench.runs.results import Record, Results
 from lfbench.utils.errors import DataError
-from lfbench.utils.readfile import read_csv
+from lfbench.utils.readfile import check_regular_file, file_sha256, read_bytes, read_csv, read_text
 
 CROP_NOTE = " (only a symmetric crop of at most the evaluation border can be aligned)"
 
@@ -96,6 +97,80 @@ def test_an_empty_csv_is_one_line_naming_the_file(tmp_path):
     with pytest.raises(DataError) as err:
         read_csv(path)
     assert str(err.value) == f"{path}: not a readable CSV table: No columns to parse from file"
+
+
+@pytest.mark.parametrize(("cap", "said"), [(1 << 20, "1 MiB"), (3 << 19, "1.5 MiB"), ((1 << 20) - 1, "1048575 bytes")])
+def test_the_byte_cap_is_said_in_mib_from_one_mib_on(tmp_path, cap, said):
+    """The cap in a refusal: MiB (as :g writes it) from 1024**2 bytes on, bytes below (kills
+    utils.readfile.x__size__mutmut_1..10: the unit, its divisor or its threshold changed)."""
+    path = tmp_path / "big.txt"
+    path.write_bytes(b"x" * (cap + 1))
+    with pytest.raises(DataError) as err:
+        read_bytes(path, max_bytes=cap)
+    assert str(err.value) == f"{path}: file is larger than {said}, more than lfbench reads"
+
+
+def test_the_readers_name_a_file_as_file_by_default(tmp_path):
+    """``what`` defaults to 'file' and reaches the check (kills x_check_regular_file__mutmut_1, 2, 5 and
+    x_read_text__mutmut_1, 2: the default changed or None passed)."""
+    missing = tmp_path / "absent.cfg"
+    for read in (check_regular_file, read_text, read_bytes, file_sha256):
+        with pytest.raises(DataError) as err:
+            read(missing)
+        assert str(err.value) == f"{missing}: file not found", read.__name__
+
+
+def test_read_text_decodes_utf8_strictly_unless_told(tmp_path):
+    """Bytes that are not UTF-8: one error naming the file by default; ``errors`` reaches the decoding (kills
+    x_read_text__mutmut_3, 4: an unknown error handler, a LookupError; 17: ``errors`` left out; 20..22: the
+    message or the path dropped)."""
+    path = tmp_path / "latin1.cfg"
+    path.write_bytes("caf\u00e9\n".encode("latin-1"))
+    with pytest.raises(DataError) as err:
+        read_text(path)
+    assert str(err.value) == f"{path}: file is not UTF-8 text"
+    assert read_text(path, errors="replace") == "caf\ufffd\n"
+
+
+def test_file_sha256_hashes_every_byte_of_a_file_of_several_pieces(tmp_path):
+    """The digest (and the bytes) of a file longer than one 1 MiB piece are those of all its bytes (kills
+    x_file_sha256 mutants that read one piece only, stop early or hash something else)."""
+    import hashlib
+
+    data = np.random.default_rng(1).integers(0, 256, (1 << 20) + 12345, dtype=np.uint8).tobytes()
+    path = tmp_path / "w.bin"
+    path.write_bytes(data)
+    assert file_sha256(path) == hashlib.sha256(data).hexdigest()
+    assert read_bytes(path) == data  # the pieces joined as they were read (kills x_read_bytes__mutmut_49)
+    assert file_sha256(tmp_path / "w.bin", "weights") == hashlib.sha256(data).hexdigest()
+    with pytest.raises(DataError) as err:
+        file_sha256(tmp_path, "weights")
+    assert str(err.value) == f"{tmp_path}: weights is a folder, expected a file"
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/self/mem"), reason="needs Linux's /proc/self/mem")
+@pytest.mark.parametrize("read", [read_bytes, file_sha256])
+def test_a_read_that_fails_is_one_line_naming_the_file(read):
+    """/proc/self/mem is a regular file whose read at offset 0 fails (EIO): one error naming the file and the
+    system's reason (kills x_read_bytes__mutmut_36..40 and x_file_sha256__mutmut_21..25: the message or the
+    path dropped, `strerror and exc`)."""
+    with pytest.raises(DataError) as err:
+        read("/proc/self/mem", "memory")
+    assert str(err.value) == "/proc/self/mem: cannot read memory: Input/output error"
+
+
+def test_an_open_that_fails_or_a_device_is_one_line_naming_the_file(tmp_path):
+    """An open refused for another reason than a missing file (a name too long) and a device: one error naming
+    the file, its reason and kind (kills x__open__mutmut_34..38: the message or the path dropped, `strerror and
+    exc`; 50, 51: the kind's text)."""
+    long_name = tmp_path / ("x" * 300)
+    with pytest.raises(DataError) as err:
+        read_bytes(long_name)
+    assert str(err.value) == f"{long_name}: cannot read file: File name too long"
+    if os.path.exists("/dev/null"):
+        with pytest.raises(DataError) as err:
+            read_bytes("/dev/null")
+        assert str(err.value) == "/dev/null: file is not a regular file (a device, FIFO or socket), expected a file"
 
 
 # --------------------------------------------------------------------------- the gate: NEW records, defaults

@@ -222,6 +222,22 @@ REASONS: dict[str, tuple[str, ...]] = {
     "equivalent: a default that is never used: PixelMetric and OnMaps are called only by Metric.__call__, "
     "Metric.score_pixels and stats' errors-only view, which always pass `toolkit=`": (
         "scoring.pixelwise.xǁPixelMetricǁ__call____mutmut_1", "scoring.pixelwise.xǁOnMapsǁ__call____mutmut_1"),
+    "equivalent on POSIX: `getattr(os, NAME, default)`'s default (or its absence) is used only where os lacks "
+    "O_NONBLOCK / O_CLOEXEC, which every POSIX Python has": (
+        *(f"utils.readfile.x__open__mutmut_{i}" for i in (10, 13, 16, 19, 22, 25)),),
+    "equivalent in lfbench: O_CLOEXEC only keeps the descriptor out of a program exec'd while it is open; every "
+    "caller of _open closes it before returning and starts no process in between": (
+        *(f"utils.readfile.x__open__mutmut_{i}" for i in (17, 23, 24)),),
+    "unreachable on Linux: os.open of a folder read-only succeeds (no IsADirectoryError), and fstat's S_ISDIR "
+    "check right after refuses it with the same text": (
+        *(f"utils.readfile.x__open__mutmut_{i}" for i in (30, 31, 32, 33)),),
+    "equivalent: the size of each read (pieces of at most 1 or 2 MiB, at most what is left of max_bytes + 1 or "
+    "a little more) changes how many bytes past the cap may be read, never the verdict (total > max_bytes) or "
+    "the bytes returned or hashed": (
+        *(f"utils.readfile.x_read_bytes__mutmut_{i}" for i in (25, 27, 29, 30)),
+        "utils.readfile.x_file_sha256__mutmut_18", "utils.readfile.x_file_sha256__mutmut_19"),
+    "equivalent: bytes.decode's default codec is UTF-8, and 'UTF-8' names the same codec as 'utf-8'": (
+        "utils.readfile.x_read_text__mutmut_16", "utils.readfile.x_read_text__mutmut_19"),
 }
 
 _FIELDS = re.compile(r"\b(name|description|vmin|vmax|cmap)=(f?\"[^\"]*\"|[^,)\n]*)\s*,?")
