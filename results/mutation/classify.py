@@ -121,17 +121,18 @@ REASONS: dict[str, tuple[str, ...]] = {
         "scoring.region_metrics.x_bumpiness_map__mutmut_14", "scoring.region_metrics.x_bumpiness_x100__mutmut_27",
         "scoring.region_metrics.x_bumpiness_x100__mutmut_32", "scoring.region_metrics.x_missed_dots__mutmut_131",
         "scoring.region_metrics.x__scale__mutmut_6", "scoring.prepare.x_align_prediction__mutmut_34",
-        "scoring.prepare.x_read_label_mask__mutmut_24", "scoring.general.x_badpix_family__mutmut_19",
+        "scoring.prepare.x_read_label_mask__mutmut_24",
         "runs.regress.x_make_golden__mutmut_94", "runs.regress.x_make_golden__mutmut_97",
         "runs.regress.x_make_golden__mutmut_99", "runs.regress.x_tolerance_for__mutmut_14",
         "scoring.prepare.xǁSceneReferenceǁprepare__mutmut_26", "scoring.prepare.xǁSceneReferenceǁprepare__mutmut_48",
         "scoring.prepare.xǁSceneReferenceǁvalid_mask__mutmut_21",
         "scoring.general.x_bad_pix_curve__mutmut_29", "scoring.rules.x_metric_resolution__mutmut_8",
         "scoring.region_metrics.x_scharr_derivative__mutmut_15"),
-    "equivalent for every valid id: `badpix_<t>` ids have one '_'; the split differs only for malformed ids "
-    "with a second one": (
-        "scoring.general.x_badpix_family__mutmut_9", "scoring.general.x_badpix_family__mutmut_10",
-        "scoring.general.x_badpix_family__mutmut_12"),
+    "equivalent for every id: `badpix_<t>` ids have one '_'; the split differs only for ids with a second one, "
+    "which badpix_family refuses either way (since issue 31 it returns a metric only when the id is that metric's "
+    "own id or toolkit id, neither of which has a second '_')": (
+        "scoring.general.x_badpix_family__mutmut_10", "scoring.general.x_badpix_family__mutmut_11",
+        "scoring.general.x_badpix_family__mutmut_13"),
     "unreachable (defensive) code: Scene.mask reads a mask with its expected size and refuses any other "
     "(lfbench.data.scene.read_mask) before this check (SceneReference.mask's shape check serves light fields "
     "whose masks are not read by Scene); Scene.valid_mask refuses any size but the scene's, and a high-res "
@@ -202,6 +203,41 @@ REASONS: dict[str, tuple[str, ...]] = {
         *(f"scoring.pixels.xǁPixelErrorsǁof_maps__mutmut_{i}" for i in (23, 30, 41)),),
     "equivalent: every region BadPix is BadPix(0.07), bad_pix_of's default threshold, so leaving t out of "
     "the call changes nothing": ("scoring.region_metrics.x__bad_pix_pixels__mutmut_6",),
+    # issue 31's run (issue31/README.md): the one check of a prediction, the CSV bounds, the gate, pixelwise.py
+    "equivalent: disparity_problem halves dh and dw only after refusing odd ones (`not dh % 2 and not dw % 2`), "
+    "so `max(dh, dw) / 2` equals `// 2`": ("data.disparity.x_disparity_problem__mutmut_33",),
+    "equivalent: `skipped` is an ordered set of scene names (a dict of None): only its keys are read, so the "
+    "value stored changes nothing": ("runs.regress.x_check__mutmut_13",),
+    "equivalent for every caller: the widest line of an empty file (no lines) is compared with max_columns, "
+    "and a default of 1 instead of 0 changes the verdict only for max_columns < 1 (no caller passes one; "
+    "a CSV table has at least one column)": ("utils.readfile.x_read_csv__mutmut_28",),
+    "equivalent: an all-True `keep` selects every pixel, as None does (values[keep] is a copy of the same "
+    "values in the same order; every reader of Sample.keep indexes with it or skips it when None), and "
+    "Sample's `keep` defaults to None": (
+        "scoring.pixelwise.x_kept__mutmut_1", "scoring.pixelwise.x_kept__mutmut_5"),
+    "equivalent: astype(None) is astype(float64), the dtype named (bool values and bincount's int64 counts "
+    "become float64 either way)": (
+        "scoring.pixelwise.xǁProportionǁpooled_replicates__mutmut_9",
+        "scoring.pixelwise.x__pooled_means__mutmut_11"),
+    "equivalent: a default that is never used: PixelMetric and OnMaps are called only by Metric.__call__, "
+    "Metric.score_pixels and stats' errors-only view, which always pass `toolkit=`": (
+        "scoring.pixelwise.xǁPixelMetricǁ__call____mutmut_1", "scoring.pixelwise.xǁOnMapsǁ__call____mutmut_1"),
+    "equivalent on POSIX: `getattr(os, NAME, default)`'s default (or its absence) is used only where os lacks "
+    "O_NONBLOCK / O_CLOEXEC, which every POSIX Python has": (
+        *(f"utils.readfile.x__open__mutmut_{i}" for i in (10, 13, 16, 19, 22, 25)),),
+    "equivalent in lfbench: O_CLOEXEC only keeps the descriptor out of a program exec'd while it is open; every "
+    "caller of _open closes it before returning and starts no process in between": (
+        *(f"utils.readfile.x__open__mutmut_{i}" for i in (17, 23, 24)),),
+    "unreachable on Linux: os.open of a folder read-only succeeds (no IsADirectoryError), and fstat's S_ISDIR "
+    "check right after refuses it with the same text": (
+        *(f"utils.readfile.x__open__mutmut_{i}" for i in (30, 31, 32, 33)),),
+    "equivalent: the size of each read (pieces of at most 1 or 2 MiB, at most what is left of max_bytes + 1 or "
+    "a little more) changes how many bytes past the cap may be read, never the verdict (total > max_bytes) or "
+    "the bytes returned or hashed": (
+        *(f"utils.readfile.x_read_bytes__mutmut_{i}" for i in (25, 27, 29, 30)),
+        "utils.readfile.x_file_sha256__mutmut_18", "utils.readfile.x_file_sha256__mutmut_19"),
+    "equivalent: bytes.decode's default codec is UTF-8, and 'UTF-8' names the same codec as 'utf-8'": (
+        "utils.readfile.x_read_text__mutmut_16", "utils.readfile.x_read_text__mutmut_19"),
 }
 
 _FIELDS = re.compile(r"\b(name|description|vmin|vmax|cmap)=(f?\"[^\"]*\"|[^,)\n]*)\s*,?")

@@ -28,7 +28,8 @@ sys.path.insert(0, str(Path(__file__).parent))
 MUTANTS = ROOT / "mutants"
 MODULES = ("lfbench.scoring.base", "lfbench.scoring.general", "lfbench.scoring.rules", "lfbench.scoring.pixels",
            "lfbench.scoring.prepare", "lfbench.scoring.region_metrics", "lfbench.scoring.metrics",
-           "lfbench.scoring.score", "lfbench.runs.regress")
+           "lfbench.scoring.score", "lfbench.runs.regress", "lfbench.scoring.pixelwise", "lfbench.data.disparity",
+           "lfbench.utils.readfile")
 # the tests of the metric definitions and the registry (what runs at import), the definitions table first
 TESTS = ("tests/test_scoring_edges.py", "tests/test_scoring_engine_mutants.py", "tests/test_metrics.py",
          "tests/test_region_metrics.py", "tests/test_prepare.py", "tests/test_scoring_engine.py")
