@@ -12,8 +12,8 @@ import math
 
 import pytest
 
+from lfbench.results import Record, Results
 from lfbench.runs.regress import compare, make_golden, read_golden
-from lfbench.runs.results import Record, Results
 
 METHOD, SCENE = "planesweep", "synth_0"
 

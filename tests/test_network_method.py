@@ -22,9 +22,9 @@ from lfbench.method.network_method import NetworkMethod
 from lfbench.method.params import Range
 from lfbench.method.registry import create, create_from_spec, method_info, register_method
 from lfbench.method.trainable import Trainable, get_trainable, register_trainable
+from lfbench.results import Results
 from lfbench.runs.folder import evaluate_to_folder
 from lfbench.runs.regress import check, read_golden
-from lfbench.runs.results import Results
 from lfbench.training.checkpoint import export_weights
 from lfbench.utils.errors import DataError, SpecError
 

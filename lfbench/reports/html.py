@@ -45,7 +45,7 @@ from lfbench.reports.maps import MAPS_DIR, SceneMaps, load_scene_maps, map_folde
 from lfbench.reports.paper import PAPER_RESOLUTION_COLUMN, average_with_paper, paper_column, per_scene_with_paper
 from lfbench.reports.plotting import colormap, method_colours, write_image
 from lfbench.reports.tables import average_table, per_scene_table
-from lfbench.results import Results, check_names
+from lfbench.results import Results
 from lfbench.scoring.metrics import describe_metric, metric_order
 from lfbench.scoring.rules import ScoringRules
 from lfbench.scoring.stats import read_ci_csv
@@ -354,11 +354,11 @@ def check_site_dir(out: str | Path) -> Path:
 def build_site(inputs: SiteInputs, out: str | Path, *, threshold: float = fig.BADPIX_THRESHOLD,
                pairwise_threshold: float = tk.PAIRWISE_THRESHOLD, border_px: int | None = None) -> Path:
     """Write the site into folder ``out`` (replacing an earlier site there as a whole); returns the
-    path of index.html."""
+    path of index.html. Pages and images are named after the methods and scenes, whose names the entry
+    point checked (lfbench.results.check_names: a run's before its work, a results file's when read)."""
     results = inputs.results
     if not results.records:
         raise DataError("the results hold no records; nothing to report")
-    check_names(results)  # pages and images are named after methods and scenes
     out = check_site_dir(out)
     border = border_px if border_px is not None else ScoringRules.from_meta(results.meta).border_px
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -4,9 +4,10 @@
 A writer sees each prediction as it is made (:meth:`OutputWriter.on_prediction`: draw a figure row at
 once, keep the pixel errors the intervals need, save the map), then writes its files into the run's
 staged output set (:meth:`OutputWriter.write`, into ``run.stage``; lfbench.utils.outputs commits the set
-as a whole). A command is a list of writers over a source of predictions: methods run on scenes
-(lfbench.runs.folder.evaluate_to_folder) or saved maps read back (lfbench.reports.from_results), so a
-new kind of output is one new writer, for example the worst scene of each method as a CSV::
+as a whole). A command is a list of writers over a source of predictions, driven by the one
+:func:`drive_writers`: methods run on scenes (lfbench.runs.folder.evaluate_to_folder) or saved maps read
+back (lfbench.reports.from_results, lfbench.ablation.report), so a new kind of output is one new writer,
+for example the worst scene of each method as a CSV::
 
     class WorstScenes(OutputWriter):
         def write(self, run):
@@ -29,7 +30,7 @@ series), :class:`CurveFigures` (the BadPix series from saved curves or the resul
 from __future__ import annotations
 
 import logging
-from collections.abc import Iterable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import SimpleNamespace
@@ -61,9 +62,9 @@ from lfbench.scoring.stats import ErrorCollector, ci_records
 from lfbench.scoring.uncertainty import UncertaintyCollector
 from lfbench.utils.atomic import write_text
 
-__all__ = ["FIGURES_DIR", "BootstrapCIs", "CIOptions", "CurveFigures", "Maps", "OutputWriter", "RunOutputs",
-           "SceneFigures", "Site", "Tables", "ToolkitFigures", "UncertaintyRatings", "replay", "scene_map_predictions",
-           "paper_scene_sections", "write_outputs"]
+__all__ = ["FIGURES_DIR", "BootstrapCIs", "CIOptions", "CurveFigures", "Maps", "OutputWriter", "PredictionSink",
+           "RunOutputs", "SceneFigures", "Site", "Tables", "ToolkitFigures", "UncertaintyRatings", "drive_writers",
+           "paper_scene_sections", "scene_map_predictions"]
 
 log = logging.getLogger(__name__)
 
@@ -110,17 +111,33 @@ class OutputWriter:
         return []
 
 
-def write_outputs(writers: Iterable[OutputWriter], run: RunOutputs) -> list[Path]:
-    """The write step of every writer, in order (the site, drawn from the others' files, comes last)."""
-    return [path for writer in writers for path in writer.write(run)]
+PredictionSink = Callable[[str, LightField, Prediction], None]
 
 
-def replay(writers: Sequence[OutputWriter], predictions: Iterable[tuple[str, LightField, Prediction]]) -> None:
-    """Hand saved predictions (label, scene, prediction) to the writers, as a run would (a report: nothing
-    is re-run; e.g. lfbench.reports.maps.saved_predictions, or :func:`scene_map_predictions`)."""
-    for label, scene, pred in predictions:
+def drive_writers(writers: Sequence[OutputWriter], run: RunOutputs, *,
+                  predictions: Iterable[tuple[str, LightField, Prediction]] = (),
+                  produce: Callable[[PredictionSink], Iterable[Path]] | None = None) -> list[Path]:
+    """The one driver of output writers, behind ``evaluate``, ``report`` and ``ablate``: every writer's
+    :meth:`~OutputWriter.start`, then every prediction handed to each writer in order, then every writer's
+    :meth:`~OutputWriter.write`, in order (the site, drawn from the others' files, comes last). Returns the
+    paths written into ``run.stage``, which the caller commits as one set (lfbench.utils.outputs): a run's
+    outputs appear together or not at all.
+
+    The predictions are saved ones (``predictions``: (label, scene, prediction), e.g.
+    :func:`scene_map_predictions`; a report re-runs nothing) or made now: ``produce(sink)`` runs the
+    methods, hands each prediction to ``sink`` as it is made, sets ``run.results`` and returns the files it
+    staged itself (results.json and results.csv), which come first."""
+    for writer in writers:
+        writer.start(run)
+
+    def sink(label: str, scene: LightField, pred: Prediction) -> None:
         for writer in writers:
             writer.on_prediction(label, scene, pred)
+
+    staged = list(produce(sink)) if produce is not None else []
+    for label, scene, pred in predictions:
+        sink(label, scene, pred)
+    return [*staged, *(path for writer in writers for path in writer.write(run))]
 
 
 def scene_map_predictions(scene_maps: Iterable[SceneMaps]) -> Iterator[tuple[str, LightField, Prediction]]:
@@ -342,8 +359,8 @@ class Site(OutputWriter):
         self.index: Path | None = None
 
     def inputs(self, run: RunOutputs) -> SiteInputs:
-        staged = run.stage / "results.json"  # the results as this set commits them, else as given
-        results = Results.read(run.stage) if staged.is_file() else run.results
+        staged = run.stage / "results.json"  # the results as this set commits them (names checked), else as given
+        results = Results.read(run.stage, names_checked=True) if staged.is_file() else run.results
         paper = self.paper if self.paper is not None and self.paper.shows("table1", results.meta) else None
         inputs = site_inputs(results, run.folder, data_root=self.data_root, maps=self.maps,
                              scenes=list(run.scenes) if run.scenes else None, scene_maps=run.scene_maps,
