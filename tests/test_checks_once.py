@@ -1,6 +1,7 @@
-"""Issue 29.5: the names of a run are checked once per entry point, by one function (lfbench.results.check_names),
-before any work; the layers below (the runner, the site, the staged results read back) trust them. The messages
-of the check are the ones the hostile-name tests pin."""
+"""Issue 29.5, checks and work done once along a flow: the names of a run are checked once per entry point, by one
+function (lfbench.results.check_names), before any work; the layers below (the runner, the site, the staged
+results read back) trust them. The messages of the check are the ones the hostile-name tests pin. The HTML site
+draws the BadPix series the figure writer computed instead of computing them again."""
 
 from __future__ import annotations
 
@@ -105,3 +106,31 @@ def test_ablate_report_checks_once(request, count_checks):
     assert main(["ablate", str(path), "--out", str(out), "--report-only", "--html", "--no-maps"]) == 0
     assert len(count_checks) == 1  # before: the results file's and the site's
     assert (out / "html" / "index.html").is_file()
+
+
+def test_the_site_draws_the_series_the_figure_writer_computed(data, tmp_path, capsys, monkeypatch):
+    """`evaluate --figures --html`: each BadPix series is computed once (by the figure writer) and the site
+    draws that one; the site's series images are those of a run whose site computes them itself."""
+    from lfbench.reports import figures
+
+    computed: list[tuple[str, str]] = []
+    real = figures.scene_curve
+
+    def counted(label, scene, *args, **kwargs):
+        computed.append((label, scene.name))
+        return real(label, scene, *args, **kwargs)
+
+    monkeypatch.setattr(figures, "scene_curve", counted)
+    common = ["evaluate", "--data", data, "--method", "constant:value=0.05", "--method", "constant:value=-0.02",
+              "--method", "gt", "--html", "--no-progress"]
+    rc, _, err = run_cli(capsys, *common, "--figures", "--out", tmp_path / "both")
+    assert rc == 0, err
+    pairs = [(m, s) for s in ("alpha", "beta") for m in ("constant:value=0.05", "constant:value=-0.02", "gt")]
+    assert sorted(computed) == sorted(pairs)  # once each (the oracle's too: the figures draw it); before: twice
+    computed.clear()
+    rc, _, err = run_cli(capsys, *common, "--out", tmp_path / "site_only")
+    assert rc == 0, err
+    assert len(computed) == 4  # the site alone: the two ranked methods on the two scenes
+    for image in ("img/badpix_series.png", "img/alpha/badpix_series.png", "img/beta/badpix_series.png"):
+        both, alone = tmp_path / "both" / "html" / image, tmp_path / "site_only" / "html" / image
+        assert both.read_bytes() == alone.read_bytes(), image

@@ -81,12 +81,15 @@ class SiteInputs:
     those maps already loaded (lfbench.reports.maps.load_scene_maps, at the site's border), used instead
     of loading them again; ``ci``: the long bootstrap frame of lfbench.scoring.stats.ci_records
     (ci.csv), or None; ``paper``: PaperTables or None, with ``paper_methods`` (default: the paper's
-    own default methods); ``sections``: further tables on the index page."""
+    own default methods); ``sections``: further tables on the index page; ``curves``: BadPix series
+    already computed ((method, scene) -> lfbench.reports.figures.Curve, e.g. by the set's figure writer),
+    drawn as they are (the others are computed from the maps by the same function, ``scene_curve``)."""
 
     results: Results
     scenes: Sequence[Any] = ()
     maps: Mapping[str, Path] = field(default_factory=dict)
     scene_maps: Mapping[str, SceneMaps] = field(default_factory=dict)
+    curves: Mapping[tuple[str, str], fig.Curve] = field(default_factory=dict)
     ci: pd.DataFrame | None = None
     paper: Any = None
     paper_methods: Sequence[str] = ()
@@ -421,7 +424,7 @@ def _write_site(inputs: SiteInputs, root: Path, threshold: float, pair_threshold
         drawn[name]["legend"] = _legend(images, sm.disp_range)
         for label in (m for m in order if m not in references):  # an oracle's BadPix(t) is 0: no line
             if hasattr(scene, "has_gt"):
-                c = fig.scene_curve(label, scene, sm.preds[label], rules)
+                c = inputs.curves.get((label, name)) or fig.scene_curve(label, scene, sm.preds[label], rules)
                 if c is not None:
                     curves.append(c)
         if curves and any(c.scene == name for c in curves):
@@ -565,13 +568,15 @@ def site_inputs_from_dir(results_path: str | Path, *, data_root: str | Path | No
 
 def site_inputs(results: Results, folder: Path, *, data_root: str | Path | Sequence[str | Path] | None = None,
                 maps: str | Path | Mapping[str, Path] | None = None, scenes: Sequence[Any] | None = None,
-                scene_maps: Mapping[str, SceneMaps] | None = None, paper: Any = None,
+                scene_maps: Mapping[str, SceneMaps] | None = None,
+                curves: Mapping[tuple[str, str], fig.Curve] | None = None, paper: Any = None,
                 paper_methods: Sequence[str] = (), title: str | None = None) -> SiteInputs:
     """:func:`site_inputs_from_dir` for ``results`` already read from the results folder ``folder``.
     ``maps``: a folder of submission folders, or method label -> submission folder (those that hold
     maps are used); ``data_root``: one data root or several (default: those the results record); ``scenes``:
     the results' scenes of the data root when already discovered (then
-    ``data_root`` is not searched again); ``scene_maps``: their saved maps when already loaded (SiteInputs)."""
+    ``data_root`` is not searched again); ``scene_maps``: their saved maps when already loaded; ``curves``:
+    BadPix series already computed (SiteInputs)."""
     ci = None
     if (folder / "ci.csv").is_symlink():
         check_within(folder / "ci.csv", folder, "the results folder")
@@ -599,7 +604,8 @@ def site_inputs(results: Results, folder: Path, *, data_root: str | Path | Seque
         shown = "the scenes and the numbers" if scenes else "the numbers only"
         notes.append(f"No saved maps: scene pages show {shown}, no method's maps (evaluate with --save-maps or "
                      "--html).")
-    return SiteInputs(results=results, scenes=scenes, maps=folders, scene_maps=dict(scene_maps or {}), ci=ci,
+    return SiteInputs(results=results, scenes=scenes, maps=folders, scene_maps=dict(scene_maps or {}),
+                      curves=dict(curves or {}), ci=ci,
                       paper=paper, paper_methods=paper_methods, title=title or _default_title(results), notes=notes)
 
 

@@ -42,6 +42,7 @@ from lfbench.data.scene import LightField
 from lfbench.method.base import Prediction
 from lfbench.reports.ci import format_ci_table
 from lfbench.reports.figures import (
+    Curve,
     SceneFigureWriter,
     curves_from_records,
     draw_badpix_curves,
@@ -78,7 +79,9 @@ class RunOutputs:
     centre view for drawing); ``results``: set before the write steps; ``source``: the folder the results
     were read from (a report: its ci.csv and maps), None when they are made in this run (the stage holds
     them); ``maps``: method label -> submission folder of saved maps; ``scene_maps``: those maps already
-    loaded per scene (lfbench.reports.maps.load_scene_maps)."""
+    loaded per scene (lfbench.reports.maps.load_scene_maps); ``curves``: the BadPix series a writer of the
+    set computed ((method label, scene) -> lfbench.reports.figures.Curve: :class:`SceneFigures`), which
+    the site draws instead of computing them again."""
 
     stage: Path
     rules: ScoringRules = field(default_factory=ScoringRules)
@@ -87,6 +90,7 @@ class RunOutputs:
     source: Path | None = None
     maps: Mapping[str, Path] = field(default_factory=dict)
     scene_maps: Mapping[str, SceneMaps] = field(default_factory=dict)
+    curves: dict[tuple[str, str], Curve] = field(default_factory=dict)
     progress: bool = False
 
     @property
@@ -247,6 +251,7 @@ class SceneFigures(OutputWriter):
         self.writer.add(label, scene, pred)
 
     def write(self, run: RunOutputs) -> list[Path]:
+        run.curves.update({(c.method, c.scene): c for c in self.writer.curves})  # the site's series too
         return sorted(self.writer.written) if self.files else [run.stage / self.folder]
 
 
@@ -364,7 +369,7 @@ class Site(OutputWriter):
         paper = self.paper if self.paper is not None and self.paper.shows("table1", results.meta) else None
         inputs = site_inputs(results, run.folder, data_root=self.data_root, maps=self.maps,
                              scenes=list(run.scenes) if run.scenes else None, scene_maps=run.scene_maps,
-                             paper=paper, paper_methods=self.paper_methods, title=self.title)
+                             curves=run.curves, paper=paper, paper_methods=self.paper_methods, title=self.title)
         inputs.notes = [*self.notes, *inputs.notes]
         inputs.sections = [*self.sections, *paper_scene_sections(results, self.paper)]
         return inputs
