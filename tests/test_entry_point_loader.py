@@ -10,6 +10,7 @@ import uuid
 from pathlib import Path
 
 import pytest
+from helpers import write_dist_info
 
 from lfbench.utils.errors import SpecError
 from lfbench.utils.registry import Registry
@@ -49,13 +50,8 @@ def test_references_are_a_registry_and_a_broken_one_is_left_out(tmp_path, monkey
     (package / "__init__.py").write_text("raise RuntimeError('a reference is read without importing its package')\n")
     shipped = (ROOT / "methods" / "subfocal" / "paper.toml").read_text(encoding="utf-8")
     (package / "paper.toml").write_text(shipped, encoding="utf-8")  # says name = "subfocal-tci2023"
-    dist = site / f"refpkg_{tag}-1.0.dist-info"
-    dist.mkdir()
-    (dist / "METADATA").write_text(f"Metadata-Version: 2.1\nName: refpkg-{tag}\nVersion: 1.0\n", encoding="utf-8")
-    (dist / "entry_points.txt").write_text(
-        "[lfbench.references]\n"
-        f"misnamed-{tag} = refpkg_{tag}:paper.toml\n"
-        f"missing-{tag} = refpkg_{tag}_absent:paper.toml\n", encoding="utf-8")
+    write_dist_info(site, f"refpkg-{tag}", "[lfbench.references]\n"
+                    f"misnamed-{tag} = refpkg_{tag}:paper.toml\nmissing-{tag} = refpkg_{tag}_absent:paper.toml\n")
     monkeypatch.syspath_prepend(str(site))
     references = Registry("reference", ref.Reference, group=ref.ENTRY_POINT_GROUP, load=ref.REFERENCES.load)
     assert references.names() == ["subfocal-tci2023"]
