@@ -6,6 +6,7 @@ draws the BadPix series the figure writer computed instead of computing them aga
 from __future__ import annotations
 
 import inspect
+import re
 import sys
 from pathlib import Path
 
@@ -134,3 +135,16 @@ def test_the_site_draws_the_series_the_figure_writer_computed(data, tmp_path, ca
     for image in ("img/badpix_series.png", "img/alpha/badpix_series.png", "img/beta/badpix_series.png"):
         both, alone = tmp_path / "both" / "html" / image, tmp_path / "site_only" / "html" / image
         assert both.read_bytes() == alone.read_bytes(), image
+
+
+def test_one_writer_driver():
+    """evaluate (lfbench.runs.folder), report (lfbench.reports.from_results) and ablate (lfbench.ablation.report)
+    drive their writers through lfbench.reports.writers.drive_writers: no other module starts writers, hands
+    them predictions or calls their write steps."""
+    root = Path(lfbench.results.__file__).parent
+    loops = re.compile(r"\.(start|on_prediction|write)\(run\b|writer\.on_prediction\(")
+    drivers = sorted(str(p.relative_to(root)) for p in root.rglob("*.py")
+                     if loops.search(p.read_text(encoding="utf-8")))
+    assert drivers == ["reports/writers.py"]
+    for module in ("runs/folder.py", "reports/from_results.py", "ablation/report.py"):
+        assert "drive_writers(" in (root / module).read_text(encoding="utf-8"), module
