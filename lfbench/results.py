@@ -194,16 +194,11 @@ def _once(keys: Iterable[tuple[str, ...]], source: str | Path | None,
 def check_names(methods: Iterable[str], scenes: Iterable[str], keys: Iterable[tuple[str, ...]] = (), *,
                 source: str | Path | None = None, twice: Callable[[tuple[str, ...]], str] | None = None,
                 scene_folders: Sequence[Any] = ()) -> None:
-    """The one check of the names a run files its records and files under, made once at each entry point
-    before any work (lfbench.runs.folder.evaluate_to_folder for the methods and scenes of a run,
-    :meth:`Results.read` for a results file): the layers below trust what it passed.
-
-    DataError (naming ``source``) when a key of ``keys`` ((method, scene) or (method, scene, metric))
-    appears twice (tables and ranks would merge them; ``twice(key)`` says why, default "record m/s/x
-    appears twice"), or two ``methods`` or two ``scenes`` have one file name (lfbench.utils.names: their
-    maps, figures and pages would be one file). ``scene_folders``: light fields whose names are checked
-    instead of ``scenes`` (lfbench.data.scene.check_scene_names: two of one name from different folders
-    are refused too)."""
+    """The one check of the names a run files things under, once at each entry point before any work (a
+    run's plan, lfbench.runs.folder.check_plan; a results file, :meth:`Results.read`); the layers below
+    trust it. DataError (naming ``source``) when a key appears twice (``twice(key)``: the message), two
+    ``methods`` or two ``scenes`` share a file name (lfbench.utils.names), or two ``scene_folders`` (light
+    fields, checked first) share a name (lfbench.data.scene.check_scene_names)."""
     if scene_folders:  # first: two scenes of one name would also make each (method, scene) pair twice
         from lfbench.data.scene import check_scene_names
 

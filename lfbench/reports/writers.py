@@ -121,16 +121,11 @@ PredictionSink = Callable[[str, LightField, Prediction], None]
 def drive_writers(writers: Sequence[OutputWriter], run: RunOutputs, *,
                   predictions: Iterable[tuple[str, LightField, Prediction]] = (),
                   produce: Callable[[PredictionSink], Iterable[Path]] | None = None) -> list[Path]:
-    """The one driver of output writers, behind ``evaluate``, ``report`` and ``ablate``: every writer's
-    :meth:`~OutputWriter.start`, then every prediction handed to each writer in order, then every writer's
-    :meth:`~OutputWriter.write`, in order (the site, drawn from the others' files, comes last). Returns the
-    paths written into ``run.stage``, which the caller commits as one set (lfbench.utils.outputs): a run's
-    outputs appear together or not at all.
-
-    The predictions are saved ones (``predictions``: (label, scene, prediction), e.g.
-    :func:`scene_map_predictions`; a report re-runs nothing) or made now: ``produce(sink)`` runs the
-    methods, hands each prediction to ``sink`` as it is made, sets ``run.results`` and returns the files it
-    staged itself (results.json and results.csv), which come first."""
+    """The one driver of output writers (evaluate, report, ablate): every writer's start, each prediction to
+    every writer, then their writes in order (the site last); returns the paths staged, which the caller
+    commits as one set. The predictions are saved ones (``predictions``: (label, scene, prediction)) or
+    made now by ``produce(sink)``, which hands each to ``sink``, sets ``run.results`` and returns the files
+    it staged itself (results.json and .csv: they come first)."""
     for writer in writers:
         writer.start(run)
 

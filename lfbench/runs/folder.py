@@ -65,7 +65,6 @@ def evaluate_to_folder(methods: Sequence[Method], scenes: Sequence[Scene], out: 
             chosen = functools.partial(_all_metrics, rules=rules)
 
         def score(sink: PredictionSink) -> list[Path]:
-            """Run and score every group, each prediction handed to the writers; stage results.json / .csv."""
             def each_prediction(method: Method, scene: Scene, pred: Prediction) -> None:
                 sink(label if label is not None else method.label, scene, pred)
 
@@ -90,10 +89,8 @@ def evaluate_to_folder(methods: Sequence[Method], scenes: Sequence[Scene], out: 
 
 
 def check_plan(groups: Sequence[tuple[Sequence[Method], Sequence[Scene]]], label: str | None = None) -> None:
-    """The names of a run of ``groups`` ((methods, scenes) pairs, each method on each of its scenes), checked
-    once before any work (lfbench.results.check_names): DataError when a (method, scene) pair comes twice
-    (the same method given twice), two methods or two scenes have one file name, or two scenes of one name
-    come from different folders. ``label``: the name the records get instead of the method's label."""
+    """:func:`lfbench.results.check_names` of a run of ``groups`` ((methods, scenes): each method on each of
+    its scenes), before any work; ``label``: the name the records get instead of the method's label."""
     names = [label if label is not None else m.label for methods, _ in groups for m in methods]
     pairs = ((label if label is not None else m.label, s.name) for methods, scenes in groups
              for m in methods for s in scenes)
