@@ -12,7 +12,7 @@ table from the JSON):
 - ``requeue_to_restart_s``: ``scontrol requeue`` of a running job -> it runs again without intervention
   (SLURM keeps a requeued batch job pending for a while);
 - ``job_s``: one job that does nothing (``int("0")``) through lfbench's own submit-and-wait
-  (lfbench.ablation.executor.run_as_jobs: submitit, the job's Python start and imports, the result file,
+  (lfbench.ablation.executor.executor_for(...).map: submitit, the job's Python start and imports, the result file,
   squeue polling), ``--repeats`` times per executor, slurm and local, each on the idle node;
 - ``ablate``: wall seconds of ``lfbench ablate`` on the grid with ``--jobs 1``, ``--jobs 2``, ``--executor local``
   and ``--executor slurm`` (each in a fresh output folder, synthetic data generation and the test-time job
@@ -82,8 +82,8 @@ def requeue_to_restart(cluster, tmp: Path, timeout_s: float = 600) -> float:
 
 
 def noop_jobs(cluster, executor: str, folder: Path, repeats: int) -> list[float]:
-    """Seconds of ``repeats`` one-job runs of ``int("0")`` through run_as_jobs, each on the idle node."""
-    from lfbench.ablation.executor import ClusterOptions, run_as_jobs
+    """Seconds of ``repeats`` one-job runs of ``int("0")`` through the executor's map, each on the idle node."""
+    from lfbench.ablation.executor import ClusterOptions, executor_for
 
     options = ClusterOptions(executor, cpus_per_job=1, timeout_min=10)
     out = []
@@ -91,7 +91,8 @@ def noop_jobs(cluster, executor: str, folder: Path, repeats: int) -> list[float]
         cluster.wait_idle()
         results: list = []
         start = time.perf_counter()
-        run_as_jobs(int, ["0"], [f"no-op {k}"], options, folder / executor, 1, results.append)
+        executor_for(options, folder=folder / executor).map(int, ["0"], labels=[f"no-op {k}"], threads=1,
+                                                            on_done=results.append)
         out.append(round(time.perf_counter() - start, 2))
         assert results == [0]
     return out
@@ -133,7 +134,7 @@ def main(argv: list[str] | None = None) -> int:
             record["submit_to_start_s"] = {"all": lat, "median": statistics.median(lat), "max": max(lat)}
             record["requeue_to_restart_s"] = requeue_to_restart(cluster, tmp)
             cluster.wait_idle()
-            os.environ["SLURM_CONF"] = cluster.env["SLURM_CONF"]  # for run_as_jobs in this process
+            os.environ["SLURM_CONF"] = cluster.env["SLURM_CONF"]  # for the executor's jobs in this process
             jobs = {ex: noop_jobs(cluster, ex, tmp / "noop", args.repeats) for ex in ("slurm", "local")}
             record["job_s"] = {ex: {"all": v, "median": statistics.median(v)} for ex, v in jobs.items()}
             runs: dict[str, list[float]] = {mode: [] for mode in MODES}

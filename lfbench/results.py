@@ -10,6 +10,7 @@ from __future__ import annotations
 import csv
 import io
 import platform
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import asdict, dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
@@ -132,11 +133,13 @@ class Results:
         return out / "results.json", out / "results.csv"
 
     @classmethod
-    def read(cls, path: str | Path) -> Results:
+    def read(cls, path: str | Path, *, names_checked: bool = False) -> Results:
         """Read results.json (or a folder holding one), or a golden/records JSON list.
 
         Every record needs string method/scene/metric and a numeric (or null) value; every run entry
-        string method/scene and numeric fields; DataError naming the file otherwise."""
+        string method/scene and numeric fields; DataError naming the file otherwise. The names are checked
+        (:func:`check_names`) unless ``names_checked`` says the file is the set this run staged itself,
+        whose names were checked before its work."""
         path = Path(path)
         if path.is_dir():
             path = path / "results.json"
@@ -165,27 +168,44 @@ class Results:
             raise DataError("'meta' must be an object", path)
         _check_meta(meta, path)
         results = cls(records=records, runs=runs, meta=meta)
-        check_names(results, path)
+        if not names_checked:
+            check_names(results.methods, results.scenes, _keys(records), source=path)
         return results
 
 
 def check_unique(results: Results, source: str | Path | None = None) -> None:
     """DataError naming ``source`` when ``results`` hold one (method, scene, metric) twice."""
-    seen: set[tuple[str, str, str]] = set()
-    for r in results.records:
-        key = (r.method, r.scene, r.metric)
+    _once(_keys(results.records), source)
+
+
+def _keys(records: Iterable[Record]) -> Iterator[tuple[str, str, str]]:
+    return ((r.method, r.scene, r.metric) for r in records)
+
+
+def _once(keys: Iterable[tuple[str, ...]], source: str | Path | None,
+          twice: Callable[[tuple[str, ...]], str] | None = None) -> None:
+    seen: set[tuple[str, ...]] = set()
+    for key in keys:
         if key in seen:
-            raise DataError(f"record {'/'.join(key)} appears twice", source)
+            raise DataError(twice(key) if twice is not None else f"record {'/'.join(key)} appears twice", source)
         seen.add(key)
 
 
-def check_names(results: Results, source: str | Path | None = None) -> None:
-    """DataError (naming ``source``) when ``results`` hold a (method, scene, metric) twice (tables and
-    ranks would merge them), or two methods or two scenes whose names are one file name
-    (lfbench.utils.names: their maps, figures and pages would be one file)."""
-    check_unique(results, source)
-    file_names(results.methods, "method label", source=source)
-    file_names(results.scenes, "scene", source=source)
+def check_names(methods: Iterable[str], scenes: Iterable[str], keys: Iterable[tuple[str, ...]] = (), *,
+                source: str | Path | None = None, twice: Callable[[tuple[str, ...]], str] | None = None,
+                scene_folders: Sequence[Any] = ()) -> None:
+    """The one check of the names a run files things under, once at each entry point before any work (a
+    run's plan, lfbench.runs.folder.check_plan; a results file, :meth:`Results.read`); the layers below
+    trust it. DataError (naming ``source``) when a key appears twice (``twice(key)``: the message), two
+    ``methods`` or two ``scenes`` share a file name (lfbench.utils.names), or two ``scene_folders`` (light
+    fields, checked first) share a name (lfbench.data.scene.check_scene_names)."""
+    if scene_folders:  # first: two scenes of one name would also make each (method, scene) pair twice
+        from lfbench.data.scene import check_scene_names
+
+        check_scene_names(scene_folders)
+    _once(keys, source, twice)
+    file_names(methods, "method label", source=source)
+    file_names(scenes, "scene", source=source)
 
 
 def _list(data: Any, key: str, path: Path) -> list[Any]:

@@ -150,6 +150,16 @@ class Offset(Method):
 '''
 
 
+def write_dist_info(site: Path, name: str, entry_points: str) -> Path:
+    """An installed distribution's ``<name>-1.0.dist-info`` under ``site`` (put on sys.path), its
+    ``entry_points.txt`` holding ``entry_points`` (e.g. ``"[lfbench.commands]\nx = module\n"``)."""
+    dist = site / f"{name.replace('-', '_')}-1.0.dist-info"
+    dist.mkdir(parents=True)
+    (dist / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {name}\nVersion: 1.0\n", encoding="utf-8")
+    (dist / "entry_points.txt").write_text(entry_points, encoding="utf-8")
+    return dist
+
+
 def write_fake_plugin(root: Path, tag: str) -> dict[str, str]:
     """A fake installed distribution under ``root`` (put it on sys.path / PYTHONPATH): a module and a
     ``*.dist-info`` whose entry_points.txt adds methods to the ``lfbench.methods`` group.

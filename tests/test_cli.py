@@ -18,6 +18,7 @@ from helpers import (
     install_fake_plugin,
     pfm_bytes,
     run_cli,
+    write_dist_info,
     write_scene,
     write_submission,
     zip_folder,
@@ -424,15 +425,12 @@ def test_plugin_commands_come_from_entry_points(tmp_path, monkeypatch, capsys):
     site.mkdir()
     (site / f"lfbench_cmd_{tag}.py").write_text(COMMAND_MODULE, encoding="utf-8")
     (site / f"lfbench_cmd_{tag}_empty.py").write_text("HELP = 'no run'\n", encoding="utf-8")
-    dist = site / f"lfbench_cmd_{tag}-1.0.dist-info"
-    dist.mkdir()
-    (dist / "METADATA").write_text(f"Metadata-Version: 2.1\nName: lfbench-cmd-{tag}\nVersion: 1.0\n", encoding="utf-8")
-    (dist / "entry_points.txt").write_text(
-        "[lfbench.commands]\n"
-        f"echo-{tag} = lfbench_cmd_{tag}\n"
-        f"evaluate = lfbench_cmd_{tag}\n"  # may not replace a built-in command
-        f"empty-{tag} = lfbench_cmd_{tag}_empty\n"  # no add_arguments / run
-        f"broken-{tag} = lfbench_cmd_{tag}_missing\n", encoding="utf-8")
+    write_dist_info(site, f"lfbench-cmd-{tag}",
+                    "[lfbench.commands]\n"
+                    f"echo-{tag} = lfbench_cmd_{tag}\n"
+                    f"evaluate = lfbench_cmd_{tag}\n"  # may not replace a built-in command
+                    f"empty-{tag} = lfbench_cmd_{tag}_empty\n"  # no add_arguments / run
+                    f"broken-{tag} = lfbench_cmd_{tag}_missing\n")
     monkeypatch.syspath_prepend(str(site))
     import sys
 

@@ -12,8 +12,8 @@ import math
 
 import pytest
 
+from lfbench.results import Record, Results
 from lfbench.runs.regress import compare, make_golden, read_golden
-from lfbench.runs.results import Record, Results
 
 METHOD, SCENE = "planesweep", "synth_0"
 
@@ -121,8 +121,8 @@ def test_a_higher_is_better_metric_worsens_when_it_falls(tmp_path, monkeypatch):
 
     score = Metric(id="psnr_db", name="PSNR", description="peak signal-to-noise ratio", unit="dB",
                    fn=lambda *a, **k: 0.0, higher_is_better=True)
-    known = regress.find_metric
-    monkeypatch.setattr(regress, "find_metric", lambda m: score if m == "psnr_db" else known(m))
+    known = regress.METRICS.find
+    monkeypatch.setattr(regress.METRICS, "find", lambda m: score if m == "psnr_db" else known(m))
     golden = _golden(tmp_path, {"psnr_db": 30.0, "mse_x100": 2.0}, 1.0)
     # PSNR: 30 -> 29.4 is within the tolerance 1 (a doubled change, 1.2, would not be); 28.9 is worse; 31.5 better
     assert compare(golden, _results({"psnr_db": 29.4, "mse_x100": 2.0})) == []

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 from lfbench.data.disparity import check_disparity, disparity_problem
+from lfbench.results import Record, Results
 from lfbench.runs.regress import GoldenRecord, check
-from lfbench.runs.results import Record, Results
 from lfbench.utils.errors import DataError
 from lfbench.utils.readfile import check_regular_file, file_sha256, read_bytes, read_csv, read_text
 

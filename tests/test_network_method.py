@@ -20,11 +20,11 @@ from lfbench.data.scene import ArrayLightField, Scene
 from lfbench.method.base import Method, Prediction
 from lfbench.method.network_method import NetworkMethod
 from lfbench.method.params import Range
-from lfbench.method.registry import create, create_from_spec, method_info, register_method
+from lfbench.method.registry import REGISTRY, create, create_from_spec, register_method
 from lfbench.method.trainable import Trainable, get_trainable, register_trainable
+from lfbench.results import Results
 from lfbench.runs.folder import evaluate_to_folder
 from lfbench.runs.regress import check, read_golden
-from lfbench.runs.results import Results
 from lfbench.training.checkpoint import export_weights
 from lfbench.utils.errors import DataError, SpecError
 
@@ -128,7 +128,7 @@ def _reference(path: Path, lf: ArrayLightField) -> tuple[np.ndarray, np.ndarray]
 
 
 def test_a_network_registered_once_runs_as_a_method(nets):
-    info = method_info("stack")
+    info = REGISTRY.info("stack")
     assert info.method_class is NetworkMethod and info.network == "stack"
     assert {"weights", "device", "precision", "threads", "tile", "hidden", "scale", "angular"} == set(info.params)
     text = info.describe()
@@ -166,7 +166,7 @@ def test_tiles_are_exact_and_a_network_without_a_receptive_radius_runs_whole(net
 
 
 def test_the_two_class_style_still_works(nets):
-    info = method_info("stack2")
+    info = REGISTRY.info("stack2")
     assert info.method_class is StackMethod and list(info.params) == ["weights"]
     text = info.describe()  # the network's parameters are listed beside the method's own
     assert "weights (Path, required): weights file" in text

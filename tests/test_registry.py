@@ -246,7 +246,7 @@ def test_the_registry_discovers_a_third_party_plugin(plugin, tmp_path):
 
 def test_the_global_helpers_see_plugins(plugin):
     assert plugin["centre"] in [i.name for i in registry.list_methods()]
-    assert registry.method_info(plugin["offset"]).params["offset"].default == 0.0
+    assert registry.REGISTRY.info(plugin["offset"]).params["offset"].default == 0.0
     assert registry.create(plugin["centre"]).gain == 1.0
 
 
@@ -318,7 +318,7 @@ def test_a_variant_is_the_factory_registered_with_its_defaults(reg):
 
 
 def test_lfattnet_is_a_registered_variant_of_subfocal():
-    sub, lfa = registry.method_info("subfocal"), registry.method_info("lfattnet")
+    sub, lfa = registry.REGISTRY.info("subfocal"), registry.REGISTRY.info("lfattnet")
     assert lfa.factory is sub.factory and lfa.defaults == {"interval": 1.0} and sub.defaults == {}
     assert lfa.params["interval"].default == 1.0 and sub.params["interval"].default == 0.5
     assert list(lfa.params) == list(sub.params)

@@ -71,8 +71,8 @@ def within(seconds: float, fn):
 
 def no_op_job(folder: Path, results: list) -> None:
     """One job of ``int("0")`` through --executor slurm (what benchmarks/slurm_overhead.py times)."""
-    executor.run_as_jobs(int, ["0"], ["no-op"], executor.ClusterOptions("slurm", timeout_min=5), folder, 1,
-                         results.append)
+    executor.executor_for(executor.ClusterOptions("slurm", timeout_min=5), folder=folder).map(
+        int, ["0"], labels=["no-op"], threads=1, on_done=results.append)
 
 
 def gone(pid_file: Path) -> bool:

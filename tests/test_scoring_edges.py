@@ -422,13 +422,13 @@ def test_badpix_family_and_registry_lookups():
     """Kills, in the `badpix_<t>` family: exponent ids (tiny thresholds) refused (`"." in text or` -> `and`), negative
     or infinite thresholds accepted, threshold 0 refused (`t >= 0` -> `t > 0`); and `in` / list_metrics /
     aggregate changes."""
-    from lfbench.scoring.metrics import METRICS, find_metric, get_metric, list_metrics
+    from lfbench.scoring.metrics import METRICS, get_metric, list_metrics
 
-    assert find_metric("badpix_1e-05").id == "badpix_1e-05"  # the id of a tiny threshold is in exponent form
-    assert find_metric("badpix_5e-2") is None  # one spelling per id (issue 31): 0.05 is 'badpix_0.05'
-    assert find_metric("badpix_0").id == "badpix_0" and find_metric("badpix_0")(np.zeros((1, 2)), np.eye(1, 2)) == 50
+    assert METRICS.find("badpix_1e-05").id == "badpix_1e-05"  # the id of a tiny threshold is in exponent form
+    assert METRICS.find("badpix_5e-2") is None  # one spelling per id (issue 31): 0.05 is 'badpix_0.05'
+    assert METRICS.find("badpix_0").id == "badpix_0" and METRICS.find("badpix_0")(np.zeros((1, 2)), np.eye(1, 2)) == 50
     for bad in ("badpix_-0.1", "badpix_inf", "badpix_nan", "badpix_x"):
-        assert find_metric(bad) is None, bad
+        assert METRICS.find(bad) is None, bad
     assert "badpix_0.05" in METRICS and "mse_x100" in METRICS and "psnr" not in METRICS and 5 not in METRICS
     assert [m.id for m in list_metrics("stratified")][:2] == ["backgammon_fattening", "backgammon_thinning"]
     assert {m.category for m in list_metrics("region")} == {"region"}

@@ -15,9 +15,9 @@ from helpers import run_cli, write_scene, write_submission
 from lfbench.data.submission import read_runtime, write_submission_map
 from lfbench.scoring.metrics import (
     GENERAL_METRICS,
+    METRICS,
     RUNTIME_METRICS,
     OrderStatistic,
-    find_metric,
     get_metric,
     quantile_metric,
 )
@@ -43,7 +43,7 @@ def test_quantile_ids_follow_the_toolkit():
     assert get_metric("q_25_100") is get_metric("q25_x100") is quantile_metric(25)  # Q25 stays one metric
     assert get_metric("q2.5_x100").toolkit_id is None  # the toolkit's ids hold whole percentages only
     for bad in ("q100_x100", "q50", "q-5_x100", "q05_x100", "q50.0_x100", "qnan_x100", "q1e1_x100"):
-        assert find_metric(bad) is None, bad
+        assert METRICS.find(bad) is None, bad
     with pytest.raises(SpecError, match=r"Unknown metric 'q100_x100'\. Available: .*q<p>_x100"):
         get_metric("q100_x100")
     with pytest.raises(ValueError, match="from 0 to below 100"):

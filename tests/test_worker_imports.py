@@ -50,10 +50,10 @@ def test_safe_path_environ_restores_the_environment(monkeypatch):
 def test_ablation_jobs_do_not_import_from_the_current_folder(decoy_cwd):
     """submitit's local executor (the --executor path): a job unpickles its function, importing lfbench."""
     pytest.importorskip("submitit", reason="the cluster path needs submitit (pip install -e '.[cluster]')")
-    from lfbench.ablation.executor import ClusterOptions, run_as_jobs
+    from lfbench.ablation.executor import ClusterOptions, executor_for
     from lfbench.utils.names import file_name
 
     done: list = []
-    run_as_jobs(file_name, ["a<b", ".."], ["job a<b", "job .."], ClusterOptions(executor="local", timeout_min=5),
-                decoy_cwd / "jobs", threads=1, on_done=done.append)
+    executor_for(ClusterOptions(executor="local", timeout_min=5), folder=decoy_cwd / "jobs").map(
+        file_name, ["a<b", ".."], labels=["job a<b", "job .."], threads=1, on_done=done.append)
     assert done == ["a_b", "__"]

@@ -26,7 +26,7 @@ from collections.abc import Callable, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, ClassVar, TypeVar
+from typing import ClassVar, TypeVar
 
 from lfbench.utils.errors import SpecError
 from lfbench.utils.registry import Lazy, Registry
@@ -214,12 +214,5 @@ def executor_for(options: ClusterOptions | None, *, jobs: int = 1, folder: Path 
     return EXECUTORS.get(options.executor)(options, jobs=jobs, folder=folder, log=log)
 
 
-def run_as_jobs(fn: Callable[[Any], Any], args: Sequence[Any], labels: Sequence[str], options: ClusterOptions,
-                folder: Path, threads: int, on_done: Callable[[Any], None]) -> None:
-    """``fn(arg)`` for each arg through the executor ``options`` name (files in ``folder``), each result to
-    ``on_done`` (:meth:`Executor.map`)."""
-    executor_for(options, folder=folder).map(fn, args, labels=labels, threads=threads, on_done=on_done)
-
-
 __all__ = ["EXECUTORS", "ClusterOptions", "Executor", "InProcess", "ProcessPool", "executor_for", "visible_gpus",
-           "worker_gpus", "init_worker", "run_as_jobs"]
+           "worker_gpus", "init_worker"]

@@ -61,8 +61,7 @@ from lfbench.reports.writers import (
     SceneFigures,
     Site,
     Tables,
-    replay,
-    write_outputs,
+    drive_writers,
 )
 from lfbench.results import Results
 from lfbench.scoring.metrics import get_metric
@@ -542,9 +541,6 @@ def run_writers(writers: Sequence[OutputWriter], spec: AblationSpec, results: Re
     error maps), on the evaluation scenes the results record; ``scenes``: the evaluation scenes, for the site."""
     run = RunOutputs(stage=stage, results=results, scenes=scenes, source=folder,
                      maps=drawn_map_folders(spec, results, folder, maps))
-    for writer in writers:
-        writer.start(run)
-    if spec.evaluation.error_maps:
-        recorded = [Scene(d) for d in results.meta.get("scenes", [])]
-        replay(writers, saved_predictions(recorded, run.maps, within=folder))
-    return write_outputs(writers, run)
+    saved = (saved_predictions([Scene(d) for d in results.meta.get("scenes", [])], run.maps, within=folder)
+             if spec.evaluation.error_maps else ())
+    return drive_writers(writers, run, predictions=saved)

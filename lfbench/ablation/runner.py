@@ -44,7 +44,7 @@ from lfbench.ablation.report import check_maps, report_writers, run_writers
 from lfbench.ablation.spec import AblationSpec, Cell, SyntheticEval, sha256_of
 from lfbench.method.registry import create_from_spec
 from lfbench.reports.writers import Maps
-from lfbench.results import Results
+from lfbench.results import Results, check_names
 from lfbench.runs.folder import evaluate_to_folder
 from lfbench.scoring.rules import ScoringRules
 from lfbench.training.scenes import check_data
@@ -444,6 +444,7 @@ def merge_results(out: Path, new: Results, dest: Path | None = None) -> Results:
     if "ablation" in merged.meta:
         merged.meta["ablation"] = {**merged.meta["ablation"], "cells": old_cells + list(new_cells)}
     merged.meta["scenes"] = sorted(set(old.meta.get("scenes", [])) | set(new.meta.get("scenes", [])))
+    check_names(merged.methods, merged.scenes, source=path)  # earlier runs' cells beside this run's: the set's names
     merged.write(dest)
     return merged
 

@@ -37,7 +37,7 @@ import pandas as pd
 from scipy import stats
 
 from lfbench.reports.reference import Reference, default_reference
-from lfbench.scoring.metrics import find_metric
+from lfbench.scoring.metrics import METRICS
 
 __all__ = ["ALPHA", "Comparison", "comparisons", "paired_t", "scene_scores", "seeds_table",
            "significance_table", "t_interval", "verdict"]
@@ -142,7 +142,7 @@ def scene_scores(scores: pd.DataFrame, metric: str) -> pd.DataFrame:
 def within_range(metric: str, low: float, high: float) -> tuple[float, float, bool]:
     """(low, high) of an interval of ``metric`` clipped to the values it can take (``Metric.value_range``;
     a metric lfbench does not define is left as it is), and whether clipping changed them."""
-    found = find_metric(metric)
+    found = METRICS.find(metric)
     if found is None:
         return low, high, False
     lo, hi = found.value_range
@@ -165,8 +165,8 @@ def seeds_table(info: pd.DataFrame, scores: pd.DataFrame, metrics: Sequence[str]
             mean, low, high = t_interval(vals)
             low, high, changed = within_range(metric, low, high)
             if changed:
-                lo, hi = find_metric(metric).value_range
-                clipped[metric] = f"{find_metric(metric).name}: {lo:g} to {hi:g}"
+                lo, hi = METRICS.find(metric).value_range
+                clipped[metric] = f"{METRICS.find(metric).name}: {lo:g} to {hi:g}"
             row = rows.setdefault(variant, {"variant": variant, "seeds": len(vals)})
             row[f"{metric} mean"] = mean
             row[f"{metric} 95% low"] = low

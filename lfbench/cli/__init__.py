@@ -22,7 +22,6 @@ import logging
 import sys
 import warnings
 from collections.abc import Sequence
-from importlib import metadata
 from pathlib import Path
 from typing import Any, Protocol, runtime_checkable
 
@@ -70,18 +69,14 @@ class _Parser(argparse.ArgumentParser):
 
 
 def command_registry() -> Registry[Any]:
-    """The built-in commands and the plugins' (``lfbench.commands`` entry points), none imported yet. A
-    plugin command named like a built-in one is left out (with a one-line warning on stderr)."""
-    commands: Registry[Any] = Registry("command", Command)
-    for name, module in BUILTIN_COMMANDS.items():
-        commands.add(name, Lazy(module))
-    for ep in sorted(metadata.entry_points(group=COMMAND_GROUP), key=lambda e: e.name):
-        if ep.name in BUILTIN_COMMANDS:
-            print(f"lfbench: warning: plugin command {ep.name!r} ({ep.value}) would replace a built-in command; "
-                  "left out", file=sys.stderr)
-            continue
-        if ep.name not in commands.registered():
-            commands.add(ep.name, Lazy(ep.value))
+    """The built-in commands and the plugins' (``lfbench.commands`` entry points), none imported yet (each a
+    :class:`~lfbench.utils.registry.Lazy` of its module). A plugin command named like a built-in one is left
+    out (with a one-line warning on stderr)."""
+    commands: Registry[Any] = Registry("command", Command, group=COMMAND_GROUP, builtins=BUILTIN_COMMANDS,
+                                       load=lambda ep: Lazy(ep.value))
+    commands.names()  # every entry point read (nothing imported)
+    for name, why in commands.load_errors.items():
+        print(f"lfbench: warning: plugin command {name!r}: {why}", file=sys.stderr)
     return commands
 
 

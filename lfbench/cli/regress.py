@@ -58,7 +58,7 @@ def _parse_tolerance(text: str):
 
 
 def run(args: argparse.Namespace) -> int:
-    from lfbench.results import Results, check_unique
+    from lfbench.results import Results
     from lfbench.runs.regress import check, make_golden, read_golden
 
     tolerance = _parse_tolerance(args.tolerance)  # checked even without --update: a typo is an error
@@ -66,14 +66,13 @@ def run(args: argparse.Namespace) -> int:
         from lfbench.utils.outputs import check_output_file
 
         args.golden = check_output_file(args.golden)  # before reading NEW (a link: the file it leads to)
-    new = Results.read(args.new)
+    new = Results.read(args.new)  # its names checked (no record twice, no two names of one file name)
     if args.update:
         n = make_golden(new, tolerance, args.golden, source=args.new, allow_empty=args.allow_empty)
         skipped = len(new.records) - n
         print(f"wrote {n} golden records to {args.golden}"
               + (f" ({skipped} non-finite values left out)" if skipped else ""))
         return 0
-    check_unique(new, args.new)
     golden = read_golden(args.golden)
     result = check(golden, new, skip_absent_scenes=args.skip_absent_scenes, fail_on_new=args.fail_on_new,
                    allow_empty=args.allow_empty)

@@ -28,7 +28,7 @@ from lfbench.data.scene import LOWRES, Benchmark
 from lfbench.utils.errors import DataError, SpecError
 from lfbench.utils.registry import Registry
 
-__all__ = ["DATASET_GROUP", "DATASETS", "Dataset", "DatasetProtocol", "detect_dataset", "get_dataset", "dataset_of",
+__all__ = ["DATASET_GROUP", "DATASETS", "Dataset", "DatasetProtocol", "detect_dataset", "dataset_of",
            "open_datasets", "open_dataset", "method_range_params"]
 
 DATASET_GROUP = "lfbench.datasets"
@@ -116,11 +116,6 @@ class Dataset:
 DATASETS: Registry[type[Dataset]] = Registry("dataset", Dataset, group=DATASET_GROUP)
 
 
-def get_dataset(name: str) -> type[Dataset]:
-    """The adapter registered as ``name`` (SpecError listing the others otherwise)."""
-    return DATASETS.get(name)
-
-
 def detect_dataset(root: str | Path) -> type[Dataset]:
     """The one adapter whose layout ``root`` matches; DataError (one line) when none or several do."""
     root = Path(root)
@@ -143,7 +138,7 @@ def dataset_of(root: str | Path, name: str | None = None) -> type[Dataset]:
     if name is None:
         return detect_dataset(root)
     try:
-        dataset = get_dataset(name)
+        dataset = DATASETS.get(name)
     except SpecError as exc:
         raise DataError(str(exc)) from None
     if not root.is_dir():

@@ -7,8 +7,8 @@ what the generic :class:`NetworkMethod` runs as ``NAME:weights=PATH``), paramete
 from lfbench.method.base import Method, Prediction
 from lfbench.method.network_method import NetworkMethod
 from lfbench.method.params import Param, Range
-from lfbench.method.registry import create, create_from_spec, list_methods, method_info, register_method
-from lfbench.method.trainable import Trainable, get_trainable, list_trainables, register_trainable
+from lfbench.method.registry import create, create_from_spec, list_methods, register_method
+from lfbench.method.trainable import Trainable, get_trainable, register_trainable
 
 __all__ = ["Method", "Prediction", "NetworkMethod", "Param", "Range", "create", "create_from_spec", "list_methods",
-           "method_info", "register_method", "Trainable", "get_trainable", "list_trainables", "register_trainable"]
+           "register_method", "Trainable", "get_trainable", "register_trainable"]

@@ -22,10 +22,10 @@ from typing import Any
 from lfbench.utils.errors import DataError
 from lfbench.utils.readfile import check_regular_file
 
-#: ``format`` of exported weights (final.pt, best.pt, stage*.pt).
+#: ``format`` of exported weights (final.pt, best.pt, stage*.pt). The reader tells weights from a training
+#: checkpoint by :data:`CHECKPOINT_FORMAT` only, so weights written under the format's earlier name
+#: ("lfbench.subfocal.weights", e.g. the shipped methods/weights/subfocal_small.pt) read as they are.
 WEIGHTS_FORMAT = "lfbench.weights"
-#: Earlier names of the same format (weights files written before plugins had networks of their own).
-LEGACY_WEIGHTS_FORMATS = ("lfbench.subfocal.weights",)
 #: ``format`` of a training checkpoint (the resume state of ``lfbench train``).
 CHECKPOINT_FORMAT = "lfbench.train.checkpoint"
 
@@ -155,4 +155,4 @@ def _is_name(text: str) -> bool:
 
 
 __all__ = ["check_checkpoint_file", "MAX_CHECKPOINT_BYTES", "read_checkpoint", "read_weights", "is_weights", "sniff",
-           "WEIGHTS_FORMAT", "LEGACY_WEIGHTS_FORMATS", "CHECKPOINT_FORMAT"]
+           "WEIGHTS_FORMAT", "CHECKPOINT_FORMAT"]

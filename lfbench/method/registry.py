@@ -34,7 +34,7 @@ from lfbench.method.params import (
     signature_params,
     without_help_lines,
 )
-from lfbench.method.trainable import ENTRY_POINT_GROUP, Trainable, find_trainable, trainable_names
+from lfbench.method.trainable import ENTRY_POINT_GROUP, TRAINABLES, Trainable
 from lfbench.utils.errors import SpecError
 from lfbench.utils.registry import Registry
 
@@ -67,7 +67,7 @@ class MethodInfo:
         parameters that are the network's; for a method of the two-class style, the network's that it does not
         take itself (its trainable's ``[model]`` keys and ablation axes); empty otherwise (a subclass of the
         network method, such as SubFocal's, takes or fixes them itself)."""
-        trainable = find_trainable(self.network) if self.network else None
+        trainable = TRAINABLES.find(self.network) if self.network else None
         if trainable is None or self.method_class is None:
             return {}
         if self.method_class is NetworkMethod:
@@ -116,7 +116,7 @@ def _introspect(name: str, factory: Callable[..., Any], defaults: dict[str, Any]
     cls = factory if inspect.isclass(factory) else None
     network = getattr(cls, "network", None) if cls is not None and issubclass(cls, NetworkMethod) else None
     return MethodInfo(name, factory, params, summary, doc, getattr(factory, "__module__", "?"), defaults, cls,
-                      network or (name if find_trainable(name) is not None else None))
+                      network or (name if TRAINABLES.find(name) is not None else None))
 
 
 def names_file(param: Param) -> bool:
@@ -159,7 +159,7 @@ class MethodRegistry(Registry[MethodInfo]):
     def find(self, name: str) -> MethodInfo | None:
         found = super().find(name)
         if found is None and self.networks:
-            trainable = find_trainable(name)
+            trainable = TRAINABLES.find(name)
             if trainable is not None and trainable.method_name == name:
                 return network_method_info(trainable)
         return found
@@ -167,7 +167,7 @@ class MethodRegistry(Registry[MethodInfo]):
     def names(self) -> list[str]:
         names = set(super().names())
         if self.networks:
-            names |= {n for n in trainable_names() if find_trainable(n).method_name == n}
+            names |= {n for n in TRAINABLES.names() if TRAINABLES.find(n).method_name == n}
         return sorted(names)
 
     def info(self, name: str) -> MethodInfo:
@@ -209,9 +209,9 @@ class MethodRegistry(Registry[MethodInfo]):
         info = self.info(name)
         if info.network is not None:
             return info.network
-        if find_trainable(name) is not None:
+        if TRAINABLES.find(name) is not None:
             return name
-        return next((n for n in trainable_names() if find_trainable(n).method_name == name), None)
+        return next((n for n in TRAINABLES.names() if TRAINABLES.find(n).method_name == name), None)
 
     def create_from_spec(self, spec: str, runtime: Mapping[str, Any] | None = None,
                          defaults: Callable[[MethodInfo, dict[str, Any]], Mapping[str, Any]] | None = None) -> Any:
@@ -238,34 +238,26 @@ def register_method(name: str, registry: MethodRegistry | None = None, *, defaul
     ``defaults`` (replacing the signature's), ``doc`` (summary line and description) and ``help`` (parameter
     help worded for the variant), the way timm registers resnet18 = ``_create_resnet("resnet18", **kwargs)``."""
     def deco(obj: Any) -> Any:
-        (registry if registry is not None else _global()).register(name, obj, defaults=defaults, doc=doc, help=help)
+        (registry if registry is not None else REGISTRY).register(name, obj, defaults=defaults, doc=doc, help=help)
         return obj
 
     return deco
 
 
-def _global() -> MethodRegistry:
-    return REGISTRY
-
-
 def create(name: str, **params: Any) -> Any:
     """Create a registered method with keyword parameters (variants are parameters)."""
-    return _global().create(name, **params)
+    return REGISTRY.create(name, **params)
 
 
 def create_from_spec(spec: str, runtime: Mapping[str, Any] | None = None,
                      defaults: Callable[[MethodInfo, dict[str, Any]], Mapping[str, Any]] | None = None) -> Any:
     """Create a method from ``name:key=value,key=value`` (``runtime``, ``defaults``: see
     MethodRegistry.create_from_spec)."""
-    return _global().create_from_spec(spec, runtime, defaults)
+    return REGISTRY.create_from_spec(spec, runtime, defaults)
 
 
 def list_methods() -> list[MethodInfo]:
-    return [_global().info(n) for n in _global().names()]
-
-
-def method_info(name: str) -> MethodInfo:
-    return _global().info(name)
+    return [REGISTRY.info(n) for n in REGISTRY.names()]
 
 
 def network_runner(network: str, weights: str | Path, *, device: str = "cpu", **options: Any) -> Method:
@@ -275,7 +267,7 @@ def network_runner(network: str, weights: str | Path, *, device: str = "cpu", **
     from lfbench.method.trainable import get_trainable
 
     name = get_trainable(network).method_name
-    accepted = method_info(name).params
+    accepted = REGISTRY.info(name).params
     method = create(name, weights=Path(weights), **{k: v for k, v in options.items() if k in accepted})
     return method.to(device)
 
@@ -285,14 +277,14 @@ def offline_variants(name: str) -> list[dict[str, Any]]:
     of the method made with its defaults (e.g. ``[{"width": 16}]``, the architecture of its shipped weights)
     when it implements the hook and offers a non-empty list, else ``[{}]`` (its defaults). A method that
     needs a parameter (no defaults) and does not implement the hook is not made."""
-    info = _global().info(name)
+    info = REGISTRY.info(name)
     cls = info.method_class
     if cls is None or not overrides(cls, "offline_variants"):
         return [{}]
-    return _global().create(name).offline_variants() or [{}]
+    return REGISTRY.create(name).offline_variants() or [{}]
 
 
-__all__ = ["register_method", "create", "create_from_spec", "list_methods", "method_info", "parse_spec",
+__all__ = ["register_method", "create", "create_from_spec", "list_methods", "parse_spec",
            "format_spec", "coerce", "coerce_params", "MethodRegistry", "REGISTRY", "ENTRY_POINT_GROUP",
            "Param", "MethodInfo", "names_file", "signature_params", "network_method_info", "network_runner",
            "offline_variants"]

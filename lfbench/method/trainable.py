@@ -593,22 +593,9 @@ def get_trainable(name: str) -> Trainable:
     return TRAINABLES.get(name)
 
 
-def find_trainable(name: str) -> Trainable | None:
-    """The registered trainable network ``name``, or None."""
-    return TRAINABLES.find(name)
-
-
-def trainable_names() -> list[str]:
-    """Every registered trainable network's name, sorted."""
-    return TRAINABLES.names()
-
-
-list_trainables = trainable_names
-
-
 __all__ = ["Trainable", "StageOptions", "BenchOption", "network_from_state", "check_state_dict", "network_bytes",
            "check_network_size", "contract_problem", "construct", "ConstructorError", "plugin_failure",
            "flops_problem", "plugin_source", "network_summary", "FLOPS_CONTRACT", "to_channels_last",
            "tiled_forward", "MAX_NETWORK_BYTES",
            "TRAINABLES", "DEFAULT_TRAINABLE", "ENTRY_POINT_GROUP", "register_trainable", "get_trainable",
-           "find_trainable", "trainable_names", "list_trainables", "trainable_registry"]
+           "trainable_registry"]

@@ -36,7 +36,7 @@ from lfbench.data.scene import LightField
 from lfbench.data.submission import disp_map_path, read_submission_map
 from lfbench.method.base import Prediction
 from lfbench.reports.plotting import add_colorbar, as_gray, colormap, legend_label, method_colours, pyplot, save_figure
-from lfbench.scoring.metrics import BadPixels, bad_pix_curve, find_metric
+from lfbench.scoring.metrics import METRICS, BadPixels, bad_pix_curve
 from lfbench.scoring.prepare import SceneReference, align_prediction
 from lfbench.scoring.rules import ScoringRules
 from lfbench.utils.atomic import write_bytes, write_text
@@ -444,7 +444,7 @@ def curves_from_records(results: Any) -> dict[str, tuple[np.ndarray, np.ndarray]
     df = results.to_frame()
     thresholds = {}
     for metric_id in dict.fromkeys(df["metric"]):
-        m = find_metric(metric_id)  # the general BadPix(t) metrics, by their definition
+        m = METRICS.find(metric_id)  # the general BadPix(t) metrics, by their definition
         sample = None if m is None or m.pixelwise is None else m.pixelwise.sample
         if isinstance(sample, BadPixels) and m.category == "general" and m.bootstrap is not None:
             thresholds[metric_id] = float(sample.threshold)

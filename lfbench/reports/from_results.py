@@ -35,9 +35,8 @@ from lfbench.reports.writers import (
     Site,
     Tables,
     ToolkitFigures,
-    replay,
+    drive_writers,
     scene_map_predictions,
-    write_outputs,
 )
 from lfbench.results import Results
 from lfbench.scoring.rules import ScoringRules
@@ -88,12 +87,10 @@ def report_from_results(results_path: str | Path, out: str | Path, *,
     with staged_outputs(out) as outputs:  # OUT checked and its staging folder made before any work
         run = RunOutputs(stage=outputs.stage, rules=ScoringRules.from_meta(results.meta), results=results,
                          source=results_dir)
-        if maps is not None:  # the saved maps, loaded once, replayed as predictions to every writer
+        if maps is not None:  # the saved maps, loaded once, handed as predictions to every writer
             _load_maps(run, Path(maps), data, results_path)
-        for writer in writers:
-            writer.start(run)
-        replay(writers, scene_map_predictions(run.scene_maps.values()))
-        written = outputs.commit_written(write_outputs(writers, run))
+        staged = drive_writers(writers, run, predictions=scene_map_predictions(run.scene_maps.values()))
+        written = outputs.commit_written(staged)
     return ReportOutcome(tables=tables.tables, written=written, figures=out / FIGURES_DIR,
                          curves_source=f"saved maps in {maps}" if maps is not None else figures.source,
                          html_index=outputs.final(site.index) if html else None)

@@ -45,7 +45,7 @@ from lfbench.reports.maps import MAPS_DIR, SceneMaps, load_scene_maps, map_folde
 from lfbench.reports.paper import PAPER_RESOLUTION_COLUMN, average_with_paper, paper_column, per_scene_with_paper
 from lfbench.reports.plotting import colormap, method_colours, write_image
 from lfbench.reports.tables import average_table, per_scene_table
-from lfbench.results import Results, check_names
+from lfbench.results import Results
 from lfbench.scoring.metrics import describe_metric, metric_order
 from lfbench.scoring.rules import ScoringRules
 from lfbench.scoring.stats import read_ci_csv
@@ -81,12 +81,15 @@ class SiteInputs:
     those maps already loaded (lfbench.reports.maps.load_scene_maps, at the site's border), used instead
     of loading them again; ``ci``: the long bootstrap frame of lfbench.scoring.stats.ci_records
     (ci.csv), or None; ``paper``: PaperTables or None, with ``paper_methods`` (default: the paper's
-    own default methods); ``sections``: further tables on the index page."""
+    own default methods); ``sections``: further tables on the index page; ``curves``: BadPix series
+    already computed ((method, scene) -> lfbench.reports.figures.Curve, e.g. by the set's figure writer),
+    drawn as they are (the others are computed from the maps by the same function, ``scene_curve``)."""
 
     results: Results
     scenes: Sequence[Any] = ()
     maps: Mapping[str, Path] = field(default_factory=dict)
     scene_maps: Mapping[str, SceneMaps] = field(default_factory=dict)
+    curves: Mapping[tuple[str, str], fig.Curve] = field(default_factory=dict)
     ci: pd.DataFrame | None = None
     paper: Any = None
     paper_methods: Sequence[str] = ()
@@ -354,11 +357,11 @@ def check_site_dir(out: str | Path) -> Path:
 def build_site(inputs: SiteInputs, out: str | Path, *, threshold: float = fig.BADPIX_THRESHOLD,
                pairwise_threshold: float = tk.PAIRWISE_THRESHOLD, border_px: int | None = None) -> Path:
     """Write the site into folder ``out`` (replacing an earlier site there as a whole); returns the
-    path of index.html."""
+    path of index.html. Pages and images are named after the methods and scenes, whose names the entry
+    point checked (lfbench.results.check_names: a run's before its work, a results file's when read)."""
     results = inputs.results
     if not results.records:
         raise DataError("the results hold no records; nothing to report")
-    check_names(results)  # pages and images are named after methods and scenes
     out = check_site_dir(out)
     border = border_px if border_px is not None else ScoringRules.from_meta(results.meta).border_px
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -421,7 +424,7 @@ def _write_site(inputs: SiteInputs, root: Path, threshold: float, pair_threshold
         drawn[name]["legend"] = _legend(images, sm.disp_range)
         for label in (m for m in order if m not in references):  # an oracle's BadPix(t) is 0: no line
             if hasattr(scene, "has_gt"):
-                c = fig.scene_curve(label, scene, sm.preds[label], rules)
+                c = inputs.curves.get((label, name)) or fig.scene_curve(label, scene, sm.preds[label], rules)
                 if c is not None:
                     curves.append(c)
         if curves and any(c.scene == name for c in curves):
@@ -565,13 +568,15 @@ def site_inputs_from_dir(results_path: str | Path, *, data_root: str | Path | No
 
 def site_inputs(results: Results, folder: Path, *, data_root: str | Path | Sequence[str | Path] | None = None,
                 maps: str | Path | Mapping[str, Path] | None = None, scenes: Sequence[Any] | None = None,
-                scene_maps: Mapping[str, SceneMaps] | None = None, paper: Any = None,
+                scene_maps: Mapping[str, SceneMaps] | None = None,
+                curves: Mapping[tuple[str, str], fig.Curve] | None = None, paper: Any = None,
                 paper_methods: Sequence[str] = (), title: str | None = None) -> SiteInputs:
     """:func:`site_inputs_from_dir` for ``results`` already read from the results folder ``folder``.
     ``maps``: a folder of submission folders, or method label -> submission folder (those that hold
     maps are used); ``data_root``: one data root or several (default: those the results record); ``scenes``:
     the results' scenes of the data root when already discovered (then
-    ``data_root`` is not searched again); ``scene_maps``: their saved maps when already loaded (SiteInputs)."""
+    ``data_root`` is not searched again); ``scene_maps``: their saved maps when already loaded; ``curves``:
+    BadPix series already computed (SiteInputs)."""
     ci = None
     if (folder / "ci.csv").is_symlink():
         check_within(folder / "ci.csv", folder, "the results folder")
@@ -599,7 +604,8 @@ def site_inputs(results: Results, folder: Path, *, data_root: str | Path | Seque
         shown = "the scenes and the numbers" if scenes else "the numbers only"
         notes.append(f"No saved maps: scene pages show {shown}, no method's maps (evaluate with --save-maps or "
                      "--html).")
-    return SiteInputs(results=results, scenes=scenes, maps=folders, scene_maps=dict(scene_maps or {}), ci=ci,
+    return SiteInputs(results=results, scenes=scenes, maps=folders, scene_maps=dict(scene_maps or {}),
+                      curves=dict(curves or {}), ci=ci,
                       paper=paper, paper_methods=paper_methods, title=title or _default_title(results), notes=notes)
 
 

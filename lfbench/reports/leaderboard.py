@@ -61,9 +61,9 @@ def metric_table(results, metric: str, *, ranks: pd.DataFrame | None = None) -> 
         table.loc[r.method, (r.scene, "value")] = float(r.value)
         table.loc[r.method, (r.scene, "rank")] = float(r.rank)
         table.loc[r.method, (r.scene, "resolution")] = r.resolution
-    from lfbench.scoring.metrics import find_metric
+    from lfbench.scoring.metrics import METRICS
 
-    found = find_metric(metric)
+    found = METRICS.find(metric)
     for method, g in long.groupby("method", sort=False):
         values = g["value"].astype(float).to_numpy()
         table.loc[method, ("mean", "value")] = float(found.aggregate(values) if found else np.nanmean(values))

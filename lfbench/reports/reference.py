@@ -50,6 +50,7 @@ from pathlib import Path
 from lfbench.method.trainable import DEFAULT_TRAINABLE
 from lfbench.utils.errors import SpecError
 from lfbench.utils.options import Table, option, parse_section
+from lfbench.utils.registry import Registry
 from lfbench.utils.tomlfile import read_toml
 
 __all__ = ["ENTRY_POINT_GROUP", "BetaSweep", "PaperTable", "Reference", "Table4", "Table5", "default_reference",
@@ -205,15 +206,22 @@ def read_reference(path: str | Path) -> Reference:
 
 
 def list_references() -> dict[str, Reference]:
-    """Every registered reference by name (the entry points of ``lfbench.references``)."""
-    found = {}
-    for ep in sorted(metadata.entry_points(group=ENTRY_POINT_GROUP), key=lambda e: e.name):
-        path = _data_file(ep)
-        reference = read_reference(path)
-        if reference.name != ep.name:
-            raise SpecError(f"reference {ep.name!r}: its file says name = {reference.name!r}", path)
-        found[ep.name] = reference
-    return found
+    """Every registered reference by name (the entry points of ``lfbench.references``, loaded by the one
+    Registry: a broken one is left out and named in ``REFERENCES.load_errors``)."""
+    return {name: REFERENCES.get(name) for name in REFERENCES.names()}
+
+
+def _entry_reference(ep: metadata.EntryPoint) -> Reference:
+    """The reference an entry point ``package:file.toml`` names, read from its data file."""
+    path = _data_file(ep)
+    reference = read_reference(path)
+    if reference.name != ep.name:
+        raise SpecError(f"reference {ep.name!r}: its file says name = {reference.name!r}", path)
+    return reference
+
+
+#: Every registered reference, by name: the entry points of ``lfbench.references``, each read from its data file.
+REFERENCES: Registry[Reference] = Registry("reference", Reference, group=ENTRY_POINT_GROUP, load=_entry_reference)
 
 
 def _data_file(ep: metadata.EntryPoint) -> Path:
@@ -234,10 +242,7 @@ def _data_file(ep: metadata.EntryPoint) -> Path:
 
 def get_reference(name: str) -> Reference:
     """The registered reference ``name``; SpecError 'Unknown reference ... Available: ...' otherwise."""
-    known = list_references()
-    if name not in known:
-        raise SpecError(f"Unknown reference {name!r}. Available: {', '.join(known) or 'none'}")
-    return known[name]
+    return REFERENCES.get(name)
 
 
 def reference_for_network(network: str) -> Reference | None:

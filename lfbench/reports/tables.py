@@ -14,7 +14,7 @@ from tabulate import tabulate
 
 from lfbench.reports import latex
 from lfbench.results import Results
-from lfbench.scoring.metrics import find_metric, list_metrics, metric_order
+from lfbench.scoring.metrics import METRICS, list_metrics, metric_order
 from lfbench.utils.atomic import write_text
 from lfbench.utils.markdown import markdown_cell
 
@@ -28,7 +28,7 @@ def _header(column: str) -> str:
 
 
 def _scene_aggregate(metric_id: str) -> str:
-    metric = find_metric(metric_id)
+    metric = METRICS.find(metric_id)
     return metric.scene_aggregate if metric is not None else "mean"
 
 

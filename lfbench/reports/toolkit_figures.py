@@ -30,7 +30,7 @@ import pandas as pd
 
 from lfbench.reports.maps import load_scene_maps
 from lfbench.reports.plotting import add_colorbar, as_gray, colormap, legend_label, method_colours, pyplot, save_formats
-from lfbench.scoring.metrics import describe_metric, find_metric, metric_order
+from lfbench.scoring.metrics import METRICS, describe_metric, metric_order
 from lfbench.utils.errors import SpecError
 from lfbench.utils.figure_text import plain_text
 from lfbench.utils.names import FileNames, file_names
@@ -156,7 +156,7 @@ def radar_metric_ids(results: Any) -> list[str]:
     """The metrics a radar chart shows: the region and stratified metrics the results hold, else the
     general ones (in the tables' order)."""
     held = list(dict.fromkeys(r.metric for r in results.records))
-    region = [m for m in held if getattr(find_metric(m), "category", "general") in ("region", "stratified")]
+    region = [m for m in held if getattr(METRICS.find(m), "category", "general") in ("region", "stratified")]
     return region or metric_order(held)
 
 

@@ -4,9 +4,10 @@
 A writer sees each prediction as it is made (:meth:`OutputWriter.on_prediction`: draw a figure row at
 once, keep the pixel errors the intervals need, save the map), then writes its files into the run's
 staged output set (:meth:`OutputWriter.write`, into ``run.stage``; lfbench.utils.outputs commits the set
-as a whole). A command is a list of writers over a source of predictions: methods run on scenes
-(lfbench.runs.folder.evaluate_to_folder) or saved maps read back (lfbench.reports.from_results), so a
-new kind of output is one new writer, for example the worst scene of each method as a CSV::
+as a whole). A command is a list of writers over a source of predictions, driven by the one
+:func:`drive_writers`: methods run on scenes (lfbench.runs.folder.evaluate_to_folder) or saved maps read
+back (lfbench.reports.from_results, lfbench.ablation.report), so a new kind of output is one new writer,
+for example the worst scene of each method as a CSV::
 
     class WorstScenes(OutputWriter):
         def write(self, run):
@@ -29,7 +30,7 @@ series), :class:`CurveFigures` (the BadPix series from saved curves or the resul
 from __future__ import annotations
 
 import logging
-from collections.abc import Iterable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import SimpleNamespace
@@ -41,6 +42,7 @@ from lfbench.data.scene import LightField
 from lfbench.method.base import Prediction
 from lfbench.reports.ci import format_ci_table
 from lfbench.reports.figures import (
+    Curve,
     SceneFigureWriter,
     curves_from_records,
     draw_badpix_curves,
@@ -61,9 +63,9 @@ from lfbench.scoring.stats import ErrorCollector, ci_records
 from lfbench.scoring.uncertainty import UncertaintyCollector
 from lfbench.utils.atomic import write_text
 
-__all__ = ["FIGURES_DIR", "BootstrapCIs", "CIOptions", "CurveFigures", "Maps", "OutputWriter", "RunOutputs",
-           "SceneFigures", "Site", "Tables", "ToolkitFigures", "UncertaintyRatings", "replay", "scene_map_predictions",
-           "paper_scene_sections", "write_outputs"]
+__all__ = ["FIGURES_DIR", "BootstrapCIs", "CIOptions", "CurveFigures", "Maps", "OutputWriter", "PredictionSink",
+           "RunOutputs", "SceneFigures", "Site", "Tables", "ToolkitFigures", "UncertaintyRatings", "drive_writers",
+           "paper_scene_sections", "scene_map_predictions"]
 
 log = logging.getLogger(__name__)
 
@@ -77,7 +79,9 @@ class RunOutputs:
     centre view for drawing); ``results``: set before the write steps; ``source``: the folder the results
     were read from (a report: its ci.csv and maps), None when they are made in this run (the stage holds
     them); ``maps``: method label -> submission folder of saved maps; ``scene_maps``: those maps already
-    loaded per scene (lfbench.reports.maps.load_scene_maps)."""
+    loaded per scene (lfbench.reports.maps.load_scene_maps); ``curves``: the BadPix series a writer of the
+    set computed ((method label, scene) -> lfbench.reports.figures.Curve: :class:`SceneFigures`), which
+    the site draws instead of computing them again."""
 
     stage: Path
     rules: ScoringRules = field(default_factory=ScoringRules)
@@ -86,6 +90,7 @@ class RunOutputs:
     source: Path | None = None
     maps: Mapping[str, Path] = field(default_factory=dict)
     scene_maps: Mapping[str, SceneMaps] = field(default_factory=dict)
+    curves: dict[tuple[str, str], Curve] = field(default_factory=dict)
     progress: bool = False
 
     @property
@@ -110,17 +115,28 @@ class OutputWriter:
         return []
 
 
-def write_outputs(writers: Iterable[OutputWriter], run: RunOutputs) -> list[Path]:
-    """The write step of every writer, in order (the site, drawn from the others' files, comes last)."""
-    return [path for writer in writers for path in writer.write(run)]
+PredictionSink = Callable[[str, LightField, Prediction], None]
 
 
-def replay(writers: Sequence[OutputWriter], predictions: Iterable[tuple[str, LightField, Prediction]]) -> None:
-    """Hand saved predictions (label, scene, prediction) to the writers, as a run would (a report: nothing
-    is re-run; e.g. lfbench.reports.maps.saved_predictions, or :func:`scene_map_predictions`)."""
-    for label, scene, pred in predictions:
+def drive_writers(writers: Sequence[OutputWriter], run: RunOutputs, *,
+                  predictions: Iterable[tuple[str, LightField, Prediction]] = (),
+                  produce: Callable[[PredictionSink], Iterable[Path]] | None = None) -> list[Path]:
+    """The one driver of output writers (evaluate, report, ablate): every writer's start, each prediction to
+    every writer, then their writes in order (the site last); returns the paths staged, which the caller
+    commits as one set. The predictions are saved ones (``predictions``: (label, scene, prediction)) or
+    made now by ``produce(sink)``, which hands each to ``sink``, sets ``run.results`` and returns the files
+    it staged itself (results.json and .csv: they come first)."""
+    for writer in writers:
+        writer.start(run)
+
+    def sink(label: str, scene: LightField, pred: Prediction) -> None:
         for writer in writers:
             writer.on_prediction(label, scene, pred)
+
+    staged = list(produce(sink)) if produce is not None else []
+    for label, scene, pred in predictions:
+        sink(label, scene, pred)
+    return [*staged, *(path for writer in writers for path in writer.write(run))]
 
 
 def scene_map_predictions(scene_maps: Iterable[SceneMaps]) -> Iterator[tuple[str, LightField, Prediction]]:
@@ -230,6 +246,7 @@ class SceneFigures(OutputWriter):
         self.writer.add(label, scene, pred)
 
     def write(self, run: RunOutputs) -> list[Path]:
+        run.curves.update({(c.method, c.scene): c for c in self.writer.curves})  # the site's series too
         return sorted(self.writer.written) if self.files else [run.stage / self.folder]
 
 
@@ -342,12 +359,12 @@ class Site(OutputWriter):
         self.index: Path | None = None
 
     def inputs(self, run: RunOutputs) -> SiteInputs:
-        staged = run.stage / "results.json"  # the results as this set commits them, else as given
-        results = Results.read(run.stage) if staged.is_file() else run.results
+        staged = run.stage / "results.json"  # the results as this set commits them (names checked), else as given
+        results = Results.read(run.stage, names_checked=True) if staged.is_file() else run.results
         paper = self.paper if self.paper is not None and self.paper.shows("table1", results.meta) else None
         inputs = site_inputs(results, run.folder, data_root=self.data_root, maps=self.maps,
                              scenes=list(run.scenes) if run.scenes else None, scene_maps=run.scene_maps,
-                             paper=paper, paper_methods=self.paper_methods, title=self.title)
+                             curves=run.curves, paper=paper, paper_methods=self.paper_methods, title=self.title)
         inputs.notes = [*self.notes, *inputs.notes]
         inputs.sections = [*self.sections, *paper_scene_sections(results, self.paper)]
         return inputs

@@ -2,5 +2,4 @@
 with the chosen output writers (folder: ``evaluate_to_folder``), golden regression checks (regress), the
 offline demo (demo) and speed/memory benchmarks (bench). Import from the modules
 (``lfbench.runs.folder.evaluate_to_folder``): the package itself imports nothing, since the command line
-reads the demo's defaults at start-up. The results data model is :mod:`lfbench.results` (also importable
-as ``lfbench.runs.results``)."""
+reads the demo's defaults at start-up. The results data model is :mod:`lfbench.results`."""

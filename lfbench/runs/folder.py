@@ -7,7 +7,7 @@ Files in OUT: results.json, results.csv (always), then what the output writers
 (``Maps``), figures/ (``SceneFigures``), ci.csv and table_ci_per_scene (``BootstrapCIs``),
 uncertainty.csv, table_uncertainty.md and figures/sparsification_*.png (``UncertaintyRatings``) and
 html/ (``Site``, drawn from the run's own files). Each writer sees every prediction as it is made
-and writes its files after the scoring.
+and writes its files after the scoring (lfbench.reports.writers.drive_writers).
 
 The files of a run appear together or not at all (lfbench.utils.outputs): they are written into a
 staging folder inside OUT and committed as one set, which replaces the previous run's set (files of
@@ -24,15 +24,15 @@ from typing import Any
 
 from lfbench.data.scene import Scene
 from lfbench.method.base import Method, Prediction
-from lfbench.reports.writers import CIOptions, OutputWriter, RunOutputs, Tables, write_outputs
-from lfbench.results import Results
-from lfbench.runs.runner import check_names, evaluate
+from lfbench.reports.writers import CIOptions, OutputWriter, PredictionSink, RunOutputs, Tables, drive_writers
+from lfbench.results import Results, check_names
+from lfbench.runs.runner import evaluate
 from lfbench.scoring.metrics import RUNTIME_METRICS, Metric, list_metrics
 from lfbench.scoring.rules import ScoringRules
 from lfbench.scoring.score import applicable_metrics
 from lfbench.utils.outputs import staged_outputs
 
-__all__ = ["CIOptions", "evaluate_to_folder"]
+__all__ = ["CIOptions", "check_plan", "evaluate_to_folder"]
 
 
 def evaluate_to_folder(methods: Sequence[Method], scenes: Sequence[Scene], out: str | Path, *,
@@ -56,36 +56,47 @@ def evaluate_to_folder(methods: Sequence[Method], scenes: Sequence[Scene], out: 
     out = Path(out)
     if label is not None and len(methods) != 1:
         raise ValueError("label= names the records of a single method")
-    check_names([(methods, scenes), *more], label)  # records and files that would collide: before any work
+    check_plan([(methods, scenes), *more], label)  # records and files that would collide: before any work
     with staged_outputs(out) as outputs:  # OUT checked and its staging folder made before any work
         scored = [*scenes, *(s for _, group in more for s in group)]
         run = RunOutputs(stage=outputs.stage, rules=rules, scenes=scored, progress=progress)
-        for writer in writers:
-            writer.start(run)
-
-        def each_prediction(method: Method, scene: Scene, pred: Prediction) -> None:
-            for writer in writers:
-                writer.on_prediction(label if label is not None else method.label, scene, pred)
-
         chosen = metrics if metrics is not None else list_metrics("general")  # plugins' general metrics too
         if all_metrics:
             chosen = functools.partial(_all_metrics, rules=rules)
-        score = functools.partial(evaluate, metrics=chosen, rules=rules, on_prediction=each_prediction,
-                                  progress=progress, jobs=jobs)
-        run.results = results = score(methods, scenes)
-        for group_methods, group_scenes in more:
-            results.extend(score(group_methods, group_scenes))
-        if label is not None:
-            results.records = [replace(r, method=label) for r in results.records]
-            results.runs = [replace(r, method=label) for r in results.runs]
-        references = [label if label is not None else m.label
-                      for m in [*methods, *(m for group, _ in more for m in group)] if m.oracle]
-        if references:  # shown as reference lines by the reports, never ranked (Results.references)
-            results.meta["references"] = list(dict.fromkeys(references))
-        results.meta.update(meta or {})
-        staged = [*results.write(outputs.stage), *write_outputs(writers, run)]
-        results.files = outputs.commit_written(staged)
-    return results
+
+        def score(sink: PredictionSink) -> list[Path]:
+            def each_prediction(method: Method, scene: Scene, pred: Prediction) -> None:
+                sink(label if label is not None else method.label, scene, pred)
+
+            run_group = functools.partial(evaluate, metrics=chosen, rules=rules, on_prediction=each_prediction,
+                                          progress=progress, jobs=jobs)
+            run.results = results = run_group(methods, scenes)
+            for group_methods, group_scenes in more:
+                results.extend(run_group(group_methods, group_scenes))
+            if label is not None:
+                results.records = [replace(r, method=label) for r in results.records]
+                results.runs = [replace(r, method=label) for r in results.runs]
+            references = [label if label is not None else m.label
+                          for m in [*methods, *(m for group, _ in more for m in group)] if m.oracle]
+            if references:  # shown as reference lines by the reports, never ranked (Results.references)
+                results.meta["references"] = list(dict.fromkeys(references))
+            results.meta.update(meta or {})
+            return list(results.write(outputs.stage))
+
+        staged = drive_writers(writers, run, produce=score)
+        run.results.files = outputs.commit_written(staged)
+    return run.results
+
+
+def check_plan(groups: Sequence[tuple[Sequence[Method], Sequence[Scene]]], label: str | None = None) -> None:
+    """:func:`lfbench.results.check_names` of a run of ``groups`` ((methods, scenes): each method on each of
+    its scenes), before any work; ``label``: the name the records get instead of the method's label."""
+    names = [label if label is not None else m.label for methods, _ in groups for m in methods]
+    pairs = ((label if label is not None else m.label, s.name) for methods, scenes in groups
+             for m in methods for s in scenes)
+    check_names(names, (), pairs, scene_folders=[s for _, scenes in groups for s in scenes],
+                twice=lambda key: f"method {key[0]!r} would run on scene {key[1]!r} twice (given twice?): its "
+                                  "records would be duplicated")
 
 
 def _all_metrics(scene: Scene, rules: ScoringRules) -> list[Metric]:

@@ -33,7 +33,7 @@ import numpy as np
 
 from lfbench.data.pattern import PatternScene
 from lfbench.data.scene import Scene
-from lfbench.scoring.metrics import Metric, find_metric, get_metric
+from lfbench.scoring.metrics import METRICS, Metric, get_metric
 from lfbench.scoring.rules import ScoringRules
 from lfbench.scoring.score import SceneScore, score_predictions
 from lfbench.utils.errors import RunFailed, SpecError
@@ -153,7 +153,7 @@ class ScoringPool:
             return _Done(score_predictions(scene, predictions, metrics, rules))
         ids = [m.id for m in metrics]
         for metric in metrics:  # a worker knows the registered metrics only
-            if find_metric(metric.id) != metric:
+            if METRICS.find(metric.id) != metric:
                 raise SpecError(f"metric {metric.id!r} is not a registered metric: score it with jobs=1")
         if self._executor is None:
             self._marks = Path(tempfile.mkdtemp(prefix="lfbench-scoring-"))

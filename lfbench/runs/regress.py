@@ -27,7 +27,7 @@ from pathlib import Path
 
 from lfbench.data.scene import HIGHRES, LOWRES
 from lfbench.results import Results, check_unique
-from lfbench.scoring.metrics import Metric, find_metric
+from lfbench.scoring.metrics import METRICS, Metric
 from lfbench.utils.atomic import write_text
 from lfbench.utils.errors import DataError, SpecError
 from lfbench.utils.jsonfile import read_json
@@ -146,7 +146,7 @@ def read_golden(path: str | Path) -> list[GoldenRecord]:
             raise DataError(f"{where}: value must be a finite number, got {rec.value}", path)
         if not _is_tolerance(rec.tolerance):
             raise DataError(f"{where}: {TOLERANCE_RULE}", path)
-        metric = find_metric(rec.metric)
+        metric = METRICS.find(rec.metric)
         if metric is None:
             raise DataError(f"{where}: unknown metric {rec.metric!r}", path)
         problem = _out_of_range(metric, rec.value) or _tolerance_too_wide(metric, rec.tolerance)
@@ -237,7 +237,7 @@ def check(golden: list[GoldenRecord], new: Results, *, skip_absent_scenes: bool 
             findings.append(Finding("resolution", g.key,
                                     f"CHANGED  {name}: scored at {r.resolution}, golden at {g.resolution}"))
             continue
-        metric = find_metric(g.metric)  # known: read_golden refuses unknown ids
+        metric = METRICS.find(g.metric)  # known: read_golden refuses unknown ids
         why = _invalid(metric, r.value)
         if why:
             findings.append(Finding("nan", g.key, f"INVALID  {name}: new {why}"))
@@ -252,7 +252,7 @@ def check(golden: list[GoldenRecord], new: Results, *, skip_absent_scenes: bool 
     known = {g.key for g in golden}
     for key, r in current.items():
         if key not in known:
-            why = _invalid(find_metric(key[2]), r.value)  # a value that cannot be one fails, golden or not
+            why = _invalid(METRICS.find(key[2]), r.value)  # a value that cannot be one fails, golden or not
             findings.append(Finding("new", key, f"NEW      {'/'.join(key)}: {r.value:.6g} is not in the golden file"
                                     + (f" (INVALID: {why})" if why else ""), failed=fail_on_new or why is not None))
     findings.sort(key=lambda f: not f.failed)
@@ -299,7 +299,7 @@ def make_golden(results: Results, tolerance: float | Mapping[str, float], path: 
     if path.is_dir():
         raise DataError("golden file is a folder, expected a file", path)
     for r in results.records:
-        metric = find_metric(r.metric)
+        metric = METRICS.find(r.metric)
         where = f"record {r.method}/{r.scene}/{r.metric}"
         if metric is None:
             raise DataError(f"{where}: unknown metric {r.metric!r}, cannot make it golden", path)

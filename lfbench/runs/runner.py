@@ -19,7 +19,6 @@ from lfbench.scoring.metrics import GENERAL_METRICS, Metric
 from lfbench.scoring.rules import ScoringRules
 from lfbench.scoring.score import SceneScore
 from lfbench.utils.errors import DataError
-from lfbench.utils.names import FileNames
 
 log = logging.getLogger(__name__)
 
@@ -43,9 +42,9 @@ def evaluate(methods: Sequence[Method], scenes: Sequence[Scene], *,
     ``jobs`` is. A (method, scene) pair the method cannot serve (e.g. no stored map) is skipped with a
     warning (logger ``lfbench.runs.runner``); a method that can serve none of the scenes is an error
     (DataError, raised before any work). ``on_prediction`` sees each prediction (to save maps or draw
-    figures), scene by scene.
+    figures), scene by scene. Their names are trusted: the entry point checked them once, before any work
+    (lfbench.runs.folder.evaluate_to_folder: lfbench.results.check_names).
     """
-    check_names([(methods, scenes)])
     reasons = check_runnable(methods, scenes)  # each (method, scene) asked once
     results = Results(meta={"scoring": rules.to_meta()})
     bar = tqdm(total=len(methods) * len(scenes), desc="evaluate", unit="run", disable=None if progress else True,
@@ -96,28 +95,6 @@ def _record(results: Results, method: Method, scene: Scene, pred: Prediction, sc
     if score.nonfinite_pixels:
         log.warning("lfbench: %s on %s: %d non-finite pixels inside the evaluation mask (%s)", method.label,
                     scene.name, score.nonfinite_pixels, _NONFINITE_RULE[rules.toolkit])
-
-
-def check_names(groups: Sequence[tuple[Sequence[Method], Sequence[Scene]]], label: str | None = None) -> None:
-    """DataError before any work when the records or files of a run of ``groups`` ((methods, scenes)
-    pairs, each method on each of its scenes) would collide: a (method, scene) pair twice (the same
-    method given twice), two methods or two scenes whose names are one file name (lfbench.utils.names),
-    two scenes of one name from different folders (lfbench.data.scene.check_scene_names). ``label``:
-    the name the records get instead of the method's label."""
-    from lfbench.data.scene import check_scene_names
-
-    check_scene_names([s for _, scenes in groups for s in scenes])
-    names = FileNames("method label")
-    pairs: set[tuple[str, str]] = set()
-    for methods, scenes in groups:
-        for method in methods:
-            name = label if label is not None else method.label
-            names(name)
-            for scene in scenes:
-                if (name, scene.name) in pairs:
-                    raise DataError(f"method {name!r} would run on scene {scene.name!r} twice (given twice?): its "
-                                    "records would be duplicated")
-                pairs.add((name, scene.name))
 
 
 def check_runnable(methods: Sequence[Method], scenes: Sequence[Scene]) -> list[list[str | None]]:

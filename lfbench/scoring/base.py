@@ -14,7 +14,6 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from importlib import metadata
 
 import numpy as np
 
@@ -207,7 +206,10 @@ class MetricRegistry(Registry[Metric]):
     """
 
     def __init__(self, group: str | None = None) -> None:
-        super().__init__("metric", Metric, group=group)
+        # lfbench's own metrics load first (the benchmark's order), even where an install's metadata is older
+        # than the group (e.g. a stale lfbench.egg-info beside the sources)
+        super().__init__("metric", Metric, group=group,
+                         builtins={"hci": BUILTIN_METRICS} if group == METRICS_GROUP else None)
         self._families: list[tuple[str, Callable[[str], Metric | None]]] = []
 
     def register(self, metric: Metric) -> Metric:
@@ -223,15 +225,6 @@ class MetricRegistry(Registry[Metric]):
                 raise ValueError(f"metric {obj.id!r} registered as {name!r}: the name must be the metric's id")
             aliases = aliases or ((obj.toolkit_id,) if obj.toolkit_id else ())
         super().add(name, obj, entry=entry, aliases=aliases)
-
-    def entry_points(self) -> list[metadata.EntryPoint]:
-        """The group's entry points, lfbench's own first (then the plugins', by name). Metadata of an install
-        older than the group (e.g. a stale ``lfbench.egg-info`` beside the sources) lacks lfbench's own entry
-        point: it is added then, so that the benchmark's metrics are never missing."""
-        eps = sorted(super().entry_points(), key=lambda ep: not ep.value.startswith("lfbench."))
-        if self.group == METRICS_GROUP and not any(ep.value == BUILTIN_METRICS for ep in eps):
-            eps.insert(0, metadata.EntryPoint(name="hci", value=BUILTIN_METRICS, group=METRICS_GROUP))
-        return eps
 
     def register_family(self, pattern: str, make: Callable[[str], Metric | None]) -> None:
         """A parametrised family: ``make(id)`` returns the metric for an id it understands, else None;

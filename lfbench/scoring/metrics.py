@@ -1,4 +1,4 @@
-"""Every metric by id: the process-wide registry :data:`METRICS` (:func:`get_metric`, :func:`find_metric`,
+"""Every metric by id: the process-wide registry :data:`METRICS` (:func:`get_metric`, ``METRICS.find``,
 :func:`list_metrics`) and the one display order of metric ids (:func:`metric_order`).
 
 The registry is assembled here from the definitions beside their functions: the general and runtime
@@ -56,7 +56,6 @@ __all__ = [
     "PERCENT",
     "NON_NEGATIVE",
     "get_metric",
-    "find_metric",
     "list_metrics",
     "describe_metric",
     "scored_metrics",
@@ -84,11 +83,6 @@ def get_metric(metric_id: str) -> Metric:
     return METRICS.get(metric_id)
 
 
-def find_metric(metric_id: str) -> Metric | None:
-    """Like :func:`get_metric`, but None for an unknown id (e.g. a plugin's own column)."""
-    return METRICS.find(metric_id)
-
-
 def list_metrics(category: str | None = None) -> tuple[Metric, ...]:
     """Every registered metric (optionally of one category: 'general', 'region', 'stratified')."""
     return METRICS.all(category)
@@ -100,7 +94,7 @@ def scored_metrics(ids: Iterable[str], source: str | Path | None = None) -> list
     that declared ``ids`` (a dataset's TOML file): an id that is not a general metric is a DataError naming it."""
     chosen = []
     for metric_id in dict.fromkeys(ids):
-        metric = find_metric(metric_id) if source is not None else get_metric(metric_id)
+        metric = METRICS.find(metric_id) if source is not None else get_metric(metric_id)
         if metric is None or metric.resolution != "scene" or metric.is_runtime:
             raise DataError(f"'protocol.metrics': {metric_id!r} is not a general metric (e.g. badpix_0.07, mse_x100, "
                             "q25_x100)", source)
@@ -112,11 +106,11 @@ def scored_metrics(ids: Iterable[str], source: str | Path | None = None) -> list
 def describe_metric(metric_id: str) -> Metric:
     """The metric an id names, for labels and directions in reports: the registered one, else
     :meth:`Metric.undefined` (the id as its name, no unit, lower is better)."""
-    return find_metric(metric_id) or Metric.undefined(metric_id)
+    return METRICS.find(metric_id) or Metric.undefined(metric_id)
 
 
 def _order(metric_id: str) -> int | None:
-    metric = find_metric(metric_id)
+    metric = METRICS.find(metric_id)
     return metric.order if metric is not None and metric.id == metric_id else None
 
 

@@ -480,7 +480,7 @@ def ci_records(results, errors: Mapping[tuple[str, str], ErrorsLike], metrics: S
                block: int | None = None, average: bool = True, progress: bool = False):
     """Long DataFrame of CIs: columns method, scene, metric, value, low, high, n_pixels, resolution.
 
-    ``results``: a :class:`lfbench.runs.results.Results`; ``errors``: (method label, scene) -> per-pixel
+    ``results``: a :class:`lfbench.results.Results`; ``errors``: (method label, scene) -> per-pixel
     errors (:class:`ScoredErrors` or :func:`scored_errors` output) scored as the results were.
     ``value`` is the Results value; low/high the bootstrap over pixels (NaN where no errors were
     given or the metric has no bootstrap). With ``average``, a row per (method, metric) with

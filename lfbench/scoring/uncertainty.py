@@ -35,7 +35,7 @@ import numpy as np
 import pandas as pd
 
 from lfbench.data.scene import Scene
-from lfbench.scoring.metrics import find_metric
+from lfbench.scoring.metrics import METRICS
 from lfbench.scoring.prepare import SceneReference
 from lfbench.scoring.rules import ScoringRules
 from lfbench.scoring.stats import ScoredErrors, pixel_loss
@@ -64,7 +64,7 @@ def _unit_of(measure: str) -> str:
     """The unit of a measure: px for 'abs', else the metric's own (lfbench.scoring.metrics registry)."""
     if measure == "abs":
         return "px"
-    metric = find_metric(measure)
+    metric = METRICS.find(measure)
     return metric.unit if metric is not None else ""
 
 

@@ -10,8 +10,14 @@ commands), in the style of lm-evaluation-harness's ``Registry(base_cls=...)``.
 - a registry with an entry-point ``group`` loads the plugins of that group on demand: the entry point
   of the asked name first, every entry point only when that is not enough (listing all names).
   An entry point names a module (importing it runs the plugin's registering decorators) or an object
-  (registered under the entry point's name when it is of this registry's kind). A plugin that fails to
-  load is recorded in :attr:`Registry.load_errors` and does not break the others.
+  (registered under the entry point's name when it is of this registry's kind); a registry may load its
+  entry points its own way (``load=``: a command is a :class:`Lazy` of its module, a paper reference its
+  data file read). lfbench's own entries (``builtins=``) come first, as entry points of the group, and a
+  plugin cannot replace one. A plugin that fails to load is recorded in :attr:`Registry.load_errors` and
+  does not break the others.
+
+This is the one entry-point loader: methods, trainable networks, metrics, datasets, commands and
+references all load their plugins through it.
 """
 
 from __future__ import annotations
@@ -19,7 +25,7 @@ from __future__ import annotations
 import importlib
 import inspect
 import types
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 from importlib import metadata
 from typing import Any, Generic, TypeVar
@@ -56,18 +62,24 @@ class Registry(Generic[T]):
     ``base_cls``: what may be registered: a subclass or an instance of it (a runtime-checkable Protocol
     works too); None accepts anything callable. ``factories``: functions are accepted as well (they
     make a ``base_cls`` when called; the caller checks what they return). ``group``: the entry-point
-    group whose plugins fill the registry. An *entry* is what :meth:`get` returns: the object itself,
-    or what ``make(name, obj)`` derives from it (e.g. a method's introspected info), or the ``entry=``
-    given to :meth:`add`.
+    group whose plugins fill the registry; ``load(entry_point)``: the object an entry point registers
+    (default: ``entry_point.load()``); ``builtins``: lfbench's own entries of the group, name -> target,
+    loaded first whether or not the install's metadata lists them (an older install's may not). An
+    *entry* is what :meth:`get` returns: the object itself, or what ``make(name, obj)`` derives from it
+    (e.g. a method's introspected info), or the ``entry=`` given to :meth:`add`.
     """
 
     def __init__(self, kind: str, base_cls: type | None = None, *, group: str | None = None,
-                 factories: bool = False, make: Callable[[str, Any], T] | None = None) -> None:
+                 factories: bool = False, make: Callable[[str, Any], T] | None = None,
+                 load: Callable[[metadata.EntryPoint], Any] | None = None,
+                 builtins: Mapping[str, str] | None = None) -> None:
         self.kind = kind
         self.base_cls = base_cls
         self.group = group
         self.factories = factories
         self.make = make
+        self.load = load
+        self.builtins = dict(builtins or {})
         self._objects: dict[str, Any] = {}  # name -> the registered object (or a Lazy)
         self._entries: dict[str, T] = {}
         self._aliases: dict[str, str] = {}  # other name -> name
@@ -188,10 +200,13 @@ class Registry(Generic[T]):
     # -- plugins ---------------------------------------------------------------------------------
 
     def entry_points(self) -> list[metadata.EntryPoint]:
-        """The entry points of the group, sorted by name (none without a group)."""
+        """The entry points of the group: lfbench's own (``builtins``) first, then the plugins', by name
+        (none without a group)."""
         if self.group is None:
             return []
-        return sorted(metadata.entry_points(group=self.group), key=lambda ep: ep.name)
+        own = [metadata.EntryPoint(name=n, value=v, group=self.group) for n, v in self.builtins.items()]
+        plugins = (ep for ep in metadata.entry_points(group=self.group) if ep.value not in self.builtins.values())
+        return own + sorted(plugins, key=lambda ep: ep.name)
 
     def _load_entry_points(self, name: str | None = None) -> None:
         """Load the plugins: only the entry points called ``name`` when there are some (so that using one
@@ -210,13 +225,18 @@ class Registry(Generic[T]):
             self._load_entry_point(ep)
 
     def _load_entry_point(self, ep: metadata.EntryPoint) -> None:
+        if ep.name in self.builtins and ep.value != self.builtins[ep.name]:
+            self.load_errors[ep.name] = f"{ep.value} would replace a built-in {self.kind}; left out"
+            return
         try:
-            obj = ep.load()
+            obj = self.load(ep) if self.load is not None else ep.load()
         except Exception as exc:  # noqa: BLE001 - a broken plugin must not break the others
             self.load_errors[ep.name] = f"{type(exc).__name__}: {exc}"  # shown by `lfbench methods`
             return
-        if isinstance(obj, types.ModuleType) or ep.name in self._objects or not self.accepts(obj):
+        if isinstance(obj, types.ModuleType) or ep.name in self._objects:
             return  # a module registered what it holds when it was imported
+        if not (isinstance(obj, Lazy) or self.accepts(obj)):
+            return
         try:
             self.add(ep.name, obj)
         except (TypeError, ValueError) as exc:

@@ -27,7 +27,7 @@ from lfbench.data.scene import LightField
 from lfbench.method.base import Method, Prediction
 from lfbench.method.network_method import NetworkMethod
 from lfbench.method.params import Range
-from lfbench.method.registry import method_info, register_method
+from lfbench.method.registry import REGISTRY, register_method
 from lfbench.method.trainable import get_trainable
 from lfbench.utils.errors import DataError, SpecError
 from lfbench.utils.hardware import DEVICE_HELP
@@ -184,7 +184,7 @@ class SubFocal(NetworkMethod):
     def _variant_defaults(self) -> dict:
         """The parameter defaults of this variant (the registry's, else the signature's)."""
         try:
-            return {k: p.default for k, p in method_info(self.variant).params.items()}
+            return {k: p.default for k, p in REGISTRY.info(self.variant).params.items()}
         except SpecError:
             return _signature_defaults()
 
