@@ -27,8 +27,9 @@ import dataclasses
 from pathlib import Path
 
 from lfbench.ablation.executor import EXECUTORS, ClusterOptions
-from lfbench.cli.argtypes import int_range
+from lfbench.cli.argtypes import add_flag
 from lfbench.utils.errors import SpecError
+from lfbench.utils.flags import JOBS
 from lfbench.utils.tomlfile import toml_text
 
 HELP = ("train and score a grid of network variants (SubFocal's Tables IV, V, beta sweep, I/II beside the paper's "
@@ -39,8 +40,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("spec", type=Path, metavar="SPEC.toml", help="ablation spec (see ablations/*.toml)")
     p.add_argument("--out", type=Path, default=None,
                    help="output folder (default: the spec's 'out', else runs/ablate/<spec name>)")
-    p.add_argument("--jobs", type=int_range(1, 1024), default=1, metavar="N",
-                   help="cells trained at a time, each in its own process with cores / N torch threads")
+    add_flag(p, JOBS, detail="each trains one cell with cores / N torch threads (--executor pool)")
     p.add_argument("--paper", default=None, metavar="DIR",
                    help="folder of the paper's tables (default: $LFBENCH_PAPER_DIR, else $LFBENCH_HCI_ROOT/../paper)")
     p.add_argument("--cells", default="", metavar="IDS",
@@ -73,8 +73,6 @@ def run(args: argparse.Namespace) -> int:
     from lfbench.ablation.spec import load_spec  # imported here (torch): `lfbench --help` starts without it
 
     spec = load_spec(args.spec)
-    if args.jobs < 1:
-        raise SpecError(f"--jobs must be >= 1, got {args.jobs}")
     if args.cells.strip():
         wanted = [c.strip() for c in args.cells.split(",") if c.strip()]
         known = {c.id: c for c in spec.cells}

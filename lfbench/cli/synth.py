@@ -13,18 +13,21 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from lfbench.cli.argtypes import add_flag
+from lfbench.utils.flags import SCENE_COUNT, SEED
+
 HELP = "generate synthetic scenes (HCI or UrbanLF-Syn layout) with exact ground truth"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", required=True, type=Path, metavar="DIR", help="data root to write into")
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    add_flag(p, SEED)
     p.add_argument("--layout", choices=("hci", "urbanlf-syn"), default="hci",
                    help="the dataset layout written (default hci; urbanlf-syn: 9x9 views, non-square sizes)")
     p.add_argument("--size", type=_size, default=None, metavar="S|WxH",
                    help="views are S x S px, or W x H px with --layout urbanlf-syn (default 128; urbanlf-syn: "
                         "640x480)")
-    p.add_argument("--scenes", type=int, default=4, metavar="K", help="number of scenes (default 4)")
+    add_flag(p, SCENE_COUNT)
     p.add_argument("--numbers", type=_numbers, default=None, metavar="N,N,...",
                    help="--layout urbanlf-syn: the sample numbers written (Image<N>/, e.g. 11,27,34,50,54,68,69,70, "
                         "the paper's Table III samples); replaces --scenes")
