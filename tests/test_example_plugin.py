@@ -72,7 +72,7 @@ def test_the_plugin_is_listed_with_its_parameters(plugin):
     assert "weights (path, default None): weights file of this network" in out
     # the network's own parameters, with their help (issue 22.2)
     assert "channels (int [1, 1024], default 8): channels of the hidden 3x3 convolutions" in out
-    assert "interval (float, default 1.0, 0.01 to 8): step of the candidate disparities in px" in out
+    assert "interval (float [0.01, 8], default 1.0): step of the candidate disparities in px" in out
     info = _ok(lfbench(env, "info", "tinycnn"))
     assert info.count("channels of the hidden 3x3 convolutions") == 1  # each help line once
     assert "no weights: give tinycnn:weights=FILE.pt" in info

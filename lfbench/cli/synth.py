@@ -14,9 +14,13 @@ import argparse
 from pathlib import Path
 
 from lfbench.cli.argtypes import add_flag
-from lfbench.utils.flags import SCENE_COUNT, SEED
+from lfbench.utils.flags import MAX_JOBS, SCENE_COUNT, SEED, Flag
+from lfbench.utils.options import Range
 
 HELP = "generate synthetic scenes (HCI or UrbanLF-Syn layout) with exact ground truth"
+
+WORKERS = Flag("workers", int | None, None, "scenes generated at a time in separate processes (default: the "
+               "available cores)", Range(1, MAX_JOBS), "N")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -35,8 +39,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="category (split) folder (default synthetic; urbanlf-syn: val)")
     p.add_argument("--angular", type=int, default=9, metavar="A", help="A x A views, odd (default 9)")
     p.add_argument("--force", action="store_true", help="overwrite existing scene folders")
-    p.add_argument("--workers", type=int, default=None, metavar="N",
-                   help="scenes generated at a time in separate processes (default: the available cores)")
+    add_flag(p, WORKERS)
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
