@@ -226,8 +226,8 @@ def test_bad_budget_and_missing_base(tmp_path, capsys):
     code, err = run_main(["ablate", str(path), "--list"], capsys)
     assert code == 2 and "budget.steps: expected 2 numbers" in err and str(path) in err
     # [budget.model] holds the network's own parameters, of their types; the old budget.width says where it went
-    for budget, problem in (("model = { width = 2.5 }", "budget.model: width expects int, got float 2.5"),
-                            ("model = { widht = 4 }", "budget.model: unknown key(s): widht (accepted: angular, "
+    for budget, problem in (("model = { width = 2.5 }", "budget.model.width: expected int, got float"),
+                            ("model = { widht = 4 }", "[budget.model] unknown key(s): widht (accepted: angular, "
                                                       "attention, d_max, d_min, interpolation, interval, width)"),
                             ("width = 4", "budget.width: is now [budget.model] width")):
         path.write_text(write_spec(tmp_path, "").read_text().replace("[budget]\nthreads = 1\n",

@@ -294,7 +294,7 @@ def test_a_good_network_passes_and_each_broken_one_fails_its_check_with_its_line
 
 def test_bad_input_is_one_line_exit_2(broken, capsys, tmp_path):
     assert_one_error_line(*run_cli(capsys, "check-plugin", "nosuchnet")[::2], "nosuchnet")
-    assert_one_error_line(*run_cli(capsys, "check-plugin", "base:hidden=0")[::2], "hidden must be 1 to 64, got 0")
+    assert_one_error_line(*run_cli(capsys, "check-plugin", "base:hidden=0")[::2], "hidden: must be in [1, 64], got 0")
     assert_one_error_line(*run_cli(capsys, "check-plugin", "base", "--weights", tmp_path / "no.pt")[::2],
                           "no.pt: weights file not found")
     (tmp_path / "w.json").write_text("{}")

@@ -172,14 +172,14 @@ def test_predict_views_npy_with_a_plugin_method(data, tmp_path, plugin, capsys):
 def test_methods_and_info(capsys, plugin):
     rc, out, _ = run_cli(capsys, "methods")
     assert rc == 0
-    assert "gt: Oracle" in out and "published: " in out and "path (Path, required)" in out
+    assert "gt: Oracle" in out and "published: " in out and "path (path, required)" in out
     assert f"{plugin['centre']}: Returns the centre view" in out
     assert f"{plugin['broken']}: plugin failed to load: ModuleNotFoundError" in out
     rc, out, _ = run_cli(capsys, "methods", "--names")
     assert rc == 0 and {"gt", "published", plugin["centre"], plugin["offset"]} <= set(out.split())
     rc, out, _ = run_cli(capsys, "info", "published")
     assert rc == 0
-    assert out.startswith("published: Precomputed results") and "path (Path, required): the submission folder" in out
+    assert out.startswith("published: Precomputed results") and "path (path, required): the submission folder" in out
 
 
 # --------------------------------------------------------------------------- bad input

@@ -69,10 +69,10 @@ def test_the_plugin_is_listed_with_its_parameters(plugin):
     _, env, _ = plugin
     out = _ok(lfbench(env, "methods"))
     assert "tinycnn: A tiny CNN over the stacked views (lfbench's example plugin)." in out
-    assert "weights (Path | None, default None): weights file of this network" in out
+    assert "weights (path, default None): weights file of this network" in out
     # the network's own parameters, with their help (issue 22.2)
-    assert "channels (int, default 8, 1 to 1024): channels of the hidden 3x3 convolutions" in out
-    assert "interval (float, default 1.0, 0.01 to 8): step of the candidate disparities in px" in out
+    assert "channels (int [1, 1024], default 8): channels of the hidden 3x3 convolutions" in out
+    assert "interval (float [0.01, 8], default 1.0): step of the candidate disparities in px" in out
     info = _ok(lfbench(env, "info", "tinycnn"))
     assert info.count("channels of the hidden 3x3 convolutions") == 1  # each help line once
     assert "no weights: give tinycnn:weights=FILE.pt" in info
@@ -160,7 +160,8 @@ def test_foreign_weights_and_bad_parameters_are_one_line(plugin, trained, tmp_pa
                           (f"tinycnn:weights={trained / 'checkpoint.pt'}", "a training checkpoint"),
                           (f"tinycnn:weights={trained / 'final.pt'},channels=4",
                            "channels=4 (checkpoint: 8) conflicts with the weights"),
-                          (f"tinycnn:weights={trained / 'final.pt'},channels=0", "tinycnn:channels must be 1 to 1024"),
+                          (f"tinycnn:weights={trained / 'final.pt'},channels=0",
+                           "tinycnn:channels: must be in [1, 1024]"),
                           (f"subfocal:weights={trained / 'final.pt'}", "a tinycnn checkpoint, not subfocal")):
         proc = lfbench(env, "evaluate", "--data", data, "--method", spec, "--out", tmp_path / "never")
         assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1, proc.stderr
@@ -215,8 +216,8 @@ def test_bench_times_the_plugin_network(plugin, tmp_path):
     # refused in one line before any case process starts (issue 22.9)
     shipped = ROOT / "methods" / "weights" / "subfocal_small.pt"
     for args, message in ((["inference", "--model", "tinycnn", "--width", "3"], "unrecognized arguments: --width"),
-                          (["inference", "--model", "tinycnn:channels=0"], "channels must be 1 to 1024, got 0"),
-                          (["inference", "--model", "tinycnn", "--channels", "0"], "channels must be 1 to 1024"),
+                          (["inference", "--model", "tinycnn:channels=0"], "channels: must be in [1, 1024], got 0"),
+                          (["inference", "--model", "tinycnn", "--channels", "0"], "--channels: must be in [1, 1024]"),
                           (["inference", "--model", "tinycnn", "--weights", str(shipped)],
                            "a subfocal checkpoint, not tinycnn"),
                           (["train", "--model", "tinycnn", "--path", "reference"], "unrecognized arguments: --path")):

@@ -45,14 +45,14 @@ def write_config(tmp_path: Path, text: str, name: str = "c.toml") -> Path:
     (STAGE1 + STAGE2.format(beta="nan"), "", "", "beta must be a finite number >= 0"),
     (STAGE1.replace("lr = 1e-3", "lr = nan"), "", "", "stages[0].lr: must be a finite number"),
     (STAGE1.replace("lr = 1e-3", "lr = inf"), "", "", "stages[0].lr: must be a finite number"),
-    (STAGE1.replace("lr = 1e-3", "lr = 0"), "", "", "stages[0].lr: must be > 0.0"),
-    (STAGE1.replace("steps = 2", "steps = 0"), "", "", "stages[0].steps: must be >= 1"),
+    (STAGE1.replace("lr = 1e-3", "lr = 0"), "", "", "stages[0].lr: must be > 0, got 0.0"),
+    (STAGE1.replace("steps = 2", "steps = 0"), "", "", "stages[0].steps: must be in [1, 1000000000], got 0"),
     (STAGE1 + "betas = [1.5, 0.9]\n", "", "", "stages[0].betas: expected numbers in [0, 1)"),
     (STAGE1, "", "", None),  # placeholder replaced below (batch_size)
 ], ids=["beta-str", "beta-neg", "beta-nan", "lr-nan", "lr-inf", "lr-0", "steps-0", "betas", "ok"])
 def test_every_stage_is_validated_before_step_1(tmp_path, capsys, data_root, stages, training, data, problem):
     if problem is None:
-        training, problem = "batch_size = 1000000000\n", "training.batch_size: must be <= 4096"
+        training, problem = "batch_size = 1000000000\n", "training.batch_size: must be in [1, 4096], got 1000000000"
         stages = STAGE1.replace("batch_size = 1\n", "")
     text = config_text(data_root, stages, data=data)
     if "batch_size = 1000000000" in training:

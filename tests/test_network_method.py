@@ -133,7 +133,7 @@ def test_a_network_registered_once_runs_as_a_method(nets):
     assert {"weights", "device", "precision", "threads", "tile", "hidden", "scale", "angular"} == set(info.params)
     text = info.describe()
     assert "network parameters (with weights=..., the weights' own" in text
-    assert "hidden (int, default 4, 1 to 64): hidden channels" in text
+    assert "hidden (int [1, 64], default 4): hidden channels" in text
     lf = _lf()
     method = create_from_spec(f"stack:weights={nets['stack']},device=cpu,threads=1")
     assert isinstance(method, NetworkMethod) and method.available_for(lf) is None
@@ -169,9 +169,9 @@ def test_the_two_class_style_still_works(nets):
     info = REGISTRY.info("stack2")
     assert info.method_class is StackMethod and list(info.params) == ["weights"]
     text = info.describe()  # the network's parameters are listed beside the method's own
-    assert "weights (Path, required): weights file" in text
+    assert "weights (path, required): weights file" in text
     assert "network parameters (the [model] keys of lfbench train and the ablation axes of network 'stack2')" in text
-    assert "hidden (int, default 4, 1 to 64): hidden channels" in text
+    assert "hidden (int [1, 64], default 4): hidden channels" in text
     lf = _lf()
     method = create("stack2", weights=nets["stack2"])
     assert type(method) is StackMethod
@@ -188,9 +188,9 @@ def test_parameters_given_must_agree_with_the_weights(nets):
     assert create("stack", weights=nets["stack"], hidden=4).available_for(lf) is None
     with pytest.raises(SpecError, match=r"stack: hidden=6 \(checkpoint: 4\) conflicts with the weights"):
         create("stack", weights=nets["stack"], hidden=6).available_for(lf)
-    with pytest.raises(SpecError, match="stack:hidden must be 1 to 64, got 0"):
+    with pytest.raises(SpecError, match=r"stack:hidden: must be in \[1, 64\], got 0"):
         create_from_spec(f"stack:weights={nets['stack']},hidden=0")
-    with pytest.raises(SpecError, match="stack:hidden expects int, got '4.5'"):
+    with pytest.raises(SpecError, match="stack:hidden: expected int, got '4.5'"):
         create_from_spec(f"stack:weights={nets['stack']},hidden=4.5")
 
 

@@ -84,7 +84,7 @@ def test_the_readme_plugin_runs_with_the_readme_commands(readme_plugin):
                for c in commands]
     listing = outputs[0]
     assert "epinet: EPI streams through the centre row and column, a distribution over disparity bins." in listing
-    assert "features (int, default 8, 1 to 256): channels of each EPI stream" in listing
+    assert "features (int [1, 256], default 8): channels of each EPI stream" in listing
 
     # trained: both stages ran, the distribution loss too, and the weights say which network they hold
     final = torch.load(src / "runs" / "epi" / "final.pt", map_location="cpu", weights_only=True)

@@ -87,12 +87,12 @@ def test_coerce_untyped_follows_the_default():
 
 
 @pytest.mark.parametrize("kind, text, fragment", [
-    (bool, "maybe", "m:x expects bool, got 'maybe'"),
-    (int, "1.5", "m:x expects int, got '1.5'"),
-    (int, "", "expects int"),
-    (float, "fast", "m:x expects float, got 'fast'"),
-    (Optional[int], "x", "expects int"),  # noqa: UP045
-    (Literal["a", "b"], "c", "m:x must be one of a, b, got 'c'"),
+    (bool, "maybe", "m:x: expected bool, got 'maybe'"),
+    (int, "1.5", "m:x: expected int, got '1.5'"),
+    (int, "", "m:x: expected int, got ''"),
+    (float, "fast", "m:x: expected float, got 'fast'"),
+    (Optional[int], "x", "m:x: expected int, got 'x'"),  # noqa: UP045
+    (Literal["a", "b"], "c", "m:x: expected one of 'a', 'b', got 'c'"),
 ])
 def test_coerce_errors(kind, text, fragment):
     with pytest.raises(SpecError, match=fragment.replace("(", r"\(")):
@@ -161,8 +161,8 @@ def test_create_from_spec_converts_types(reg):
 @pytest.mark.parametrize("spec, fragment", [
     ("nope", "Unknown method 'nope'. Available: needs-path, toy"),
     ("toy:speed=3", "method 'toy' has no parameter 'speed'; parameters: scale, steps, flag, where, mode"),
-    ("toy:steps=two", "toy:steps expects int, got 'two'"),
-    ("toy:mode=c", "toy:mode must be one of a, b"),
+    ("toy:steps=two", "toy:steps: expected int, got 'two'"),
+    ("toy:mode=c", "toy:mode: expected one of 'a', 'b', got 'c'"),
     ("toy:steps=0", "method 'toy': steps must be >= 1"),
     ("needs-path", "method 'needs-path' needs parameter path (e.g. needs-path:path=...)"),
 ])
@@ -194,8 +194,8 @@ def test_describe_lists_parameters_with_types_defaults_and_help(reg):
     assert text.splitlines()[0] == "toy: A toy method for the registry tests."
     assert "scale (float, default 1.0): multiplies the ground truth" in text
     assert "steps (int, default 3): number of steps" in text
-    assert "mode (Literal['a', 'b'], default 'a'): how to do it" in text
-    assert "path (Path, required): required folder" in reg.info("needs-path").describe()
+    assert "mode (one of 'a', 'b', default 'a'): how to do it" in text
+    assert "path (path, required): required folder" in reg.info("needs-path").describe()
 
 
 def test_builtin_methods_through_the_global_registry(tmp_path):
@@ -307,7 +307,7 @@ def test_a_variant_is_the_factory_registered_with_its_defaults(reg):
     assert m.label == "toy-fast:scale=2.0"  # the variant's defaults are not spelled out
     assert reg.create("toy-fast", steps=5).steps == 5
     text = info.describe()
-    assert "steps (int, default 1): one step only" in text and "mode (Literal['a', 'b'], default 'b')" in text
+    assert "steps (int, default 1): one step only" in text and "mode (one of 'a', 'b', default 'b')" in text
     assert reg.info("toy").params["steps"].default == 3  # the base name keeps its own defaults
     with pytest.raises(TypeError, match="variant 'bad' gives defaults for speed"):
         register_method("bad", registry=reg, defaults={"speed": 2})(Toy)

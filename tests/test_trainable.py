@@ -61,7 +61,7 @@ def test_registration_parameters_and_axes(registry):
         get_trainable("nope")
     with pytest.raises(TypeError, match="registered as trainable network 'bad' is not a Trainable"):
         register_trainable("bad", registry)(Line)
-    with pytest.raises(ValueError, match="unknown \\[model\\] key\\(s\\) slope \\(accepted: a, angular, bias\\)"):
+    with pytest.raises(ValueError, match="\\[model\\] unknown key\\(s\\): slope \\(accepted: a, angular, bias\\)"):
         t.check_params({"slope": 2})
 
 

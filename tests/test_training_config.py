@@ -46,16 +46,16 @@ def write_config(path: Path, cfg: dict) -> Path:
     ({"training": {"precision": "fp16"}}, "training.precision: expected one of 'fp32', 'bf16', got 'fp16'"),
     ({"training": {"batch": 3}}, "[training] unknown key(s): batch (accepted: accumulate, batch_size, channels_last"),
     ({"": {"sed": 3}}, "unknown key(s): sed (accepted: augment, data, init, method, model, out, seed, stages"),
-    ({"data": {"patch": 4}}, "data.patch: must be >= 8, got 4"),
+    ({"data": {"patch": 4}}, "data.patch: must be in [8, 1024], got 4"),
     ({"data": {"roots": ["a", 1]}}, "data.roots: expected list of str, got list of int and str"),
     ({"data": {"stride_weights": [1, -1], "strides": [1, 2]}},
      "data.stride_weights: expected numbers >= 0, got [1.0, -1.0]"),
     ({"augment": {"gamma": [1.2]}}, "augment.gamma: expected list of 2 float, got list of 1"),
     ({"augment": {"gamma": [1.2, 0.8]}}, "augment.gamma: expected [low, high] with 0 < low <= high"),
     ({"augment": {"flip": float("nan")}}, "augment.flip: must be a finite number, got nan"),
-    ({"model": {"width": "16"}}, "[model] width expects int, got str '16'"),
-    ({"model": {"width": 16.5}}, "[model] width expects int, got float 16.5"),
-    ({"model": {"interval": True}}, "[model] interval expects float, got bool True"),
+    ({"model": {"width": "16"}}, "model.width: expected int, got str"),
+    ({"model": {"width": 16.5}}, "model.width: expected int, got float"),
+    ({"model": {"interval": True}}, "model.interval: expected float, got bool"),
     ({"model": {"widht": 16}}, "[model] unknown key(s): widht (accepted: angular, attention, d_max, d_min, "
                                "interpolation, interval, width)"),
     # the network's own check of a value, before the data is generated or anything is written
@@ -174,7 +174,7 @@ def test_coerce_accepts_values_of_the_declared_type(value, kind, expected):
     (1, tuple[str, ...], "expected list of str, got int"),
     ({"a": "x"}, dict[str, float], "expected table of float, got a table with list of str"),
     ("16", Annotated[int, "channels"], "expected int, got str"),
-    (5, str | None, "expected str, got int"), (5, Path | None, "expected str (a path), got int"),
+    (5, str | None, "expected str, got int"), (5, Path | None, "expected path, got int"),
 ])
 def test_coerce_names_both_types_and_never_the_value(value, kind, message):
     with pytest.raises(TypeMismatch) as info:

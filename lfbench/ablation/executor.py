@@ -29,6 +29,8 @@ from pathlib import Path
 from typing import ClassVar, TypeVar
 
 from lfbench.utils.errors import SpecError
+from lfbench.utils.flags import Flag
+from lfbench.utils.options import Range
 from lfbench.utils.registry import Lazy, Registry
 
 _log = logging.getLogger(__name__)
@@ -75,22 +77,32 @@ def init_worker(threads: int, gpu_queue=None) -> None:
 
 # --------------------------------------------------------------------------- the interface
 
+#: The numbers of :class:`ClusterOptions`, declared once: ``lfbench ablate`` adds them as flags, and
+#: ClusterOptions (public API) checks a value given from Python by the same declaration.
+CLUSTER_FLAGS = (Flag("gpus_per_job", int, 0, "GPUs of each cell's job (--executor)", Range(0), "N"),
+                 Flag("cpus_per_job", int, 0, "CPUs of each cell's job (--executor; 0: the spec's threads per cell)",
+                      Range(0), "N"),
+                 Flag("timeout_min", int, 24 * 60, "time limit of each job in minutes", Range(1), "MIN"),
+                 Flag("max_parallel", int, 0, "SLURM jobs running at once (0: no limit)", Range(0), "N"))
+_GPUS, _CPUS, _TIMEOUT, _PARALLEL = (f.default for f in CLUSTER_FLAGS)
+
+
 @dataclass(frozen=True)
 class ClusterOptions:
     """How the cells run (``lfbench ablate --executor NAME ...``): the executor's name (one of
     :data:`EXECUTORS`) and the resources of each job of an executor that submits jobs."""
 
     executor: str = "local"
-    gpus_per_job: int = 0
-    cpus_per_job: int = 0  # 0: the spec's threads per cell
-    timeout_min: int = 24 * 60
+    gpus_per_job: int = _GPUS
+    cpus_per_job: int = _CPUS  # 0: the spec's threads per cell
+    timeout_min: int = _TIMEOUT
     partition: str | None = None
-    max_parallel: int = 0  # slurm array parallelism (0: no limit)
+    max_parallel: int = _PARALLEL  # slurm array parallelism (0: no limit)
 
     def __post_init__(self) -> None:
         EXECUTORS.get(self.executor)  # SpecError: Unknown executor 'x'. Available: ...
-        if self.gpus_per_job < 0 or self.cpus_per_job < 0 or self.timeout_min < 1 or self.max_parallel < 0:
-            raise SpecError("--gpus-per-job, --cpus-per-job and --max-parallel must be >= 0, --timeout-min >= 1")
+        for flag in CLUSTER_FLAGS:
+            flag.require(getattr(self, flag.name))
 
 
 class Executor(ABC):

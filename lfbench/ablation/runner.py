@@ -50,6 +50,7 @@ from lfbench.scoring.rules import ScoringRules
 from lfbench.training.scenes import check_data
 from lfbench.utils.atomic import fresh_dir, write_text
 from lfbench.utils.errors import DataError, SpecError
+from lfbench.utils.flags import JOBS
 from lfbench.utils.hardware import available_cores
 from lfbench.utils.jsonfile import json_text, read_json
 from lfbench.utils.log import log_to_file
@@ -337,8 +338,7 @@ def run_ablation(spec: AblationSpec, out: str | Path, *, jobs: int = 1, progress
     lfbench.ablation.executor). OUT/results.json is merged under a file lock: runs of different cells
     (``--cells``, several processes or machines) add up. ``maps``: whose saved maps the error-map figures and
     the site draw (lfbench.ablation.report.MAP_CHOICES: all, best, none)."""
-    if jobs < 1:
-        raise SpecError(f"--jobs must be >= 1, got {jobs}")
+    JOBS.require(jobs)  # a call from Python; the command line has checked it as it parsed it
     check_maps(maps)
     out = Path(out)
     executor = executor_for(cluster, jobs=jobs, folder=out / "submitit", log=log)

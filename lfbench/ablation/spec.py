@@ -410,9 +410,9 @@ def _check_budget(budget: Budget, base: TrainConfig, source: Path) -> None:
     if budget.steps is not None and len(budget.steps) != len(base.stages):
         _fail(source, "budget.steps", f"expected {len(base.stages)} numbers (one per [[stages]] of the base config), "
                                       f"got {len(budget.steps)}")
-    problem = model_problem(get_trainable(base.method), budget.model)
+    problem = model_problem(get_trainable(base.method), budget.model, "budget.model")
     if problem:
-        _fail(source, "budget.model", problem)
+        raise SpecError(problem, source)
 
 
 def _apply_budget(cfg: dict[str, Any], budget: Budget) -> dict[str, Any]:

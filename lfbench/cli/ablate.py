@@ -26,9 +26,10 @@ import argparse
 import dataclasses
 from pathlib import Path
 
-from lfbench.ablation.executor import EXECUTORS, ClusterOptions
-from lfbench.cli.argtypes import int_range
+from lfbench.ablation.executor import CLUSTER_FLAGS, EXECUTORS, ClusterOptions
+from lfbench.cli.argtypes import add_flag
 from lfbench.utils.errors import SpecError
+from lfbench.utils.flags import JOBS
 from lfbench.utils.tomlfile import toml_text
 
 HELP = ("train and score a grid of network variants (SubFocal's Tables IV, V, beta sweep, I/II beside the paper's "
@@ -39,8 +40,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("spec", type=Path, metavar="SPEC.toml", help="ablation spec (see ablations/*.toml)")
     p.add_argument("--out", type=Path, default=None,
                    help="output folder (default: the spec's 'out', else runs/ablate/<spec name>)")
-    p.add_argument("--jobs", type=int_range(1, 1024), default=1, metavar="N",
-                   help="cells trained at a time, each in its own process with cores / N torch threads")
+    add_flag(p, JOBS, detail="each trains one cell with cores / N torch threads (--executor pool)")
     p.add_argument("--paper", default=None, metavar="DIR",
                    help="folder of the paper's tables (default: $LFBENCH_PAPER_DIR, else $LFBENCH_HCI_ROOT/../paper)")
     p.add_argument("--cells", default="", metavar="IDS",
@@ -59,13 +59,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--executor", choices=EXECUTORS.names(), default=None,
                    help="where the cells run: " + "; ".join(f"{name}: {EXECUTORS.get(name).help}"
                                                             for name in EXECUTORS.names()))
-    p.add_argument("--gpus-per-job", type=int, default=0, metavar="N", help="GPUs of each cell's job (--executor)")
-    p.add_argument("--cpus-per-job", type=int, default=0, metavar="N",
-                   help="CPUs of each cell's job (--executor; default: the spec's threads per cell)")
-    p.add_argument("--timeout-min", type=int, default=24 * 60, metavar="MIN", help="time limit of each job")
+    for flag in CLUSTER_FLAGS:
+        add_flag(p, flag)
     p.add_argument("--partition", default=None, help="SLURM partition (--executor slurm)")
-    p.add_argument("--max-parallel", type=int, default=0, metavar="N",
-                   help="SLURM jobs running at once (0: no limit)")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 
@@ -73,8 +69,6 @@ def run(args: argparse.Namespace) -> int:
     from lfbench.ablation.spec import load_spec  # imported here (torch): `lfbench --help` starts without it
 
     spec = load_spec(args.spec)
-    if args.jobs < 1:
-        raise SpecError(f"--jobs must be >= 1, got {args.jobs}")
     if args.cells.strip():
         wanted = [c.strip() for c in args.cells.split(",") if c.strip()]
         known = {c.id: c for c in spec.cells}
@@ -101,9 +95,8 @@ def run(args: argparse.Namespace) -> int:
 
         cluster = None
         if args.executor is not None:
-            cluster = ClusterOptions(args.executor, gpus_per_job=args.gpus_per_job, cpus_per_job=args.cpus_per_job,
-                                     timeout_min=args.timeout_min, partition=args.partition,
-                                     max_parallel=args.max_parallel)
+            cluster = ClusterOptions(args.executor, partition=args.partition,
+                                     **{f.name: getattr(args, f.name) for f in CLUSTER_FLAGS})
         run_ablation(spec, out, jobs=args.jobs, progress=progress, paper=args.paper, cluster=cluster, html=args.html,
                      maps=args.maps)
     if args.html:

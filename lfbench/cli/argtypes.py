@@ -1,50 +1,107 @@
-"""argparse pieces the commands share: types that check a flag's range when it is parsed (one usage line,
-exit 2), before any work, and flags declared alike by several commands."""
+"""argparse pieces the commands share: a flag is added from its declaration (a :class:`~lfbench.utils.flags.Flag`:
+the shared ones in lfbench.utils.flags, a command's own beside its parser), and its argparse ``type`` reads
+and checks the value as the declaration says (one usage line, exit 2), before any work. The reference of the
+shared flags is generated from the same declarations:
+
+    python -m lfbench.cli.argtypes > docs/command-line.md
+"""
 
 from __future__ import annotations
 
 import argparse
-from collections.abc import Callable
+import sys
+from collections.abc import Callable, Iterator
+from typing import Any
 
-__all__ = ["add_method_device", "float_range", "int_range"]
+from lfbench.utils.flags import FLAGS, Flag
+from lfbench.utils.options import BadValue, Param
+
+__all__ = ["add_flag", "flag_type", "flag_users", "reference", "COMMAND"]
+
+COMMAND = "python -m lfbench.cli.argtypes > docs/command-line.md"
+_UNSET: Any = object()
 
 
-def int_range(low: int, high: int) -> Callable[[str], int]:
-    """An argparse ``type``: a whole number from ``low`` to ``high``."""
+def flag_type(param: Param) -> Callable[[str], Any]:
+    """An argparse ``type``: the text read as ``param`` declares it (:meth:`Param.parse`); its problem as the
+    one line argparse prints (``argument --jobs: must be in [1, 256], got 0``)."""
 
-    def parse(text: str) -> int:
+    def parse(text: str) -> Any:
         try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected a whole number, got {text[:40]!r}") from None
-        if not low <= value <= high:
-            raise argparse.ArgumentTypeError(f"must be from {low} to {high}, got {value}")
-        return value
+            return param.parse(text)
+        except BadValue as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
 
-    parse.__name__ = "integer"
+    parse.__name__ = param.type_name
     return parse
 
 
-def float_range(low: float, high: float, *, low_open: bool = False) -> Callable[[str], float]:
-    """An argparse ``type``: a finite number from ``low`` (excluded with ``low_open``) to ``high``."""
+def add_flag(p: argparse.ArgumentParser | argparse._ArgumentGroup, flag: Flag, *, default: Any = _UNSET,
+             detail: str = "", **kwargs: Any) -> argparse.Action:
+    """``flag`` added to ``p`` from its declaration; a command may give it another ``default`` (checked against
+    the declaration) and a ``detail`` of what the value does there (appended to the declared help). ``kwargs``
+    go to ``add_argument`` (e.g. ``nargs``)."""
+    default = flag.default if default is _UNSET else default
+    if default is not None:  # a command's default is checked against the declaration as any value
+        _ = [flag.check(d) for d in default] if isinstance(default, list) else flag.check(default)
+    given = [f"default {' '.join(map(str, default)) if isinstance(default, list) else default}"] \
+        if default is not None else []
+    given += [flag.range.within()] if flag.range else []
+    text = flag.help + (f"; {detail}" if detail else "") + (f" ({', '.join(given)})" if given else "")
+    action = p.add_argument(flag.flag, type=flag_type(flag), default=default, metavar=flag.metavar,
+                            help=text.replace("%", "%%"), **kwargs)
+    action.declared = flag  # type: ignore[attr-defined]
+    return action
 
-    def parse(text: str) -> float:
-        try:
-            value = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected a number, got {text[:40]!r}") from None
-        if not (low < value if low_open else low <= value) or not value <= high:
-            raise argparse.ArgumentTypeError(f"must be {'above' if low_open else 'from'} {low:g} to {high:g}, "
-                                             f"got {text[:40]}")
-        return value
 
-    parse.__name__ = "number"
-    return parse
+def _parsers(parser: argparse.ArgumentParser, prefix: tuple[str, ...] = ()
+             ) -> Iterator[tuple[tuple[str, ...], argparse.ArgumentParser]]:
+    yield prefix, parser
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for name, sub in action.choices.items():
+                yield from _parsers(sub, (*prefix, name))
 
 
-def add_method_device(p: argparse.ArgumentParser) -> None:
-    """``--device``: where the methods of a command run, handed to ``create_from_spec`` as the default of
-    a method's ``device`` parameter (None: the method's own default)."""
-    p.add_argument("--device", metavar="DEVICE",
-                   help="where methods that have a device parameter run (a spec's own device=... wins): "
-                        "auto, cpu, cuda or cuda:K (default: the method's, auto)")
+def flag_users() -> dict[Flag, list[tuple[str, ...]]]:
+    """The built-in commands (``("bench", "train")`` for a bench) whose parsers add each shared flag, read from
+    their parsers."""
+    import importlib
+
+    from lfbench.cli import BUILTIN_COMMANDS
+
+    users: dict[Flag, list[tuple[str, ...]]] = {f: [] for f in FLAGS}
+    for name, module in BUILTIN_COMMANDS.items():
+        parser = argparse.ArgumentParser(prog=f"lfbench {name}")
+        importlib.import_module(module).add_arguments(parser)
+        for path, sub in _parsers(parser, (name,)):
+            for action in sub._actions:
+                declared = getattr(action, "declared", None)
+                if declared in users:
+                    users[declared].append(path)
+    return users
+
+
+def reference() -> str:
+    """docs/command-line.md: the shared flags, the commands that take them, their types, defaults and bounds."""
+    from lfbench.utils.markdown import markdown_table
+
+    rows = []
+    for flag, commands in flag_users().items():
+        used = ", ".join(f"`{' '.join(c)}`" for c in commands)
+        rows.append([f"`{flag.flag} {flag.metavar}`", flag.type_name, "—" if flag.default is None else
+                     f"`{flag.default}`", flag.range.text() if flag.range else "", used, flag.help])
+    return (f"<!-- Generated by `{COMMAND}` from the declarations in lfbench/utils/flags.py: edit those, not this "
+            "file. -->\n\n# Shared command-line flags\n\nThe flags several commands take are declared once, with "
+            "their type, default, bounds and meaning; every command that takes one reads and checks it the same "
+            "way: a value of another type or out of its bounds is one usage line naming the flag, exit code 2, "
+            "before any work. A command may set another default (its `--help` says which) and words what the "
+            "value does there; the bounds are the same everywhere. Method and network parameters "
+            "(`NAME:key=value`) and TOML keys are checked by the same declarations' rules and worded alike "
+            "(`must be in [1, 256], got 0`); `--threads` is also the `threads` parameter of every network's "
+            "method.\n\n"
+            + markdown_table(["flag", "type", "default", "bounds", "commands", "meaning"], rows))
+
+
+if __name__ == "__main__":
+    sys.stdout.write(reference())

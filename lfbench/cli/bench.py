@@ -42,10 +42,11 @@ from __future__ import annotations
 import argparse
 import itertools
 from pathlib import Path
-from typing import Any
 
-from lfbench.cli.argtypes import float_range, int_range
+from lfbench.cli.argtypes import add_flag, flag_type
 from lfbench.method.trainable import DEFAULT_TRAINABLE
+from lfbench.utils.flags import DEVICE, MAX_MEMORY, POSITIVE, REPEAT, SCENE_COUNT, THREADS, TIMEOUT, Flag
+from lfbench.utils.options import Range
 
 HELP = "speed and memory benchmarks (inference, cost volume, training, metrics, conv peak)"
 
@@ -55,11 +56,21 @@ MAX_SIZE = 4096  # px per side of a timed light field (as lfbench synth)
 MAX_BATCH = 4096  # as a training config's batch_size
 MAX_PATCH = 1024  # px, as a training config's patch
 MAX_COUNT = 10**6  # steps, repeats, rounds, scenes, methods
-MAX_THREADS = 4096
 DEFAULT_MODEL = DEFAULT_TRAINABLE  # the network a bench times without --model
-_SIZE = int_range(8, MAX_SIZE)
-_COUNT = int_range(1, MAX_COUNT)
-_POSITIVE = float_range(0.0, 1e12, low_open=True)
+SIZE = Flag("size", int, 512, "image size in px (a size x size scene, 81 views)", Range(8, MAX_SIZE), "S")
+TILE = Flag("tile", int, 0, "core tile size in px (0 = the network's choice: SubFocal's from --max-memory)",
+            Range(0, MAX_SIZE), "PX")
+BATCH = Flag("batch", int, 2, "patches per training step", Range(1, MAX_BATCH), "N")
+TRAIN_BATCH = Flag("train_batch", int, 2, "patches per step of the training cases", Range(1, MAX_BATCH), "N")
+PATCH = Flag("patch", int, 32, "patch size in px", Range(8, MAX_PATCH), "PX")
+STEPS = Flag("steps", int, 2, "timed training steps", Range(1, MAX_COUNT), "N")
+TRAIN_STEPS = Flag("train_steps", int, 2, "timed steps of the training cases", Range(1, MAX_COUNT), "N")
+WARMUP = Flag("warmup", int, 1, "untimed steps first (one-time costs: kernel setup, caches, the heap growing to its "
+              "size)", Range(0, MAX_COUNT), "N")
+ROUNDS = Flag("rounds", int, 1, "run the cases this many times, interleaved (before/after under the same load)",
+              Range(1, MAX_COUNT), "N")
+METHODS = Flag("methods", int, 5, "methods scored on each scene", Range(1, 1000), "N")
+INTERVAL = Flag("interval", float, 0.5, "disparity step of the cost volume in px", POSITIVE, "PX")
 _NETWORK_BENCHES = ("inference", "train", "suite")  # the benches whose parsers take the network's own flags
 
 
@@ -96,7 +107,7 @@ def _add_network_flags(p: argparse.ArgumentParser, bench: str, model: str) -> No
     """``--PARAM V [V ...]`` for every parameter of the network (one case per value; a parameter whose flag
     the bench has already is set through ``--model NAME:key=value``) and, for the training bench, the
     options the network adds (:attr:`Trainable.train_bench_options`)."""
-    from lfbench.method.params import coerce, parse_spec
+    from lfbench.method.params import parse_spec
     from lfbench.method.trainable import get_trainable
 
     name, _ = parse_spec(model)
@@ -108,18 +119,9 @@ def _add_network_flags(p: argparse.ArgumentParser, bench: str, model: str) -> No
         if flag in taken:
             continue
 
-        def parse(text: str, param=param) -> Any:
-            from lfbench.utils.errors import SpecError
-
-            try:
-                return coerce(text, param)
-            except SpecError as exc:
-                raise argparse.ArgumentTypeError(str(exc)) from None
-
-        parse.__name__ = param.type_name
         timed = trainable.train_bench_defaults.get(key) if bench in ("train", "suite") else None
         default = " ".join(map(str, timed)) + " (training)" if timed else repr(param.default)
-        group.add_argument(flag, dest=f"net_{key}", nargs="+", type=parse, metavar=key.upper(),
+        group.add_argument(flag, dest=f"net_{key}", nargs="+", type=flag_type(param), metavar=key.upper(),
                            help=f"{param.help or key} (default: {default})")
     if bench == "train":
         for option in trainable.train_bench_options:
@@ -131,28 +133,23 @@ def _add_network_flags(p: argparse.ArgumentParser, bench: str, model: str) -> No
 def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", type=Path, metavar="OUT.json", help="write the records (a JSON list) here")
     p.add_argument("--table", type=Path, metavar="OUT.md", help="also write the table (Markdown) here")
-    p.add_argument("--threads", type=int_range(0, MAX_THREADS), default=0, help="torch threads (0 = all cores)")
-    p.add_argument("--timeout", type=_POSITIVE, default=None, metavar="S", help="give up a case after S seconds")
+    add_flag(p, THREADS)
+    add_flag(p, TIMEOUT)
     p.add_argument("--model", default=DEFAULT_MODEL, metavar="NAME[:key=value,...]",
                    help=f"trainable network to time, with parameters (default {DEFAULT_MODEL}; see lfbench methods)")
 
 
 def _device_option(p: argparse.ArgumentParser) -> None:
-    from lfbench.utils.hardware import DEVICE_HELP
-
-    p.add_argument("--device", default="auto", help=f"where peak, inference and training cases run: {DEVICE_HELP}")
+    add_flag(p, DEVICE, default="auto", detail="the peak, inference and training cases")
 
 
 def _inference_options(p: argparse.ArgumentParser, size: int) -> None:
-    p.add_argument("--size", type=_SIZE, default=size, help=f"image size in px (a size x size scene, 81 views; "
-                                                            f"8 to {MAX_SIZE})")
+    add_flag(p, SIZE, default=size)
     p.add_argument("--precision", nargs="+", default=["fp32", "bf16"], choices=["fp32", "bf16"])
     p.add_argument("--weights", help="weights file of the network (default: random weights)")
-    p.add_argument("--max-memory", type=_POSITIVE, default=None, metavar="GB",
-                   help="memory budget of inference (default: 4 on the CPU, the GPU's free memory on CUDA)")
-    p.add_argument("--tile", type=int_range(0, MAX_SIZE), default=0,
-                   help="core tile size in px (0 = the network's choice: SubFocal's from --max-memory)")
-    p.add_argument("--repeat", type=_COUNT, default=1, help="runs per case (the best is kept, or their mean: --mean)")
+    add_flag(p, MAX_MEMORY)
+    add_flag(p, TILE)
+    add_flag(p, REPEAT, detail="the best is kept, or their mean: --mean")
     p.add_argument("--mean", action="store_true",
                    help="seconds = the mean of the --repeat runs after one warm-up run, not the best (as papers "
                         "report runtime: SubFocal's Table III is --size 256 --repeat 50 --mean)")
@@ -172,43 +169,41 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     _inference_options(s, 512)
     s.add_argument("--quick", action="store_true", help="64x64 scene, tiny training and metric cases (seconds)")
     s.add_argument("--skip", nargs="+", default=[], choices=["peak", "inference", "volume", "train", "metrics"])
-    s.add_argument("--train-batch", type=int_range(1, MAX_BATCH), default=2)
-    s.add_argument("--train-steps", type=_COUNT, default=2)
+    add_flag(s, TRAIN_BATCH)
+    add_flag(s, TRAIN_STEPS)
     _common(s)
     i = _bench_parser(sub, "inference", help="one scene per network parameter x precision (seconds, peak memory, "
                                              "GFLOP/s)")
     _inference_options(i, 512)
     _common(i)
     v = _bench_parser(sub, "volume", help="the cost volume alone (GB/s; SubFocal's own bench)")
-    v.add_argument("--size", type=_SIZE, default=512)
-    v.add_argument("--interval", type=_POSITIVE, nargs="+", default=[0.5])
+    add_flag(v, SIZE)
+    add_flag(v, INTERVAL, nargs="+", default=[0.5])
     v.add_argument("--precision", nargs="+", default=["fp32", "bf16"], choices=["fp32", "bf16"])
     v.add_argument("--method", nargs="+", default=["gather", "grid_sample"], choices=["gather", "grid_sample"])
-    v.add_argument("--repeat", type=_COUNT, default=1)
+    add_flag(v, REPEAT)
     _common(v)
     t = _bench_parser(sub, "train", help="training steps per second (Adam + L1 on random patches)")
-    t.add_argument("--batch", type=int_range(1, MAX_BATCH), default=2, help=f"patches per step (1 to {MAX_BATCH})")
-    t.add_argument("--patch", type=int_range(8, MAX_PATCH), default=32, help=f"patch size in px (8 to {MAX_PATCH})")
-    t.add_argument("--steps", type=_COUNT, default=2)
-    t.add_argument("--warmup", type=int_range(0, MAX_COUNT), default=1,
-                   help="untimed steps first (one-time costs: kernel setup, caches, the heap growing to its size)")
+    add_flag(t, BATCH)
+    add_flag(t, PATCH)
+    add_flag(t, STEPS)
+    add_flag(t, WARMUP)
     t.add_argument("--no-channels-last", action="store_true")
     t.add_argument("--precision", nargs="+", default=["fp32"], choices=["fp32", "bf16"],
                    help="fp32 and/or bf16 (autocast of the forward pass, as [training] precision = 'bf16')")
-    t.add_argument("--rounds", type=_COUNT, default=1,
-                   help="run the cases this many times, interleaved (before/after under the same load)")
+    add_flag(t, ROUNDS)
     _device_option(t)
     _common(t)
     m = _bench_parser(sub, "metrics", help="the metric engine over synthetic scenes x methods")
-    m.add_argument("--scenes", type=int_range(1, 1000), default=12)
-    m.add_argument("--methods", type=int_range(1, 1000), default=5)
-    m.add_argument("--size", type=_SIZE, default=512)
-    m.add_argument("--repeat", type=_COUNT, default=1)
+    add_flag(m, SCENE_COUNT, default=12)
+    add_flag(m, METHODS)
+    add_flag(m, SIZE)
+    add_flag(m, REPEAT)
     _common(m)
     k = _bench_parser(sub, "peak", help="the conv3d peak (GFLOP/s) of the paper's 3D convolution (SubFocal's own "
                                         "bench)")
     k.add_argument("--precision", nargs="+", default=["fp32", "bf16"], choices=["fp32", "bf16"])
-    k.add_argument("--repeat", type=_COUNT, default=3)
+    add_flag(k, REPEAT, default=3)
     _device_option(k)
     _common(k)
 

@@ -10,6 +10,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from lfbench.cli.argtypes import add_flag
+from lfbench.utils.flags import SEED
+
 HELP = "check a plugin's network against lfbench's contract (shapes, sign, tiling, flops, save/load, training)"
 
 
@@ -17,7 +20,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("spec", metavar="NAME", help="registered network, optionally with parameters: NAME[:key=value,...]")
     p.add_argument("--weights", type=Path, default=None, metavar="FILE",
                    help="trained weights (lfbench train writes OUT/final.pt): also checks the disparity's sign")
-    p.add_argument("--seed", type=int, default=0, help="seed of the random views and initialisation (default 0)")
+    add_flag(p, SEED, detail="of the random views and the initialisation")
 
 
 def run(args: argparse.Namespace) -> int:

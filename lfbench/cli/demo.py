@@ -13,6 +13,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from lfbench.cli.argtypes import add_flag
+from lfbench.utils.flags import SCENE_COUNT, SEED
+
 HELP = "run a mini benchmark on generated synthetic scenes (no dataset needed)"
 
 
@@ -21,11 +24,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
     p.add_argument("--out", type=Path, default=Path("lfbench-demo"), metavar="DIR",
                    help="output folder (default: ./lfbench-demo)")
-    p.add_argument("--seed", type=int, default=DEFAULT_SEED, help=f"seed of the generator (default {DEFAULT_SEED})")
+    add_flag(p, SEED, default=DEFAULT_SEED)
     p.add_argument("--size", type=int, default=DEFAULT_SIZE, metavar="S",
                    help=f"scene width and height in px (default {DEFAULT_SIZE})")
-    p.add_argument("--scenes", type=int, default=DEFAULT_SCENES, metavar="K",
-                   help=f"number of scenes (default {DEFAULT_SCENES})")
+    add_flag(p, SCENE_COUNT, default=DEFAULT_SCENES)
     p.add_argument("--methods", action="append", metavar="SPEC,...",
                    help="methods to run, comma-separated specs (default: every registered method that runs offline)")
     p.add_argument("--no-figures", action="store_true", help="skip the figures")

@@ -9,9 +9,15 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from lfbench.cli.argtypes import add_method_device, int_range
+from lfbench.cli.argtypes import add_flag
+from lfbench.utils.flags import DEVICE, JOBS, Flag
+from lfbench.utils.options import Range
 
 HELP = "score methods on a dataset's scenes (results.json, results.csv, tables)"
+
+CI_BLOCK = Flag("ci_block", int, 16, "tile size of the block bootstrap in px (1 = independent pixels; errors of "
+                "neighbours correlate)", Range(1, 4096), "PX")
+CI_RESAMPLES = Flag("ci_resamples", int, 1000, "bootstrap resamples", Range(1, 10**6), "N")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -49,9 +55,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="also write each prediction as OUT/maps/<method>/ (submission layout)")
     p.add_argument("--ci", action="store_true",
                    help="also write 95%% bootstrap CIs: OUT/ci.csv and OUT/table_ci_per_scene.{md,tex,csv}")
-    p.add_argument("--ci-block", type=int_range(1, 4096), default=16, metavar="PX",
-                   help="tile size of the block bootstrap (1 = independent pixels; errors of neighbours correlate)")
-    p.add_argument("--ci-resamples", type=int_range(1, 10**6), default=1000, metavar="N", help="bootstrap resamples")
+    add_flag(p, CI_BLOCK)
+    add_flag(p, CI_RESAMPLES)
     p.add_argument("--figures", action="store_true", help="also draw per-scene figures into OUT/figures/")
     p.add_argument("--html", action="store_true",
                    help="also write a static HTML report OUT/html/index.html (implies --save-maps; opens offline)")
@@ -59,10 +64,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="also rate each method's uncertainty map (SubFocal: std of its distribution): "
                         "sparsification curves and AUSE/AURG in OUT/uncertainty.csv, OUT/table_uncertainty.md "
                         "and OUT/figures/sparsification_*.png")
-    p.add_argument("--jobs", type=int_range(1, 256), default=1, metavar="N",
-                   help="score in N worker processes, scene by scene (the numbers are the same for any N; memory "
-                        "grows with N scenes, not with the number of methods)")
-    add_method_device(p)
+    add_flag(p, JOBS, detail="each scores one scene at a time; the numbers are the same for any N, memory grows "
+                             "with N scenes (not with the number of methods)")
+    add_flag(p, DEVICE, detail="every method that has a device parameter (a spec's own device=... wins; default: "
+                               "the method's, auto)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 

@@ -9,7 +9,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from lfbench.cli.argtypes import add_method_device
+from lfbench.cli.argtypes import add_flag
+from lfbench.utils.flags import DEVICE
 
 HELP = "predict a disparity map for a scene or sample folder or a VIEWS.npy"
 
@@ -19,7 +20,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--input", required=True, type=Path,
                    help="scene folder (HCI layout), UrbanLF-Syn sample folder (ImageN/) or VIEWS.npy (H, W, 81)")
     p.add_argument("--out", required=True, type=Path, help="OUT.pfm or OUT.npy")
-    add_method_device(p)
+    add_flag(p, DEVICE, detail="every method that has a device parameter (a spec's own device=... wins; default: "
+                               "the method's, auto)")
     p.add_argument("--extras", action="store_true",
                    help="also save OUT.distribution.npy (D, H, W), OUT.disparities.npy (D,) and OUT.uncertainty.npy")
 

@@ -13,18 +13,25 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from lfbench.cli.argtypes import add_flag
+from lfbench.utils.flags import MAX_JOBS, SCENE_COUNT, SEED, Flag
+from lfbench.utils.options import Range
+
 HELP = "generate synthetic scenes (HCI or UrbanLF-Syn layout) with exact ground truth"
+
+WORKERS = Flag("workers", int | None, None, "scenes generated at a time in separate processes (default: the "
+               "available cores)", Range(1, MAX_JOBS), "N")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", required=True, type=Path, metavar="DIR", help="data root to write into")
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    add_flag(p, SEED)
     p.add_argument("--layout", choices=("hci", "urbanlf-syn"), default="hci",
                    help="the dataset layout written (default hci; urbanlf-syn: 9x9 views, non-square sizes)")
     p.add_argument("--size", type=_size, default=None, metavar="S|WxH",
                    help="views are S x S px, or W x H px with --layout urbanlf-syn (default 128; urbanlf-syn: "
                         "640x480)")
-    p.add_argument("--scenes", type=int, default=4, metavar="K", help="number of scenes (default 4)")
+    add_flag(p, SCENE_COUNT)
     p.add_argument("--numbers", type=_numbers, default=None, metavar="N,N,...",
                    help="--layout urbanlf-syn: the sample numbers written (Image<N>/, e.g. 11,27,34,50,54,68,69,70, "
                         "the paper's Table III samples); replaces --scenes")
@@ -32,8 +39,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="category (split) folder (default synthetic; urbanlf-syn: val)")
     p.add_argument("--angular", type=int, default=9, metavar="A", help="A x A views, odd (default 9)")
     p.add_argument("--force", action="store_true", help="overwrite existing scene folders")
-    p.add_argument("--workers", type=int, default=None, metavar="N",
-                   help="scenes generated at a time in separate processes (default: the available cores)")
+    add_flag(p, WORKERS)
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 

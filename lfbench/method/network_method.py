@@ -28,6 +28,7 @@ from lfbench.method.checkpoint import check_checkpoint_file
 from lfbench.method.params import Param, Range
 from lfbench.method.trainable import Trainable, contract_problem, get_trainable, plugin_failure
 from lfbench.utils.errors import DataError, LFBenchError, SpecError
+from lfbench.utils.flags import THREADS
 from lfbench.utils.hardware import DEVICE_HELP
 
 if TYPE_CHECKING:
@@ -42,7 +43,7 @@ RUNTIME_PARAMS: dict[str, Param] = {
     "device": Param("device", str, "auto", DEVICE_HELP),
     "precision": Param("precision", Literal["fp32", "bf16"], "fp32",
                        "fp32 (IEEE), or bf16 autocast of the forward pass (needs bf16 convolutions)"),
-    "threads": Param("threads", int, 0, "torch CPU threads (0 = all cores)", Range(0, 4096)),
+    "threads": THREADS,  # the same declaration as lfbench bench --threads
     "tile": Param("tile", int, 0, "inference tile size in px (0 = the whole image; exact: each tile is run with "
                                   "the network's receptive radius of context; networks that have one)",
                   Range(0, 1 << 16)),

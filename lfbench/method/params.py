@@ -11,66 +11,20 @@ before annotations (help in ``name: text`` lines of the class docstring) still w
 deprecated way, read only where an annotation gives no help.
 
 A spec string selects a method and its parameters on the command line: ``name`` or
-``name:key=value,key=value``; values are converted to the annotated types.
+``name:key=value,key=value``; values are converted to the annotated types. :class:`Param` and
+:class:`Range` are lfbench.utils.options': a parameter's type, bounds and messages are those of every
+declared option.
 """
 
 from __future__ import annotations
 
 import inspect
-import math
-import types
 import typing
-from collections.abc import Callable
-from dataclasses import dataclass
-from pathlib import Path
+from collections.abc import Callable, Mapping
 from typing import Any
 
 from lfbench.utils.errors import SpecError
-
-
-@dataclass(frozen=True)
-class Range:
-    """Inclusive bounds of a numeric parameter (None: unbounded on that side)."""
-
-    min: float | None = None
-    max: float | None = None
-
-    def text(self) -> str:
-        if self.min is not None and self.max is not None:
-            return f"{self.min:g} to {self.max:g}"
-        return f">= {self.min:g}" if self.min is not None else f"<= {self.max:g}" if self.max is not None else ""
-
-    def contains(self, value: float) -> bool:
-        return (self.min is None or value >= self.min) and (self.max is None or value <= self.max)
-
-
-@dataclass(frozen=True)
-class Param:
-    """One parameter: name, type (without its ``Annotated`` metadata), default, help and bounds."""
-
-    name: str
-    kind: Any
-    default: Any
-    help: str = ""
-    range: Range | None = None
-
-    @property
-    def required(self) -> bool:
-        return self.default is inspect.Parameter.empty
-
-    @property
-    def type_name(self) -> str:
-        k = self.kind
-        if isinstance(k, type):
-            return k.__name__
-        return str(k).replace("typing.", "").replace("pathlib.", "")
-
-    def describe(self) -> str:
-        """``name (type, default 8, 1 to 1024): help``: one line of ``lfbench methods``."""
-        parts = [self.type_name, "required" if self.required else f"default {self.default!r}"]
-        if self.range is not None:
-            parts.append(self.range.text())
-        return f"{self.name} ({', '.join(parts)}){': ' + self.help if self.help else ''}"
+from lfbench.utils.options import BadValue, Bounds, Param, Range
 
 
 def docstring_help(doc: str) -> dict[str, str]:
@@ -100,12 +54,12 @@ def without_help_lines(doc: str, names: typing.Iterable[str]) -> str:
     return "\n".join(lines).strip()
 
 
-def _annotation(hint: Any) -> tuple[Any, str, Range | None]:
-    """(type, help, range) of a type hint, reading ``Annotated[type, "help", Range(...)]``."""
+def _annotation(hint: Any) -> tuple[Any, str, Bounds | None]:
+    """(type, help, bounds) of a type hint, reading ``Annotated[type, "help", Range(...)]``."""
     if typing.get_origin(hint) is typing.Annotated:
         kind, *extra = typing.get_args(hint)
         text = next((e for e in extra if isinstance(e, str)), "")
-        bounds = next((e for e in extra if isinstance(e, Range)), None)
+        bounds = next((e for e in extra if isinstance(e, Bounds)), None)
         return kind, " ".join(text.split()), bounds
     return hint, "", None
 
@@ -170,102 +124,28 @@ def coerce_params(raw: dict[str, str], params: dict[str, Param], owner: str, kin
     return out
 
 
-_TRUE, _FALSE = {"1", "true", "yes", "on"}, {"0", "false", "no", "off"}
-
-
 def coerce(text: str, param: Param, method: str = "") -> Any:
-    """Convert a spec value to the parameter's type (bool, int, float, str, Path, Optional, Literal) and
-    check it against the parameter's bounds."""
-    value = _coerce(text, param, method)
-    problem = value_problem(param, value)
-    if problem:
-        raise SpecError(f"{method}:{param.name} {problem}" if method else f"{param.name} {problem}")
-    return value
-
-
-def _coerce(text: str, param: Param, method: str) -> Any:
-    kind = param.kind
-    origin = typing.get_origin(kind)
-    args = typing.get_args(kind)
-    where = f"{method}:{param.name}" if method else param.name
-    if origin in (typing.Union, types.UnionType):
-        if text.lower() in ("none", "null", "") and type(None) in args:
-            return None
-        errors = []
-        for a in args:
-            if a is type(None):
-                continue
-            try:
-                return _coerce(text, Param(param.name, a, param.default), method)
-            except SpecError as exc:
-                errors.append(str(exc))
-        raise SpecError(errors[0] if errors else f"{where}: cannot use {text!r}")
-    if origin is typing.Literal:
-        for a in args:
-            if str(a) == text:
-                return a
-        raise SpecError(f"{where} must be one of {', '.join(map(str, args))}, got {text!r}")
-    if kind is inspect.Parameter.empty or kind is Any:
-        kind = type(param.default) if param.default not in (None, inspect.Parameter.empty) else str
+    """A spec value converted to the parameter's type and checked against its bounds (:meth:`Param.parse`);
+    SpecError ``method:name: expected int, got 'x'`` otherwise."""
     try:
-        if kind is bool:
-            low = text.lower()
-            if low in _TRUE:
-                return True
-            if low in _FALSE:
-                return False
-            raise ValueError
-        if kind is int:
-            return int(text)
-        if kind is float:
-            return float(text)
-        if kind is Path:
-            return Path(text).expanduser()
-        if kind is str:
-            return text
-        return kind(text)
-    except (ValueError, TypeError):
-        raise SpecError(f"{where} expects {getattr(kind, '__name__', kind)}, got {text!r}") from None
+        return param.parse(text)
+    except BadValue as exc:
+        raise SpecError(f"{method + ':' if method else ''}{param.name}: {exc}") from None
 
 
-def value_problem(param: Param, value: Any) -> str | None:
-    """Why ``value`` (e.g. from a TOML table, already typed) does not fit the parameter's type and bounds,
-    as a phrase (``expects int, got str '16'``), or None. Types it cannot check are accepted."""
-    if not _fits(param.kind, value):
-        shown = repr(value) if len(repr(value)) <= 40 else repr(value)[:37] + "..."
-        return f"expects {_type_text(param.kind)}, got {type(value).__name__} {shown}"
-    if param.range is not None and isinstance(value, int | float) and not isinstance(value, bool):
-        if not math.isfinite(value) or not param.range.contains(value):
-            return f"must be {param.range.text()}, got {value!r}"
+def values_problem(params: Mapping[str, Param], values: Mapping[str, Any]) -> tuple[str | None, str] | None:
+    """Why ``values`` (e.g. a TOML ``[model]`` table, already typed) cannot set ``params``: (the key, the
+    problem as :meth:`Param.check` words it), or (None, the unknown keys and the accepted ones); None when
+    they fit."""
+    unknown = sorted(set(values) - set(params))
+    if unknown:
+        return None, f"unknown key(s): {', '.join(unknown)} (accepted: {', '.join(sorted(params))})"
+    for key, value in values.items():
+        problem = params[key].problem(value)
+        if problem:
+            return key, problem
     return None
 
 
-def _type_text(kind: Any) -> str:
-    if typing.get_origin(kind) is typing.Literal:
-        return "one of " + ", ".join(map(repr, typing.get_args(kind)))
-    return getattr(kind, "__name__", None) or str(kind).replace("typing.", "")
-
-
-def _fits(kind: Any, value: Any) -> bool:
-    origin = typing.get_origin(kind)
-    if origin in (typing.Union, types.UnionType):
-        return any(_fits(a, value) for a in typing.get_args(kind))
-    if origin is typing.Literal:
-        return any(value == a and type(value) is type(a) for a in typing.get_args(kind))
-    if kind is type(None) or kind is None:
-        return value is None
-    if kind is bool:
-        return isinstance(value, bool)
-    if kind is int:
-        return isinstance(value, int) and not isinstance(value, bool)
-    if kind is float:
-        return isinstance(value, int | float) and not isinstance(value, bool)
-    if kind is str:
-        return isinstance(value, str)
-    if kind is Path:
-        return isinstance(value, str | Path)
-    return True  # Any, unannotated or a type lfbench does not know: the network decides
-
-
 __all__ = ["Param", "Range", "signature_params", "docstring_help", "without_help_lines", "parse_spec", "format_spec",
-           "coerce", "coerce_params", "value_problem"]
+           "coerce", "coerce_params", "values_problem"]

@@ -48,7 +48,7 @@ from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 
 from lfbench.data.disparity import disparity_problem
 from lfbench.method.checkpoint import read_weights
-from lfbench.method.params import Param, docstring_help, signature_params, value_problem
+from lfbench.method.params import Param, docstring_help, signature_params, values_problem
 from lfbench.utils.errors import DataError, PluginError
 from lfbench.utils.registry import Lazy, Registry
 
@@ -193,15 +193,11 @@ class Trainable:
 
     def check_values(self, params: dict[str, Any]) -> None:
         """ValueError naming unknown keys and values that do not fit a parameter's annotated type or bounds
-        (``channels expects int, got str '16'``): no network is built or imported."""
-        accepted = self.parameters()
-        unknown = sorted(set(params) - set(accepted))
-        if unknown:
-            raise ValueError(f"unknown [model] key(s) {', '.join(unknown)} (accepted: {', '.join(sorted(accepted))})")
-        for key, value in params.items():
-            problem = value_problem(accepted[key], value)
-            if problem:
-                raise ValueError(f"{key} {problem}")
+        (``channels: expected int, got str``): no network is built or imported."""
+        problem = values_problem(self.parameters(), params)
+        if problem:
+            key, text = problem
+            raise ValueError(f"{key}: {text}" if key else f"[model] {text}")
 
     def check_params(self, params: dict[str, Any]) -> None:
         """:meth:`check_values`, then :meth:`check`, then the network's size: at most MAX_NETWORK_BYTES of

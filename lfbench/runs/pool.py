@@ -37,6 +37,7 @@ from lfbench.scoring.metrics import METRICS, Metric, get_metric
 from lfbench.scoring.rules import ScoringRules
 from lfbench.scoring.score import SceneScore, score_predictions
 from lfbench.utils.errors import RunFailed, SpecError
+from lfbench.utils.flags import JOBS
 from lfbench.utils.malloc import retain_freed_memory
 
 __all__ = ["ScoringPool", "KILL_WORKER_ENV"]
@@ -113,8 +114,7 @@ class ScoringPool:
     A context manager: leaving it waits for (or, on an error, cancels) the work in flight."""
 
     def __init__(self, jobs: int = 1) -> None:
-        if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
-            raise SpecError(f"jobs must be a positive integer, got {jobs!r}")
+        JOBS.require(jobs)
         self.jobs = jobs
         self._executor: cf.ProcessPoolExecutor | None = None
         self._marks: Path | None = None  # the workers' "scoring now" marks (a temporary folder)

@@ -66,7 +66,7 @@ from typing import Any, Literal
 
 from lfbench.data.scene import SPLITS
 from lfbench.data.synth import MAX_SYNTH_SIZE, scene_name
-from lfbench.method.params import value_problem
+from lfbench.method.params import values_problem
 from lfbench.method.trainable import DEFAULT_TRAINABLE, Trainable, get_trainable
 from lfbench.training.losses import NEEDS_DISTRIBUTION, make_loss
 from lfbench.utils.envvars import expand_vars
@@ -332,7 +332,7 @@ class TrainConfig:
                                             f"{values['method']!r} does not return (use l1 or mse)")
         problem = model_problem(trainable, values["model"])
         if problem:
-            raise SpecError(f"[model] {problem}", t.source)
+            raise SpecError(problem, t.source)
 
     def to_dict(self) -> dict[str, Any]:
         """The config in its TOML layout as plain values (storable in a weights-only checkpoint);
@@ -353,20 +353,16 @@ class TrainConfig:
         return cls.from_dict(raw, path)
 
 
-def model_problem(trainable: Trainable, params: dict[str, Any]) -> str | None:
-    """Why ``params`` cannot be the ``[model]`` table of ``trainable``: a key the network does not take (naming
-    the ones it does), or a value that does not fit the type and bounds its constructor annotates
-    (lfbench.method.params.value_problem: "channels expects int, got str '16'"); None when they fit. What
-    the network checks itself (Trainable.check) is checked before a run builds it."""
-    accepted = trainable.parameters()
-    unknown = sorted(set(params) - set(accepted))
-    if unknown:
-        return f"unknown key(s): {', '.join(unknown)} (accepted: {', '.join(sorted(accepted))})"
-    for key, value in params.items():
-        problem = value_problem(accepted[key], value)
-        if problem:
-            return f"{key} {problem}"
-    return None
+def model_problem(trainable: Trainable, params: dict[str, Any], where: str = "model") -> str | None:
+    """Why ``params`` cannot be the ``[model]`` table (at ``where``) of ``trainable``: a key the network does not
+    take (naming the ones it does), or a value that does not fit the type and bounds its constructor annotates,
+    worded as for any option (``model.channels: expected int, got str``); None when they fit. What the network
+    checks itself (Trainable.check) is checked before a run builds it."""
+    problem = values_problem(trainable.parameters(), params)
+    if problem is None:
+        return None
+    key, text = problem
+    return f"{where}.{key}: {text}" if key else f"[{where}] {text}"
 
 
 #: The keys of a [[stages]] entry that are not loss parameters.

@@ -8,8 +8,11 @@ default, bounds, help text and whether a resumed run may change it). From that o
 - :func:`option_paths`, e.g. the keys a resumed training run may change;
 - :func:`reference_markdown`, the reference tables of every key (type, default, bounds, meaning).
 
-:func:`coerce` is the type check of every declared option (a network's ``[model]`` parameters are declared
-by its constructor and checked by lfbench.method.params.value_problem).
+The same types, bounds and messages serve the options declared by name rather than as a field: a
+:class:`Param` (a method's or network's keyword parameter, ``Annotated[int, "help", Range(1, 1024)]``, and
+the command-line flags several commands share, lfbench.utils.flags). :func:`check` is the one check of a
+value against a declared type and :class:`Bounds` (``expected int, got str``; ``must be in [1, 1024], got
+0``), :func:`from_text` the one reading of a value written as text (a spec string, a flag).
 
 Types understood: ``bool``, ``int``, ``float`` (an int is taken as a float), ``str``, ``Literal[...]``,
 ``X | None`` (None = absent: TOML has no null), ``tuple[X, ...]`` and ``tuple[X, X]`` (TOML arrays),
@@ -21,6 +24,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import inspect
 import math
 import types
 import typing
@@ -33,9 +37,53 @@ from lfbench.utils.errors import SpecError
 from lfbench.utils.markdown import markdown_cell, markdown_table
 
 __all__ = ["Option", "option", "option_fields", "is_section", "Table", "parse_section", "plain_dict", "coerce",
-           "TypeMismatch", "type_name", "option_paths", "reference_markdown", "bounds_text"]
+           "check", "from_text", "Bounds", "Range", "Param", "BadValue", "TypeMismatch", "type_name", "option_paths",
+           "reference_markdown"]
 
 _KEY = "lfbench.option"
+
+
+@dataclass(frozen=True)
+class Bounds:
+    """Bounds of a number, or of every number of a list or table (None: unbounded on that side; an open end
+    excludes the bound itself)."""
+
+    low: float | None = None
+    high: float | None = None
+    low_open: bool = False
+    high_open: bool = False
+
+    def text(self) -> str:
+        """The bounds as an interval, e.g. ``[1, 4096]``, ``> 0``, ``[0, 1)`` ('' when there are none)."""
+        low, high = self.low, self.high
+        if low is not None and high is not None:
+            return f"{'(' if self.low_open else '['}{_num(low)}, {_num(high)}{')' if self.high_open else ']'}"
+        if low is not None:
+            return f"{'>' if self.low_open else '>='} {_num(low)}"
+        return f"{'<' if self.high_open else '<='} {_num(high)}" if high is not None else ""
+
+    def within(self) -> str:
+        """``in [1, 4096]`` or ``>= 1``: what a message says a value must be."""
+        text = self.text()
+        return f"in {text}" if self.low is not None and self.high is not None else text
+
+    def holds(self, value: float) -> bool:
+        if isinstance(value, float) and not math.isfinite(value):
+            return False
+        low, high = self.low, self.high
+        return (low is None or value > low or (value == low and not self.low_open)) and \
+            (high is None or value < high or (value == high and not self.high_open))
+
+
+class Range(Bounds):
+    """The bounds of a parameter as its annotation writes them, ``Annotated[int, "help", Range(1, 1024)]``:
+    inclusive ``min`` and ``max`` (None: unbounded on that side); the same :class:`Bounds` an option has."""
+
+    def __init__(self, min: float | None = None, max: float | None = None) -> None:  # noqa: A002
+        super().__init__(min, max)
+
+
+NO_BOUNDS = Bounds()
 
 
 @dataclass(frozen=True)
@@ -43,10 +91,7 @@ class Option:
     """What :func:`option` declares about one field (its type is the field's annotation)."""
 
     help: str
-    low: float | None = None  # bounds of a number, or of every number of a list / table of numbers
-    high: float | None = None
-    low_open: bool = False  # low itself excluded
-    high_open: bool = False
+    bounds: Bounds = NO_BOUNDS  # of a number, or of every number of a list / table (option(low=, high=, ...))
     min_length: int = 0  # fewest entries of a list
     resume_free: bool = False  # a resumed run may change it (it does not change the result)
     omit_default: bool = False  # left out of plain_dict() at its default (added after fingerprints were written)
@@ -61,10 +106,12 @@ class Option:
 
 def option(default: Any = dataclasses.MISSING, *, help: str, factory: Callable[[], Any] | None = None,
            **declared: Any) -> Any:
-    """A dataclass field declared as an option (see :class:`Option` for ``declared``); without a default (or
-    ``factory``, e.g. a section class) the option is required (declare the dataclass ``kw_only``). Mutable
-    defaults (dict, list) are copied."""
-    meta = {_KEY: Option(help=help, **declared)}
+    """A dataclass field declared as an option (see :class:`Option` for ``declared``; the bounds are given as
+    ``low``, ``high``, ``low_open`` and ``high_open``, see :class:`Bounds`); without a default (or ``factory``,
+    e.g. a section class) the option is required (declare the dataclass ``kw_only``). Mutable defaults (dict,
+    list) are copied."""
+    bounds = Bounds(**{k: declared.pop(k) for k in ("low", "high", "low_open", "high_open") if k in declared})
+    meta = {_KEY: Option(help=help, bounds=bounds, **declared)}
     if factory is not None:
         return dataclasses.field(default_factory=factory, metadata=meta)
     if default is dataclasses.MISSING:
@@ -96,7 +143,11 @@ def _default(f: dataclasses.Field) -> Any:
 
 # --------------------------------------------------------------------------- types
 
-class TypeMismatch(Exception):
+class BadValue(Exception):
+    """A value that does not fit its declaration, as one phrase (``must be in [1, 1024], got 0``)."""
+
+
+class TypeMismatch(BadValue):
     """A value is not of its declared type: ``expected`` and ``got`` name both."""
 
     def __init__(self, expected: str, got: str) -> None:
@@ -152,7 +203,7 @@ def type_name(kind: Any) -> str:
     if is_section(kind):
         return "table"
     if isinstance(kind, type) and issubclass(kind, PurePath):
-        return "str (a path)"
+        return "path"
     return getattr(kind, "__name__", str(kind))
 
 
@@ -215,30 +266,8 @@ def coerce(value: Any, kind: Any) -> Any:
     raise TypeMismatch(type_name(kind), _value_name(value))
 
 
-def bounds_text(opt: Option) -> str:
-    """The bounds as an interval, e.g. ``[1, 4096]``, ``> 0``, ``[0, 1)`` ('' when there are none)."""
-    if opt.low is not None and opt.high is not None:
-        return f"{'(' if opt.low_open else '['}{_num(opt.low)}, {_num(opt.high)}{')' if opt.high_open else ']'}"
-    if opt.low is not None:
-        return f"{'>' if opt.low_open else '>='} {_num(opt.low)}"
-    if opt.high is not None:
-        return f"{'<' if opt.high_open else '<='} {_num(opt.high)}"
-    return ""
-
-
 def _num(x: float) -> str:
     return f"{x:g}" if isinstance(x, float) else str(x)
-
-
-def _bound_problem(value: Any, opt: Option) -> str | None:
-    """Why a number is out of the option's bounds (the messages name the declared bound as written)."""
-    if isinstance(value, float) and not math.isfinite(value):
-        return f"must be a finite number, got {value}"
-    if opt.low is not None and (value < opt.low or (opt.low_open and value == opt.low)):
-        return f"must be {'>' if opt.low_open else '>='} {opt.low}, got {value}"
-    if opt.high is not None and (value > opt.high or (opt.high_open and value == opt.high)):
-        return f"must be {'<' if opt.high_open else '<='} {opt.high}, got {value}"
-    return None
 
 
 def _numbers(value: Any) -> list[float]:
@@ -249,6 +278,111 @@ def _numbers(value: Any) -> list[float]:
     if isinstance(value, dict):
         return [v for v in value.values() if isinstance(v, (int, float)) and not isinstance(v, bool)]
     return []
+
+
+def check(value: Any, kind: Any, bounds: Bounds = NO_BOUNDS) -> Any:
+    """``value`` as the declared type ``kind`` (:func:`coerce`), its numbers finite and inside ``bounds``
+    (every number of a list or table); BadValue as one phrase otherwise: ``expected int, got str``, ``must be
+    in [1, 1024], got 0``, ``must be a finite number, got nan``, ``expected numbers in [0, 1), got [2, 0.5]``."""
+    value = coerce(value, kind)
+    numbers = _numbers(value)
+    if all(bounds.holds(v) for v in numbers):
+        return value
+    if isinstance(value, (int, float)):
+        if not math.isfinite(value):
+            raise BadValue(f"must be a finite number, got {value}")
+        raise BadValue(f"must be {bounds.within()}, got {value}")
+    shown = list(value.values()) if isinstance(value, dict) else list(value)
+    raise BadValue(f"expected {'numbers ' + bounds.within() if bounds.text() else 'finite numbers'}, got {shown}")
+
+
+_TRUE, _FALSE = {"1", "true", "yes", "on"}, {"0", "false", "no", "off"}
+
+
+def from_text(text: str, kind: Any) -> Any:
+    """A value written as text (a spec string's ``key=value``, a flag's argument) as the declared type: bool
+    (1/0, true/false, yes/no, on/off), int, float, str, a path (``~`` expanded), ``Literal`` (by its text),
+    ``X | None`` (``none``, ``null`` or nothing: None), another class by calling it with the text;
+    TypeMismatch naming the type and the text. Bounds are :func:`check`'s."""
+    kind = _strip(kind)
+    args = _union_args(kind)
+    if args is not None:
+        if type(None) in args and text.strip().lower() in ("none", "null", ""):
+            return None
+        for a in (a for a in args if a is not type(None)):
+            try:
+                return from_text(text, a)
+            except TypeMismatch:
+                continue
+    elif typing.get_origin(kind) is typing.Literal:
+        match = [a for a in typing.get_args(kind) if str(a) == text]
+        if match:
+            return match[0]
+    elif kind is Any or kind is str or kind is dataclasses.MISSING or not isinstance(kind, type):
+        return text
+    elif kind is not type(None):
+        try:
+            if kind is bool:
+                if text.strip().lower() in _TRUE | _FALSE:
+                    return text.strip().lower() in _TRUE
+                raise ValueError(text)
+            value = kind(text)
+            return value.expanduser() if isinstance(value, PurePath) and hasattr(value, "expanduser") else value
+        except (ValueError, TypeError, ArithmeticError):
+            pass
+    raise TypeMismatch(type_name(kind), repr(text[:40]))
+
+
+@dataclass(frozen=True)
+class Param:
+    """An option declared by name: a keyword parameter of a method or network (type, default, help and
+    :class:`Range` from its ``Annotated`` annotation; lfbench.method.params) or a command-line flag that
+    several commands share (lfbench.utils.flags). It checks values as a section's option does."""
+
+    name: str
+    kind: Any  # the type, without its Annotated metadata; Any for an unannotated parameter
+    default: Any  # inspect.Parameter.empty: required
+    help: str = ""
+    range: Bounds | None = None
+
+    def __post_init__(self) -> None:
+        if self.kind is inspect.Parameter.empty:
+            object.__setattr__(self, "kind", Any)
+
+    @property
+    def required(self) -> bool:
+        return self.default is inspect.Parameter.empty
+
+    @property
+    def type_name(self) -> str:
+        return type_name(self.kind)
+
+    def check(self, value: Any) -> Any:
+        """``value`` (e.g. from a TOML table, already typed) as the parameter's type, inside its bounds;
+        BadValue as one phrase otherwise. Types this cannot check are accepted."""
+        return check(value, self.kind, self.range or NO_BOUNDS)
+
+    def problem(self, value: Any) -> str | None:
+        """Why ``value`` does not fit (:meth:`check`'s phrase), or None."""
+        try:
+            self.check(value)
+        except BadValue as exc:
+            return str(exc)
+        return None
+
+    def parse(self, text: str) -> Any:
+        """A value written as text, converted (:func:`from_text`; an unannotated parameter takes its
+        default's type) and checked."""
+        kind = self.kind
+        if kind is Any and self.default not in (None, inspect.Parameter.empty):
+            kind = type(self.default)
+        return self.check(from_text(text, kind))
+
+    def describe(self) -> str:
+        """``name (int in [1, 1024], default 8): help``: one line of ``lfbench methods``."""
+        kind = " ".join(filter(None, (self.type_name, self.range.text() if self.range else "")))
+        parts = [kind, "required" if self.required else f"default {self.default!r}"]
+        return f"{self.name} ({', '.join(parts)}){': ' + self.help if self.help else ''}"
 
 
 # --------------------------------------------------------------------------- parsing
@@ -339,13 +473,11 @@ def _read(t: Table, f: dataclasses.Field, opt: Option, kind: Any, values: dict[s
         if opt.single and isinstance(raw, (str, int, float)) and typing.get_origin(_strip(base)) is tuple:
             raw = [raw]
         try:
-            value = coerce(raw, kind)
-        except TypeMismatch as exc:
+            value = check(raw, kind, opt.bounds)
+        except BadValue as exc:
             t.fail(key, str(exc))
     if isinstance(value, (tuple, list, dict)) and len(value) < opt.min_length:
         t.fail(key, f"needs at least {opt.min_length} entr{'y' if opt.min_length == 1 else 'ies'}")
-    if section is None and items is None:
-        _check_bounds(t, key, value, opt)
     if opt.convert is not None:
         value = opt.convert(value)
     if opt.check is not None:
@@ -353,19 +485,6 @@ def _read(t: Table, f: dataclasses.Field, opt: Option, kind: Any, values: dict[s
         if problem:
             t.fail(key, problem)
     return value
-
-
-def _check_bounds(t: Table, key: str, value: Any, opt: Option) -> None:
-    """Numbers are finite and inside the option's bounds (every number of a list or table)."""
-    if isinstance(value, (int, float)) and not isinstance(value, bool):
-        problem = _bound_problem(value, opt)
-        if problem:
-            t.fail(key, problem)
-    elif any(_bound_problem(v, opt) for v in _numbers(value)):
-        shown = list(value.values()) if isinstance(value, dict) else list(value)
-        bounds = bounds_text(opt)
-        within = f"in {bounds}" if opt.low is not None and opt.high is not None else bounds
-        t.fail(key, f"expected {'numbers ' + within if bounds else 'finite numbers'}, got {shown}")
 
 
 def parse_section(cls: type, table: Table, index: int | None = None) -> Any:
@@ -466,7 +585,7 @@ def reference_markdown(cls: type, heading: str = "", level: int = 2, free: dict[
         if opt.rest:
             rows.append(("*(any other key)*", "any", "", "", False, opt.help))
             continue
-        rows.append((f"`{f.name}`", type_name(kind), _default_text(f, opt, kind), bounds_text(opt), opt.resume_free,
+        rows.append((f"`{f.name}`", type_name(kind), _default_text(f, opt, kind), opt.bounds.text(), opt.resume_free,
                      opt.help))
         name = f"{heading.strip('[]')}.{f.name}" if heading else f.name
         if is_section(base):

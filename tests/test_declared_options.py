@@ -1,0 +1,151 @@
+"""One declared-option system (issue 29.3): TOML keys, method and network parameters and the command-line flags
+several commands share are declared with the same types and bounds and checked by one function, in one
+wording; every command that takes a shared flag has its one ceiling; docs/command-line.md is generated from
+the flags' declarations."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+from pathlib import Path
+from typing import Annotated
+
+import pytest
+import torch
+from helpers import assert_one_error_line, isolate_registries, run_cli
+
+from lfbench import Range
+from lfbench.cli import argtypes, build_parser
+from lfbench.method.trainable import Trainable, register_trainable
+from lfbench.training.config import TrainConfig
+from lfbench.utils.errors import SpecError
+from lfbench.utils.flags import FLAGS, JOBS, MAX_JOBS, SEED, THREADS
+from lfbench.utils.options import Bounds, Param, Table, parse_section
+
+REPO = Path(__file__).resolve().parents[1]
+DOC = REPO / "docs" / "command-line.md"
+
+#: What each command needs besides the flag to parse (nothing is run: only parsed).
+REQUIRED = {"evaluate": ["--data", "d", "--method", "gt", "--out", "o"], "ablate": ["spec.toml"],
+            "predict": ["--method", "gt", "--input", "v.npy", "--out", "o.pfm"], "synth": ["--out", "o"],
+            "check-plugin": ["base"]}
+
+
+def _cases() -> list[tuple[object, tuple[str, ...], float, str]]:
+    """(flag, command, a value at a bound, a value past it) for every bound of every declared flag, for every
+    command that takes it."""
+    out = []
+    for flag, commands in argtypes.flag_users().items():
+        if flag.range is None:
+            continue
+        for command in commands:
+            for bound, is_open, step in ((flag.range.low, flag.range.low_open, -1),
+                                         (flag.range.high, flag.range.high_open, 1)):
+                if bound is None:
+                    continue
+                inside = bound if not is_open else bound - step  # an open end: the nearest inside value
+                outside = bound + step if not is_open else bound
+                out.append(pytest.param(flag, command, inside, outside, id=f"{' '.join(command)}-{flag.flag}-{bound}"))
+    return out
+
+
+def _parse(command: tuple[str, ...], flag, value) -> argparse.Namespace:
+    argv = [*command, *REQUIRED.get(command[0], []), flag.flag, str(value)]
+    return build_parser(argv).parse_args(argv)
+
+
+@pytest.mark.parametrize(("flag", "command", "inside", "outside"), _cases())
+def test_every_command_taking_a_shared_flag_has_its_one_ceiling(capsys, flag, command, inside, outside):
+    """Each command accepts the declared bound and refuses one past it: one usage line naming the flag, exit 2.
+    (`ablate --jobs` took up to 1024 and `evaluate --jobs` 256; the seeds of synth, demo and check-plugin
+    took anything argparse's int did, -1 included.)"""
+    value = int(inside) if flag.kind is int else inside
+    assert getattr(_parse(command, flag, value), flag.name) == value
+    with pytest.raises(SystemExit) as exc:
+        _parse(command, flag, int(outside) if flag.kind is int else outside)
+    err = capsys.readouterr().err
+    assert exc.value.code == 2
+    line = assert_one_error_line(2, err, f"argument {flag.flag}: must be", flag.range.within())
+    assert line.startswith(f"lfbench {' '.join(command)}: error:")
+
+
+def test_jobs_is_shared_by_evaluate_and_ablate_with_one_ceiling():
+    users = argtypes.flag_users()
+    assert users[JOBS] == [("evaluate",), ("ablate",)] and JOBS.range.high == MAX_JOBS == 256
+    assert [("synth",), ("check-plugin",)] == [c for c in users[SEED] if c[0] in ("synth", "check-plugin")]
+    # --threads of lfbench bench is the threads parameter of every network's method: one declaration
+    from lfbench.method.network_method import RUNTIME_PARAMS
+
+    assert RUNTIME_PARAMS["threads"] is THREADS
+
+
+def test_a_library_call_checks_jobs_by_the_same_declaration():
+    """run_ablation and the scoring pool are public API: their guard is the flag's own check."""
+    from lfbench.runs.pool import ScoringPool
+
+    for bad, problem in ((0, "must be in [1, 256], got 0"), (MAX_JOBS + 1, "got 257"), (True, "expected int, got bool"),
+                         (2.0, "expected int, got float")):
+        with pytest.raises(SpecError) as exc:
+            ScoringPool(bad)
+        assert str(exc.value).startswith("--jobs: ") and str(exc.value).endswith(problem)
+
+
+def test_a_parameter_and_a_toml_key_are_worded_alike():
+    """A network parameter's bound and type messages are the TOML keys' (it said "must be 1 to 8" and
+    "expects int, got str '16'" where a TOML key says "must be in [1, 8]" and "expected int, got str")."""
+    from lfbench.utils.options import option
+
+    @dataclasses.dataclass(frozen=True)
+    class Section:
+        width: int = option(2, low=1, high=8, help="a width")
+
+    def toml(value) -> str:
+        with pytest.raises(SpecError) as exc:
+            parse_section(Section, Table({"width": value}, "net", None))
+        return str(exc.value).split("net.width: ", 1)[1]
+
+    param = Param("width", int, 2, "a width", Range(1, 8))
+    for value in (9, 0, "16", 2.5, math.nan):
+        assert param.problem(value) == toml(value)
+    assert toml(9) == "must be in [1, 8], got 9" and toml("16") == "expected int, got str"
+    assert dataclasses.astuple(Range(1, 8)) == dataclasses.astuple(Bounds(1, 8)) and Range(1, 8).text() == "[1, 8]"
+
+
+class Narrow(torch.nn.Module):
+    def __init__(self, width: Annotated[int, "channels", Range(1, 8)] = 2, angular: int = 9) -> None:
+        super().__init__()
+        self.angular = angular
+        self.conv = torch.nn.Conv2d(angular * angular, 1, 3, padding=1)
+
+    def forward(self, views):
+        return self.conv(views)[:, 0], None
+
+
+class NarrowNet(Trainable):
+    """A plugin network whose width is bounded by Range(1, 8)."""
+
+    network = Narrow
+
+
+def test_a_plugin_range_refuses_the_same_value_from_a_spec_and_from_a_model_table(monkeypatch, capsys):
+    """`Annotated[int, "help", Range(1, 8)]` (the plugin API) refuses 9 from a spec string and from a training
+    config's [model] table with the same message, as a TOML key of the same bounds would."""
+    isolate_registries(monkeypatch)
+    register_trainable("narrow")(NarrowNet)
+    rc, _, err = run_cli(capsys, "check-plugin", "narrow:width=9")
+    assert assert_one_error_line(rc, err).endswith("narrow:width: must be in [1, 8], got 9")
+    with pytest.raises(SpecError) as exc:
+        TrainConfig.from_dict({"method": "narrow", "model": {"width": 9}, "stages": [{"loss": "l1", "steps": 1}],
+                               "data": {"synthetic": [{"category": "synthetic"}]}})
+    assert str(exc.value) == "model.width: must be in [1, 8], got 9"
+    assert "width (int [1, 8], default 2): channels" in run_cli(capsys, "info", "narrow")[1]
+
+
+def test_the_committed_flag_reference_is_what_the_declarations_generate(capsys):
+    text = DOC.read_text(encoding="utf-8")
+    assert argtypes.COMMAND in text.splitlines()[0]
+    assert text == argtypes.reference(), f"{DOC.name} is stale: run `{argtypes.COMMAND}`"
+    for flag in FLAGS:
+        assert f"| `{flag.flag} {flag.metavar}` |" in text
+    assert "docs/command-line.md" in (REPO / "README.md").read_text(encoding="utf-8")
