@@ -74,8 +74,10 @@ from lfbench.utils.names import FileNames
 from lfbench.utils.options import Table, option, parse_section
 from lfbench.utils.tomlfile import read_toml
 
-TABLES = ("table4", "table5", "beta", "tables12", "none")
-SPECIAL_AXES = ("loss", "beta", "lr", "seed")
+NO_TABLE = ("tables12", "none")  # a spec without a reference table (Tables I/II are written for every spec)
+#: Axes of every training config, whatever the network: the last stage's loss and learning rate, the seed (and,
+#: beside them, each keyword parameter a registered loss declares: :func:`loss_axes`).
+SPECIAL_AXES = ("loss", "lr", "seed")
 DEVICES = ("cpu", "cuda", "auto")
 MAX_CELLS = 1024  # cells (x seeds) one spec may define: counted before any cell is made
 MAX_REPEATS = 1000  # timed (and warm-up) runs of the test time
@@ -197,8 +199,10 @@ class SpecFile:
     """The keys of an ablation spec file, as declared (parse_spec makes an :class:`AblationSpec` of them)."""
 
     title: str | None = option(None, default_text="the file name", help="title of the tables")
-    table: Literal["table4", "table5", "beta", "tables12", "none"] = option(
-        "none", help="the paper table beside ours (Tables I/II, per scene and average, are written for every spec)")
+    table: str = option(
+        "none", help="the reference's table beside ours: the id of a table its declaration lists (e.g. SubFocal's "
+                     "table4, table5, beta), or none / tables12 (Tables I/II, per scene and average, are written "
+                     "for every spec)")
     base: str | dict[str, Any] | None = option(
         None, help="the training config every cell starts from (a file, relative to the spec), or an inline [base] "
                    "table in the training-config layout", free_text="")
@@ -265,9 +269,14 @@ class AblationSpec:
         return cfg
 
 
+def network_name(config: dict[str, Any]) -> str:
+    """The name of the registered trainable network a training config (dict layout) trains."""
+    return config.get("method", DEFAULT_TRAINABLE)
+
+
 def trainable_of(config: dict[str, Any]) -> Trainable:
     """The registered trainable network a training config (dict layout) trains."""
-    return get_trainable(config.get("method", DEFAULT_TRAINABLE))
+    return get_trainable(network_name(config))
 
 
 def network_default(config: dict[str, Any], key: str) -> Any:
@@ -337,10 +346,27 @@ def parse_spec(raw: dict[str, Any], source: Path, text: str = "") -> AblationSpe
     evaluation = f.evaluation
     if evaluation.synthetic is None and evaluation.data is None:
         raise SpecError("evaluation: give synthetic = {seed, size, scenes} and/or data = ROOT with scenes", source)
+    _check_table(f.table, f.report.reference, network_name(cells[0].config if cells else {}), source)
     return AblationSpec(source=source, title=f.title if f.title is not None else source.stem, table=f.table,
                         base_source=base_source, budget=budget, cells=cells, shared_stage1=shared,
                         evaluation=evaluation, methods=methods, paper_methods=f.report.paper_methods,
                         reference=f.report.reference, out=f.out, text=text, seeds=seeds)
+
+
+def _check_table(table: str, reference: str | None, network: str, source: Path) -> None:
+    """SpecError unless ``table`` is none / tables12 or a table the spec's reference declares for ablations
+    (its ``[report] reference``, else its network's: lfbench.reports.reference)."""
+    if table in NO_TABLE:
+        return
+    from lfbench.reports.reference import get_reference, reference_for_network
+
+    if reference == "none":  # no reference: the spec's table is not written
+        return
+    ref = get_reference(reference) if reference is not None else reference_for_network(network)
+    known = [t.id for t in ref.ablation_tables()] if ref is not None else []
+    if table not in known:
+        whose = f"reference {ref.name!r}" if ref is not None else f"no reference of network {network!r}"
+        raise SpecError(f"table: expected one of {', '.join([*known, *NO_TABLE])} ({whose}), got {table!r}", source)
 
 
 def _with_seeds(cells: tuple[Cell, ...], seeds: tuple[int, ...], source: Path) -> tuple[Cell, ...]:
@@ -538,15 +564,26 @@ def apply_axis(cfg: dict[str, Any], axis: str, value: Any, fail: Callable[[str],
         last.update(params)
         others = {s["name"] for s in stages[:-1]}
         last["name"] = _loss_stage_name(last["loss"], len(stages) - 1, others)
-    elif axis == "beta":
-        last["beta"] = value
+    elif axis in loss_axes():
+        last[axis] = value
     elif axis == "lr":
         last["lr"] = value
     elif "." in axis:
         _set_dotted(cfg, axis, value, fail)
     else:
-        fail(f"unknown axis; use {', '.join(model_axes + SPECIAL_AXES)} or a dotted training-config key "
+        fail(f"unknown axis; use {', '.join(model_axes + SPECIAL_AXES + loss_axes())} or a dotted training-config key "
              "(e.g. model.width, stages.2.lr)")
+
+
+def loss_axes() -> tuple[str, ...]:
+    """The parameters the registered losses declare after their tensors (lfbench.training.losses.make_loss: e.g.
+    a focusing exponent), each an axis that sets the last stage's loss parameter."""
+    import inspect
+
+    from lfbench.training.losses import LOSSES
+
+    return tuple(dict.fromkeys(name for loss in LOSSES.names()
+                               for name in list(inspect.signature(LOSSES.get(loss)).parameters)[4:]))
 
 
 def _check_config(cfg: dict[str, Any], source: Path, where: str) -> TrainConfig:
