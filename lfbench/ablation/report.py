@@ -2,27 +2,28 @@
 lfbench.reports.reference) in adjacent, labelled columns: the ablation's output writers
 (lfbench.reports.writers), which ``lfbench ablate`` runs into its staged set.
 
-Written into OUT (each table as .md, .tex and .csv):
+Written into OUT (each table as .md, .tex and .csv); every metric column is labelled by its definition
+(lfbench.scoring.base.Metric.label), and the metrics are those the reference's table declares, else the
+ordered metrics of the protocol of the dataset the cells were scored on (:func:`ablation_metrics`):
 
-- ``table_cells``: one row per cell: its grid values, mean BadPix 0.07/0.03/0.01 and MSE x100 over the
-  evaluation scenes, train time and test time;
-- ``table4`` (spec table = "table4"): interval, interpolation, BadPix 0.07, MSE x100, train time, test
-  time, ours beside the reference's Table IV;
-- ``table5`` ("table5"): BadPix 0.07 per fine-tuning loss, ours beside the reference's Table V;
-- ``table_beta`` ("beta"): BadPix 0.07 and MSE x100 per loss beta (what the reference says about it);
+- ``table_cells``: one row per cell: its grid values, the mean of each metric over the evaluation scenes,
+  train time and test time;
+- the spec's ``table`` (an id the reference declares, e.g. SubFocal's Table IV as ``table4``): our cells
+  beside the declared table (:func:`reference_table`: its axes joined to the paper's key columns, its metrics,
+  our measures beside its extra columns), named ``<id>`` (or ``table_<id>``), and the figure it declares:
+  ``<axis>_curve.png`` or ``accuracy_vs_test_time.png`` (lfbench.ablation.plots);
 - ``table_seeds`` / ``table_significance`` (the spec has seeds): mean and 95 % t-interval over seeds per
-  variant (clipped to each metric's range), and the reference's orderings as paired t-tests;
+  variant (clipped to each metric's range), and the orderings the declared table states as paired t-tests;
 - ``table_baselines`` (the spec has [[methods]]): every cell (with seeds: variant) against each extra
-  method, e.g. the plane sweep and the zero map, per scene group in BadPix 0.07 and MSE x100, with a
-  verdict per baseline (lfbench.ablation.baselines); its summary lines ("every cell beats ..." or "K of N
-  cells do not beat ...") are logged and head the captions of table_cells, this table and the paper-style
-  table;
+  method, e.g. the plane sweep and the zero map, per scene group, with a verdict per baseline
+  (lfbench.ablation.baselines); its summary lines ("every cell beats ..." or "K of N cells do not beat ...")
+  are logged and head the captions of table_cells, this table and the paper-style table;
 - ``table_per_scene`` / ``table_average`` (Tables I/II) for every cell and extra method, and, with a
   reference whose Tables I/II cover some evaluation scene, ``table_per_scene_paper`` / ``table_average_paper``;
-- figures/: ``beta_curve.png`` (BadPix 0.07 against beta), ``accuracy_vs_test_time.png`` (BadPix 0.07
-  against test time, per interval and interpolation, ours and the reference's), and ``error_maps/``
-  (per scene: one row per variant with disparity, BadPix map, signed error and uncertainty; the
-  BadPix(t) curves), drawn from the maps the cells saved;
+- ``table_<id>_paper``: each per-scene table the reference declares for the dataset the cells were scored on
+  (e.g. SubFocal's Table III on UrbanLF-Syn), as ``lfbench report`` writes it (lfbench.reports.paper_scenes);
+- figures/error_maps/ (per scene: one row per variant with disparity, BadPix map, signed error and
+  uncertainty; the BadPix(t) curves), drawn from the maps the cells saved;
 - html/ (``--html``): the site, with the tables of the means over seeds, the orderings and the verdicts.
 
 "ours" columns are labelled with the budget (width, batch, patch, steps, device) and the test-time
@@ -45,10 +46,10 @@ import pandas as pd
 
 from lfbench.ablation import plots
 from lfbench.ablation.baselines import baselines_caption, baselines_table, scene_groups, summary_lines
+from lfbench.ablation.cell import load_scenes
 from lfbench.ablation.facts import axis_text, axis_value, cell_info, network_of, same_value
 from lfbench.ablation.significance import ALPHA, ordering_metric, seeds_table, significance_table
 from lfbench.ablation.spec import NO_TABLE, AblationSpec
-from lfbench.data.scene import Scene
 from lfbench.reports.html import SiteInputs, SiteSection
 from lfbench.reports.maps import saved_predictions
 from lfbench.reports.paper import PaperTables, find_paper_dir, load_paper
@@ -357,7 +358,7 @@ def _with_summary(caption: list[str], summary: Sequence[str]) -> list[str]:
 # --------------------------------------------------------------------------- the writers
 
 class AblationTables(OutputWriter):
-    """table_cells, the reference's table of the spec (table4, table5, table_beta), table_seeds and
+    """table_cells, the reference's table the spec names (:func:`reference_table`), table_seeds and
     table_significance (seeds) and table_baselines ([[methods]]). ``paper``: the reference's numbers
     (None: no paper columns). After the write, ``sections`` holds the tables the site shows besides its
     leaderboard: the means over seeds with their intervals, the orderings and the verdicts."""
@@ -620,6 +621,6 @@ def run_writers(writers: Sequence[OutputWriter], spec: AblationSpec, results: Re
     for writer in writers:
         writer.start(run)
     if spec.evaluation.error_maps:
-        recorded = [Scene(d) for d in results.meta.get("scenes", [])]
+        recorded = load_scenes(tuple((d, None) for d in results.meta.get("scenes", [])), spec.evaluation)
         replay(writers, saved_predictions(recorded, run.maps, within=folder))
     return write_outputs(writers, run)

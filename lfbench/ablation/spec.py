@@ -125,7 +125,11 @@ class SyntheticEval:
 @dataclass(frozen=True)
 class Evaluation:
     synthetic: SyntheticEval | None = option(None, help="synthetic scenes generated into OUT/eval_data/")
-    data: Path | None = option(None, help="HCI data root of the scenes below (relative to the spec's folder)")
+    data: Path | None = option(None, help="data root of the scenes below, of any dataset lfbench reads (relative to "
+                                          "the spec's folder)")
+    dataset: str | None = option(None, default_text="detected", help="the dataset adapter data is read with (a "
+                                                                     "`lfbench datasets` name); its protocol scores "
+                                                                     "the cells")
     scenes: tuple[str, ...] = option((), single=True, help="scenes of data by name, category or split")
     time_size: int = option(512, low=16, high=MAX_SYNTH_SIZE,
                             help="test time: one whole 9 x 9 x time_size x time_size light field")
@@ -148,6 +152,8 @@ class Evaluation:
             values["data"] = _resolve(str(values["data"]), Path(t.source or "."), "evaluation.data")
         elif values["scenes"]:
             t.fail("scenes", "names scenes of evaluation.data, which is not given")
+        elif values["dataset"] is not None:
+            t.fail("dataset", "names the dataset of evaluation.data, which is not given")
         return values
 
     def fingerprint(self) -> str:
@@ -155,6 +161,8 @@ class Evaluation:
         key = {"synthetic": None if self.synthetic is None else vars(self.synthetic),
                "data": None if self.data is None else str(self.data), "scenes": list(self.scenes),
                "time_size": self.time_size, "lowres_only": self.lowres_only, "precision": self.precision}
+        if self.dataset is not None:  # (absent when detected: the fingerprints of earlier specs stay)
+            key["dataset"] = self.dataset
         return sha256_of(key)
 
 
