@@ -164,3 +164,26 @@ def test_no_paper_table_adapters_remain():
         strings = {node.value for node in ast.walk(tree) if isinstance(node, ast.Constant)
                    and isinstance(node.value, str) and id(node) not in docs and path.name != "reference.py"}
         assert not strings & {"table4", "table5", "beta", "interval", "interpolation", "uafl"}, path
+
+
+def test_figure_and_table_labels_come_from_the_metric_definitions(tmp_path):
+    import numpy as np
+
+    from lfbench.reports.sweep_table import sweep_figure, sweep_table
+    from lfbench.reports.uncertainty import _measure_label
+    from lfbench.scoring.uncertainty import Sparsification
+    from lfbench.training.curves import _validation_labels
+
+    assert _validation_labels([{"badpix": 3.0, "threshold": 0.03}]) == ("BadPix 0.03 (%)", "MSE x100")
+    assert _validation_labels([{"badpix": 3.0}]) == ("BadPix (%)", "MSE x100")  # no threshold recorded
+    f = np.linspace(0, 0.9, 4)
+    sp = Sparsification(f, 1 - f, 0.5 * (1 - f), np.ones_like(f), "badpix_0.015", "%", 100, False)
+    assert _measure_label(sp) == "BadPix(0.015) of remaining pixels [%]"
+    frame = pd.DataFrame({"label": ["a"] * 3, "method": ["planesweep"] * 3, "interval": [0.5] * 3,
+                          "interpolation": ["nearest"] * 3, "subpixel": ["equiangular"] * 3, "scene": ["s"] * 3,
+                          "metric": ["q25_x100", "badpix_0.015", "mse_x100"], "value": [1.0, 2.0, 3.0],
+                          "runtime_s": [1.0] * 3})
+    table = sweep_table(frame)  # the metrics the frame holds, in the one display order, labelled by Metric
+    assert list(table.columns[3:]) == ["MSE x100", "Q25", "BadPix 0.015 (%)", "time per scene (s)"]
+    assert list(sweep_table(frame, ["badpix_0.015"]).columns[3:]) == ["BadPix 0.015 (%)", "time per scene (s)"]
+    assert sweep_figure(table, tmp_path / "q25.png", "q25_x100").stat().st_size > 1000

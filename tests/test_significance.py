@@ -13,16 +13,17 @@ from test_ablate import quiet, write_spec
 from lfbench.ablation import report
 from lfbench.ablation.facts import cell_info
 from lfbench.ablation.significance import comparisons, paired_t, seeds_table, significance_table, t_interval
+from lfbench.ablation.spec import load_spec
 from lfbench.reports.reference import default_reference
+from lfbench.results import Record, Results
+from lfbench.utils.errors import SpecError
 
 
 def _declared(table_id: str):
     """The shipped reference's declaration of ``table_id`` and its axes (what the report reads)."""
     table = default_reference().table(table_id)
     return table, tuple(table.join)
-from lfbench.ablation.spec import load_spec
-from lfbench.results import Record, Results
-from lfbench.utils.errors import SpecError
+
 
 T975_DF2 = 4.302652729911275  # Student t 0.975 quantile, 2 degrees of freedom (printed tables: 4.303)
 
@@ -105,7 +106,8 @@ HAND = {(1, 1): (49, 51), (1, 2): (52, 52), (1, 3): (47, 49),
 
 def test_significance_verdicts_on_hand_made_scores(tmp_path):
     spec = _spec(tmp_path)
-    table = significance_table(_declared("table4")[0], cell_info(spec, _declared("table4")[1]), _scores(HAND)).set_index("worse")
+    table4, axes = _declared("table4")
+    table = significance_table(table4, cell_info(spec, axes), _scores(HAND)).set_index("worse")
     first = table.loc["interval=1"]
     assert first["better"] == "interval=0.5" and first["seeds"] == 3
     assert first["better mean"] == pytest.approx(40.0) and first["worse mean"] == pytest.approx(50.0)
@@ -119,10 +121,10 @@ def test_significance_verdicts_on_hand_made_scores(tmp_path):
     assert third["verdict"] == "reversed"
     # A seed missing from one side leaves the pair out (2 seeds left); one seed cannot resolve anything.
     partial = {k: v for k, v in HAND.items() if k != (0.1, 3)}
-    row = significance_table(_declared("table4")[0], cell_info(spec, _declared("table4")[1]), _scores(partial)).set_index("worse").loc["interval=0.25"]
+    row = significance_table(table4, cell_info(spec, axes), _scores(partial)).set_index("worse").loc["interval=0.25"]
     assert row["seeds"] == 2
     single = {k: v for k, v in HAND.items() if k[1] == 1}
-    rows = significance_table(_declared("table4")[0], cell_info(spec, _declared("table4")[1]), _scores(single))
+    rows = significance_table(table4, cell_info(spec, axes), _scores(single))
     assert set(rows["verdict"]) == {"not resolved"} and set(rows["seeds"]) == {1}
 
 
