@@ -24,8 +24,6 @@ from lfbench.utils.readfile import check_regular_file
 
 #: ``format`` of exported weights (final.pt, best.pt, stage*.pt).
 WEIGHTS_FORMAT = "lfbench.weights"
-#: Earlier names of the same format (weights files written before plugins had networks of their own).
-LEGACY_WEIGHTS_FORMATS = ("lfbench.subfocal.weights",)
 #: ``format`` of a training checkpoint (the resume state of ``lfbench train``).
 CHECKPOINT_FORMAT = "lfbench.train.checkpoint"
 
@@ -155,4 +153,4 @@ def _is_name(text: str) -> bool:
 
 
 __all__ = ["check_checkpoint_file", "MAX_CHECKPOINT_BYTES", "read_checkpoint", "read_weights", "is_weights", "sniff",
-           "WEIGHTS_FORMAT", "LEGACY_WEIGHTS_FORMATS", "CHECKPOINT_FORMAT"]
+           "WEIGHTS_FORMAT", "CHECKPOINT_FORMAT"]
