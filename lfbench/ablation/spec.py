@@ -96,7 +96,7 @@ class Budget:
     threads: int = option(0, low=0, high=MAX_THREADS, help="torch threads per cell (0: cores / --jobs)")
     model: dict[str, Any] = option({}, help="[model] overrides: the network's parameters every cell is built with",
                                    free_text="[model] overrides written over the base config's [model] (e.g. "
-                                             "`model = { width = 8 }` for SubFocal's aggregation channels); "
+                                             "`model = { width = 8 }`: a network's width); "
                                              "checked against the network's parameters and their types")
 
     def describe(self, config: dict[str, Any]) -> str:
@@ -208,8 +208,8 @@ class SpecFile:
 
     title: str | None = option(None, default_text="the file name", help="title of the tables")
     table: str = option(
-        "none", help="the reference's table beside ours: the id of a table its declaration lists (e.g. SubFocal's "
-                     "table4, table5, beta), or none / tables12 (Tables I/II, per scene and average, are written "
+        "none", help="the reference's table beside ours: the id of a table its declaration lists (e.g. "
+                     "table4), or none / tables12 (Tables I/II, per scene and average, are written "
                      "for every spec)")
     base: str | dict[str, Any] | None = option(
         None, help="the training config every cell starts from (a file, relative to the spec), or an inline [base] "
@@ -225,7 +225,8 @@ class SpecFile:
                                            "also by name or `last`")
     grid: tuple[dict[str, Any], ...] = option(
         (), help="the cells: the union of the products of every [[grid]] table's axis = [values] (identical configs "
-                 "run once); axes: the network's parameters, seed, loss, beta, lr or a dotted training-config key")
+                 "run once); axes: the network's parameters, seed, loss, a loss parameter (beta), lr or a dotted "
+                 "training-config key")
     stage1: Stage1 = option(factory=Stage1, help="a stage 1 shared by the cells")
     evaluation: Evaluation = option(factory=Evaluation, help="the scenes and timing every cell is scored with")
     methods: tuple[ExtraMethod, ...] = option((), help="more rows for Tables I/II: any registered method spec")
