@@ -78,7 +78,7 @@ def _no_blank(value: str) -> str | None:
 class PaperTable:
     """One table of a paper, declared generically: where its numbers are and how they line up with ours."""
 
-    id: str = option(help="what lfbench calls the table (table1 .. table5, beta, ...)", check=_no_blank)
+    id: str = option(help="what lfbench and ablation specs call the table (e.g. table3)", check=_no_blank)
     file: str = option("", help="its CSV file in the paper folder ('' for a figure whose values are not printed)")
     caption: str = option("", help="caption line of the tables that show it")
     keys: tuple[str, ...] = option((), help="the CSV columns that identify a row (join keys), e.g. method")
