@@ -8,7 +8,7 @@ ordered metrics of the protocol of the dataset the cells were scored on (:func:`
 
 - ``table_cells``: one row per cell: its grid values, the mean of each metric over the evaluation scenes,
   train time and test time;
-- the spec's ``table`` (an id the reference declares, e.g. SubFocal's Table IV as ``table4``): our cells
+- the spec's ``table`` (an id the reference declares, e.g. ``table4``): our cells
   beside the declared table (:func:`reference_table`: its axes joined to the paper's key columns, its metrics,
   our measures beside its extra columns), named ``<id>`` (or ``table_<id>``), and the figure it declares:
   ``<axis>_curve.png`` or ``accuracy_vs_test_time.png`` (lfbench.ablation.plots);
@@ -21,7 +21,7 @@ ordered metrics of the protocol of the dataset the cells were scored on (:func:`
 - ``table_per_scene`` / ``table_average`` (Tables I/II) for every cell and extra method, and, with a
   reference whose Tables I/II cover some evaluation scene, ``table_per_scene_paper`` / ``table_average_paper``;
 - ``table_<id>_paper``: each per-scene table the reference declares for the dataset the cells were scored on
-  (e.g. SubFocal's Table III on UrbanLF-Syn), as ``lfbench report`` writes it (lfbench.reports.paper_scenes);
+  (e.g. Table III on UrbanLF-Syn), as ``lfbench report`` writes it (lfbench.reports.paper_scenes);
 - figures/error_maps/ (per scene: one row per variant with disparity, BadPix map, signed error and
   uncertainty; the BadPix(t) curves), drawn from the maps the cells saved;
 - html/ (``--html``): the site, with the tables of the means over seeds, the orderings and the verdicts.
@@ -397,7 +397,7 @@ class AblationTables(OutputWriter):
         return written
 
     def _scene_tables(self, run: RunOutputs) -> list[Path]:
-        """The reference's per-scene tables of the dataset the cells were scored on (e.g. SubFocal's Table III
+        """The reference's per-scene tables of the dataset the cells were scored on (e.g. a paper's Table III
         on UrbanLF-Syn), as ``lfbench report`` writes them (lfbench.reports.paper_scenes)."""
         if self.paper is None:
             return []

@@ -6,7 +6,7 @@ seeds (mean +- t_{0.975, n-1} s / sqrt(n)): the seed is the unit of replication,
 are a fixed test set, so the interval says how much a re-training with another seed moves the number.
 
 Each ordering the reference's declared table states becomes paired comparisons of variants
-(lfbench.reports.reference.PaperTable): a ``trend`` (e.g. SubFocal's Table IV, ``interval = "lower"``:
+(lfbench.reports.reference.PaperTable): a ``trend`` (e.g. ``interval = "lower"`` in Table IV:
 interval 1 worse than 0.5 worse than 0.25 worse than 0.1 at the same interpolation) and a ``best`` row
 (e.g. its Table V: the best loss, at the table's ``where`` values, better than each other loss; its beta
 sweep: the best beta better than each other beta), in the table's first declared metric (lower is better).
