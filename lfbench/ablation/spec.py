@@ -580,8 +580,8 @@ def apply_axis(cfg: dict[str, Any], axis: str, value: Any, fail: Callable[[str],
     elif "." in axis:
         _set_dotted(cfg, axis, value, fail)
     else:
-        fail(f"unknown axis; use {', '.join(model_axes + SPECIAL_AXES + loss_axes())} or a dotted training-config key "
-             "(e.g. model.width, stages.2.lr)")
+        fail(f"unknown axis; use {', '.join(model_axes + (SPECIAL_AXES[0], *loss_axes(), *SPECIAL_AXES[1:]))} or a "
+             "dotted training-config key (e.g. model.width, stages.2.lr)")
 
 
 def loss_axes() -> tuple[str, ...]:
