@@ -187,3 +187,19 @@ def test_figure_and_table_labels_come_from_the_metric_definitions(tmp_path):
     assert list(table.columns[3:]) == ["MSE x100", "Q25", "BadPix 0.015 (%)", "time per scene (s)"]
     assert list(sweep_table(frame, ["badpix_0.015"]).columns[3:]) == ["BadPix 0.015 (%)", "time per scene (s)"]
     assert sweep_figure(table, tmp_path / "q25.png", "q25_x100").stat().st_size > 1000
+
+
+def test_an_ordering_in_a_metric_where_higher_is_better_is_tested_in_its_direction(monkeypatch):
+    """A declared table whose first metric is higher-is-better (a plugin's): its trend is reproduced when the
+    better variant scores higher, not reversed."""
+    import lfbench.ablation.significance as significance
+
+    table = PaperTable(id="x", keys=("k",), metrics={"accuracy": ""}, trend={"k": "higher"})
+    info = pd.DataFrame({"variant": ["k=1", "k=1", "k=2", "k=2"], "seed": [1, 2, 1, 2], "k": [1, 1, 2, 2]},
+                        index=["k=1_seed=1", "k=1_seed=2", "k=2_seed=1", "k=2_seed=2"])
+    scores = pd.DataFrame({"method": list(info.index), "scene": ["s"] * 4, "metric": ["accuracy"] * 4,
+                           "value": [50.0, 51.0, 90.0, 92.0]})
+    monkeypatch.setattr(significance, "find_metric", lambda _: SimpleNamespace(higher_is_better=True))
+    row = significance.significance_table(table, info, scores).iloc[0]
+    assert row["claim (paper)"] == "k 2 better than 1" and row["better"] == "k=2"
+    assert row["difference (worse - better)"] == pytest.approx(40.5) and row["verdict"] == "reproduced"

@@ -189,9 +189,12 @@ def seeds_table(info: pd.DataFrame, scores: pd.DataFrame, metrics: Sequence[str]
 def significance_table(table: PaperTable | None, info: pd.DataFrame, scores: pd.DataFrame,
                        metric: str | None = None) -> pd.DataFrame:
     """One row per comparison of :func:`comparisons`: both variants' means over the paired seeds, the mean
-    paired difference (worse - better) with its 95 % interval, t, p and the verdict; in ``metric`` (default:
-    the table's first declared metric, else :data:`ORDERING_METRIC`)."""
+    paired difference (worse - better, in the direction the metric improves: of the negated scores where higher
+    is better) with its 95 % interval, t, p and the verdict; in ``metric`` (default: the table's first declared
+    metric, else :data:`ORDERING_METRIC`)."""
     metric = metric or ordering_metric(table)
+    found = find_metric(metric)
+    higher = found is not None and found.higher_is_better
     values = scene_scores(scores, metric)
     cell_scores = {c: dict(zip(g["scene"], g["value"], strict=True)) for c, g in values.groupby("method")}
     rows = []
@@ -210,7 +213,10 @@ def significance_table(table: PaperTable | None, info: pd.DataFrame, scores: pd.
             b_vals.append(float(np.mean([cell_scores[cell][s] for s in common])))
             w_vals.append(float(np.mean([cell_scores[other][s] for s in common])))
             seeds.append(seed)
-        test = paired_t(b_vals, w_vals)
+        # d = worse - better; for a metric where higher is better, the paper's ordering means worse < better: the
+        # test then runs on the negated scores, so that a positive difference is always "as the paper says"
+        sign = -1.0 if higher else 1.0
+        test = paired_t([sign * v for v in b_vals], [sign * v for v in w_vals])
         rows.append({"claim (paper)": comp.claim, "better": comp.better, "worse": comp.worse, "metric": metric,
                      "seeds": test["n"], "better mean": float(np.mean(b_vals)) if b_vals else math.nan,
                      "worse mean": float(np.mean(w_vals)) if w_vals else math.nan,
