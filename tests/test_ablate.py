@@ -188,12 +188,15 @@ shared = true
     assert last["loss=uafl"].get("beta") is None  # the loss's default (0.1)
     assert last["loss=uafl_beta=0.5"]["beta"] == 0.5
     assert all(c.config["stages"][0] == spec.cells[0].config["stages"][0] for c in spec.cells)
-    assert [report.paper_loss_name(c.config) for c in spec.cells] == ["baseline_l1", "mse", "l1+js", "uafl", None]
+    table5 = report.spec_table(spec, report.spec_reference(spec))
+    assert [report.paper_key(c.config, table5) for c in spec.cells] == [
+        ("baseline_l1",), ("mse",), ("l1+js",), ("uafl",), None]  # the paper's UAFL row is at beta 0.1
 
     spec = load_spec(write_spec(tmp_path, "table = \"beta\"\n[[grid]]\nloss = [\"uafl\"]\nbeta = [1.0, 0.25]\n",
                                 name="beta.toml"))
     assert [c.id for c in spec.cells] == ["loss=uafl_beta=1", "loss=uafl_beta=0.25"]
-    assert [facts.loss_beta(c.config) for c in spec.cells] == [1.0, 0.25]
+    assert [facts.loss_param(c.config, "beta") for c in spec.cells] == [1.0, 0.25]
+    assert [facts.axis_value(c.config, "beta") for c in spec.cells] == [1.0, 0.25]
 
 
 def run_main(args: list[str], capsys) -> tuple[int, str]:
@@ -253,7 +256,8 @@ def test_table4_puts_the_paper_value_beside_ours(tmp_path):
     markers = [{"id": c.id, "train_s": 60.0 * (k + 1), "test_s": 0.5 * (k + 1), "time_size": 64, "device": "cpu",
                 "threads": 1} for k, c in enumerate(spec.cells)]
     frame = report.cell_frame(spec, res, markers)
-    t4 = report.table4(spec, frame, paper, quiet)
+    table4 = report.spec_table(spec, report.spec_reference(spec))
+    t4 = report.reference_table(spec, frame, table4, paper, quiet)
     ours = f"BadPix 0.07 (%), ours ({spec.budget_label()})"
     theirs = "BadPix 0.07 (%), paper (RTX 3090, full training)"
     row = t4.loc["interval=0.5_interpolation=bilinear"]
@@ -269,7 +273,7 @@ def test_table4_puts_the_paper_value_beside_ours(tmp_path):
     cols = list(t4.columns)
     assert cols.index(theirs) == cols.index(ours) + 1
     # without the paper's tables: no paper columns
-    assert not any("paper" in c for c in report.table4(spec, frame, None, quiet).columns)
+    assert not any("paper" in c for c in report.reference_table(spec, frame, table4, None, quiet).columns)
 
 
 # --------------------------------------------------------------------------- shared stage 1, end to end

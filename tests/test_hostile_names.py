@@ -244,7 +244,7 @@ def _toml(text: str) -> str:
 def test_training_and_ablation_figures_draw_dollar_labels(tmp_path):
     import pandas as pd
 
-    from lfbench.ablation.plots import accuracy_vs_time, beta_curve
+    from lfbench.ablation.plots import Points, accuracy_vs_time, metric_curve
     from lfbench.reports.sweep_table import sweep_figure
     from lfbench.reports.uncertainty import plot_sparsification
     from lfbench.scoring.metrics import get_metric
@@ -263,8 +263,12 @@ def test_training_and_ablation_figures_draw_dollar_labels(tmp_path):
                          index=["beta=0.1", "beta=1"])
     records = pd.DataFrame({"method": ["beta=0.1", "beta=1"], "scene": [MATHTEXT_BREAKER] * 2,
                             "metric": ["badpix_0.07"] * 2, "value": [10.0, 20.0]})
-    written.append(beta_curve(frame, records, tmp_path / "beta.png", MATHTEXT_BREAKER))
-    written.append(accuracy_vs_time(frame, None, tmp_path / "acc.png", MATHTEXT_BREAKER, MATHTEXT_BREAKER))
+    written.append(metric_curve(frame["badpix_0.07"], frame["beta"], records, "badpix_0.07", tmp_path / "beta.png",
+                                MATHTEXT_BREAKER, MATHTEXT_BREAKER, MATHTEXT_BREAKER, descending=True))
+    points = Points(frame["test_s"].tolist(), frame["badpix_0.07"].tolist(), ["0.5", "1"],
+                    list(frame["interpolation"]), MATHTEXT_BREAKER, MATHTEXT_BREAKER)
+    written.append(accuracy_vs_time(points, points, "badpix_0.07", tmp_path / "acc.png", MATHTEXT_BREAKER,
+                                    MATHTEXT_BREAKER))
     sweep = pd.DataFrame({"interpolation": [MATHTEXT_BREAKER] * 2, "sub-pixel fit": ["$a$", "$a$"],
                           "interval (px)": [1.0, 0.5], get_metric("badpix_0.07").label: [20.0, 10.0]},
                          index=pd.Index([MATHTEXT_BREAKER] * 2, name="scenes"))

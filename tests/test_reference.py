@@ -40,8 +40,10 @@ def test_subfocal_ships_its_paper_as_a_registered_reference():
     paper = list_references()["subfocal-tci2023"]
     assert paper == read_reference(SHIPPED)
     assert paper.methods == ("SubFocal",) and paper.label == "paper (RTX 3090, full training)"
-    assert paper.table4.train_hours == "train_hours_rtx3090" and paper.table5.loss_names == {"l1": "baseline_l1"}
-    assert paper.table5.best_loss == "uafl" and paper.beta.best == 0.1
+    assert paper.table("table4").extra["train_time"] == "train_hours_rtx3090"
+    assert paper.table("table5").names == {"l1": "baseline_l1"} and paper.table("table5").where == {"beta": "0.1"}
+    assert paper.table("table5").best == "uafl" and paper.table("beta").best == "0.1"
+    assert [t.id for t in paper.ablation_tables()] == ["table4", "table5", "beta"]
     assert default_reference() == paper  # the default network's (subfocal) paper
     assert reference_for_network("lfattnet") == paper and reference_for_network("tinycnn") is None
     with pytest.raises(SpecError, match="Unknown reference 'nope'. Available: subfocal-tci2023"):
@@ -62,13 +64,15 @@ def test_the_core_spells_no_paper():
     ('name = "x"\n', "networks: is required"),
     (SHIPPED.read_text().replace('name = "subfocal-tci2023"', 'name = "x"\nnetwork = "subfocal"'),
      "unknown key\\(s\\): network"),
-    (SHIPPED.read_text().replace('best = "0.1"', 'best = "often"'), "'beta': best: expected a number"),
+    (SHIPPED.read_text().replace('trend = { interval = "lower" }', 'trend = { interval = "finer" }'),
+     "trend: interval: expected lower or higher"),
+    (SHIPPED.read_text().replace('measures = ["stage_train_time"]', 'measures = ["gpu_hours"]'),
+     "measures: unknown gpu_hours"),
     (SHIPPED.read_text().replace('methods = ["SubFocal"]', 'methods = "SubFocal"'), "methods: expected"),
     (SHIPPED.read_text().replace('names = { l1 = "baseline_l1" }', 'names = { l1 = 1 }'),
      r"tables\[4\].names: expected"),
     (SHIPPED.read_text().replace('id = "table5"', 'id = "table4"'), "table id 'table4' declared twice"),
-    (SHIPPED.read_text().replace('test_label = "paper (RTX 3090, 512x512)", ', ''),
-     "'table4': labels.test_label is required"),
+    (SHIPPED.read_text().replace('figure = "time"', 'figure = "bars"'), r"tables\[3\].figure: expected one of"),
     (SHIPPED.read_text().replace('scene_metric = "badpix_0.07"', ''), r"tables\[2\].scene_metric: is required"),
     (SHIPPED.read_text().replace('file = "table3_urbanlf.csv"', 'file = "table3_urbanlf.csv"\ncolumns = 3'),
      r"\[tables\[2\]\] unknown key\(s\): columns"),
@@ -97,9 +101,8 @@ def test_which_reference_a_spec_stands_beside(tmp_path):
     assert report.spec_reference(table4) == paper
     off = load_spec(write_spec(tmp_path, SHIPPED_TABLE4, '[report]\nreference = "none"\n', name="off.toml"))
     assert report.spec_reference(off, paper="DIR") is None
-    named = load_spec(write_spec(tmp_path, SHIPPED_TABLE4, '[report]\nreference = "nope"\n', name="bad.toml"))
-    with pytest.raises(SpecError, match="Unknown reference 'nope'"):
-        report.spec_reference(named)
+    with pytest.raises(SpecError, match="Unknown reference 'nope'"):  # when the spec is read, before any work
+        load_spec(write_spec(tmp_path, SHIPPED_TABLE4, '[report]\nreference = "nope"\n', name="bad.toml"))
 
 
 def test_labels_and_orderings_come_from_the_reference(tmp_path):
@@ -108,16 +111,16 @@ def test_labels_and_orderings_come_from_the_reference(tmp_path):
     other = Reference(name="other", networks=("subfocal",), methods=("OACC-Net",), label="paper (A100, 2 h)",
                       benchmark_note="paper: other, Tables I/II", ablation_note="paper: other",
                       tables=(PaperTable(id="table5", file="table5_losses.csv", keys=("loss",), best="mse",
-                                         names={"l1": "baseline_l1"}),))
-    comps = comparisons("table5", cell_info(spec), other)
+                                         names={"l1": "baseline_l1"}, metrics={"badpix_0.07": "badpix_0.07"}),))
+    comps = comparisons(other.table("table5"), cell_info(spec, ("loss",)))
     assert {(c.claim, c.worse.split("_seed")[0]) for c in comps} == {
-        ("MSE better than l1", "loss=l1"), ("MSE better than uafl", "loss=uafl")}
-    assert report.paper_loss_name(spec.cells[0].config, other) == "baseline_l1"
-    assert report.paper_loss_name(spec.cells[4].config, other) == "uafl"  # no beta best: any beta of UAFL
+        ("loss mse better than loss l1", "loss=l1"), ("loss mse better than loss uafl", "loss=uafl")}
+    assert report.paper_key(spec.cells[0].config, other.table("table5")) == ("baseline_l1",)
+    assert report.paper_key(spec.cells[4].config, other.table("table5")) == ("uafl",)  # no where: any beta of UAFL
     tables = load_paper(write_paper(tmp_path / "paper"), other)
     assert tables.default_methods == ("OACC-Net",)
     frame = pd.DataFrame({"loss": ["l1", "mse"], "badpix_0.07": [3.0, 2.0], "mse_x100": [1.0, 1.0],
                           "own_train_s": [60.0, 60.0]}, index=["loss=l1_seed=1", "loss=mse_seed=1"])
-    t5 = report.table5(spec, frame, tables, quiet)
+    t5 = report.reference_table(spec, frame, other.table("table5"), tables, quiet)
     assert "BadPix 0.07 (%), paper (A100, 2 h)" in t5.columns
     assert t5.loc["loss=l1_seed=1", "BadPix 0.07 (%), paper (A100, 2 h)"] == 12.5  # its baseline_l1 row

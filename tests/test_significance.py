@@ -14,8 +14,16 @@ from lfbench.ablation import report
 from lfbench.ablation.facts import cell_info
 from lfbench.ablation.significance import comparisons, paired_t, seeds_table, significance_table, t_interval
 from lfbench.ablation.spec import load_spec
+from lfbench.reports.reference import default_reference
 from lfbench.results import Record, Results
 from lfbench.utils.errors import SpecError
+
+
+def _declared(table_id: str):
+    """The shipped reference's declaration of ``table_id`` and its axes (what the report reads)."""
+    table = default_reference().table(table_id)
+    return table, tuple(table.join)
+
 
 T975_DF2 = 4.302652729911275  # Student t 0.975 quantile, 2 degrees of freedom (printed tables: 4.303)
 
@@ -59,9 +67,10 @@ def test_seeds_expand_every_cell_and_set_the_config_seed(tmp_path):
     assert spec.seeds == (1, 2, 3) and len(spec.cells) == 12
     assert spec.cells[0].id == "interval=1_seed=1" and spec.cells[5].id == "interval=0.5_seed=3"
     assert [c.config["seed"] for c in spec.cells[:3]] == [1, 2, 3]
-    info = cell_info(spec)
+    table4, axes = _declared("table4")
+    info = cell_info(spec, axes)
     assert list(info.loc[["interval=0.25_seed=2"], "variant"]) == ["interval=0.25"]
-    comps = comparisons("table4", info)
+    comps = comparisons(table4, info)
     assert [(c.better, c.worse) for c in comps] == [("interval=0.5", "interval=1"), ("interval=0.25", "interval=0.5"),
                                                    ("interval=0.1", "interval=0.25")]
 
@@ -97,7 +106,8 @@ HAND = {(1, 1): (49, 51), (1, 2): (52, 52), (1, 3): (47, 49),
 
 def test_significance_verdicts_on_hand_made_scores(tmp_path):
     spec = _spec(tmp_path)
-    table = significance_table("table4", cell_info(spec), _scores(HAND)).set_index("worse")
+    table4, axes = _declared("table4")
+    table = significance_table(table4, cell_info(spec, axes), _scores(HAND)).set_index("worse")
     first = table.loc["interval=1"]
     assert first["better"] == "interval=0.5" and first["seeds"] == 3
     assert first["better mean"] == pytest.approx(40.0) and first["worse mean"] == pytest.approx(50.0)
@@ -111,10 +121,10 @@ def test_significance_verdicts_on_hand_made_scores(tmp_path):
     assert third["verdict"] == "reversed"
     # A seed missing from one side leaves the pair out (2 seeds left); one seed cannot resolve anything.
     partial = {k: v for k, v in HAND.items() if k != (0.1, 3)}
-    row = significance_table("table4", cell_info(spec), _scores(partial)).set_index("worse").loc["interval=0.25"]
+    row = significance_table(table4, cell_info(spec, axes), _scores(partial)).set_index("worse").loc["interval=0.25"]
     assert row["seeds"] == 2
     single = {k: v for k, v in HAND.items() if k[1] == 1}
-    rows = significance_table("table4", cell_info(spec), _scores(single))
+    rows = significance_table(table4, cell_info(spec, axes), _scores(single))
     assert set(rows["verdict"]) == {"not resolved"} and set(rows["seeds"]) == {1}
 
 
@@ -158,10 +168,10 @@ def test_seed_intervals_stay_within_the_metric_range(tmp_path):
 
 def test_loss_and_beta_orderings(tmp_path):
     spec = _spec(tmp_path, 'seeds = [1, 2]\ntable = "table5"\n[[grid]]\nloss = ["l1", "mse", "uafl"]\n')
-    comps = comparisons("table5", cell_info(spec))
+    comps = comparisons(_declared("table5")[0], cell_info(spec, _declared("table5")[1]))
     assert [(c.better, c.worse) for c in comps] == [("loss=uafl", "loss=l1"), ("loss=uafl", "loss=mse")]
     spec = _spec(tmp_path, 'seeds = [1, 2]\ntable = "beta"\n[[grid]]\nbeta = [1, 0.5, 0.1]\n')
-    comps = comparisons("beta", cell_info(spec))
+    comps = comparisons(_declared("beta")[0], cell_info(spec, _declared("beta")[1]))
     assert [(c.better, c.worse) for c in comps] == [("beta=0.1", "beta=1"), ("beta=0.1", "beta=0.5")]
 
 

@@ -241,10 +241,33 @@ def _sync() -> None:
         torch.cuda.synchronize()
 
 
-def load_scenes(pairs: tuple[tuple[str, str], ...]):
+def load_scenes(pairs: tuple[tuple[str, str | None], ...], ev: Evaluation | None = None):
+    """The scenes of (folder, category) pairs: those under the evaluation's data root opened by its dataset
+    adapter (lfbench.data.dataset), the others (generated ones) as scenes of the HCI layout."""
     from lfbench.data.scene import Scene
 
-    return [Scene(path, category=category) for path, category in pairs]
+    opened = {}
+    if ev is not None and ev.data is not None:
+        from lfbench.data.dataset import open_dataset
+
+        opened = {str(s.path): s for s in open_dataset(ev.data, ev.dataset)[1].scenes}
+    return [opened.get(path) or Scene(path, category=category) for path, category in pairs]
+
+
+def scoring_of(ev: Evaluation) -> dict[str, Any]:
+    """How the cells are scored (``evaluate_to_folder``'s rules and metrics): by the protocol of the dataset of
+    the evaluation's data root, as ``lfbench evaluate`` scores it; generated scenes alone by the default rules."""
+    from lfbench.scoring.rules import ScoringRules
+
+    if ev.data is None:
+        return {"rules": ScoringRules(allow_highres=not ev.lowres_only)}
+    from lfbench.data.dataset import dataset_of
+    from lfbench.scoring.metrics import scored_metrics
+
+    dataset = dataset_of(ev.data, ev.dataset)
+    protocol = dataset.protocol_for(ev.data)
+    return {"rules": ScoringRules.of_protocol(protocol, allow_highres=not ev.lowres_only),
+            "metrics": scored_metrics(protocol.metrics, protocol.source), "meta": {"dataset": dataset.name}}
 
 
 def evaluate_weights(label: str, weights: Path, ev: Evaluation, scenes, threads: int, out: Path,
@@ -254,11 +277,10 @@ def evaluate_weights(label: str, weights: Path, ev: Evaluation, scenes, threads:
     ``label``."""
     from lfbench.reports.writers import Maps
     from lfbench.runs.folder import evaluate_to_folder
-    from lfbench.scoring.rules import ScoringRules
 
     return evaluate_to_folder([make_method(weights, ev, threads, network)], scenes, out, label=label,
                               writers=[Maps(MAPS, per_method=False, uncertainty=True)] if save_maps else [],
-                              rules=ScoringRules(allow_highres=not ev.lowres_only), progress=False)
+                              progress=False, **scoring_of(ev))
 
 
 def timing_key(ev: Evaluation, threads: int) -> dict[str, Any]:
@@ -326,7 +348,8 @@ def _run(task: CellTask) -> dict[str, Any]:
     summary = read_json(task.path / "summary.json", "training summary")
     train_s = float(summary["elapsed_s"])
 
-    results = evaluate_weights(task.cell_id, task.path / "final.pt", task.evaluation, load_scenes(task.scenes),
+    scenes = load_scenes(task.scenes, task.evaluation)
+    results = evaluate_weights(task.cell_id, task.path / "final.pt", task.evaluation, scenes,
                                task.evaluation.threads or task.threads, task.path, True, task.network)
     marker: dict[str, Any] = {
         "id": task.cell_id, "values": task.values, "fingerprint": task.fingerprint,

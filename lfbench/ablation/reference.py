@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import sys
 
-from lfbench.ablation.spec import SPECIAL_AXES, SpecFile
+from lfbench.ablation.spec import SPECIAL_AXES, SpecFile, loss_axes
 from lfbench.utils.options import reference_markdown
 
 COMMAND = "python -m lfbench.ablation.reference > docs/ablation-spec.md"
@@ -26,9 +26,11 @@ parameter is the same error as in a training config). Paths are relative to the 
 
 Grid axes: the network's own parameters (the base config's `method`; `Trainable.axes`), written into
 `[model]`; {", ".join(f"`{a}`" for a in SPECIAL_AXES)} (the last stage's loss, a name or a table
-`{{loss = "uafl", beta = 0.5}}`; beta and lr of the last stage; the config's seed); or any dotted
-training-config key as in `[set]`. A cell's id is `axis=value` joined by `_` (e.g.
-`interval=0.5_interpolation=phase`).
+`{{loss = "uafl", beta = 0.5}}`; the last stage's lr; the config's seed); a parameter a registered loss
+declares ({", ".join(f"`{a}`" for a in loss_axes())}: the last stage's); or any dotted training-config key as in
+`[set]`. `table` names a table the spec's reference declares (`[[tables]]` of its paper file:
+[the paper reference](paper-reference.md)); the cells stand beside it as its declaration says. A cell's id
+is `axis=value` joined by `_` (e.g. `interval=0.5_interpolation=phase`).
 """
 
 

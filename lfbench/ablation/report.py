@@ -2,27 +2,28 @@
 lfbench.reports.reference) in adjacent, labelled columns: the ablation's output writers
 (lfbench.reports.writers), which ``lfbench ablate`` runs into its staged set.
 
-Written into OUT (each table as .md, .tex and .csv):
+Written into OUT (each table as .md, .tex and .csv); every metric column is labelled by its definition
+(lfbench.scoring.base.Metric.label), and the metrics are those the reference's table declares, else the
+ordered metrics of the protocol of the dataset the cells were scored on (:func:`ablation_metrics`):
 
-- ``table_cells``: one row per cell: its grid values, mean BadPix 0.07/0.03/0.01 and MSE x100 over the
-  evaluation scenes, train time and test time;
-- ``table4`` (spec table = "table4"): interval, interpolation, BadPix 0.07, MSE x100, train time, test
-  time, ours beside the reference's Table IV;
-- ``table5`` ("table5"): BadPix 0.07 per fine-tuning loss, ours beside the reference's Table V;
-- ``table_beta`` ("beta"): BadPix 0.07 and MSE x100 per loss beta (what the reference says about it);
+- ``table_cells``: one row per cell: its grid values, the mean of each metric over the evaluation scenes,
+  train time and test time;
+- the spec's ``table`` (an id the reference declares, e.g. ``table4``): our cells
+  beside the declared table (:func:`reference_table`: its axes joined to the paper's key columns, its metrics,
+  our measures beside its extra columns), named ``<id>`` (or ``table_<id>``), and the figure it declares:
+  ``<axis>_curve.png`` or ``accuracy_vs_test_time.png`` (lfbench.ablation.plots);
 - ``table_seeds`` / ``table_significance`` (the spec has seeds): mean and 95 % t-interval over seeds per
-  variant (clipped to each metric's range), and the reference's orderings as paired t-tests;
+  variant (clipped to each metric's range), and the orderings the declared table states as paired t-tests;
 - ``table_baselines`` (the spec has [[methods]]): every cell (with seeds: variant) against each extra
-  method, e.g. the plane sweep and the zero map, per scene group in BadPix 0.07 and MSE x100, with a
-  verdict per baseline (lfbench.ablation.baselines); its summary lines ("every cell beats ..." or "K of N
-  cells do not beat ...") are logged and head the captions of table_cells, this table and the paper-style
-  table;
+  method, e.g. the plane sweep and the zero map, per scene group, with a verdict per baseline
+  (lfbench.ablation.baselines); its summary lines ("every cell beats ..." or "K of N cells do not beat ...")
+  are logged and head the captions of table_cells, this table and the paper-style table;
 - ``table_per_scene`` / ``table_average`` (Tables I/II) for every cell and extra method, and, with a
   reference whose Tables I/II cover some evaluation scene, ``table_per_scene_paper`` / ``table_average_paper``;
-- figures/: ``beta_curve.png`` (BadPix 0.07 against beta), ``accuracy_vs_test_time.png`` (BadPix 0.07
-  against test time, per interval and interpolation, ours and the reference's), and ``error_maps/``
-  (per scene: one row per variant with disparity, BadPix map, signed error and uncertainty; the
-  BadPix(t) curves), drawn from the maps the cells saved;
+- ``table_<id>_paper``: each per-scene table the reference declares for the dataset the cells were scored on
+  (e.g. Table III on UrbanLF-Syn), as ``lfbench report`` writes it (lfbench.reports.paper_scenes);
+- figures/error_maps/ (per scene: one row per variant with disparity, BadPix map, signed error and
+  uncertainty; the BadPix(t) curves), drawn from the maps the cells saved;
 - html/ (``--html``): the site, with the tables of the means over seeds, the orderings and the verdicts.
 
 "ours" columns are labelled with the budget (width, batch, patch, steps, device) and the test-time
@@ -45,14 +46,15 @@ import pandas as pd
 
 from lfbench.ablation import plots
 from lfbench.ablation.baselines import baselines_caption, baselines_table, scene_groups, summary_lines
-from lfbench.ablation.facts import cell_info, last_stage_loss, loss_beta, model_value, network_of
-from lfbench.ablation.significance import ALPHA, seeds_table, significance_table
-from lfbench.ablation.spec import AblationSpec
-from lfbench.data.scene import Scene
+from lfbench.ablation.cell import load_scenes
+from lfbench.ablation.facts import axis_text, axis_value, cell_info, network_of, same_value
+from lfbench.ablation.significance import ALPHA, ordering_metric, seeds_table, significance_table
+from lfbench.ablation.spec import NO_TABLE, AblationSpec
 from lfbench.reports.html import SiteInputs, SiteSection
 from lfbench.reports.maps import saved_predictions
 from lfbench.reports.paper import PaperTables, find_paper_dir, load_paper
-from lfbench.reports.reference import Reference, default_reference, get_reference, reference_for_network
+from lfbench.reports.paper_scenes import scene_table_with_paper, scene_tables
+from lfbench.reports.reference import PaperTable, Reference, default_reference, get_reference, reference_for_network
 from lfbench.reports.tables import write_table
 from lfbench.reports.writers import (
     FIGURES_DIR,
@@ -64,7 +66,7 @@ from lfbench.reports.writers import (
     drive_writers,
 )
 from lfbench.results import Results
-from lfbench.scoring.metrics import get_metric
+from lfbench.scoring.metrics import METRICS, get_metric, metric_order
 from lfbench.utils.errors import DataError, SpecError
 from lfbench.utils.names import file_name
 from lfbench.utils.outputs import check_within
@@ -73,7 +75,6 @@ __all__ = ["MAP_CHOICES", "AblationFigures", "AblationSite", "AblationTables", "
            "drawn_map_folders", "load_paper_tables", "report_writers",
            "run_writers", "saved_map_folders", "spec_reference", "write_report"]
 
-METRICS = ("badpix_0.07", "badpix_0.03", "badpix_0.01", "mse_x100")
 ERROR_MAPS_DIR = f"{FIGURES_DIR}/error_maps"
 Log = Callable[[str], None]
 _log = logging.getLogger(__name__)
@@ -105,26 +106,38 @@ def load_paper_tables(paper: str | Path | None, log: Log, reference: Reference |
 
 # --------------------------------------------------------------------------- the cells
 
-def cell_frame(spec: AblationSpec, results: Results, markers: Sequence[dict[str, Any]]) -> pd.DataFrame:
-    """One row per cell (index: cell id): grid values, interval, interpolation, loss, beta, mean metrics
-    over the evaluation scenes, train_s, own_train_s, test_s, time_size, scenes."""
+def ablation_metrics(results: Results) -> list[str]:
+    """The metric ids the ablation's tables show: the ordered metrics of the protocol of the dataset the
+    results are of (results.json ``meta.dataset``; lfbench.data.dataset) that the results hold, else every
+    general metric they hold (lfbench.scoring.metrics.metric_order)."""
+    held = set(results.to_frame()["metric"]) if results.records else set()
+    dataset = results.meta.get("dataset")
+    if dataset:
+        from lfbench.data.dataset import DATASETS
+
+        declared = DATASETS.get(str(dataset)).protocol.metrics
+    else:
+        declared = [m for m in held if (found := METRICS.find(m)) is not None and found.category == "general"]
+    return [m for m in metric_order(declared) if m in held]
+
+
+def cell_frame(spec: AblationSpec, results: Results, markers: Sequence[dict[str, Any]],
+               metrics: Sequence[str] | None = None) -> pd.DataFrame:
+    """One row per cell (index: cell id): grid values (``grid:<axis>``), the mean of each of ``metrics``
+    (default :func:`ablation_metrics`) over the evaluation scenes, scenes, and what was measured of it:
+    train_s, own_train_s, test_s, time_size, device, threads."""
     df = results.to_frame()
+    metrics = ablation_metrics(results) if metrics is None else metrics
     by_id = {m.get("id"): m for m in markers}
     rows = []
     for cell in spec.cells:
         m = by_id.get(cell.id, {})
-        loss, params = last_stage_loss(cell.config)
-        row: dict[str, Any] = {"cell": cell.id, **{f"grid:{k}": v for k, v in cell.values.items()},
-                               "interval": model_value(cell.config, "interval", float, np.nan),
-                               "interpolation": model_value(cell.config, "interpolation", str, ""),
-                               "loss": loss + ("" if not params else "(" + ", ".join(f"{k}={v}" for k, v in
-                                                                                       params.items()) + ")"),
-                               "beta": loss_beta(cell.config)}
-        sel = df[df["method"] == cell.id]
-        for metric in METRICS:
+        row: dict[str, Any] = {"cell": cell.id, **{f"grid:{k}": v for k, v in cell.values.items()}}
+        sel = df[df["method"] == cell.id] if len(df) else df
+        for metric in metrics:
             vals = sel[sel["metric"] == metric]["value"]
             row[metric] = float(vals.mean()) if len(vals) else np.nan
-        row["scenes"] = int(sel["scene"].nunique())
+        row["scenes"] = int(sel["scene"].nunique()) if len(sel) else 0
         for key in ("train_s", "own_train_s", "test_s", "time_size", "device", "threads"):
             row[key] = m.get(key, np.nan)
         rows.append(row)
@@ -148,12 +161,13 @@ def time_label(frame: pd.DataFrame) -> str:
 
 # --------------------------------------------------------------------------- the tables
 
-def cells_table(spec: AblationSpec, frame: pd.DataFrame) -> pd.DataFrame:
+def cells_table(spec: AblationSpec, frame: pd.DataFrame, metrics: Sequence[str]) -> pd.DataFrame:
+    """table_cells: every cell's grid values, ``metrics`` (labelled by their Metric), train and test time."""
     if frame.empty:
         return frame
     grid_cols = [c for c in frame.columns if c.startswith("grid:")]
     out = frame[grid_cols].rename(columns=lambda c: c[5:]).copy()
-    for metric in METRICS:
+    for metric in metrics:
         out[f"{get_metric(metric).label}, {ours_label(spec)}"] = frame[metric]
     out["train time (min)"] = frame["train_s"] / 60.0
     out[f"test time (s), {time_label(frame)}"] = frame["test_s"]
@@ -161,98 +175,108 @@ def cells_table(spec: AblationSpec, frame: pd.DataFrame) -> pd.DataFrame:
     return out
 
 
-def _paper_extra(paper: PaperTables | None, file: str, columns: Sequence[str], log: Log) -> pd.DataFrame | None:
-    """The paper's table in ``file`` of its folder (checked for ``columns``), or None (with one line) when
-    the folder has no such file."""
-    if paper is None:
+def table_file(table: PaperTable) -> str:
+    """The file name (without suffix) of the ablation table beside the declared ``table``: its id when that
+    starts with 'table' (table4), else table_<id> (table_beta)."""
+    return table.id if table.id.startswith("table") else f"table_{table.id}"
+
+
+def paper_frame(paper: PaperTables | None, table: PaperTable, log: Log) -> pd.DataFrame | None:
+    """The paper's CSV of the declared ``table`` (checked for its key, metric and extra columns), or None:
+    no file declared, no paper's numbers, or (with one line) the folder has no such file."""
+    if paper is None or not table.file:
         return None
-    name = Path(file).stem
+    name = Path(table.file).stem
     df = paper.extra.get(name)
     if df is None:
         log(f"the paper folder {paper.source} has no {name}.csv: no paper columns in that table")
         return None
-    missing = [c for c in columns if c not in df.columns]
+    columns = [*table.keys, *(c for c in table.metrics.values() if c), *table.extra.values()]
+    missing = [c for c in dict.fromkeys(columns) if c not in df.columns]
     if missing:
         raise DataError(f"missing column(s) {', '.join(missing)}", Path(paper.source) / f"{name}.csv")
     return df
 
 
-def _layout(paper: PaperTables | None, table: str) -> Any:
-    """The reference's layout of ``table`` (its Table4 / Table5 / BetaSweep), None without one."""
-    reference = paper.reference if paper is not None else None
-    return getattr(reference, table, None) if reference is not None else None
+def paper_key(config: dict[str, Any], table: PaperTable) -> tuple[str, ...] | None:
+    """The key values of the paper's row a cell (its training config) stands beside: its value of each axis
+    the table joins (renamed as ``names`` says), or None when a ``where`` value of the cell differs from the
+    paper's (e.g. a loss at another parameter than the paper's row)."""
+    for axis, value in table.where.items():
+        ours = axis_value(config, axis)
+        if ours is not None and not same_value(ours, value):
+            return None
+    keys = []
+    for axis in table.join:
+        value = axis_value(config, axis)
+        if value is None:
+            return None
+        text = axis_text(config, axis) if axis != "loss" else str(value)
+        keys.append(table.names.get(text, text))
+    return tuple(keys)
 
 
-def table4(spec: AblationSpec, frame: pd.DataFrame, paper: PaperTables | None, log: Log) -> pd.DataFrame:
-    """Table IV: interval, interpolation, BadPix 0.07, MSE x100, train time, test time (ours | paper)."""
-    ours, test = ours_label(spec), time_label(frame)
-    layout = _layout(paper, "table4")
-    ref = None if layout is None else _paper_extra(paper, layout.file, (
-        "interval", "interpolation", "badpix_0.07", "mse_x100", layout.train_hours, layout.test_seconds), log)
-    label = paper.reference.label if ref is not None else ""
-    rows = []
-    for cid, r in frame.iterrows():
-        p = None
-        if ref is not None:
-            hit = ref[(np.isclose(pd.to_numeric(ref["interval"], errors="coerce"), r["interval"], rtol=0, atol=1e-9))
-                      & (ref["interpolation"].astype(str).str.strip() == r["interpolation"])]
-            p = hit.iloc[0] if len(hit) else None
-        row = {"cell": cid, "interval (px)": f"{r['interval']:g}", "interpolation": r["interpolation"],
-               f"BadPix 0.07 (%), {ours}": r["badpix_0.07"]}
-        if ref is not None:
-            row[f"BadPix 0.07 (%), {label}"] = _num(p, "badpix_0.07")
-        row[f"MSE x100, {ours}"] = r["mse_x100"]
-        if ref is not None:
-            row[f"MSE x100, {label}"] = _num(p, "mse_x100")
-        row[f"train time (min), {ours}"] = float(r["train_s"]) / 60.0
-        if ref is not None:
-            row[f"train time (h), {label}"] = _num(p, layout.train_hours)
-        row[f"test time (s), {test}"] = float(r["test_s"])
-        if ref is not None:
-            row[f"test time (s), {layout.test_label}"] = _num(p, layout.test_seconds)
-        rows.append(row)
-    return pd.DataFrame(rows).set_index("cell")
-
-
-def paper_loss_name(config: dict[str, Any], reference: Reference | None = None) -> str | None:
-    """The reference's (default: the default reference's) Table V row of a cell's last-stage loss: its best
-    loss only at its beta, other losses without parameters by their name (or the name it gives them)."""
-    reference = reference or default_reference()
-    if reference is None or reference.table5 is None:
+def _paper_row(ref: pd.DataFrame, table: PaperTable, key: tuple[str, ...] | None) -> pd.Series | None:
+    if key is None:
         return None
-    loss, params = last_stage_loss(config)
-    if loss == reference.table5.best_loss:
-        beta, best = loss_beta(config), reference.beta.best if reference.beta is not None else None
-        return loss if beta is None or best is None or abs(beta - best) < 1e-12 else None
-    return reference.table5.loss_names.get(loss, loss) if not params else None
+    hit = np.ones(len(ref), dtype=bool)
+    for column, value in zip(table.join.values(), key, strict=True):
+        hit &= np.array([same_value(v, value) for v in ref[column]], dtype=bool)
+    return ref[hit].iloc[0] if hit.any() else None
 
 
-def table5(spec: AblationSpec, frame: pd.DataFrame, paper: PaperTables | None, log: Log) -> pd.DataFrame:
-    """Table V: BadPix 0.07 per fine-tuning loss (ours | paper), and our MSE x100."""
+def _measure(spec: AblationSpec, frame: pd.DataFrame, name: str, row: pd.Series) -> tuple[str, float]:
+    """An ablation's measured column ``name`` (lfbench.reports.reference.MEASURES) of a cell-frame row:
+    (header, value)."""
+    if name == "train_time":
+        return f"train time (min), {ours_label(spec)}", float(row["train_s"]) / 60.0
+    if name == "stage_train_time":
+        return f"last-stage train time (min), {ours_label(spec)}", float(row["own_train_s"]) / 60.0
+    return f"test time (s), {time_label(frame)}", float(row["test_s"])
+
+
+def reference_table(spec: AblationSpec, frame: pd.DataFrame, table: PaperTable, paper: PaperTables | None,
+                    log: Log) -> pd.DataFrame:
+    """Our cells beside the declared ``table`` (lfbench.reports.reference): the table's axes (headers from its
+    ``labels``), the paper's row each cell joins ('paper row', when ``names`` or ``where`` make it differ
+    from the cell's values), each declared metric (ours, then the paper's where it reports it; labels from
+    :class:`~lfbench.scoring.base.Metric`), each declared measure (ours, then the paper's extra column of its
+    name), the paper's other extra columns; rows sorted as ``order`` says."""
+    ref = paper_frame(paper, table, log)
+    label = paper.reference.label if paper is not None and paper.reference is not None else "paper"
     ours = ours_label(spec)
-    layout = _layout(paper, "table5")
-    ref = None if layout is None else _paper_extra(paper, layout.file, ("loss", "badpix_0.07"), log)
-    reference = paper.reference if paper is not None else None
     configs = {c.id: c.config for c in spec.cells}
     rows = []
     for cid, r in frame.iterrows():
-        name = paper_loss_name(configs[cid], reference)
-        row = {"cell": cid, "loss (stage 2)": r["loss"], "paper row": name or "-",
-               f"BadPix 0.07 (%), {ours}": r["badpix_0.07"]}
+        config = configs[cid]
+        key = paper_key(config, table)
+        p = _paper_row(ref, table, key) if ref is not None else None
+        row: dict[str, Any] = {"cell": cid}
+        row |= {table.header(axis, axis): axis_text(config, axis) for axis in table.join}
+        if table.names or table.where:
+            row["paper row"] = " / ".join(key) if key else "-"
+        for metric, column in table.metrics.items():
+            name = get_metric(metric).label
+            row[f"{name}, {ours}"] = r[metric] if metric in r.index else np.nan
+            if ref is not None and column:
+                row[f"{name}, {label}"] = _num(p, column)
+        for measure in table.measures:
+            header, value = _measure(spec, frame, measure, r)
+            row[header] = value
+            if ref is not None and measure in table.extra:
+                row[table.header(measure, f"{measure}, {label}")] = _num(p, table.extra[measure])
         if ref is not None:
-            hit = ref[ref["loss"].astype(str).str.strip() == name] if name else ref.iloc[0:0]
-            row[f"BadPix 0.07 (%), {reference.label}"] = float(hit["badpix_0.07"].iloc[0]) if len(hit) else np.nan
-        row[f"MSE x100, {ours}"] = r["mse_x100"]
-        row["stage-2 train time (min)"] = r["own_train_s"] / 60.0
+            for name, column in table.extra.items():
+                if name not in table.measures:
+                    row[table.header(name, f"{name}, {label}")] = _num(p, column)
         rows.append(row)
-    return pd.DataFrame(rows).set_index("cell")
-
-
-def table_beta(spec: AblationSpec, frame: pd.DataFrame) -> pd.DataFrame:
-    ours = ours_label(spec)
-    out = pd.DataFrame({"beta": frame["beta"], f"BadPix 0.07 (%), {ours}": frame["badpix_0.07"],
-                        f"MSE x100, {ours}": frame["mse_x100"]}, index=frame.index)
-    return out.sort_values("beta", ascending=False, kind="stable")
+    out = pd.DataFrame(rows).set_index("cell")
+    if table.order and len(out):
+        axis = next(iter(table.join))
+        values = pd.Series([axis_value(configs[c], axis) for c in out.index], index=out.index)
+        out = out.loc[pd.to_numeric(values, errors="coerce").sort_values(
+            ascending=table.order == "ascending", kind="stable").index]
+    return out
 
 
 def _num(row, key: str) -> float:
@@ -333,7 +357,7 @@ def _with_summary(caption: list[str], summary: Sequence[str]) -> list[str]:
 # --------------------------------------------------------------------------- the writers
 
 class AblationTables(OutputWriter):
-    """table_cells, the reference's table of the spec (table4, table5, table_beta), table_seeds and
+    """table_cells, the reference's table the spec names (:func:`reference_table`), table_seeds and
     table_significance (seeds) and table_baselines ([[methods]]). ``paper``: the reference's numbers
     (None: no paper columns). After the write, ``sections`` holds the tables the site shows besides its
     leaderboard: the means over seeds with their intervals, the orderings and the verdicts."""
@@ -345,42 +369,52 @@ class AblationTables(OutputWriter):
 
     def write(self, run: RunOutputs) -> list[Path]:
         spec, results, out = self.spec, run.results, run.stage
-        frame = cell_frame(spec, results, self.markers)
+        metrics = ablation_metrics(results)
+        frame = cell_frame(spec, results, self.markers, metrics)
         if frame.empty:
             return []
         bar, bar_caption, bar_lines = baseline_verdicts(spec, results)
         for line in bar_lines:
             self.log(line)
-        written = write_table(cells_table(spec, frame), out, "table_cells",
+        written = write_table(cells_table(spec, frame, metrics), out, "table_cells",
                               _with_summary(caption_lines(spec, "all cells"), bar_lines))
         means, rename = seed_means(spec, frame)
         seeds_note = ([f"ours: mean over seeds {', '.join(str(x) for x in spec.seeds)} (intervals and paired tests: "
                        "table_seeds, table_significance)"] if spec.seeds else [])
-        with_paper = _with_summary([*caption_lines(spec), paper_line(self.paper), *seeds_note], bar_lines)
-        if spec.table == "table4":
-            written += write_table(table4(spec, means, self.paper, self.log).rename(index=rename), out, "table4",
-                                   with_paper)
-        elif spec.table == "table5":
-            written += write_table(table5(spec, means, self.paper, self.log).rename(index=rename), out, "table5",
-                                   with_paper)
-        elif spec.table == "beta":
-            said = [self.reference.beta.note] if self.reference is not None and self.reference.beta else []
-            caption = _with_summary([*caption_lines(spec), *seeds_note, *said], bar_lines)
-            written += write_table(table_beta(spec, means).rename(index=rename), out, "table_beta", caption)
+        table = spec_table(spec, self.reference)
+        if table is not None:
+            said = paper_line(self.paper) if table.file else table.caption
+            caption = _with_summary([*caption_lines(spec), said, *seeds_note], bar_lines)
+            written += write_table(reference_table(spec, means, table, self.paper, self.log).rename(index=rename),
+                                   out, table_file(table), caption)
         if spec.seeds:
-            written += self._seed_tables(results, out)
+            written += self._seed_tables(results, out, metrics, table)
         if not bar.empty:
             written += write_table(bar, out, "table_baselines", bar_caption)
             self.sections.append(SiteSection("baselines", "Against the baselines", bar, bar_caption))
+        written += self._scene_tables(run)
         return written
 
-    def _seed_tables(self, results: Results, out: Path) -> list[Path]:
+    def _scene_tables(self, run: RunOutputs) -> list[Path]:
+        """The reference's per-scene tables of the dataset the cells were scored on (e.g. a paper's Table III
+        on UrbanLF-Syn), as ``lfbench report`` writes them (lfbench.reports.paper_scenes)."""
+        if self.paper is None:
+            return []
+        written = []
+        for table in scene_tables(self.paper, run.results.meta):
+            both = scene_table_with_paper(run.results, self.paper, table)
+            if not both.empty:
+                written += write_table(both, run.stage, f"table_{table.id}_paper",
+                                       [*caption_lines(self.spec, f"{table.id} beside the paper's"), table.caption])
+        return written
+
+    def _seed_tables(self, results: Results, out: Path, metrics: Sequence[str], table: PaperTable | None) -> list[Path]:
         """table_seeds (mean and 95 % t-interval over seeds per variant, within each metric's range) and
-        table_significance (the reference's orderings as paired t-tests over seeds);
+        table_significance (the orderings the reference's table declares, as paired t-tests over seeds);
         see lfbench.ablation.significance."""
         spec = self.spec
-        info, scores = cell_info(spec), results.to_frame()
-        seeds, clipped = seeds_table(info, scores, METRICS)
+        info, scores = cell_info(spec, tuple(table.join) if table is not None else ()), results.to_frame()
+        seeds, clipped = seeds_table(info, scores, metrics)
         caption = caption_lines(spec, f"mean over seeds {', '.join(str(x) for x in spec.seeds)} and 95 % "
                                       "t-interval over seeds of the scene-mean score")
         if clipped:
@@ -388,19 +422,32 @@ class AblationTables(OutputWriter):
                            "t-interval can reach past it")
         written = write_table(seeds, out, "table_seeds", caption)
         self.sections.append(SiteSection("seeds", "Mean over seeds", seeds, caption))
-        sig = significance_table(spec.table, info, scores, reference=self.reference)
+        sig = significance_table(table, info, scores)
         if not sig.empty:
-            caption = caption_lines(spec, "the paper's orderings, paired t-test over seeds (BadPix 0.07, lower "
-                                          f"is better; two-sided, alpha {ALPHA:g})")
+            metric = get_metric(ordering_metric(table))
+            better = "higher" if metric.higher_is_better else "lower"
+            caption = caption_lines(spec, f"the paper's orderings, paired t-test over seeds ({metric.label}, "
+                                          f"{better} is better; two-sided, alpha {ALPHA:g})")
             sig = sig.set_index("claim (paper)")
             written += write_table(sig, out, "table_significance", caption)
             self.sections.append(SiteSection("significance", "The paper's orderings", sig, caption))
         return written
 
 
+def spec_table(spec: AblationSpec, reference: Reference | None) -> PaperTable | None:
+    """The declared table the spec's ``table`` names in its reference (None: none, tables12, or no reference)."""
+    if reference is None or spec.table in NO_TABLE:
+        return None
+    table = reference.table(spec.table)
+    if table is None:
+        raise SpecError(f"table: reference {reference.name!r} declares no table {spec.table!r}", spec.source)
+    return table
+
+
 class AblationFigures(OutputWriter):
-    """figures/beta_curve.png (spec table "beta") and figures/accuracy_vs_test_time.png ("table4", with
-    the reference's Table IV beside ours when its numbers are there)."""
+    """The figure the spec's reference table declares (``figure``): ``<axis>_curve.png`` (``curve``: its first
+    metric against its axis) or ``accuracy_vs_test_time.png`` (``time``: against test time, with the paper's
+    points beside ours when its numbers are there)."""
 
     def __init__(self, spec: AblationSpec, markers: Sequence[dict[str, Any]], paper: PaperTables | None,
                  reference: Reference | None) -> None:
@@ -408,19 +455,48 @@ class AblationFigures(OutputWriter):
 
     def write(self, run: RunOutputs) -> list[Path]:
         spec, fig_dir = self.spec, run.stage / FIGURES_DIR
-        frame = cell_frame(spec, run.results, self.markers)
-        written = []
-        if not frame.empty and spec.table == "beta" and frame["beta"].notna().any():
-            said = self.reference.beta.curve_note if self.reference is not None and self.reference.beta else None
-            written.append(plots.beta_curve(frame, run.results.to_frame(), fig_dir / "beta_curve.png",
-                                            ours_label(spec), said))
-        if not frame.empty and spec.table == "table4":
-            layout = _layout(self.paper, "table4")
-            ref = None if layout is None else _paper_extra(self.paper, layout.file, (
-                "interval", "interpolation", "badpix_0.07", layout.test_seconds), lambda _: None)
-            written.append(plots.accuracy_vs_time(frame, ref, fig_dir / "accuracy_vs_test_time.png", ours_label(spec),
-                                                  time_label(frame), layout))
-        return written
+        table = spec_table(spec, self.reference)
+        if table is None or not table.figure or not table.metrics:
+            return []
+        metric = next(iter(table.metrics))
+        frame = cell_frame(spec, run.results, self.markers, [metric])
+        if frame.empty:
+            return []
+        configs = {c.id: c.config for c in spec.cells}
+        axes = list(table.join)
+        values = {axis: [axis_value(configs[c], axis) for c in frame.index] for axis in axes}
+        if table.figure == "curve":
+            xs = pd.to_numeric(pd.Series(values[axes[0]], index=frame.index), errors="coerce")
+            if not xs.notna().any():
+                return []
+            return [plots.metric_curve(frame[metric], xs, run.results.to_frame(), metric,
+                                       fig_dir / f"{axes[0]}_curve.png", ours_label(spec), axes[0],
+                                       table.labels.get("figure_title"), descending=table.order == "descending")]
+        ref = paper_frame(self.paper, table, lambda _: None)
+        theirs = None
+        if ref is not None and "test_time" in table.extra and table.metrics[metric]:
+            theirs = plots.Points(pd.to_numeric(ref[table.extra["test_time"]], errors="coerce").tolist(),
+                                  pd.to_numeric(ref[table.metrics[metric]], errors="coerce").tolist(),
+                                  *_point_labels(ref, list(table.join.values())),
+                                  title=table.labels.get("figure_title", self.paper.reference.label),
+                                  xlabel=table.header("test_time", "test time (s), paper"))
+        ours = plots.Points(frame["test_s"].astype(float).tolist(), frame[metric].astype(float).tolist(),
+                            *_point_labels(pd.DataFrame(values), axes), title=ours_label(spec),
+                            xlabel=f"test time (s), {time_label(frame)}")
+        return [plots.accuracy_vs_time(ours, theirs, metric, fig_dir / "accuracy_vs_test_time.png",
+                                       " / ".join(table.header(a, a) for a in axes[:1]),
+                                       axes[1] if len(axes) > 1 else "")]
+
+
+def _point_labels(frame: pd.DataFrame, columns: Sequence[str]) -> tuple[list[str], list[str]]:
+    """(annotation, group) of each point: the first column's value (a number as :g) and the second's."""
+    def text(v: Any) -> str:
+        number = pd.to_numeric(pd.Series([v]), errors="coerce").iloc[0]
+        return f"{number:g}" if pd.notna(number) else str(v).strip()
+
+    first = [text(v) for v in frame[columns[0]]]
+    second = [text(v) for v in frame[columns[1]]] if len(columns) > 1 else [""] * len(frame)
+    return first, second
 
 
 class AblationSite(Site):
@@ -541,6 +617,8 @@ def run_writers(writers: Sequence[OutputWriter], spec: AblationSpec, results: Re
     error maps), on the evaluation scenes the results record; ``scenes``: the evaluation scenes, for the site."""
     run = RunOutputs(stage=stage, results=results, scenes=scenes, source=folder,
                      maps=drawn_map_folders(spec, results, folder, maps))
-    saved = (saved_predictions([Scene(d) for d in results.meta.get("scenes", [])], run.maps, within=folder)
-             if spec.evaluation.error_maps else ())
+    saved = ()
+    if spec.evaluation.error_maps:
+        recorded = load_scenes(tuple((d, None) for d in results.meta.get("scenes", [])), spec.evaluation)
+        saved = saved_predictions(recorded, run.maps, within=folder)
     return drive_writers(writers, run, predictions=saved)

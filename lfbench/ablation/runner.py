@@ -38,7 +38,16 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-from lfbench.ablation.cell import MAPS, CellTask, is_done, link_data_folder, load_scenes, read_marker, run_cell
+from lfbench.ablation.cell import (
+    MAPS,
+    CellTask,
+    is_done,
+    link_data_folder,
+    load_scenes,
+    read_marker,
+    run_cell,
+    scoring_of,
+)
 from lfbench.ablation.executor import ClusterOptions, Executor, executor_for
 from lfbench.ablation.report import check_maps, report_writers, run_writers
 from lfbench.ablation.spec import AblationSpec, Cell, SyntheticEval, sha256_of
@@ -46,7 +55,6 @@ from lfbench.method.registry import create_from_spec
 from lfbench.reports.writers import Maps
 from lfbench.results import Results, check_names
 from lfbench.runs.folder import evaluate_to_folder
-from lfbench.scoring.rules import ScoringRules
 from lfbench.training.scenes import check_data
 from lfbench.utils.atomic import fresh_dir, write_text
 from lfbench.utils.errors import DataError, SpecError
@@ -116,7 +124,8 @@ def check_training_data(spec: AblationSpec, out: Path) -> None:
 
 def prepare_evaluation(spec: AblationSpec, out: Path, log: Log) -> tuple[tuple[str, str], ...]:
     """The evaluation scenes as (folder, category): generated synthetic ones and/or the named HCI ones."""
-    from lfbench.data.scene import Benchmark, Scene, check_scene_names
+    from lfbench.data.dataset import DATASETS, open_dataset
+    from lfbench.data.scene import Scene, check_scene_names
 
     ev = spec.evaluation
     scenes: list[Scene] = []
@@ -127,8 +136,11 @@ def prepare_evaluation(spec: AblationSpec, out: Path, log: Log) -> tuple[tuple[s
     if ev.data is not None:
         if not ev.data.is_dir():
             raise DataError("evaluation.data: data root not found", ev.data)
-        chosen = Benchmark.discover(ev.data).select(list(ev.scenes))
-        scenes += [s for s in chosen if s.has_gt()]
+        dataset, bench = open_dataset(ev.data, ev.dataset)
+        if ev.synthetic is not None and dataset.protocol_for(ev.data) != DATASETS.get("hci").protocol:
+            raise SpecError(f"evaluation: synthetic scenes (HCI layout) and {dataset.name} scenes are scored by two "
+                            "protocols; one ablation scores one dataset's scenes", spec.source)
+        scenes += [s for s in bench.select(list(ev.scenes)) if s.has_gt()]
     if not scenes:
         raise DataError("none of the evaluation scenes has ground truth (gt_disp_lowres.pfm)", spec.source)
     return tuple((str(s.path), s.category) for s in check_scene_names(scenes))
@@ -204,11 +216,13 @@ def scene_keys(scenes: tuple[tuple[str, str], ...], out: Path) -> list[str]:
 
 
 def _cost_estimate(task: CellTask) -> float:
-    """Relative cost of a cell (candidates x steps; phase shifts about 1.6x), to start the longest first."""
-    model = task.config["model"]
-    d = (float(model.get("d_max", 4.0)) - float(model.get("d_min", -4.0))) / float(model.get("interval", 0.5)) + 1
+    """Relative cost of a cell, to start the longest first: its network's estimate for the steps the cell
+    trains itself (``Trainable.cost_estimate``), else those steps."""
+    from lfbench.method.trainable import get_trainable
+
     steps = sum(int(s["steps"]) for s in task.config["stages"][(1 if task.stage1_dir else 0):])
-    return d * steps * (1.6 if model.get("interpolation") == "phase" else 1.0)
+    cost = get_trainable(task.network).cost_estimate(dict(task.config["model"]), steps)
+    return float(steps if cost is None else cost)
 
 
 def run_cells(tasks: list[CellTask], executor: Executor, progress: bool | None, log: Log) -> list[dict[str, Any]]:
@@ -279,8 +293,8 @@ def run_methods(spec: AblationSpec, out: Path, scenes: tuple[tuple[str, str], ..
     """Score the spec's [[methods]] (cached in OUT/methods/<label>/ with a marker, like cells)."""
 
     ev = spec.evaluation
-    rules = ScoringRules(allow_highres=not ev.lowres_only)
-    loaded = load_scenes(scenes)
+    scoring = scoring_of(ev)
+    loaded = load_scenes(scenes, ev)
     out_list = []
     for m in spec.methods:
         folder = out / "methods" / file_name(m.label)
@@ -297,9 +311,10 @@ def run_methods(spec: AblationSpec, out: Path, scenes: tuple[tuple[str, str], ..
                 log(f"method {m.label}: finished earlier, skipped")
                 continue
             log(f"method {m.label}: {changed}; scored again")
-        res = evaluate_to_folder([method], loaded, folder, rules=rules, label=m.label,
-                                 writers=[Maps(MAPS, per_method=False, uncertainty=True)], progress=False,
-                                 meta={"method": {"label": m.label, "spec": m.spec}})
+        res = evaluate_to_folder([method], loaded, folder, rules=scoring["rules"], metrics=scoring.get("metrics"),
+                                 label=m.label, writers=[Maps(MAPS, per_method=False, uncertainty=True)],
+                                 progress=False, meta={**scoring.get("meta", {}),
+                                                       "method": {"label": m.label, "spec": m.spec}})
         if res.records:  # a method that served no scene (e.g. weights not there yet) is tried again next time
             record = {"label": m.label, "spec": m.spec, "key": key,
                       "results_sha256": file_sha256(folder / "results.json", "method results")}
@@ -364,7 +379,9 @@ def run_ablation(spec: AblationSpec, out: str | Path, *, jobs: int = 1, progress
     markers = run_cells(tasks, executor, progress, log)
     timings = time_cells(tasks, spec.evaluation.threads or per_job or cores, progress, log, executor)
     markers = [{**m, **{k: v for k, v in t.items() if k != "key"}} for m, t in zip(markers, timings, strict=True)]
-    combined = Results(meta={"ablation": {"title": spec.title, "spec": str(spec.source), "table": spec.table,
+    dataset = scoring_of(spec.evaluation).get("meta", {})  # the dataset of the data root, when there is one
+    combined = Results(meta={**dataset,
+                             "ablation": {"title": spec.title, "spec": str(spec.source), "table": spec.table,
                                           "budget": spec.budget_label(), "shared_stage1": spec.shared_stage1,
                                           "cells": markers}})
     for t in tasks:
@@ -415,7 +432,8 @@ def _write_set(spec: AblationSpec, out: Path, outputs: OutputSet, results: Resul
     them); ``maps``: whose saved maps are drawn (lfbench.ablation.report.drawn_map_folders)."""
     stage = outputs.stage
     writers = report_writers(spec, markers, results, paper=paper, folder=out, html=html, log=log, maps=maps)
-    site_scenes = load_scenes(scenes if scenes is not None else prepare_evaluation(spec, out, log)) if html else ()
+    site_scenes = (load_scenes(scenes if scenes is not None else prepare_evaluation(spec, out, log), spec.evaluation)
+                   if html else ())
     staged = run_writers(writers, spec, results, stage, out, site_scenes, maps=maps)
     books = [stage / name for name in ("results.json", "results.csv", "spec.toml") if (stage / name).is_file()]
     written = outputs.commit_written([*staged, *books], keep=keep)[:len(staged)]

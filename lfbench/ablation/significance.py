@@ -5,11 +5,11 @@ metric the tables report the mean over seeds of the scene-mean score and a 95 % 
 seeds (mean +- t_{0.975, n-1} s / sqrt(n)): the seed is the unit of replication, the evaluation scenes
 are a fixed test set, so the interval says how much a re-training with another seed moves the number.
 
-Each of the paper's orderings becomes paired comparisons of neighbouring variants (Table IV: interval
-1 worse than 0.5 worse than 0.25 worse than 0.1 at the same interpolation; Table V: the reference's
-best loss (SubFocal's paper: UAFL) better than each other loss; beta sweep: the reference's beta better
-than each other beta), in BadPix 0.07 (lower is better); lfbench.reports.reference says which loss and
-beta the paper finds best.
+Each ordering the reference's declared table states becomes paired comparisons of variants
+(lfbench.reports.reference.PaperTable): a ``trend`` (e.g. ``interval = "lower"`` in Table IV:
+interval 1 worse than 0.5 worse than 0.25 worse than 0.1 at the same interpolation) and a ``best`` row
+(e.g. its Table V: the best loss, at the table's ``where`` values, better than each other loss; its beta
+sweep: the best beta better than each other beta), in the table's first declared metric (lower is better).
 The test is a paired t-test over seeds of d_s = score(worse, s) - score(better, s), each score the mean
 over the scenes both cells were scored on: pairing by seed removes what the seeds share (the sampled
 patches, the initialisation), and averaging over scenes first keeps one independent value per training
@@ -36,11 +36,12 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from lfbench.reports.reference import Reference, default_reference
+from lfbench.ablation.facts import same_value
+from lfbench.reports.reference import PaperTable
 from lfbench.scoring.metrics import METRICS
 
 __all__ = ["ALPHA", "Comparison", "comparisons", "paired_t", "scene_scores", "seeds_table",
-           "significance_table", "t_interval", "verdict"]
+           "ordering_metric", "significance_table", "t_interval", "verdict"]
 
 ALPHA = 0.05
 LEVEL = 0.95
@@ -94,43 +95,53 @@ class Comparison:
     worse: str
 
 
-def comparisons(table: str, info: pd.DataFrame, reference: Reference | None = None) -> list[Comparison]:
-    """The paper's orderings of ``table`` (table4, table5, beta) as comparisons of the variants present;
-    ``reference`` (default: the default reference) names the best loss and beta of table5 and beta."""
-    if info.empty:
+def comparisons(table: PaperTable | None, info: pd.DataFrame) -> list[Comparison]:
+    """The orderings the declared ``table`` states, as comparisons of the variants present (``info``:
+    lfbench.ablation.facts.cell_info with a column per axis of the table): each ``trend`` axis (a lower or
+    higher value better, between neighbouring values at equal values of the table's other axes), and its
+    ``best`` row (the first axis at that value, and at its ``where`` values, better than each variant with
+    another value)."""
+    if info.empty or table is None:
         return []
-    reference = reference or default_reference()
-    best_loss = reference.table5.best_loss if reference is not None and reference.table5 is not None else None
-    best_beta = reference.beta.best if reference is not None and reference.beta is not None else None
     variants = info.drop_duplicates("variant").set_index("variant")
+    axes = [a for a in table.join if a in variants.columns]
     out: list[Comparison] = []
-    if table == "table4":
-        for interp, group in variants.groupby("interpolation", sort=False):
-            ordered = group.sort_values("interval", ascending=False)  # coarse -> fine
-            ids, steps = list(ordered.index), list(ordered["interval"])
+    for axis, way in table.trend.items():
+        if axis not in variants.columns:
+            continue
+        others = [a for a in axes if a != axis]
+        groups = variants.groupby(others, sort=False) if others else [((), variants)]
+        for key, group in groups:
+            prefix = " / ".join(_text(k) for k in (key if isinstance(key, tuple) else (key,)))
+            ordered = group.sort_values(axis, ascending=way == "higher")  # worse -> better
+            ids, steps = list(ordered.index), list(ordered[axis])
             for i in range(len(ids) - 1):
                 if steps[i] == steps[i + 1]:
                     continue
-                out.append(Comparison(f"{interp}: interval {steps[i + 1]:g} better than {steps[i]:g}",
-                                      better=ids[i + 1], worse=ids[i]))
-    elif table == "table5" and best_loss is not None:
-        best = variants[variants["loss"] == best_loss]
-        if best_beta is not None:
-            best = best[best["beta"].isna() | np.isclose(best["beta"].astype(float).fillna(best_beta), best_beta)]
+                out.append(Comparison(f"{prefix + ': ' if prefix else ''}{axis} {_text(steps[i + 1])} better than "
+                                      f"{_text(steps[i])}", better=ids[i + 1], worse=ids[i]))
+    if table.best and axes:
+        axis = axes[0]
+        valued = variants[variants[axis].notna()]
+        is_best = np.array([same_value(v, table.best) for v in valued[axis]], dtype=bool)
+        best = valued[is_best]
+        for key, value in table.where.items():
+            if key in best.columns:
+                best = best[[pd.isna(v) or same_value(v, value) for v in best[key]]]
         for b in best.index:
-            for other in variants.index:
-                if other != b and variants.loc[other, "loss"] != best_loss:
-                    out.append(Comparison(f"{best_loss.upper()} better than {variants.loc[other, 'loss']}", better=b,
-                                          worse=other))
-    elif table == "beta" and best_beta is not None:
-        betas = variants[variants["beta"].notna()]
-        best = betas[np.isclose(betas["beta"].astype(float), best_beta)]
-        for b in best.index:
-            for other in betas.index:
-                if other != b:
-                    out.append(Comparison(f"beta {best_beta:g} better than beta {betas.loc[other, 'beta']:g}",
-                                          better=b, worse=other))
+            for other in valued[~is_best].index:
+                out.append(Comparison(f"{axis} {table.best} better than {axis} {_text(valued.loc[other, axis])}",
+                                      better=b, worse=other))
     return out
+
+
+def _text(value: Any) -> str:
+    return f"{value:g}" if isinstance(value, float | int) and not isinstance(value, bool) else str(value)
+
+
+def ordering_metric(table: PaperTable | None) -> str:
+    """The metric a table's orderings are tested in: its first declared metric, else :data:`ORDERING_METRIC`."""
+    return next(iter(table.metrics), ORDERING_METRIC) if table is not None else ORDERING_METRIC
 
 
 def scene_scores(scores: pd.DataFrame, metric: str) -> pd.DataFrame:
@@ -175,14 +186,19 @@ def seeds_table(info: pd.DataFrame, scores: pd.DataFrame, metrics: Sequence[str]
     return table, list(clipped.values())
 
 
-def significance_table(table: str, info: pd.DataFrame, scores: pd.DataFrame, metric: str = ORDERING_METRIC,
-                       reference: Reference | None = None) -> pd.DataFrame:
+def significance_table(table: PaperTable | None, info: pd.DataFrame, scores: pd.DataFrame,
+                       metric: str | None = None) -> pd.DataFrame:
     """One row per comparison of :func:`comparisons`: both variants' means over the paired seeds, the mean
-    paired difference (worse - better) with its 95 % interval, t, p and the verdict."""
+    paired difference (worse - better, in the direction the metric improves: of the negated scores where higher
+    is better) with its 95 % interval, t, p and the verdict; in ``metric`` (default: the table's first declared
+    metric, else :data:`ORDERING_METRIC`)."""
+    metric = metric or ordering_metric(table)
+    found = METRICS.find(metric)
+    higher = found is not None and found.higher_is_better
     values = scene_scores(scores, metric)
     cell_scores = {c: dict(zip(g["scene"], g["value"], strict=True)) for c, g in values.groupby("method")}
     rows = []
-    for comp in comparisons(table, info, reference):
+    for comp in comparisons(table, info):
         better_cells = info[info["variant"] == comp.better]
         worse_cells = info[info["variant"] == comp.worse]
         worse_by_seed = {s: c for c, s in zip(worse_cells.index, worse_cells["seed"], strict=True)}
@@ -197,7 +213,10 @@ def significance_table(table: str, info: pd.DataFrame, scores: pd.DataFrame, met
             b_vals.append(float(np.mean([cell_scores[cell][s] for s in common])))
             w_vals.append(float(np.mean([cell_scores[other][s] for s in common])))
             seeds.append(seed)
-        test = paired_t(b_vals, w_vals)
+        # d = worse - better; for a metric where higher is better, the paper's ordering means worse < better: the
+        # test then runs on the negated scores, so that a positive difference is always "as the paper says"
+        sign = -1.0 if higher else 1.0
+        test = paired_t([sign * v for v in b_vals], [sign * v for v in w_vals])
         rows.append({"claim (paper)": comp.claim, "better": comp.better, "worse": comp.worse, "metric": metric,
                      "seeds": test["n"], "better mean": float(np.mean(b_vals)) if b_vals else math.nan,
                      "worse mean": float(np.mean(w_vals)) if w_vals else math.nan,

@@ -74,8 +74,10 @@ from lfbench.utils.names import FileNames
 from lfbench.utils.options import Table, option, parse_section
 from lfbench.utils.tomlfile import read_toml
 
-TABLES = ("table4", "table5", "beta", "tables12", "none")
-SPECIAL_AXES = ("loss", "beta", "lr", "seed")
+NO_TABLE = ("tables12", "none")  # a spec without a reference table (Tables I/II are written for every spec)
+#: Axes of every training config, whatever the network: the last stage's loss and learning rate, the seed (and,
+#: beside them, each keyword parameter a registered loss declares: :func:`loss_axes`).
+SPECIAL_AXES = ("loss", "lr", "seed")
 DEVICES = ("cpu", "cuda", "auto")
 MAX_CELLS = 1024  # cells (x seeds) one spec may define: counted before any cell is made
 MAX_REPEATS = 1000  # timed (and warm-up) runs of the test time
@@ -94,7 +96,7 @@ class Budget:
     threads: int = option(0, low=0, high=MAX_THREADS, help="torch threads per cell (0: cores / --jobs)")
     model: dict[str, Any] = option({}, help="[model] overrides: the network's parameters every cell is built with",
                                    free_text="[model] overrides written over the base config's [model] (e.g. "
-                                             "`model = { width = 8 }` for SubFocal's aggregation channels); "
+                                             "`model = { width = 8 }`: a network's width); "
                                              "checked against the network's parameters and their types")
 
     def describe(self, config: dict[str, Any]) -> str:
@@ -123,7 +125,11 @@ class SyntheticEval:
 @dataclass(frozen=True)
 class Evaluation:
     synthetic: SyntheticEval | None = option(None, help="synthetic scenes generated into OUT/eval_data/")
-    data: Path | None = option(None, help="HCI data root of the scenes below (relative to the spec's folder)")
+    data: Path | None = option(None, help="data root of the scenes below, of any dataset lfbench reads (relative to "
+                                          "the spec's folder)")
+    dataset: str | None = option(None, default_text="detected", help="the dataset adapter data is read with (a "
+                                                                     "`lfbench datasets` name); its protocol scores "
+                                                                     "the cells")
     scenes: tuple[str, ...] = option((), single=True, help="scenes of data by name, category or split")
     time_size: int = option(512, low=16, high=MAX_SYNTH_SIZE,
                             help="test time: one whole 9 x 9 x time_size x time_size light field")
@@ -146,6 +152,8 @@ class Evaluation:
             values["data"] = _resolve(str(values["data"]), Path(t.source or "."), "evaluation.data")
         elif values["scenes"]:
             t.fail("scenes", "names scenes of evaluation.data, which is not given")
+        elif values["dataset"] is not None:
+            t.fail("dataset", "names the dataset of evaluation.data, which is not given")
         return values
 
     def fingerprint(self) -> str:
@@ -153,6 +161,8 @@ class Evaluation:
         key = {"synthetic": None if self.synthetic is None else vars(self.synthetic),
                "data": None if self.data is None else str(self.data), "scenes": list(self.scenes),
                "time_size": self.time_size, "lowres_only": self.lowres_only, "precision": self.precision}
+        if self.dataset is not None:  # (absent when detected: the fingerprints of earlier specs stay)
+            key["dataset"] = self.dataset
         return sha256_of(key)
 
 
@@ -197,8 +207,10 @@ class SpecFile:
     """The keys of an ablation spec file, as declared (parse_spec makes an :class:`AblationSpec` of them)."""
 
     title: str | None = option(None, default_text="the file name", help="title of the tables")
-    table: Literal["table4", "table5", "beta", "tables12", "none"] = option(
-        "none", help="the paper table beside ours (Tables I/II, per scene and average, are written for every spec)")
+    table: str = option(
+        "none", help="the reference's table beside ours: the id of a table its declaration lists (e.g. "
+                     "table4), or none / tables12 (Tables I/II, per scene and average, are written "
+                     "for every spec)")
     base: str | dict[str, Any] | None = option(
         None, help="the training config every cell starts from (a file, relative to the spec), or an inline [base] "
                    "table in the training-config layout", free_text="")
@@ -213,7 +225,8 @@ class SpecFile:
                                            "also by name or `last`")
     grid: tuple[dict[str, Any], ...] = option(
         (), help="the cells: the union of the products of every [[grid]] table's axis = [values] (identical configs "
-                 "run once); axes: the network's parameters, seed, loss, beta, lr or a dotted training-config key")
+                 "run once); axes: the network's parameters, seed, loss, a loss parameter (beta), lr or a dotted "
+                 "training-config key")
     stage1: Stage1 = option(factory=Stage1, help="a stage 1 shared by the cells")
     evaluation: Evaluation = option(factory=Evaluation, help="the scenes and timing every cell is scored with")
     methods: tuple[ExtraMethod, ...] = option((), help="more rows for Tables I/II: any registered method spec")
@@ -265,9 +278,14 @@ class AblationSpec:
         return cfg
 
 
+def network_name(config: dict[str, Any]) -> str:
+    """The name of the registered trainable network a training config (dict layout) trains."""
+    return config.get("method", DEFAULT_TRAINABLE)
+
+
 def trainable_of(config: dict[str, Any]) -> Trainable:
     """The registered trainable network a training config (dict layout) trains."""
-    return get_trainable(config.get("method", DEFAULT_TRAINABLE))
+    return get_trainable(network_name(config))
 
 
 def network_default(config: dict[str, Any], key: str) -> Any:
@@ -337,10 +355,27 @@ def parse_spec(raw: dict[str, Any], source: Path, text: str = "") -> AblationSpe
     evaluation = f.evaluation
     if evaluation.synthetic is None and evaluation.data is None:
         raise SpecError("evaluation: give synthetic = {seed, size, scenes} and/or data = ROOT with scenes", source)
+    _check_table(f.table, f.report.reference, network_name(cells[0].config if cells else {}), source)
     return AblationSpec(source=source, title=f.title if f.title is not None else source.stem, table=f.table,
                         base_source=base_source, budget=budget, cells=cells, shared_stage1=shared,
                         evaluation=evaluation, methods=methods, paper_methods=f.report.paper_methods,
                         reference=f.report.reference, out=f.out, text=text, seeds=seeds)
+
+
+def _check_table(table: str, reference: str | None, network: str, source: Path) -> None:
+    """SpecError unless ``table`` is none / tables12 or a table the spec's reference declares for ablations
+    (its ``[report] reference``, else its network's: lfbench.reports.reference)."""
+    if table in NO_TABLE:
+        return
+    from lfbench.reports.reference import get_reference, reference_for_network
+
+    if reference == "none":  # no reference: the spec's table is not written
+        return
+    ref = get_reference(reference) if reference is not None else reference_for_network(network)
+    known = [t.id for t in ref.ablation_tables()] if ref is not None else []
+    if table not in known:
+        whose = f"reference {ref.name!r}" if ref is not None else f"no reference of network {network!r}"
+        raise SpecError(f"table: expected one of {', '.join([*known, *NO_TABLE])} ({whose}), got {table!r}", source)
 
 
 def _with_seeds(cells: tuple[Cell, ...], seeds: tuple[int, ...], source: Path) -> tuple[Cell, ...]:
@@ -538,15 +573,26 @@ def apply_axis(cfg: dict[str, Any], axis: str, value: Any, fail: Callable[[str],
         last.update(params)
         others = {s["name"] for s in stages[:-1]}
         last["name"] = _loss_stage_name(last["loss"], len(stages) - 1, others)
-    elif axis == "beta":
-        last["beta"] = value
+    elif axis in loss_axes():
+        last[axis] = value
     elif axis == "lr":
         last["lr"] = value
     elif "." in axis:
         _set_dotted(cfg, axis, value, fail)
     else:
-        fail(f"unknown axis; use {', '.join(model_axes + SPECIAL_AXES)} or a dotted training-config key "
-             "(e.g. model.width, stages.2.lr)")
+        fail(f"unknown axis; use {', '.join(model_axes + (SPECIAL_AXES[0], *loss_axes(), *SPECIAL_AXES[1:]))} or a "
+             "dotted training-config key (e.g. model.width, stages.2.lr)")
+
+
+def loss_axes() -> tuple[str, ...]:
+    """The parameters the registered losses declare after their tensors (lfbench.training.losses.make_loss: e.g.
+    a focusing exponent), each an axis that sets the last stage's loss parameter."""
+    import inspect
+
+    from lfbench.training.losses import LOSSES
+
+    return tuple(dict.fromkeys(name for loss in LOSSES.names()
+                               for name in list(inspect.signature(LOSSES.get(loss)).parameters)[4:]))
 
 
 def _check_config(cfg: dict[str, Any], source: Path, where: str) -> TrainConfig:

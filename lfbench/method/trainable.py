@@ -310,6 +310,12 @@ class Trainable:
         if problem:
             raise ValueError(f"network {self.name!r} breaks the network contract: {problem}")
 
+    def cost_estimate(self, model: dict[str, Any], steps: int) -> float | None:
+        """The relative cost of training this network with the ``[model]`` values ``model`` for ``steps`` steps
+        (any unit: only ratios between the cells of one ablation matter; ``lfbench ablate`` starts the
+        costliest cells first), or None when unknown: then the cost is the number of steps."""
+        return None
+
     def flops(self, net: torch.nn.Module, height: int, width: int) -> float | dict[str, float] | None:
         """Floating-point operations (a count, 2 per multiply-add) of one eval forward pass of ``net`` on one
         H x W light field (batch 1): a number, or ``{"total": n, part: n, ...}`` (parts are reported beside the

@@ -30,9 +30,18 @@ the one declared-option system (lfbench.utils.options: :class:`Reference`, :clas
     names = { l1 = "baseline_l1" }           # our key value -> the paper's, where they differ
     best = "uafl"                            # the row (key value) the paper finds best
 
-The ablation tables read their paper table through adapters (:attr:`Reference.table4`,
-:attr:`Reference.table5`, :attr:`Reference.beta`: views of the generic tables ``table4``, ``table5``,
-``beta``); report's Table III reads the ``table3`` declaration directly (lfbench.reports.table3).
+An ablation's table (``table = ID`` in its spec; any declared table without a ``dataset``) is one generic
+"our cells beside a declared table" (lfbench.ablation.report.reference_table), read from these keys too::
+
+    axes = { interval = "interval" }         # our axis -> the key column it joins (default: keys by name)
+    metrics = { mse_x100 = "" }              # "" : a metric the paper does not report (ours only)
+    measures = ["train_time", "test_time"]   # our measured columns, each beside the extra of its name
+    where = { beta = "0.1" }                 # what its rows were measured at (a cell with another value joins none)
+    trend = { interval = "lower" }           # an ordering tested over seeds (lfbench.ablation.significance)
+    order = "descending"                     # rows sorted by the axes
+    figure = "curve"                         # or "time": the ablation's figure of this table
+
+report's Table III reads a per-scene declaration (``scenes``) directly (lfbench.reports.paper_scenes).
 
 Which reference an ablation uses: the spec's ``[report] reference``, else, when the spec asks for a
 paper table or paper methods (or ``--paper`` is given), the reference of the spec's network, else the
@@ -46,6 +55,7 @@ import importlib.util
 from dataclasses import dataclass, field
 from importlib import metadata
 from pathlib import Path
+from typing import Literal
 
 from lfbench.method.trainable import DEFAULT_TRAINABLE
 from lfbench.utils.errors import SpecError
@@ -53,10 +63,12 @@ from lfbench.utils.options import Table, option, parse_section
 from lfbench.utils.registry import Registry
 from lfbench.utils.tomlfile import read_toml
 
-__all__ = ["ENTRY_POINT_GROUP", "BetaSweep", "PaperTable", "Reference", "Table4", "Table5", "default_reference",
+__all__ = ["ENTRY_POINT_GROUP", "MEASURES", "PaperTable", "Reference", "default_reference",
            "get_reference", "list_references", "read_reference", "reference_for_network"]
 
 ENTRY_POINT_GROUP = "lfbench.references"
+#: What an ablation measures of every cell besides its scores, by name (a table's ``measures``).
+MEASURES = ("train_time", "stage_train_time", "test_time")
 
 
 def _no_blank(value: str) -> str | None:
@@ -67,7 +79,7 @@ def _no_blank(value: str) -> str | None:
 class PaperTable:
     """One table of a paper, declared generically: where its numbers are and how they line up with ours."""
 
-    id: str = option(help="what lfbench calls the table (table1 .. table5, beta, ...)", check=_no_blank)
+    id: str = option(help="what lfbench and ablation specs call the table (e.g. table3)", check=_no_blank)
     file: str = option("", help="its CSV file in the paper folder ('' for a figure whose values are not printed)")
     caption: str = option("", help="caption line of the tables that show it")
     keys: tuple[str, ...] = option((), help="the CSV columns that identify a row (join keys), e.g. method")
@@ -82,13 +94,43 @@ class PaperTable:
                                             "name -> text")
     names: dict[str, str] = option({}, help="our key value -> the paper's row, where they differ")
     best: str = option("", help="the row (key value) the paper finds best, as text")
+    axes: dict[str, str] = option({}, help="an ablation's table: our axis (a grid axis, a network parameter, "
+                                          "loss, a loss parameter) -> the key column it joins (default: each key "
+                                          "is the axis of its name)")
+    where: dict[str, str] = option({}, help="what the paper's rows were measured at: a cell joins a row only when "
+                                           "each of these values (axis -> value) is unset in it or the same")
+    measures: tuple[str, ...] = option((), help="an ablation's table: our measured columns after the metrics "
+                                               f"({', '.join(MEASURES)}), each followed by the extra column of "
+                                               "its name when declared")
+    trend: dict[str, str] = option({}, help="axis -> lower or higher: the paper finds a lower (higher) value "
+                                           "better, at equal values of the other axes (tested over seeds)")
+    order: Literal["", "ascending", "descending"] = option("", help="an ablation's table: rows sorted by its "
+                                                                   "axes ('' : the cells' order)")
+    figure: Literal["", "curve", "time"] = option("", help="an ablation's figure: curve (the first metric "
+                                                          "against the axis) or time (against test time; colour: "
+                                                          "the second axis, labels: the first)")
 
     @staticmethod
     def check_options(values: dict, table: Table) -> None:
-        """A per-scene table names its file and its metric."""
+        """A per-scene table names its file and its metric; a trend is lower or higher."""
         for key in ("file", "scene_metric"):
             if values["scenes"] and not values[key]:
                 table.fail(key, "is required with scenes")
+        for axis, way in values["trend"].items():
+            if way not in ("lower", "higher"):
+                table.fail("trend", f"{axis}: expected lower or higher, got {way!r}")
+        unknown = [m for m in values["measures"] if m not in MEASURES]
+        if unknown:
+            table.fail("measures", f"unknown {', '.join(unknown)} (known: {', '.join(MEASURES)})")
+
+    @property
+    def join(self) -> dict[str, str]:
+        """Our axis -> the key column it joins (``axes``, else each key as the axis of its name)."""
+        return dict(self.axes) if self.axes else {k: k for k in self.keys}
+
+    def header(self, name: str, default: str) -> str:
+        """``labels[name]`` when declared, else ``default``."""
+        return self.labels.get(name, default)
 
     def label(self, name: str) -> str:
         """``labels[name]``; SpecError naming the table when the reference does not give it."""
@@ -101,57 +143,6 @@ class PaperTable:
         if name not in self.extra:
             raise SpecError(f"reference table {self.id!r}: extra.{name} is required")
         return self.extra[name]
-
-
-@dataclass(frozen=True)
-class Table4:
-    """Adapter: the paper's Table IV as the ablation tables read it (BadPix 0.07, MSE x100, train and test
-    time per (interval, interpolation)); a view of the generic table ``table4``."""
-
-    file: str
-    train_hours: str
-    test_seconds: str
-    test_label: str
-    figure_title: str
-    figure_time_label: str
-
-    @classmethod
-    def of(cls, t: PaperTable) -> Table4:
-        return cls(file=t.file, train_hours=t.column("train_hours"), test_seconds=t.column("test_seconds"),
-                   test_label=t.label("test_label"), figure_title=t.label("figure_title"),
-                   figure_time_label=t.label("figure_time_label"))
-
-
-@dataclass(frozen=True)
-class Table5:
-    """Adapter: the paper's Table V (BadPix 0.07 per fine-tuning loss; ``best_loss`` the one it finds best);
-    a view of the generic table ``table5``."""
-
-    file: str
-    best_loss: str
-    loss_names: dict[str, str] = field(default_factory=dict)
-
-    @classmethod
-    def of(cls, t: PaperTable) -> Table5:
-        return cls(file=t.file, best_loss=t.best, loss_names=dict(t.names))
-
-
-@dataclass(frozen=True)
-class BetaSweep:
-    """Adapter: the paper's beta sweep, the ``best`` beta and what it says about it (``note``: table
-    caption, ``curve_note``: figure title); a view of the generic table ``beta``."""
-
-    best: float
-    note: str
-    curve_note: str
-
-    @classmethod
-    def of(cls, t: PaperTable) -> BetaSweep:
-        try:
-            best = float(t.best)
-        except ValueError:
-            raise SpecError(f"reference table {t.id!r}: best: expected a number, got {t.best!r}") from None
-        return cls(best=best, note=t.caption, curve_note=t.label("curve_note"))
 
 
 def _unique_ids(tables: tuple[PaperTable, ...]) -> str | None:
@@ -177,20 +168,9 @@ class Reference:
         """The declaration of the table ``table_id``, None when the paper has none."""
         return next((t for t in self.tables if t.id == table_id), None)
 
-    @property
-    def table4(self) -> Table4 | None:
-        t = self.table("table4")
-        return Table4.of(t) if t is not None else None
-
-    @property
-    def table5(self) -> Table5 | None:
-        t = self.table("table5")
-        return Table5.of(t) if t is not None else None
-
-    @property
-    def beta(self) -> BetaSweep | None:
-        t = self.table("beta")
-        return BetaSweep.of(t) if t is not None else None
+    def ablation_tables(self) -> tuple[PaperTable, ...]:
+        """The tables an ablation spec may stand beside (``table = ID``): those not of a dataset's results."""
+        return tuple(t for t in self.tables if not t.dataset)
 
 
 def read_reference(path: str | Path) -> Reference:
@@ -198,10 +178,6 @@ def read_reference(path: str | Path) -> Reference:
     path = Path(path)
     raw, _ = read_toml(path, "reference")
     ref = parse_section(Reference, Table(raw, "", str(path)))
-    try:  # the adapters' keys are checked when the file is read, not when a table first uses them
-        ref.table4, ref.table5, ref.beta  # noqa: B018
-    except SpecError as exc:
-        raise SpecError(str(exc), path) from None
     return dataclasses.replace(ref, source=str(path))
 
 

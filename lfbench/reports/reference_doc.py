@@ -23,9 +23,13 @@ A paper reference (a plugin's TOML data file named in the entry-point group `lfb
 the numbers themselves are the user's CSV files (`lfbench report --paper DIR`). Its tables are a list of
 generic declarations (`[[tables]]`); a key the tables below do not list, or a value of another type, is
 refused with one line naming the file and the key. A table with `scenes` and a `dataset` (SubFocal's
-`table3`, UrbanLF-Syn) is put beside results of that dataset by `lfbench report --paper DIR` and the HTML
-site; the ablation tables read `table4`, `table5` and `beta` (their `extra` columns `train_hours` and
-`test_seconds`, `labels` `test_label`, `figure_title`, `figure_time_label` and `curve_note`, `best`, `names`).
+`table3`, UrbanLF-Syn) is put beside results of that dataset by `lfbench report --paper DIR`, the HTML
+site and `lfbench ablate` (cells scored on that dataset). Any other table without a `dataset` is one an
+ablation spec may name (`table = ID`): its cells are put beside it by one generic table (its `axes` joined
+to the paper's `keys`, row names by `names`, rows measured at `where`; its `metrics` with their labels from
+the metric definitions, a metric whose column is `""` shown for ours only; our `measures` each beside the
+`extra` column of its name, headed by `labels`), its `trend` and `best` tested over seeds, its `figure`
+drawn. Adding another paper's table is a `[[tables]]` entry and its CSV file: no code.
 """
 
 

@@ -18,11 +18,16 @@ from lfbench.utils.figure_text import plain_text
 __all__ = ["plot_sparsification", "write_uncertainty_report"]
 
 
-_MEASURE_LABEL = {"abs": "mean abs. error (EPE)", "mse_x100": "MSE x100"}
+ABS_LABEL = "mean abs. error (EPE)"  # the sparsification's own measure (not a metric of lfbench.scoring.metrics)
 
 
 def _measure_label(sp: Sparsification) -> str:
-    name = _MEASURE_LABEL.get(sp.measure, sp.measure.replace("badpix_", "BadPix "))
+    """The y label of a sparsification curve: its measure's metric name (lfbench.scoring.base.Metric), or the
+    mean absolute error."""
+    from lfbench.scoring.metrics import METRICS
+
+    found = METRICS.find(sp.measure) if sp.measure != "abs" else None
+    name = ABS_LABEL if sp.measure == "abs" else found.name if found is not None else sp.measure
     suffix = " (relative)" if sp.normalized else f" [{sp.unit}]" if sp.unit else ""
     return f"{name} of remaining pixels{suffix}"
 

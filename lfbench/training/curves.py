@@ -142,6 +142,20 @@ def _number(value: Any) -> float:
     return float(value) if isinstance(value, int | float) else float("nan")
 
 
+def _validation_labels(val: Sequence[dict[str, Any]]) -> tuple[str, str]:
+    """The labels of the validation entries' ``badpix`` and ``mse_x100`` (lfbench.scoring.base.Metric.label): the
+    BadPix metric of the entries' ``threshold`` where they record one, else the family's name with its unit."""
+    from lfbench.scoring.metrics import get_metric
+
+    threshold = val[-1].get("threshold")
+    if isinstance(threshold, int | float) and not isinstance(threshold, bool) and threshold > 0:
+        badpix = get_metric(f"badpix_{threshold:g}").label
+    else:
+        family = get_metric("badpix_0.07")  # the family's name and unit; the entries do not say its threshold
+        badpix = f"BadPix ({family.unit})"
+    return badpix, get_metric("mse_x100").label
+
+
 @plain_text
 def plot_learning_curve(entries: Sequence[dict[str, Any]], path: str | Path, title: str = "") -> Path:
     """Training loss (log scale; one colour per stage, boundaries dotted) and validation BadPix (%) and
@@ -170,13 +184,14 @@ def plot_learning_curve(entries: Sequence[dict[str, Any]], path: str | Path, tit
         ax_loss.legend(fontsize=7)
     if val:
         steps = [e["global_step"] for e in val]
+        badpix, mse = _validation_labels(val)
         ax_val.plot(steps, [_number(e.get("badpix")) for e in val], marker="o", markersize=3, color="tab:red",
-                    label="BadPix (%)")
-        ax_val.set_ylabel("validation BadPix (%)", color="tab:red")
+                    label=badpix)
+        ax_val.set_ylabel(f"validation {badpix}", color="tab:red")
         twin = ax_val.twinx()
         twin.plot(steps, [_number(e.get("mse_x100")) for e in val], marker="s", markersize=3, color="tab:blue",
-                  label="MSE x100")
-        twin.set_ylabel("validation MSE x100", color="tab:blue")
+                  label=mse)
+        twin.set_ylabel(f"validation {mse}", color="tab:blue")
     else:
         ax_val.text(0.5, 0.5, "no validation", ha="center", va="center", color="0.4", transform=ax_val.transAxes)
     ax_val.set_xlabel("global step")

@@ -46,6 +46,12 @@ class SubFocalTrainable(Trainable):
 
         check_config(**{**{k: p.default for k, p in self.parameters().items()}, **params})
 
+    def cost_estimate(self, model: dict[str, Any], steps: int) -> float:
+        """Candidate disparities x steps (the cost volume dominates); the phase-shift interpolation about 1.6x."""
+        params = {**{k: p.default for k, p in self.parameters().items()}, **model}
+        d = (float(params["d_max"]) - float(params["d_min"])) / float(params["interval"]) + 1
+        return d * steps * (1.6 if params.get("interpolation") == "phase" else 1.0)
+
     def load(self, path: str | Path, **overrides: Any) -> SubFocalNet:
         from lfbench_methods.subfocal.keras_import import build_from_checkpoint
 
