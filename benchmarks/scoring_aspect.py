@@ -24,8 +24,7 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 import numpy as np  # noqa: E402
 from PIL import Image  # noqa: E402
 
-from lfbench.data.hci import HCIDataset  # noqa: E402
-from lfbench.data.scene import Scene  # noqa: E402
+from lfbench.data.hci import HCIDataset, HCIScene  # noqa: E402
 from lfbench.data.urbanlf import UrbanLFScene, UrbanLFSyn, gt_name, view_name  # noqa: E402
 from lfbench.runs.bench import _write_synthetic_scene  # noqa: E402
 from lfbench.scoring.metrics import get_metric  # noqa: E402
@@ -71,7 +70,7 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:
         hci_gt = _write_synthetic_scene(Path(tmp) / "hci" / "scene", 512, 0)
-        hci = Scene(Path(tmp) / "hci" / "scene", category="synthetic")
+        hci = HCIScene(Path(tmp) / "hci" / "scene", category="synthetic")
         urban_gt = _urbanlf_scene(Path(tmp) / "urban" / "Image1", 0)
         urban = UrbanLFScene(Path(tmp) / "urban" / "Image1", category="val")
         (hci_s, hci_cpu), (urban_s, urban_cpu) = (_time(hci, hci_gt, HCIDataset, args.repeat),

@@ -16,7 +16,8 @@ from helpers import write_scene
 from PIL import Image
 from scipy import ndimage
 
-from lfbench.data.params import SceneParameters
+from lfbench.data.hci import HCIScene
+from lfbench.data.hci.params import SceneParameters
 from lfbench.data.pfm import write_pfm
 from lfbench.data.scene import ArrayLightField, Scene
 from lfbench.method.base import Prediction
@@ -40,7 +41,7 @@ def _highres_scene(tmp_path: Path) -> tuple[Scene, np.ndarray, np.ndarray]:
     valid = np.ones((N, N), bool)
     valid[8:11, 4:16] = False
     Image.fromarray(np.where(valid, 255, 0).astype(np.uint8)).save(folder / "valid_mask.png")
-    return Scene(folder), gt_hi, valid
+    return HCIScene(folder), gt_hi, valid
 
 
 def _cropped_prediction(gt_hi: np.ndarray) -> np.ndarray:
@@ -127,7 +128,7 @@ def _nonsquare_scene(tmp_path: Path) -> tuple[Scene, np.ndarray]:
     valid = np.ones((H2, W2), bool)
     valid[2:4, 3:9] = False
     Image.fromarray(np.where(valid, 255, 0).astype(np.uint8)).save(folder / "valid_mask.png")
-    return Scene(folder), valid
+    return HCIScene(folder), valid
 
 
 def test_a_non_square_scene_and_its_uncertainty_are_prepared_rows_to_rows(tmp_path):
@@ -188,7 +189,7 @@ def test_score_scene_records_the_runtime_a_method_reports(tmp_path):
     one gives no record, and a non-positive one a note."""
     from lfbench.scoring.score import score_scene
 
-    scene = Scene(write_scene(tmp_path, "toy", size=40, views=False))
+    scene = HCIScene(write_scene(tmp_path, "toy", size=40, views=False))
     runtime, log = RUNTIME_METRICS
     metrics = [runtime, get_metric("badpix_0.07"), log]
     score = score_scene(scene, np.ones((40, 40), F32), metrics, runtime_s=2.5)

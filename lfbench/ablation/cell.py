@@ -242,9 +242,9 @@ def _sync() -> None:
 
 
 def load_scenes(pairs: tuple[tuple[str, str], ...]):
-    from lfbench.data.scene import Scene
+    from lfbench.data.hci import HCIScene
 
-    return [Scene(path, category=category) for path, category in pairs]
+    return [HCIScene(path, category=category) for path, category in pairs]
 
 
 def evaluate_weights(label: str, weights: Path, ev: Evaluation, scenes, threads: int, out: Path,

@@ -48,7 +48,7 @@ from lfbench.ablation.baselines import baselines_caption, baselines_table, scene
 from lfbench.ablation.facts import cell_info, last_stage_loss, loss_beta, model_value, network_of
 from lfbench.ablation.significance import ALPHA, seeds_table, significance_table
 from lfbench.ablation.spec import AblationSpec
-from lfbench.data.scene import Scene
+from lfbench.data.hci import HCIScene
 from lfbench.reports.html import SiteInputs, SiteSection
 from lfbench.reports.maps import saved_predictions
 from lfbench.reports.paper import PaperTables, find_paper_dir, load_paper
@@ -545,6 +545,6 @@ def run_writers(writers: Sequence[OutputWriter], spec: AblationSpec, results: Re
     for writer in writers:
         writer.start(run)
     if spec.evaluation.error_maps:
-        recorded = [Scene(d) for d in results.meta.get("scenes", [])]
+        recorded = [HCIScene(d) for d in results.meta.get("scenes", [])]
         replay(writers, saved_predictions(recorded, run.maps, within=folder))
     return write_outputs(writers, run)

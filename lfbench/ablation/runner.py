@@ -115,18 +115,20 @@ def check_training_data(spec: AblationSpec, out: Path) -> None:
 
 def prepare_evaluation(spec: AblationSpec, out: Path, log: Log) -> tuple[tuple[str, str], ...]:
     """The evaluation scenes as (folder, category): generated synthetic ones and/or the named HCI ones."""
-    from lfbench.data.scene import Benchmark, Scene, check_scene_names
+    from lfbench.data.hci import HCIDataset, HCIScene
+    from lfbench.data.hci.scene import is_scene_folder
+    from lfbench.data.scene import Scene, check_scene_names
 
     ev = spec.evaluation
     scenes: list[Scene] = []
     if ev.synthetic is not None:
         syn: SyntheticEval = ev.synthetic
         folder = _generate(out / "eval_data" / syn.folder_name, syn.seed, syn.size, syn.scenes, "synthetic", log)
-        scenes += [Scene(p, category="synthetic") for p in sorted(folder.iterdir()) if (p / "parameters.cfg").is_file()]
+        scenes += [HCIScene(p, category="synthetic") for p in sorted(folder.iterdir()) if is_scene_folder(p)]
     if ev.data is not None:
         if not ev.data.is_dir():
             raise DataError("evaluation.data: data root not found", ev.data)
-        chosen = Benchmark.discover(ev.data).select(list(ev.scenes))
+        chosen = HCIDataset.open(ev.data).select(list(ev.scenes))
         scenes += [s for s in chosen if s.has_gt()]
     if not scenes:
         raise DataError("none of the evaluation scenes has ground truth (gt_disp_lowres.pfm)", spec.source)

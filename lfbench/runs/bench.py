@@ -372,7 +372,7 @@ def _write_synthetic_scene(folder: Path, size: int, seed: int):
     """An HCI-layout scene folder with parameters.cfg and gt_disp_lowres.pfm (smooth random disparity)."""
     import numpy as np
 
-    from lfbench.data.params import SceneParameters
+    from lfbench.data.hci.params import SceneParameters
     from lfbench.data.pfm import write_pfm
 
     folder.mkdir(parents=True, exist_ok=True)

@@ -198,7 +198,7 @@ def run_demo(out: str | Path = "lfbench-demo", *, seed: int = DEFAULT_SEED, size
     tables, figures, every method's maps (OUT/maps) and, with ``html``, the HTML report (OUT/html), as one
     set (lfbench.runs.folder.evaluate_to_folder with the writers of lfbench.reports.writers).
     Returns a :class:`DemoOutcome`."""
-    from lfbench.data.scene import Benchmark
+    from lfbench.data.hci import HCIDataset
     from lfbench.method.registry import create_from_spec
     from lfbench.reports.html import SITE_DIR
     from lfbench.reports.maps import MAPS_DIR
@@ -214,7 +214,7 @@ def run_demo(out: str | Path = "lfbench-demo", *, seed: int = DEFAULT_SEED, size
         recover(out)
         read_manifest(out)
     root, reused = prepare_data(out, seed, size, scenes, log)
-    scene_list = [s for s in Benchmark.discover(root) if s.has_gt()]
+    scene_list = [s for s in HCIDataset.open(root) if s.has_gt()]
     chosen, skipped = select_methods(requested, scene_list, log)
     writers = [*([SceneFigures()] if figures else []), Maps(), Tables(), *([Site()] if html else [])]
     results = evaluate_to_folder(chosen, scene_list, out, writers=writers, progress=progress,
