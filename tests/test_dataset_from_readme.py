@@ -74,7 +74,8 @@ def test_readme_dataset_is_scored_by_its_own_protocol(readme_root, tmp_path: Pat
     assert data["meta"]["dataset"] == "toml" and data["meta"]["scoring"]["border_px"] == 15
     assert {r["metric"] for r in data["records"]} == {"badpix_0.03", "badpix_0.07", "mse_x100"}
     # the plane sweep searched the range the TOML declares, and says so in its label
-    assert {r["method"] for r in data["records"]} == {"planesweep:d_min=-3.0,d_max=3.0", "constant", "gt"}
+    assert {r["method"] for r in data["records"]} == {"planesweep:d_min=-3.0,d_max=3.0,interval=0.1", "constant",
+                                                      "gt"}
     recs = {(r["method"], r["scene"], r["metric"]): r["value"] for r in data["records"]}
     for scene, gt in facts["gts"].items():
         assert recs[("gt", scene, "mse_x100")] == 0.0
@@ -89,8 +90,11 @@ def test_readme_command_with_the_planesweep_searches_the_declared_range(readme_r
     from lfbench.method.registry import create_from_spec
 
     _, _, facts = readme_root
-    m = create_from_spec("planesweep", {"device": "cpu"}, method_range_params(facts["protocol"].disparity_range))
-    assert m.label == "planesweep:d_min=-3.0,d_max=3.0"
+    protocol = facts["protocol"]
+    assert (protocol.disparity_range, protocol.disparity_interval) == ((-3.0, 3.0), 0.1)
+    m = create_from_spec("planesweep", {"device": "cpu"},
+                         method_range_params(protocol.disparity_range, protocol.disparity_interval))
+    assert m.label == "planesweep:d_min=-3.0,d_max=3.0,interval=0.1" and len(m.disparities) == 61
 
 
 @pytest.mark.parametrize(("text", "fragment"), [
