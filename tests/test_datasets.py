@@ -321,3 +321,40 @@ def test_jobs_score_urbanlf_scenes_in_workers_with_the_same_numbers(urban_root: 
         assert rc == 0, err
         runs[jobs] = json.loads((out / "results.json").read_text())["records"]
     assert runs["1"] == runs["2"] and len(runs["1"]) == 2 * 2 * 4
+
+
+# ------------------------------------------------------------------------------------------- the seam itself
+
+
+def test_hci_file_names_live_in_the_hci_adapter_only():
+    """Issue 30.1: the generic data code (the scene contract, the dataset seam, the pattern layouts) names no
+    HCI file; HCI's view names, parameters.cfg and PFM ground truth are lfbench/data/hci/'s."""
+    import lfbench.data as data
+
+    folder = Path(data.__file__).parent
+    generic = ["scene.py", "dataset.py", "pattern.py", "generic.py", "urbanlf.py"]
+    for name in generic:
+        text = (folder / name).read_text(encoding="utf-8")
+        for hci_only in ("input_Cam", "parameters.cfg", "gt_disp_", "SceneParameters"):
+            assert hci_only not in text, (name, hci_only)
+    hci = "".join(p.read_text(encoding="utf-8") for p in (folder / "hci").glob("*.py"))
+    assert all(word in hci for word in ("input_Cam", "parameters.cfg", "gt_disp_", "SceneParameters"))
+
+
+def test_an_hci_scene_pickles_as_its_folder(tmp_path: Path):
+    """A scoring worker (--jobs N) gets any dataset's scene as its folder, reopened there, never its views."""
+    import pickle
+
+    from lfbench.data.hci import HCIScene
+    from lfbench.data.scene import Scene
+
+    root = tmp_path / "hci"
+    write_benchmark(root, seed=1, size=24, scenes=1, category="training")
+    scene = HCIDataset.open(root).scenes[0]
+    assert isinstance(scene, HCIScene) and isinstance(scene, Scene)
+    scene.gray_views()
+    blob = pickle.dumps(scene)
+    again = pickle.loads(blob)
+    assert len(blob) < 2000 and "_rgb" not in again.__dict__
+    assert (type(again), again.path, again.category, again.params) == (HCIScene, scene.path, "training", scene.params)
+    np.testing.assert_array_equal(again.gray_views(), scene.gray_views())

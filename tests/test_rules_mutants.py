@@ -102,7 +102,7 @@ def test_missing_ground_truth_is_an_error_naming_the_scene(tmp_path):
     (folder / "gt_disp_lowres.pfm").unlink()
     with pytest.raises(DataError) as e:
         score_scene(HCIScene(folder), np.zeros((40, 40), F32), GENERAL_METRICS)
-    assert str(e.value) == f"{folder}: no ground truth (gt_disp_lowres.pfm) to score against"
+    assert str(e.value) == f"{folder}: no ground truth at lowres to score against"
 
 
 def test_score_scene_names_the_prediction_by_default(tmp_path):

@@ -90,10 +90,12 @@ def prepare_data(out: Path, seed: int, size: int, scenes: int, log: Log = _log.i
             got = stored.get("settings", {}) if isinstance(stored, dict) else {}
             raise DataError(f"holds demo data generated with {_describe(got)}, not {_describe(wanted)}; "
                             "choose another --out or remove this folder (data of two settings are never mixed)", out)
+        from lfbench.data.hci.scene import is_scene_folder
+
         scene_dirs = stored.get("scene_dirs")
         if not isinstance(scene_dirs, list) or not all(_inside(root, s) for s in scene_dirs):
             raise DataError("demo manifest: scene_dirs must list scene folders inside the data folder", manifest)
-        missing = [s for s in scene_dirs if not (root / s / "parameters.cfg").is_file()]
+        missing = [s for s in scene_dirs if not is_scene_folder(root / s)]
         if missing or not scene_dirs:
             raise DataError(f"demo data are incomplete (missing {', '.join(missing) or 'scene list'}); "
                             "remove this folder or choose another --out", out)

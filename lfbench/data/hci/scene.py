@@ -17,7 +17,7 @@ from lfbench.data.pfm import read_pfm
 from lfbench.data.scene import LOWRES, Benchmark, Scene, read_mask
 from lfbench.utils.errors import DataError
 
-__all__ = ["CATEGORIES", "SPLITS", "PARAMETERS_FILE", "HCIScene", "discover", "is_scene_folder"]
+__all__ = ["CATEGORIES", "SPLITS", "PARAMETERS_FILE", "INVALID_AREA_FILE", "HCIScene", "discover", "is_scene_folder"]
 
 CATEGORIES = ("stratified", "training", "test", "additional")
 #: The paper's splits of the HCI categories.
@@ -27,6 +27,8 @@ SPLITS: dict[str, tuple[str, ...]] = {
     "test": ("test",),
 }
 PARAMETERS_FILE = "parameters.cfg"
+#: SubFocal's training masks of the areas to leave out, one per scene (``<folder>/<scene>/<file>``).
+INVALID_AREA_FILE = "input_Cam040_invalid_ver2.png"
 _MASK_RE = re.compile(r"^(?P<name>.+)_(?P<res>lowres|highres)\.png$")
 _NOT_MASKS = {"gt_disp", "gt_depth", "input_Cam040", "stratified_masks"}
 
