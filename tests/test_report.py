@@ -289,7 +289,7 @@ def test_report_with_maps_and_html_reads_every_input_once(evaluated, tmp_path, m
     # of the scenes and one load of every saved map; the site ranks each metric once for all its tables.
     from collections import Counter
 
-    from lfbench.data.scene import Benchmark
+    from lfbench.data.hci import dataset as hci_dataset
     from lfbench.reports import leaderboard
     from lfbench.reports import maps as saved_maps
 
@@ -302,7 +302,7 @@ def test_report_with_maps_and_html_reads_every_input_once(evaluated, tmp_path, m
         return call
 
     monkeypatch.setattr(Results, "read", counted(lambda path: "results.json", Results.read))
-    monkeypatch.setattr(Benchmark, "discover", counted(lambda root: "discover", Benchmark.discover))
+    monkeypatch.setattr(hci_dataset, "discover", counted(lambda root: "discover", hci_dataset.discover))
     monkeypatch.setattr(saved_maps, "read_submission_map", counted(lambda root, scene: (Path(root).name, scene),
                                                                    saved_maps.read_submission_map))
     monkeypatch.setattr(leaderboard, "metric_ranks", counted(lambda results, metric: metric, leaderboard.metric_ranks))
