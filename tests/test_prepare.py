@@ -176,7 +176,7 @@ def test_a_light_field_held_in_memory_is_scored_inside_the_border():
     assert np.array_equal(p.gt, gt) and np.array_equal(p.mask, inside) and p.scale == 1
     bare = SceneReference(ArrayLightField(views=views, name="bare"), rules)
     assert not bare.has_gt() and np.array_equal(bare.evaluation_mask(), inside)
-    with pytest.raises(DataError, match="^no ground truth \\(gt_disp_lowres.pfm\\) to score against$"):
+    with pytest.raises(DataError, match="^no ground truth at lowres to score against$"):
         bare.prepare(gt, "lowres")
     crop = SceneReference.of_ground_truth(gt, rules, name="val")
     assert (crop.name, crop.spatial_size, crop.rules) == ("val", (12, 16), rules)
