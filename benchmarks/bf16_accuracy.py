@@ -67,7 +67,7 @@ def main(argv: list[str] | None = None) -> int:
 
     import torch
 
-    from lfbench.data.scene import Benchmark
+    from lfbench.data.hci import HCIDataset
 
     torch.set_num_threads(args.threads or os.cpu_count() or 1)
     if args.weights.suffix in (".h5", ".hdf5"):
@@ -78,7 +78,7 @@ def main(argv: list[str] | None = None) -> int:
         from lfbench_methods.subfocal.keras_import import build_from_checkpoint
 
         net = build_from_checkpoint(args.weights)
-    bench = Benchmark.discover(args.hci)
+    bench = HCIDataset.open(args.hci)
     records = []
     for scene in bench.select(args.scenes):
         r = measure(net.eval(), scene, args.crop)

@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
-from lfbench.data.params import SceneParameters
+from lfbench.data.hci.params import SceneParameters
 from lfbench.data.pfm import write_pfm
 from lfbench.data.submission import write_submission_map
 

@@ -36,14 +36,14 @@ def main(argv: list[str] | None = None) -> int:
 
     import torch
 
-    from lfbench.data.scene import Benchmark
+    from lfbench.data.hci import HCIDataset
     from lfbench.method.registry import create_from_spec
     from lfbench.scoring.rules import ScoringRules
     from lfbench.scoring.score import score_scene
 
     torch.set_num_threads(args.threads)
     method = create_from_spec(args.method)
-    scenes = Benchmark.discover(args.data).select([s.strip() for s in args.scenes.split(",") if s.strip()])
+    scenes = HCIDataset.open(args.data).select([s.strip() for s in args.scenes.split(",") if s.strip()])
     rules = ScoringRules(allow_highres=False)
     print(f"{method.label} on {len(scenes)} scene(s), torch threads {torch.get_num_threads()}, "
           f"low resolution, {rules.border_px} px border")

@@ -42,7 +42,8 @@ import numpy as np  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from hci_layout import write_benchmark, write_submissions  # noqa: E402
 
-from lfbench.data.scene import HIGHRES, Benchmark, read_mask  # noqa: E402
+from lfbench.data.hci import HCIDataset  # noqa: E402
+from lfbench.data.scene import HIGHRES, read_mask  # noqa: E402
 from lfbench.data.submission import read_submission_map  # noqa: E402
 from lfbench.method.registry import create_from_spec  # noqa: E402
 from lfbench.runs.runner import evaluate  # noqa: E402
@@ -53,7 +54,7 @@ from lfbench.utils.malloc import retain_freed_memory  # noqa: E402
 
 
 def _scenes(root: Path) -> list:
-    return [s for s in Benchmark.discover(root) if s.has_gt()]
+    return [s for s in HCIDataset.open(root) if s.has_gt()]
 
 
 def _methods(subs: Path, n: int) -> list:

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import torch
 
-from lfbench.data.scene import Benchmark
+from lfbench.data.hci import HCIDataset
 from lfbench.data.synth import write_benchmark
 from lfbench.method.registry import REGISTRY, create, offline_variants
 from lfbench.runs.folder import evaluate_to_folder
@@ -44,7 +44,7 @@ def main(argv: list[str] | None = None) -> int:
     data = args.out / "data"
     if not data.exists():
         write_benchmark(data, **SYNTH)
-    scenes = list(Benchmark.discover(data))
+    scenes = list(HCIDataset.open(data))
     methods = []
     for name in SYNTH_METHODS:
         if name not in REGISTRY.names():
@@ -57,7 +57,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.hci is not None:
         published = args.hci.parent / "published" / "subfocal"
         if published.is_dir():
-            real = [s for s in Benchmark.discover(args.hci) if s.has_gt()]
+            real = [s for s in HCIDataset.open(args.hci) if s.has_gt()]
             more.append(([create("published", path=published)], real))
     meta = {"golden_setup": {"synthetic": SYNTH, "hci": str(args.hci) if args.hci else None}}
     results = evaluate_to_folder(methods, scenes, args.out, more=more, writers=(), meta=meta, progress=False)

@@ -200,7 +200,7 @@ def test_report_only_end_to_end_against_the_zero_map_scored_for_real(tmp_path, c
     cells around the zero map's scores, then `lfbench ablate --report-only`."""
     from lfbench.ablation.runner import prepare_evaluation, run_methods
     from lfbench.cli import main
-    from lfbench.data.scene import Scene
+    from lfbench.data.hci import HCIScene
 
     tail = '\n[[methods]]\nlabel = "Zero map"\nspec = "constant"\n[[methods]]\nlabel = "Oracle"\nspec = "gt"\n'
     path = write_spec(tmp_path, 'table = "table4"\n[[grid]]\ninterval = [1, 0.5]\n', tail,
@@ -208,7 +208,7 @@ def test_report_only_end_to_end_against_the_zero_map_scored_for_real(tmp_path, c
     spec, out = load_spec(path), tmp_path / "out"
     scenes = prepare_evaluation(spec, out, quiet)
     (folder, _), = scenes
-    gt = Scene(Path(folder)).gt_disparity()[15:-15, 15:-15].astype(np.float64)  # inside the 15 px border
+    gt = HCIScene(Path(folder)).gt_disparity()[15:-15, 15:-15].astype(np.float64)  # inside the 15 px border
     zero_bp, zero_mse = 100 * np.mean(np.abs(gt) > 0.07), 100 * np.mean(gt**2)
     combined = Results(meta={"scenes": [folder]})
     for res in run_methods(spec, out, scenes, quiet):

@@ -17,7 +17,7 @@ from lfbench.ablation.report import best_cell, drawn_map_folders
 from lfbench.ablation.runner import prepare_evaluation, run_methods
 from lfbench.ablation.spec import load_spec
 from lfbench.cli import main
-from lfbench.data.scene import Scene
+from lfbench.data.hci import HCIScene
 from lfbench.reports.figures import safe_name
 from lfbench.results import Record, Results
 from lfbench.utils.errors import SpecError
@@ -35,7 +35,7 @@ def ablation(tmp_path_factory) -> tuple[Path, Path, str]:
     spec, out = load_spec(path), tmp / "out"
     scenes = prepare_evaluation(spec, out, quiet)
     (folder, _), = scenes
-    scene = Scene(Path(folder))
+    scene = HCIScene(Path(folder))
     combined = Results(meta={"scenes": [folder]})
     for res in run_methods(spec, out, scenes, quiet):
         combined.extend(res)

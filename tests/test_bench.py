@@ -277,3 +277,27 @@ def test_train_bench_compares_weight_gradients_on_the_fast_path_only(monkeypatch
     assert r["weight_grad"] == "native" and not used
     with pytest.raises(SpecError, match="weight_grad applies to the fast training path"):
         bench.bench_train(width=2, batch=1, patch=8, steps=1, threads=1, path="reference", weight_grad="gemm")
+
+
+def test_the_metrics_bench_scores_every_pair_of_its_synthetic_hci_scenes(monkeypatch):
+    """`lfbench bench metrics` scores scenes it writes in HCI's layout (it once opened them through the generic
+    scene contract, which has no ground truth of its own, and failed): every (scene, method) pair is scored."""
+    from lfbench.runs import bench as bench_module
+    from lfbench.scoring import score as score_module
+
+    calls = []
+    real = score_module.score_scene
+
+    def counting(scene, pred, metrics):
+        out = real(scene, pred, metrics)
+        calls.append((scene.name, out))
+        return out
+
+    monkeypatch.setattr(score_module, "score_scene", counting)
+    record = bench_module.bench_metrics(scenes=2, methods=3, size=32)
+    assert len(calls) == 6 and {name for name, _ in calls} == {"scene_00", "scene_01"}
+    assert record["size"] == 32 and record["scenes"] == 2 and record["methods"] == 3
+    # the predictions are the ground truth plus noise of 0.02 px per method rank: MSE x100 grows with the rank
+    first = [out for name, out in calls if name == "scene_00"]
+    mse = [o.values["mse_x100"] for o in first]
+    assert mse[0] < mse[1] < mse[2]

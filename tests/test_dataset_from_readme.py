@@ -17,6 +17,7 @@ from PIL import Image
 
 from lfbench.data.dataset import detect_dataset
 from lfbench.data.generic import SPEC_FILE, GenericDataset, read_dataset_spec
+from lfbench.data.pfm import write_pfm
 from lfbench.data.synth import generate_scene, quantize
 from lfbench.utils.errors import DataError
 
@@ -73,7 +74,8 @@ def test_readme_dataset_is_scored_by_its_own_protocol(readme_root, tmp_path: Pat
     assert data["meta"]["dataset"] == "toml" and data["meta"]["scoring"]["border_px"] == 15
     assert {r["metric"] for r in data["records"]} == {"badpix_0.03", "badpix_0.07", "mse_x100"}
     # the plane sweep searched the range the TOML declares, and says so in its label
-    assert {r["method"] for r in data["records"]} == {"planesweep:d_min=-3.0,d_max=3.0", "constant", "gt"}
+    assert {r["method"] for r in data["records"]} == {"planesweep:d_min=-3.0,d_max=3.0,interval=0.1", "constant",
+                                                      "gt"}
     recs = {(r["method"], r["scene"], r["metric"]): r["value"] for r in data["records"]}
     for scene, gt in facts["gts"].items():
         assert recs[("gt", scene, "mse_x100")] == 0.0
@@ -88,8 +90,11 @@ def test_readme_command_with_the_planesweep_searches_the_declared_range(readme_r
     from lfbench.method.registry import create_from_spec
 
     _, _, facts = readme_root
-    m = create_from_spec("planesweep", {"device": "cpu"}, method_range_params(facts["protocol"].disparity_range))
-    assert m.label == "planesweep:d_min=-3.0,d_max=3.0"
+    protocol = facts["protocol"]
+    assert (protocol.disparity_range, protocol.disparity_interval) == ((-3.0, 3.0), 0.1)
+    m = create_from_spec("planesweep", {"device": "cpu"},
+                         method_range_params(protocol.disparity_range, protocol.disparity_interval))
+    assert m.label == "planesweep:d_min=-3.0,d_max=3.0,interval=0.1" and len(m.disparities) == 61
 
 
 @pytest.mark.parametrize(("text", "fragment"), [
@@ -107,6 +112,21 @@ def test_readme_command_with_the_planesweep_searches_the_declared_range(readme_r
     ('[views]\npattern = "v{k}.png"\nangular = 3\n[ground_truth]\nfile = "d.png"\nformat = "png16"\nscale = 0\n',
      "finite non-zero"),
     ('[views\n', "invalid TOML"),
+    # the search interval (issue 30.3): > 0, finite, at most the range's max - min; its name is exact
+    ('[views]\npattern = "v{k}.png"\nangular = 3\n[protocol]\ndisparity_interval = 0\n',
+     "'protocol.disparity_interval' must be a number of px > 0"),
+    ('[views]\npattern = "v{k}.png"\nangular = 3\n[protocol]\ndisparity_interval = -0.1\n',
+     "'protocol.disparity_interval' must be a number of px > 0"),
+    ('[views]\npattern = "v{k}.png"\nangular = 3\n[protocol]\ndisparity_interval = nan\n',
+     "'protocol.disparity_interval' must be a number of px > 0"),
+    ('[views]\npattern = "v{k}.png"\nangular = 3\n[protocol]\ndisparity_interval = inf\n',
+     "'protocol.disparity_interval' must be a number of px > 0"),
+    ('[views]\npattern = "v{k}.png"\nangular = 3\n[protocol]\ndisparity_range = [0.0, 1.0]\ndisparity_interval = 1.5\n',
+     "at most the range's max - min (1)"),
+    ('[views]\npattern = "v{k}.png"\nangular = 3\n[protocol]\ndisparity_interval = "0.1"\n',
+     "'protocol.disparity_interval' must be a number"),
+    ('[views]\npattern = "v{k}.png"\nangular = 3\n[protocol]\ninterval = 0.1\n', "unknown key 'protocol.interval'"),
+    ('[views]\npattern = "v{k}.png"\nangular = 3\n[protocol]\ndisparity_range = [nan, 1.0]\n', "min < max"),
 ])
 def test_bad_dataset_toml_is_one_line_naming_it(tmp_path: Path, capsys, text: str, fragment: str):
     root = tmp_path / "root"
@@ -142,3 +162,76 @@ def test_generic_layout_bad_views_and_ground_truth(tmp_path: Path, capsys):
     rc, _, err = run_cli(capsys, "evaluate", "--data", root, "--method", "gt", "--out", tmp_path / "out")
     assert_one_error_line(rc, err, "320 non-finite values", "gt.npy")
     assert not (tmp_path / "out").exists()
+
+
+def _generic_root(tmp_path: Path, gt_format: str = "npy") -> Path:
+    """ROOT/lfbench-dataset.toml and one 3x3 scene ROOT/s/ of 20x16 px views v1.png .. v9.png and gt.<format>."""
+    root = tmp_path / "root"
+    root.mkdir()
+    (root / SPEC_FILE).write_text('[views]\npattern = "v{k}.png"\nangular = 3\nfirst = 1\n'
+                                  f'[ground_truth]\nfile = "gt.{gt_format}"\n', encoding="utf-8")
+    scene = root / "s"
+    scene.mkdir()
+    for k in range(1, 10):
+        Image.new("RGB", (20, 16)).save(scene / f"v{k}.png")
+    gt = np.zeros((16, 20), np.float32)
+    if gt_format == "npy":
+        np.save(scene / "gt.npy", gt)
+    else:
+        write_pfm(scene / "gt.pfm", gt)
+    return root
+
+
+def _break_missing(scene: Path) -> None:
+    (scene / "v4.png").unlink()
+
+
+def _break_extra(scene: Path) -> None:
+    Image.new("RGB", (20, 16)).save(scene / "v10.png")
+
+
+def _break_sizes(scene: Path) -> None:
+    Image.new("RGB", (20, 18)).save(scene / "v7.png")
+
+
+def _break_gt_shape(scene: Path) -> None:
+    np.save(scene / "gt.npy", np.zeros((20, 16), np.float32))
+
+
+def _break_gt_nan(scene: Path) -> None:
+    gt = np.zeros((16, 20), np.float32)
+    gt[3, 4] = np.nan
+    np.save(scene / "gt.npy", gt)
+
+
+def _break_pfm_shape(scene: Path) -> None:
+    write_pfm(scene / "gt.pfm", np.zeros((8, 20), np.float32))
+
+
+def _break_pfm_inf(scene: Path) -> None:
+    gt = np.zeros((16, 20), np.float32)
+    gt[0, 0] = np.inf
+    write_pfm(scene / "gt.pfm", gt)
+
+
+@pytest.mark.parametrize(("gt_format", "damage", "fragments"), [
+    ("npy", _break_missing, ("missing 1 of 9 views: v4.png", "root/s")),
+    ("npy", _break_extra, ("unexpected view v10.png", "s/v10.png")),
+    ("npy", _break_sizes, ("view is 20x18, the centre view v5.png is 20x16", "s/v7.png")),
+    ("npy", _break_gt_shape, ("shape (20, 16), expected (16, 20)", "s/gt.npy")),
+    ("npy", _break_gt_nan, ("1 non-finite values", "s/gt.npy")),
+    ("pfm", _break_pfm_shape, ("s/gt.pfm",)),
+    ("pfm", _break_pfm_inf, ("1 non-finite values", "s/gt.pfm")),
+], ids=["missing-view", "extra-view", "mixed-sizes", "gt-shape", "gt-nan", "pfm-shape", "pfm-inf"])
+def test_generic_layout_bad_scene_is_one_line_exit_2_nothing_written(tmp_path: Path, capsys, gt_format, damage,
+                                                                     fragments):
+    """Issue 30.7 in the generic layout, through `lfbench evaluate`: one line naming the file, exit 2, no output."""
+    root = _generic_root(tmp_path, gt_format)
+    rc, _, err = run_cli(capsys, "evaluate", "--data", root, "--method", "gt", "--out", tmp_path / "ok",
+                         "--no-progress")
+    assert rc == 0, err  # the intact scene scores
+    damage(root / "s")
+    out = tmp_path / "out"
+    rc, _, err = run_cli(capsys, "evaluate", "--data", root, "--method", "gt", "--out", out, "--no-progress")
+    assert_one_error_line(rc, err, *fragments)
+    assert not out.exists()

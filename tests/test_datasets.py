@@ -4,6 +4,7 @@ and bad input in the UrbanLF-Syn layout (one line naming the file, exit 2, nothi
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import shutil
 from importlib import metadata
@@ -18,7 +19,7 @@ from lfbench.data.dataset import DATASETS, detect_dataset, method_range_params, 
 from lfbench.data.hci import HCIDataset
 from lfbench.data.synth import generate_scene, quantize, write_benchmark
 from lfbench.data.synth_urbanlf import write_urbanlf
-from lfbench.data.urbanlf import UrbanLFScene, UrbanLFSyn
+from lfbench.data.urbanlf import URBANLF_DISPARITY_RANGE, UrbanLFScene, UrbanLFSyn
 from lfbench.method.registry import create_from_spec
 from lfbench.utils.errors import DataError
 
@@ -78,9 +79,11 @@ def test_synth_urbanlf_layout_is_exact_and_non_square(urban_root: Path):
     assert gt.shape == (H, W) and gt.dtype == np.float32
     # the written files are the generator's square scene cropped to the centre H x W in every view
     from lfbench.data.synth import scene_seed
-    square = generate_scene(scene_seed(3, 0), size=W, angular=9)
+    square = generate_scene(scene_seed(3, 0), size=W, angular=9, disparity_range=URBANLF_DISPARITY_RANGE)
     y0 = (W - H) // 2
     np.testing.assert_array_equal(gt, square.disparity[y0:y0 + H])
+    lo, hi = URBANLF_DISPARITY_RANGE  # UrbanLF-Syn's released range, not the generator's own [-2.1, 2.3]
+    assert lo <= gt.min() < gt.max() <= hi
     np.testing.assert_array_equal(np.asarray(Image.open(sample / "2_7.png")), quantize(square.views[1, 6, y0:y0 + H]))
 
 
@@ -162,18 +165,51 @@ def test_evaluate_scores_urbanlf_by_its_protocol(urban_root: Path, tmp_path: Pat
     assert pngs
 
 
+def _grid(protocol):
+    return method_range_params(protocol.disparity_range, protocol.disparity_interval)
+
+
 def test_planesweep_range_follows_the_dataset():
-    urban = method_range_params(UrbanLFSyn.protocol.disparity_range)
-    hci = method_range_params(HCIDataset.protocol.disparity_range)
-    m = create_from_spec("planesweep", {"device": "cpu"}, urban)  # the 0.25 px grid from -0.5 covering 1.6
-    assert m.label == "planesweep:d_min=-0.5,d_max=1.75"
-    assert float(m.disparities[0]) == pytest.approx(-0.5) and float(m.disparities[-1]) == pytest.approx(1.75)
-    fine = create_from_spec("planesweep:interval=0.1", {"device": "cpu"}, urban)  # the paper's interval
-    assert fine.label == "planesweep:d_min=-0.5,d_max=1.6,interval=0.1"
-    assert len(fine.disparities) == 22 and float(fine.disparities[-1]) == pytest.approx(1.6)
+    urban, hci = _grid(UrbanLFSyn.protocol), _grid(HCIDataset.protocol)
+    m = create_from_spec("planesweep", {"device": "cpu"}, urban)  # UrbanLF-Syn's grid: the paper's 0.1 px
+    assert m.label == "planesweep:d_min=-0.5,d_max=1.6,interval=0.1"
+    assert len(m.disparities) == 22 and float(m.disparities[0]) == pytest.approx(-0.5)
+    assert float(m.disparities[-1]) == pytest.approx(1.6)
+    coarse = create_from_spec("planesweep:interval=0.25", {"device": "cpu"}, urban)  # the spec's interval wins
+    assert coarse.label == "planesweep:d_min=-0.5,d_max=1.75,interval=0.25"  # the 0.25 px grid covering 1.6
+    assert float(coarse.disparities[-1]) == pytest.approx(1.75)
     assert create_from_spec("planesweep", {"device": "cpu"}, hci).label == "planesweep"  # HCI labels unchanged
     assert create_from_spec("planesweep:d_max=3", None, urban).label == "planesweep:d_max=3.0"  # the spec wins
     assert create_from_spec("constant", None, urban).label == "constant"  # no range parameters: untouched
+
+
+def test_the_protocols_declare_the_interval_searched():
+    """Issue 30.3: UrbanLF-Syn [-0.5, 1.6] at 0.1 px (the paper's Table III grid); HCI leaves the interval to
+    each method (its numbers are the methods' defaults: plane sweep 0.25, SubFocal 0.5), so nothing changes."""
+    assert (UrbanLFSyn.protocol.disparity_range, UrbanLFSyn.protocol.disparity_interval) == ((-0.5, 1.6), 0.1)
+    assert (HCIDataset.protocol.disparity_range, HCIDataset.protocol.disparity_interval) == ((-4.0, 4.0), None)
+    free = create_from_spec("subfocal:width=8", {"device": "cpu"}, _grid(UrbanLFSyn.protocol))  # no weights
+    assert (free.params["d_min"], free.params["d_max"], free.params["interval"]) == (-0.5, 1.6, 0.1)
+    for spec in ("planesweep", "subfocal:width=8", "lfattnet"):  # HCI: every method's own grid, label as before
+        assert create_from_spec(spec, {"device": "cpu"}, _grid(HCIDataset.protocol)).label == spec
+    hook = method_range_params((-4.0, 4.0), 0.1)  # a range that is the default, an interval that is not
+    plain = create_from_spec("planesweep", {"device": "cpu"}, hook)
+    assert plain.label == "planesweep:interval=0.1" and len(plain.disparities) == 81
+    with pytest.raises(ValueError, match="disparity interval"):
+        dataclasses.replace(UrbanLFSyn.protocol, disparity_interval=3.0)  # more than max - min
+    with pytest.raises(ValueError, match="disparity interval"):
+        dataclasses.replace(UrbanLFSyn.protocol, disparity_interval=float("nan"))
+
+
+def test_evaluate_searches_the_dataset_grid(urban_root: Path, tmp_path: Path, capsys):
+    rc, _, err = run_cli(capsys, "evaluate", "--data", urban_root, "--method", "planesweep", "--out", tmp_path / "o",
+                         "--no-progress", "--scenes", "Image1")
+    assert rc == 0, err
+    data = json.loads((tmp_path / "o" / "results.json").read_text())
+    assert {r["method"] for r in data["records"]} == {"planesweep:d_min=-0.5,d_max=1.6,interval=0.1"}
+    rc, out, _ = run_cli(capsys, "datasets")
+    assert "disparity range: [-0.5, 1.6] px per view step, interval 0.1 px" in out
+    assert "disparity range: [-4, 4] px per view step, each method's own interval" in out
 
 
 # ------------------------------------------------------------------------------------------- bad input
@@ -250,6 +286,25 @@ def test_synth_command_writes_the_urbanlf_layout(tmp_path: Path, capsys):
     assert not (tmp_path / "h").exists()
 
 
+def test_synth_disparity_range_option(tmp_path: Path, capsys):
+    rc, _, err = run_cli(capsys, "synth", "--layout", "urbanlf-syn", "--size", "40x24", "--scenes", "1",
+                         "--out", tmp_path / "u", "--seed", "3", "--disparity-range", "-1", "0.5")
+    assert rc == 0, err
+    gt = np.load(tmp_path / "u" / "val" / "Image1" / "5_5_disparity.npy")
+    assert -1 <= gt.min() < gt.max() <= 0.5
+    rc, _, err = run_cli(capsys, "synth", "--size", "24", "--scenes", "1", "--out", tmp_path / "h", "--seed", "3",
+                         "--disparity-range", "0", "2", "--workers", "1", "--no-progress")
+    assert rc == 0, err
+    hci = HCIDataset.open(tmp_path / "h").scenes[0].gt_disparity()
+    assert 0 <= hci.min() < hci.max() <= 2
+    for layout in ("hci", "urbanlf-syn"):
+        out = tmp_path / f"bad_{layout}"
+        rc, _, err = run_cli(capsys, "synth", "--layout", layout, "--size", "24", "--out", out,
+                             "--disparity-range", "-5", "1")
+        assert_one_error_line(rc, err, "disparity range [-5, 1] px", "at most 4.41 px")
+        assert not out.exists()
+
+
 def test_jobs_score_urbanlf_scenes_in_workers_with_the_same_numbers(urban_root: Path, tmp_path: Path, capsys):
     import pickle
 
@@ -266,3 +321,40 @@ def test_jobs_score_urbanlf_scenes_in_workers_with_the_same_numbers(urban_root: 
         assert rc == 0, err
         runs[jobs] = json.loads((out / "results.json").read_text())["records"]
     assert runs["1"] == runs["2"] and len(runs["1"]) == 2 * 2 * 4
+
+
+# ------------------------------------------------------------------------------------------- the seam itself
+
+
+def test_hci_file_names_live_in_the_hci_adapter_only():
+    """Issue 30.1: the generic data code (the scene contract, the dataset seam, the pattern layouts) names no
+    HCI file; HCI's view names, parameters.cfg and PFM ground truth are lfbench/data/hci/'s."""
+    import lfbench.data as data
+
+    folder = Path(data.__file__).parent
+    generic = ["scene.py", "dataset.py", "pattern.py", "generic.py", "urbanlf.py"]
+    for name in generic:
+        text = (folder / name).read_text(encoding="utf-8")
+        for hci_only in ("input_Cam", "parameters.cfg", "gt_disp_", "SceneParameters"):
+            assert hci_only not in text, (name, hci_only)
+    hci = "".join(p.read_text(encoding="utf-8") for p in (folder / "hci").glob("*.py"))
+    assert all(word in hci for word in ("input_Cam", "parameters.cfg", "gt_disp_", "SceneParameters"))
+
+
+def test_an_hci_scene_pickles_as_its_folder(tmp_path: Path):
+    """A scoring worker (--jobs N) gets any dataset's scene as its folder, reopened there, never its views."""
+    import pickle
+
+    from lfbench.data.hci import HCIScene
+    from lfbench.data.scene import Scene
+
+    root = tmp_path / "hci"
+    write_benchmark(root, seed=1, size=24, scenes=1, category="training")
+    scene = HCIDataset.open(root).scenes[0]
+    assert isinstance(scene, HCIScene) and isinstance(scene, Scene)
+    scene.gray_views()
+    blob = pickle.dumps(scene)
+    again = pickle.loads(blob)
+    assert len(blob) < 2000 and "_rgb" not in again.__dict__
+    assert (type(again), again.path, again.category, again.params) == (HCIScene, scene.path, "training", scene.params)
+    np.testing.assert_array_equal(again.gray_views(), scene.gray_views())

@@ -110,10 +110,10 @@ def test_split_specs_keeps_parameters_with_their_method():
 
 
 def test_default_selection_skips_methods_with_required_parameters(demo):
-    from lfbench.data.scene import Benchmark
+    from lfbench.data.hci import HCIDataset
 
     out, _, _ = demo
-    scenes = list(Benchmark.discover(out / "data"))
+    scenes = list(HCIDataset.open(out / "data"))
     lines: list[str] = []
     methods, skipped = select_methods(None, scenes, lines.append)
     labels = [m.label for m in methods]

@@ -12,7 +12,7 @@ from PIL import Image
 from scipy import ndimage
 
 from lfbench.cli import main
-from lfbench.data.scene import Scene
+from lfbench.data.hci import HCIScene
 from lfbench.method.registry import create
 from lfbench.runs.runner import evaluate
 from lfbench.scoring.metrics import GENERAL_METRICS
@@ -58,7 +58,7 @@ def test_border_mask():
 
 def test_errors_inside_the_15px_border_do_not_count(tmp_path):
     gt = np.random.default_rng(0).uniform(-1, 1, (40, 40)).astype(np.float32)
-    scene = Scene(write_scene(tmp_path, "tiny", size=40, views=False, gt=gt))
+    scene = HCIScene(write_scene(tmp_path, "tiny", size=40, views=False, gt=gt))
     pred = gt.copy()
     pred[:15] += 5
     pred[:, 25:] = np.nan
@@ -74,7 +74,7 @@ def test_errors_inside_the_15px_border_do_not_count(tmp_path):
 
 def test_low_resolution_scores_match_definitions(tmp_path):
     gt = np.random.default_rng(1).uniform(-1, 1, (40, 40)).astype(np.float32)
-    scene = Scene(write_scene(tmp_path, "boxes", size=40, views=False, gt=gt))
+    scene = HCIScene(write_scene(tmp_path, "boxes", size=40, views=False, gt=gt))
     pred = _noisy(gt, 2)
     score = score_scene(scene, pred, GENERAL_METRICS)
     assert_scores(score.values, reference_scores(gt, pred, 15))
@@ -90,7 +90,7 @@ def test_valid_mask_restricts_scoring(tmp_path):
     pred = gt.copy()
     pred[15:20, 15:25] = 1.0  # errors only where invalid
     pred[20, 15] = 1.0  # one error of the 50 valid pixels
-    score = score_scene(Scene(folder), pred, GENERAL_METRICS)
+    score = score_scene(HCIScene(folder), pred, GENERAL_METRICS)
     assert score.values["badpix_0.07"] == pytest.approx(2.0)
 
 
@@ -111,7 +111,7 @@ def test_highres_rule(tmp_path, name):
     gt_low = rng.uniform(-1, 1, (40, 40)).astype(np.float32)
     gt_high = np.kron(gt_low, np.ones((10, 10), np.float32)) + rng.standard_normal((400, 400)).astype(
         np.float32) * np.float32(0.02)
-    scene = Scene(write_scene(tmp_path, name, "stratified", size=40, views=False, gt=gt_low, gt_highres=gt_high))
+    scene = HCIScene(write_scene(tmp_path, name, "stratified", size=40, views=False, gt=gt_low, gt_highres=gt_high))
     pred = _noisy(gt_low, 4, 0.03)
     score = score_scene(scene, pred, GENERAL_METRICS)
     assert score.resolution == dict.fromkeys(GENERAL_IDS, "highres")
@@ -129,14 +129,14 @@ def test_highres_rule(tmp_path, name):
 
 def test_highres_gt_of_another_scene_is_not_used(tmp_path):
     gt_low = np.zeros((40, 40), np.float32)
-    scene = Scene(write_scene(tmp_path, "boxes", size=40, views=False, gt=gt_low,
+    scene = HCIScene(write_scene(tmp_path, "boxes", size=40, views=False, gt=gt_low,
                               gt_highres=np.ones((400, 400), np.float32)))
     assert score_scene(scene, gt_low, GENERAL_METRICS).resolution == dict.fromkeys(GENERAL_IDS, "lowres")
 
 
 def test_backgammon_without_highres_gt_is_scored_at_low_resolution(tmp_path):
     gt = np.random.default_rng(5).uniform(-1, 1, (40, 40)).astype(np.float32)
-    scene = Scene(write_scene(tmp_path, "backgammon", "stratified", size=40, views=False, gt=gt))
+    scene = HCIScene(write_scene(tmp_path, "backgammon", "stratified", size=40, views=False, gt=gt))
     pred = _noisy(gt, 6)
     score = score_scene(scene, pred, GENERAL_METRICS)
     assert score.resolution == dict.fromkeys(GENERAL_IDS, "lowres")
@@ -149,7 +149,7 @@ def test_backgammon_without_highres_gt_is_scored_at_low_resolution(tmp_path):
 @pytest.fixture(scope="module")
 def scene512(tmp_path_factory):
     gt = np.random.default_rng(7).uniform(-1, 1, (512, 512)).astype(np.float32)
-    return Scene(write_scene(tmp_path_factory.mktemp("s512"), "cotton", size=512, views=False, gt=gt)), gt
+    return HCIScene(write_scene(tmp_path_factory.mktemp("s512"), "cotton", size=512, views=False, gt=gt)), gt
 
 
 @pytest.mark.parametrize("crop", [482, 490])
@@ -191,7 +191,7 @@ def test_three_dimensional_prediction_is_refused(scene512):
 
 def test_nonfinite_prediction_counted_bad_and_reported(tmp_path):
     gt = np.zeros((40, 40), np.float32)
-    scene = Scene(write_scene(tmp_path, "nan", size=40, views=False, gt=gt))
+    scene = HCIScene(write_scene(tmp_path, "nan", size=40, views=False, gt=gt))
     pred = gt.copy()
     pred[15, 15:18] = np.nan
     pred[16, 15] = np.inf
@@ -210,7 +210,7 @@ def test_nonfinite_prediction_counted_bad_and_reported(tmp_path):
 
 def test_runner_with_the_oracle(tmp_path):
     gt = np.random.default_rng(9).uniform(-1, 1, (40, 40)).astype(np.float32)
-    scene = Scene(write_scene(tmp_path, "oracle", size=40, views=False, gt=gt))
+    scene = HCIScene(write_scene(tmp_path, "oracle", size=40, views=False, gt=gt))
     results = evaluate([create("gt")], [scene], metrics=GENERAL_METRICS, progress=False)
     assert {(r.method, r.scene, r.metric, r.resolution) for r in results.records} == {
         ("gt", "oracle", m, "lowres") for m in GENERAL_IDS}
@@ -220,7 +220,7 @@ def test_runner_with_the_oracle(tmp_path):
 
 def test_runner_asks_each_method_once_per_scene(tmp_path, monkeypatch, caplog):
     # The up-front check (a method serving no scene is an error) and the skip of one scene use the same answer.
-    scenes = [Scene(write_scene(tmp_path, name, size=24, views=False)) for name in ("served", "not_served")]
+    scenes = [HCIScene(write_scene(tmp_path, name, size=24, views=False)) for name in ("served", "not_served")]
     method = create("gt")
     asked = []
 
@@ -237,7 +237,7 @@ def test_runner_asks_each_method_once_per_scene(tmp_path, monkeypatch, caplog):
 
 def test_scoring_rules_read_back_from_results_meta(tmp_path):
     rules = ScoringRules(border_px=7, toolkit=True, highres_scenes=frozenset({"dots", "stripes"}))
-    scene = Scene(write_scene(tmp_path, "oracle", size=24, views=False))
+    scene = HCIScene(write_scene(tmp_path, "oracle", size=24, views=False))
     evaluate([create("gt")], [scene], rules=rules, progress=False).write(tmp_path / "out")
     meta = json.loads((tmp_path / "out" / "results.json").read_text())["meta"]
     assert meta["scoring"] == {"border_px": 7, "toolkit_nonfinite": True, "highres_scenes": ["dots", "stripes"]}
@@ -284,7 +284,7 @@ def test_published_subfocal_on_real_backgammon(hci_root, shared_data, tmp_path, 
 
 def test_submission_round_trip_through_published(tmp_path):
     gt = np.random.default_rng(10).uniform(-1, 1, (40, 40)).astype(np.float32)
-    scene = Scene(write_scene(tmp_path / "data", "tiny", size=40, views=False, gt=gt))
+    scene = HCIScene(write_scene(tmp_path / "data", "tiny", size=40, views=False, gt=gt))
     pred = _noisy(gt, 11)
     sub = write_submission(tmp_path / "sub", {"tiny": pred}, {"tiny": "2.5\n"})
     results = evaluate([create("published", path=sub)], [scene], metrics=GENERAL_METRICS, progress=False)

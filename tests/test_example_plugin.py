@@ -18,7 +18,7 @@ import pytest
 import torch
 from helpers import install_example_plugin
 
-from lfbench.data.scene import Benchmark
+from lfbench.data.hci import HCIDataset
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -107,7 +107,7 @@ def test_evaluate_runs_the_trained_weights(plugin, trained, tmp_path):
     label = f"tinycnn:weights=sha256:{hashlib.sha256((trained / 'final.pt').read_bytes()).hexdigest()[:12]}"
     assert saved["meta"]["methods"][label]["weights"]["path"] == str(trained / "final.pt")  # provenance
     mse = {r["scene"]: r["value"] for r in saved["records"] if r["method"] == label and r["metric"] == "mse_x100"}
-    scene = Benchmark.discover(data).scenes[0]
+    scene = HCIDataset.open(data).scenes[0]
     assert set(mse) == {scene.name}
 
     # Independent reference: the network rebuilt from final.pt by hand, scored inside the 15 px border.

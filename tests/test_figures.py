@@ -203,10 +203,10 @@ def test_malformed_curve_csv_is_a_data_error(tmp_path):
 
 
 def test_curve_on_a_real_scene_matches_the_scored_badpix(hci_root, tmp_path):
-    from lfbench.data.scene import Benchmark
+    from lfbench.data.hci import HCIDataset
     from lfbench.scoring.score import score_scene
 
-    scene = Benchmark.discover(hci_root).select(["backgammon"])[0]
+    scene = HCIDataset.open(hci_root).select(["backgammon"])[0]
     gt = scene.gt_disparity()
     pred = gt + np.float32(0.05) * np.sign(np.sin(np.arange(gt.size, dtype=np.float32))).reshape(gt.shape)
     pred[200:220, 200:220] += 0.5

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from helpers import write_scene, write_submission
 
-from lfbench.data.scene import Benchmark
+from lfbench.data.hci import HCIDataset
 from lfbench.method.registry import create
 from lfbench.reports.tables import TABLE_FORMATS, render, render_with_caption, write_table
 from lfbench.reports.writers import BootstrapCIs, SceneFigures, Tables
@@ -23,7 +23,7 @@ def scenes(tmp_path):
     gt = np.zeros((SIZE, SIZE), np.float32)
     for name in ("alpha", "beta"):
         write_scene(tmp_path / "data", name, gt=gt)
-    return list(Benchmark.discover(tmp_path / "data"))
+    return list(HCIDataset.open(tmp_path / "data"))
 
 
 def test_results_tables_and_meta(scenes, tmp_path):

@@ -17,8 +17,8 @@ from helpers import assert_one_error_line as one_line
 from helpers import run_cli, write_scene, write_submission
 from PIL import Image
 
+from lfbench.data.hci import HCIScene
 from lfbench.data.pfm import write_pfm
-from lfbench.data.scene import Scene
 
 SIZE = 24
 
@@ -49,10 +49,10 @@ def test_sixteen_bit_gray_views_read_as_their_8_bit_equivalent(tmp_path, scene):
         Image.fromarray(gray).save(eight / name)
         Image.fromarray(gray.astype(np.uint16) * 257).save(sixteen / name)
     assert Image.open(sixteen / "input_Cam000.png").mode.startswith("I")
-    ref, got = Scene(eight).gray_views(), Scene(sixteen).gray_views()
+    ref, got = HCIScene(eight).gray_views(), HCIScene(sixteen).gray_views()
     assert np.abs(ref - got).max() < 1e-6
     assert ref.mean() < 0.9  # the views are not white
-    np.testing.assert_array_equal(read_views_uint8(Scene(sixteen)), read_views_uint8(Scene(eight)))
+    np.testing.assert_array_equal(read_views_uint8(HCIScene(sixteen)), read_views_uint8(HCIScene(eight)))
 
 
 def test_method_that_runs_on_no_scene_is_an_error_and_keeps_previous_results(tmp_path, capsys, scene):

@@ -467,11 +467,11 @@ def test_ablation_methods_of_one_folder_or_a_cell_id_are_refused(tmp_path, capsy
 
 
 def test_figure_writer_refuses_a_row_named_like_its_own_files(tmp_path):
-    from lfbench.data.scene import Scene
+    from lfbench.data.hci import HCIScene
     from lfbench.reports.figures import SceneFigureWriter
     from lfbench.utils.errors import DataError
 
-    scene = Scene(write_scene(tmp_path / "data", "s0", "training", size=SIZE))
+    scene = HCIScene(write_scene(tmp_path / "data", "s0", "training", size=SIZE))
     writer = SceneFigureWriter(tmp_path / "fig", curves=False)
     writer.add("m<1", scene, np.ones((SIZE, SIZE), np.float32))
     with pytest.raises(DataError, match="'m<1' and 'm>1'"):
@@ -483,13 +483,13 @@ def test_figure_writer_refuses_a_row_named_like_its_own_files(tmp_path):
 
 def test_toolkit_pairwise_names_of_one_file_are_refused_before_drawing(tmp_path):
     """'a_vs_b' vs 'c' and 'a' vs 'b_vs_c' are both pairwise_a_vs_b_vs_c."""
-    from lfbench.data.scene import Scene
+    from lfbench.data.hci import HCIScene
     from lfbench.reports.maps import load_scene_maps
     from lfbench.reports.toolkit_figures import toolkit_figures_from_scene_maps
     from lfbench.results import Record, Results
     from lfbench.utils.errors import DataError
 
-    scene = Scene(write_scene(tmp_path / "data", "s0", "training", size=SIZE))
+    scene = HCIScene(write_scene(tmp_path / "data", "s0", "training", size=SIZE))
     labels = ["a_vs_b", "c", "a", "b_vs_c"]
     folders = {m: write_submission(tmp_path / f"sub{i}", {"s0": np.full((SIZE, SIZE), i, np.float32)})
                for i, m in enumerate(labels)}

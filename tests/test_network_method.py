@@ -16,7 +16,8 @@ import torch
 from helpers import isolate_registries, write_scene
 from torch import nn
 
-from lfbench.data.scene import ArrayLightField, Scene
+from lfbench.data.hci import HCIScene
+from lfbench.data.scene import ArrayLightField
 from lfbench.method.base import Method, Prediction
 from lfbench.method.network_method import NetworkMethod
 from lfbench.method.params import Range
@@ -233,7 +234,7 @@ def test_foreign_files_are_named_in_one_line(nets, tmp_path):
 def test_results_are_keyed_by_the_weights_content_not_their_path(nets, tmp_path, monkeypatch):
     """The same weights named by a relative and by an absolute path give records that compare equal;
     the path is kept in results.json as provenance."""
-    scene = Scene(write_scene(tmp_path / "data", "alpha", size=32))
+    scene = HCIScene(write_scene(tmp_path / "data", "alpha", size=32))
     moved = tmp_path / "elsewhere" / "copy.pt"
     moved.parent.mkdir()
     moved.write_bytes(nets["stack"].read_bytes())
@@ -267,7 +268,7 @@ def test_two_class_records_are_keyed_by_the_weights_content(nets, tmp_path, caps
     results with the file at A and then moved to B compare equal in ``lfbench regress``."""
     from helpers import run_cli
 
-    scene = Scene(write_scene(tmp_path / "data", "alpha", size=32))
+    scene = HCIScene(write_scene(tmp_path / "data", "alpha", size=32))
     a = tmp_path / "a" / "w.pt"
     a.parent.mkdir()
     a.write_bytes(nets["stack2"].read_bytes())

@@ -13,7 +13,8 @@ import pytest
 import torch
 from lfbench_methods.planesweep import estimator as ps
 
-from lfbench.data.scene import ArrayLightField, Benchmark
+from lfbench.data.hci import HCIDataset
+from lfbench.data.scene import ArrayLightField
 from lfbench.data.shift import angular_offsets, shift_views
 from lfbench.method.registry import create, create_from_spec
 from lfbench.scoring.rules import ScoringRules
@@ -299,7 +300,7 @@ def test_small_and_non_square_inputs():
 def test_issue_targets_on_real_scenes(hci_root, scene_name, max_badpix, max_mse):
     """Issue 2's accuracy targets: low resolution, 15 px border (its time is measured by
     benchmarks/planesweep_real.py, not here: a timed unit test fails on a loaded machine)."""
-    scenes = [s for s in Benchmark.discover(hci_root).scenes if s.name == scene_name]
+    scenes = [s for s in HCIDataset.open(hci_root).scenes if s.name == scene_name]
     if not scenes:
         pytest.skip(f"{scene_name} not under {hci_root}")
     scene = scenes[0]

@@ -17,7 +17,7 @@ import pytest
 import torch
 from helpers import code_blocks, install_package, isolate_registries, readme_section
 
-from lfbench.data.scene import Benchmark
+from lfbench.data.hci import HCIDataset
 
 ROOT = Path(__file__).resolve().parent.parent
 README = ROOT / "README.md"
@@ -104,7 +104,7 @@ def test_the_readme_plugin_runs_with_the_readme_commands(readme_plugin):
     sys.modules.pop("my_lfnet", None)
     net = EpiNet(**final["config"]).eval()
     net.load_state_dict(final["state_dict"])
-    scene = Benchmark.discover(src / "data").scenes[0]
+    scene = HCIDataset.open(src / "data").scenes[0]
     views = torch.from_numpy(scene.gray_views().reshape(1, 81, 48, 48).astype(np.float32))
     with torch.inference_mode():
         pred = net(views)[0][0].numpy()

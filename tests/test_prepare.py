@@ -16,7 +16,8 @@ from helpers import write_scene
 from PIL import Image
 from scipy import ndimage
 
-from lfbench.data.params import SceneParameters
+from lfbench.data.hci import HCIScene
+from lfbench.data.hci.params import SceneParameters
 from lfbench.data.pfm import write_pfm
 from lfbench.data.scene import ArrayLightField, Scene
 from lfbench.method.base import Prediction
@@ -40,7 +41,7 @@ def _highres_scene(tmp_path: Path) -> tuple[Scene, np.ndarray, np.ndarray]:
     valid = np.ones((N, N), bool)
     valid[8:11, 4:16] = False
     Image.fromarray(np.where(valid, 255, 0).astype(np.uint8)).save(folder / "valid_mask.png")
-    return Scene(folder), gt_hi, valid
+    return HCIScene(folder), gt_hi, valid
 
 
 def _cropped_prediction(gt_hi: np.ndarray) -> np.ndarray:
@@ -127,7 +128,7 @@ def _nonsquare_scene(tmp_path: Path) -> tuple[Scene, np.ndarray]:
     valid = np.ones((H2, W2), bool)
     valid[2:4, 3:9] = False
     Image.fromarray(np.where(valid, 255, 0).astype(np.uint8)).save(folder / "valid_mask.png")
-    return Scene(folder), valid
+    return HCIScene(folder), valid
 
 
 def test_a_non_square_scene_and_its_uncertainty_are_prepared_rows_to_rows(tmp_path):
@@ -175,7 +176,7 @@ def test_a_light_field_held_in_memory_is_scored_inside_the_border():
     assert np.array_equal(p.gt, gt) and np.array_equal(p.mask, inside) and p.scale == 1
     bare = SceneReference(ArrayLightField(views=views, name="bare"), rules)
     assert not bare.has_gt() and np.array_equal(bare.evaluation_mask(), inside)
-    with pytest.raises(DataError, match="^no ground truth \\(gt_disp_lowres.pfm\\) to score against$"):
+    with pytest.raises(DataError, match="^no ground truth at lowres to score against$"):
         bare.prepare(gt, "lowres")
     crop = SceneReference.of_ground_truth(gt, rules, name="val")
     assert (crop.name, crop.spatial_size, crop.rules) == ("val", (12, 16), rules)
@@ -188,7 +189,7 @@ def test_score_scene_records_the_runtime_a_method_reports(tmp_path):
     one gives no record, and a non-positive one a note."""
     from lfbench.scoring.score import score_scene
 
-    scene = Scene(write_scene(tmp_path, "toy", size=40, views=False))
+    scene = HCIScene(write_scene(tmp_path, "toy", size=40, views=False))
     runtime, log = RUNTIME_METRICS
     metrics = [runtime, get_metric("badpix_0.07"), log]
     score = score_scene(scene, np.ones((40, 40), F32), metrics, runtime_s=2.5)

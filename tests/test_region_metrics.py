@@ -14,9 +14,10 @@ import pytest
 import skimage.filters as skf
 from PIL import Image
 
-from lfbench.data.params import SceneParameters
+from lfbench.data.hci import HCIDataset, HCIScene
+from lfbench.data.hci.params import SceneParameters
 from lfbench.data.pfm import write_pfm
-from lfbench.data.scene import Benchmark, Scene
+from lfbench.data.scene import Scene
 from lfbench.scoring.metrics import GENERAL_METRICS, get_metric
 from lfbench.scoring.prepare import read_label_mask
 from lfbench.scoring.region_metrics import (
@@ -314,7 +315,7 @@ def _make_scene(root: Path, category: str, name: str, gt: np.ndarray, masks: dic
         _write_mask(path / f"{key}.png", mask)
     for key, arr in (labels or {}).items():
         Image.fromarray(arr.astype(np.uint8)).save(path / f"{key}.png")
-    return Scene(path, category=category)
+    return HCIScene(path, category=category)
 
 
 def _box(y0: int, y1: int, x0: int, x1: int, n: int = N) -> np.ndarray:
@@ -324,7 +325,7 @@ def _box(y0: int, y1: int, x0: int, x1: int, n: int = N) -> np.ndarray:
 
 
 def test_real_scenes_without_masks_score_only_the_general_metrics(hci_root):
-    for scene in Benchmark.discover(hci_root):
+    for scene in HCIDataset.open(hci_root):
         metrics = applicable_metrics(scene)
         assert [m.id for m in metrics] == GENERAL_IDS, scene.name
         gt = scene.gt_disparity()

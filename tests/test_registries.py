@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from lfbench.data.params import SceneParameters
+from lfbench.data.hci import HCIScene
+from lfbench.data.hci.params import SceneParameters
 from lfbench.data.pfm import write_pfm
 from lfbench.data.scene import Scene
 from lfbench.data.synth import generate_scene, write_scene
@@ -32,7 +33,7 @@ def synthetic_scene(tmp_path_factory) -> Scene:
     """A 32 x 32 px synthetic light field (lfbench.data.synth) in the HCI layout, with exact gt."""
     folder = tmp_path_factory.mktemp("synth") / "synthetic" / "tiny"
     write_scene(generate_scene(3, size=SIZE, name="tiny"), folder)
-    return Scene(folder, category="synthetic")
+    return HCIScene(folder, category="synthetic")
 
 
 def _published(scene: Scene, tmp: Path) -> tuple[list[Method], np.ndarray | None]:
@@ -136,7 +137,7 @@ def _scene(root: Path, category: str, name: str, gt: np.ndarray, masks: dict[str
         Image.fromarray(np.where(mask, 255, 0).astype(np.uint8)).save(path / f"{key}_lowres.png")
     for key, arr in labels.items():
         Image.fromarray(arr.astype(np.uint8)).save(path / f"{key}_lowres.png")
-    return Scene(path, category=category)
+    return HCIScene(path, category=category)
 
 
 def _general(root: Path) -> tuple[Scene, np.ndarray]:

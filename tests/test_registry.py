@@ -11,7 +11,8 @@ import pytest
 from helpers import forget_module, install_fake_plugin, write_scene
 
 import lfbench.method.registry as registry
-from lfbench.data.scene import ArrayLightField, Scene
+from lfbench.data.hci import HCIScene
+from lfbench.data.scene import ArrayLightField
 from lfbench.method.base import Method, Prediction
 from lfbench.method.registry import MethodRegistry, Param, coerce, format_spec, parse_spec, register_method
 from lfbench.utils.errors import SpecError
@@ -201,7 +202,7 @@ def test_describe_lists_parameters_with_types_defaults_and_help(reg):
 def test_builtin_methods_through_the_global_registry(tmp_path):
     assert {"gt", "published"} <= set(registry.REGISTRY.names())
     gt = np.random.default_rng(0).uniform(-1, 1, (16, 16)).astype(np.float32)
-    scene = Scene(write_scene(tmp_path, "s", size=16, views=False, gt=gt))
+    scene = HCIScene(write_scene(tmp_path, "s", size=16, views=False, gt=gt))
     assert np.array_equal(registry.create("gt").run(scene).disparity, gt)
     with pytest.raises(SpecError, match="needs parameter path"):
         registry.create("published")

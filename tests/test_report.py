@@ -212,14 +212,14 @@ def test_bad_paper_input_fails_clearly(tmp_path):
 @pytest.fixture(scope="module")
 def evaluated(tmp_path_factory) -> Path:
     """A synthetic data root, a 'published' submission of perturbed maps, and an evaluate run of it."""
-    from lfbench.data.scene import Benchmark
+    from lfbench.data.hci import HCIDataset
     from lfbench.data.submission import write_submission_map
     from lfbench.data.synth import write_benchmark
 
     base = tmp_path_factory.mktemp("report")
     write_benchmark(base / "data", seed=3, size=48, scenes=2)
     rng = np.random.default_rng(0)
-    for scene in Benchmark.discover(base / "data"):
+    for scene in HCIDataset.open(base / "data"):
         gt = scene.gt_disparity()
         write_submission_map(base / "sub", scene.name, gt + rng.normal(0, 0.05, gt.shape).astype(np.float32), 1.5)
     rc = main(["evaluate", "--data", str(base / "data"), "--method", "gt", "--method", f"published:path={base / 'sub'}",
@@ -289,7 +289,7 @@ def test_report_with_maps_and_html_reads_every_input_once(evaluated, tmp_path, m
     # of the scenes and one load of every saved map; the site ranks each metric once for all its tables.
     from collections import Counter
 
-    from lfbench.data.scene import Benchmark
+    from lfbench.data.hci import dataset as hci_dataset
     from lfbench.reports import leaderboard
     from lfbench.reports import maps as saved_maps
 
@@ -302,7 +302,7 @@ def test_report_with_maps_and_html_reads_every_input_once(evaluated, tmp_path, m
         return call
 
     monkeypatch.setattr(Results, "read", counted(lambda path: "results.json", Results.read))
-    monkeypatch.setattr(Benchmark, "discover", counted(lambda root: "discover", Benchmark.discover))
+    monkeypatch.setattr(hci_dataset, "discover", counted(lambda root: "discover", hci_dataset.discover))
     monkeypatch.setattr(saved_maps, "read_submission_map", counted(lambda root, scene: (Path(root).name, scene),
                                                                    saved_maps.read_submission_map))
     monkeypatch.setattr(leaderboard, "metric_ranks", counted(lambda results, metric: metric, leaderboard.metric_ranks))
@@ -339,8 +339,8 @@ def test_report_draws_overviews_from_saved_maps(evaluated, tmp_path):
 
 def test_report_curves_from_saved_maps_use_the_recorded_scoring_rules(evaluated, tmp_path):
     # results scored with a 5 px border: the redrawn curves must use 5 px too, not the default 15
+    from lfbench.data.hci import HCIDataset
     from lfbench.data.pfm import read_pfm
-    from lfbench.data.scene import Benchmark
     from lfbench.data.submission import disp_map_path
     from lfbench.reports.figures import read_curves_csv
 
@@ -351,7 +351,7 @@ def test_report_curves_from_saved_maps_use_the_recorded_scoring_rules(evaluated,
     assert main(["report", str(tmp_path / "eval"), "--out", str(tmp_path / "r"), "--maps",
                  str(evaluated / "eval" / "maps"), "--data", str(evaluated / "data"), "--format", "md"]) == 0
     curves = {(c.method, c.scene): c.values for c in read_curves_csv(tmp_path / "r" / "figures" / "badpix_series.csv")}
-    for scene in Benchmark.discover(evaluated / "data"):
+    for scene in HCIDataset.open(evaluated / "data"):
         err = np.abs(read_pfm(disp_map_path(evaluated / "sub", scene.name)) - scene.gt_disparity())[5:-5, 5:-5]
         by_hand = 100 * np.mean(err > 0.07)
         assert by_hand != pytest.approx(100 * np.mean(err[10:-10, 10:-10] > 0.07))  # the border matters here

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 from helpers import write_scene
 
-from lfbench.data.params import SceneParameters
+from lfbench.data.hci import HCIScene
+from lfbench.data.hci.params import SceneParameters
 from lfbench.data.pfm import write_pfm
 from lfbench.data.scene import Scene
 from lfbench.scoring.metrics import GENERAL_METRICS, Metric, get_metric
@@ -35,7 +36,7 @@ def _nonsquare_scene(root, name: str = "stripes", highres: bool = True) -> tuple
     hi[30:36, :] = 1.0
     if highres:
         write_pfm(folder / "gt_disp_highres.pfm", hi)
-    return Scene(folder), hi
+    return HCIScene(folder), hi
 
 
 def test_nonsquare_crop_is_aligned_rows_to_rows_and_columns_to_columns():
@@ -100,15 +101,15 @@ def test_missing_ground_truth_is_an_error_naming_the_scene(tmp_path):
     folder = write_scene(tmp_path, "toy", size=40, views=False)
     (folder / "gt_disp_lowres.pfm").unlink()
     with pytest.raises(DataError) as e:
-        score_scene(Scene(folder), np.zeros((40, 40), F32), GENERAL_METRICS)
-    assert str(e.value) == f"{folder}: no ground truth (gt_disp_lowres.pfm) to score against"
+        score_scene(HCIScene(folder), np.zeros((40, 40), F32), GENERAL_METRICS)
+    assert str(e.value) == f"{folder}: no ground truth at lowres to score against"
 
 
 def test_score_scene_names_the_prediction_by_default(tmp_path):
     """Kills a change of score_scene's default source (the name its errors give a prediction)."""
     folder = write_scene(tmp_path, "toy", size=40, views=False)
     with pytest.raises(DataError) as e:
-        score_scene(Scene(folder), np.zeros((41, 40), F32), GENERAL_METRICS)
+        score_scene(HCIScene(folder), np.zeros((41, 40), F32), GENERAL_METRICS)
     assert str(e.value).startswith("prediction: prediction is 40x41, scene is 40x40")
 
 
@@ -120,7 +121,7 @@ def test_metrics_that_do_not_apply_are_skipped_without_stopping(tmp_path):
     plugin = Metric(id="my_region", name="mine", description="BadPix(0.07) on mask_mine", unit="%",
                     fn=GENERAL_METRICS[2].fn, mask_name="mask_mine")
     metrics = [get_metric("bumpiness_planes"), plugin, *GENERAL_METRICS]
-    score = score_scene(Scene(folder), np.full((40, 40), 1.0, F32), metrics)
+    score = score_scene(HCIScene(folder), np.full((40, 40), 1.0, F32), metrics)
     assert sorted(score.values) == sorted(m.id for m in GENERAL_METRICS)
 
 
@@ -129,7 +130,7 @@ def test_applicable_metrics_follow_the_rules(tmp_path):
     whose only mask is high-res does not apply."""
     folder = write_scene(tmp_path, "toy", size=40, views=False, gt_highres=np.zeros((400, 400), F32),
                          masks={"mask_fine_highres": np.ones((400, 400), bool)})
-    scene = Scene(folder)
+    scene = HCIScene(folder)
     assert "fine_thinning" in [m.id for m in applicable_metrics(scene)]
     assert "fine_thinning" not in [m.id for m in applicable_metrics(scene, ScoringRules(allow_highres=False))]
 

@@ -9,9 +9,10 @@ from helpers import ANGULAR, scene_parameters, write_scene
 from PIL import Image
 from scipy import ndimage
 
-from lfbench.data.params import read_parameters
+from lfbench.data.hci import HCIDataset, HCIScene
+from lfbench.data.hci.params import read_parameters
 from lfbench.data.pfm import write_pfm
-from lfbench.data.scene import ArrayLightField, Benchmark, Scene, read_mask, rgb_to_gray
+from lfbench.data.scene import ArrayLightField, read_mask, rgb_to_gray
 from lfbench.utils.errors import DataError
 
 # --------------------------------------------------------------------------- views
@@ -25,7 +26,7 @@ def _gray_by_hand(path) -> np.ndarray:
 def test_scene_metadata_and_lazy_loading(tmp_path):
     folder = write_scene(tmp_path, "tiny", "training", size=40)
     (folder / "input_Cam005.png").write_bytes(b"not a png")  # lazy: not read until views are asked for
-    scene = Scene(folder, category="training")
+    scene = HCIScene(folder, category="training")
     assert (scene.name, scene.category, scene.angular_size, scene.spatial_size) == ("tiny", "training", (9, 9),
                                                                                      (40, 40))
     assert scene.has_gt() and not scene.has_gt("highres")
@@ -37,7 +38,7 @@ def test_scene_metadata_and_lazy_loading(tmp_path):
 
 def test_views_are_indexed_v_u_and_gray_is_the_weighted_sum(tmp_path):
     folder = write_scene(tmp_path, "tiny", size=24, seed=3)
-    views = Scene(folder).gray_views()
+    views = HCIScene(folder).gray_views()
     assert views.shape == (9, 9, 24, 24) and views.dtype == np.float32
     for k in (0, 1, 8, 9, 40, 44, 80):
         expected = _gray_by_hand(folder / f"input_Cam{k:03d}.png")
@@ -48,7 +49,7 @@ def test_views_are_indexed_v_u_and_gray_is_the_weighted_sum(tmp_path):
 def test_view_geometry_follows_the_benchmark_convention(tmp_path):
     # a plane at d = 2: centre(x, y) = view_{u,v}(x - (u-4) d, y - (v-4) d) (u along x, v along y)
     d = 2
-    views = Scene(write_scene(tmp_path, "plane", size=40, view_disparity=d)).gray_views()
+    views = HCIScene(write_scene(tmp_path, "plane", size=40, view_disparity=d)).gray_views()
     centre = views[4, 4]
     for v, u in ((4, 8), (0, 4), (1, 7), (8, 0)):
         shifted = np.roll(views[v, u], ((v - 4) * d, (u - 4) * d), axis=(0, 1))
@@ -81,7 +82,7 @@ def test_missing_views_name_them(tmp_path):
     for k in (3, 40, 41, 42, 80):
         (folder / f"input_Cam{k:03d}.png").unlink()
     with pytest.raises(DataError) as info:
-        Scene(folder).gray_views()
+        HCIScene(folder).gray_views()
     msg = str(info.value)
     assert str(folder) in msg and "missing 5 of 81 views" in msg and "input_Cam003.png" in msg and "\n" not in msg
 
@@ -90,14 +91,14 @@ def test_view_of_the_wrong_size(tmp_path):
     folder = write_scene(tmp_path, "odd", size=16)
     Image.fromarray(np.zeros((8, 8, 3), np.uint8)).save(folder / "input_Cam007.png")
     with pytest.raises(DataError, match="input_Cam007.png: view is 8x8, parameters.cfg says 16x16"):
-        Scene(folder).gray_views()
+        HCIScene(folder).gray_views()
 
 
 def test_missing_cfg(tmp_path):
     folder = write_scene(tmp_path, "nocfg", size=16, views=False)
     (folder / "parameters.cfg").unlink()
     with pytest.raises(DataError, match="parameters.cfg: missing parameters.cfg"):
-        Scene(folder)
+        HCIScene(folder)
 
 
 @pytest.mark.parametrize("key", ["focal_length_mm", "num_cams_x", "baseline_mm", "focus_distance_m"])
@@ -106,7 +107,7 @@ def test_cfg_without_a_required_key(tmp_path, key):
     cfg = folder / "parameters.cfg"
     cfg.write_text("\n".join(line for line in cfg.read_text().splitlines() if not line.startswith(key)))
     with pytest.raises(DataError) as info:
-        Scene(folder)
+        HCIScene(folder)
     assert f"missing required key [{'intrinsics' if key == 'focal_length_mm' else 'extrinsics'}] {key}" in str(
         info.value)
     assert str(cfg) in str(info.value)
@@ -127,7 +128,7 @@ def test_ground_truth_of_the_wrong_size(tmp_path):
     folder = write_scene(tmp_path, "gt", size=16, views=False)
     write_pfm(folder / "gt_disp_lowres.pfm", np.zeros((8, 16), np.float32))
     with pytest.raises(DataError, match="ground truth is 16x8, expected 16x16"):
-        Scene(folder).gt_disparity()
+        HCIScene(folder).gt_disparity()
 
 
 # --------------------------------------------------------------------------- parameters
@@ -151,7 +152,7 @@ def test_cfg_round_trip_and_toolkit_depth_to_disparity(tmp_path):
 
 
 def test_real_scene_parameters(hci_root):
-    scene = Scene(hci_root / "stratified" / "backgammon")
+    scene = HCIScene(hci_root / "stratified" / "backgammon")
     assert scene.angular_size == (9, 9) and scene.spatial_size == (512, 512)
     assert scene.params.focus_distance_m == pytest.approx(8.3, abs=1e-6)
     assert (scene.params.disp_min, scene.params.disp_max) == (-1.7, 0.7)
@@ -161,7 +162,7 @@ def test_real_scene_parameters(hci_root):
 
 def test_real_geometry_sign(hci_root):
     """centre(x, y) = view_{u,v}(x - (u-4) d, y - (v-4) d) on backgammon: clearly better than the opposite sign."""
-    scene = Scene(hci_root / "stratified" / "backgammon")
+    scene = HCIScene(hci_root / "stratified" / "backgammon")
     gt = scene.gt_disparity().astype(np.float64)
     centre = _gray_by_hand(scene.view_path(40))
     yy, xx = np.mgrid[0:512, 0:512].astype(np.float64)
@@ -185,7 +186,7 @@ def _layout(tmp_path):
                       ("mine", "synth_0")):
         write_scene(tmp_path, name, cat, size=8, views=False)
     (tmp_path / "training" / "not_a_scene").mkdir()
-    return Benchmark.discover(tmp_path)
+    return HCIDataset.open(tmp_path)
 
 
 def test_discover_categories_and_splits(tmp_path):
@@ -206,15 +207,15 @@ def test_discover_categories_and_splits(tmp_path):
 
 def test_discover_a_single_scene_and_a_flat_folder(tmp_path):
     folder = write_scene(tmp_path, "one", "cat", size=8, views=False)
-    assert Benchmark.discover(folder).names == ["one"]
-    assert Benchmark.discover(tmp_path / "cat").names == ["one"]
+    assert HCIDataset.open(folder).names == ["one"]
+    assert HCIDataset.open(tmp_path / "cat").names == ["one"]
 
 
 def test_empty_or_missing_data_root(tmp_path):
     with pytest.raises(DataError, match="no scenes found"):
-        Benchmark.discover(tmp_path)
+        HCIDataset.open(tmp_path)
     with pytest.raises(DataError, match="data root not found"):
-        Benchmark.discover(tmp_path / "missing")
+        HCIDataset.open(tmp_path / "missing")
 
 
 def test_masks(tmp_path):
@@ -222,7 +223,7 @@ def test_masks(tmp_path):
     mask[2:5, 3:6] = True
     folder = write_scene(tmp_path, "m", size=8, views=False, masks={"mask_planes_lowres": mask,
                                                                      "mask_fine_highres": mask})
-    scene = Scene(folder)
+    scene = HCIScene(folder)
     assert scene.mask_names("lowres") == ["mask_planes"]  # gt_disp_lowres.pfm is not a mask
     assert scene.mask_names("highres") == ["mask_fine"]
     assert np.array_equal(scene.mask("mask_planes"), mask)

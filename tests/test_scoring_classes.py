@@ -22,6 +22,7 @@ import numpy as np
 import pytest
 from helpers import run_cli, write_scene, write_submission
 
+from lfbench.data.hci import HCIScene
 from lfbench.data.scene import Scene
 from lfbench.results import Record, Results
 from lfbench.runs.regress import GoldenRecord, check
@@ -49,15 +50,15 @@ def _highres_scene(root, name: str = "backgammon", seed: int = 5) -> Scene:
     """A high-resolution scene (backgammon: scored at high resolution) whose high-res ground truth is not a
     repeat of its low-res one."""
     gt_hi = np.random.default_rng(seed).uniform(-1, 1, (N * S, N * S)).astype(F32)
-    return Scene(write_scene(root, name, "stratified", size=N, views=False, gt=gt_hi[::S, ::S].copy(),
+    return HCIScene(write_scene(root, name, "stratified", size=N, views=False, gt=gt_hi[::S, ::S].copy(),
                              gt_highres=gt_hi))
 
 
 # --------------------------------------------------------------------------- (a) the reference of a scene
 
 def test_a_reference_serves_its_own_scene_not_another_folders_scene_of_the_same_name(tmp_path):
-    twin_a = Scene(write_scene(tmp_path, "twin", "stratified", size=N, views=False, gt=np.zeros((N, N), F32)))
-    twin_b = Scene(write_scene(tmp_path, "twin", "training", size=N, views=False, gt=np.ones((N, N), F32)))
+    twin_a = HCIScene(write_scene(tmp_path, "twin", "stratified", size=N, views=False, gt=np.zeros((N, N), F32)))
+    twin_b = HCIScene(write_scene(tmp_path, "twin", "training", size=N, views=False, gt=np.ones((N, N), F32)))
     assert twin_a.name == twin_b.name
     reference = SceneReference(twin_a, RULES)
     pred = np.zeros((N, N), F32)

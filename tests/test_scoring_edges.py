@@ -461,7 +461,7 @@ def test_every_region_metric_follows_the_scoring_rules_through_score_scene(tmp_p
     (left out). Values by hand; each metric's mask is a 4 x 4 block inside the 15 px border."""
     from helpers import write_scene
 
-    from lfbench.data.scene import Scene
+    from lfbench.data.hci import HCIScene
     from lfbench.scoring.rules import ScoringRules
     from lfbench.scoring.score import applicable_metrics, score_scene
 
@@ -472,7 +472,7 @@ def test_every_region_metric_follows_the_scoring_rules_through_score_scene(tmp_p
                          masks={f"{m}_lowres": region for m in names})
     pred = np.zeros((40, 40), F32)
     pred[20, 20] = np.nan
-    values = score_scene(Scene(folder), pred, applicable_metrics(Scene(folder)), rules).values
+    values = score_scene(HCIScene(folder), pred, applicable_metrics(HCIScene(folder)), rules).values
     pct = 0.0 if toolkit else 100 / 16
     for mid in ("discontinuities", "fine_fattening", "fine_thinning"):
         assert values[mid] == pct, mid
@@ -492,7 +492,7 @@ def test_every_region_metric_follows_the_scoring_rules_through_score_scene(tmp_p
     pred = gt.copy()
     pred[15, 15], pred[16, 16] = 0.6, np.nan  # fattening (> 0.5), NaN
     pred[20, 20], pred[21, 21] = 0.4, np.nan  # thinning (< 0.5), NaN
-    values = score_scene(Scene(folder), pred, applicable_metrics(Scene(folder)), rules).values
+    values = score_scene(HCIScene(folder), pred, applicable_metrics(HCIScene(folder)), rules).values
     assert values["backgammon_fattening"] == values["backgammon_thinning"] == (100 / 16 if toolkit else 200 / 16)
 
     # dots: dot 1 half NaN (missed by default, detected by the toolkit), dot 2 right
@@ -504,7 +504,7 @@ def test_every_region_metric_follows_the_scoring_rules_through_score_scene(tmp_p
     _write_labels(folder, "mask_dots_by_size_lowres", dots)
     pred = np.zeros((40, 40), F32)
     pred[17, 17:19] = np.nan
-    values = score_scene(Scene(folder), pred, applicable_metrics(Scene(folder)), rules).values
+    values = score_scene(HCIScene(folder), pred, applicable_metrics(HCIScene(folder)), rules).values
     assert values["missed_dots"] == (0.0 if toolkit else 50.0)
 
     # pyramids: the slanted surfaces are the union of three masks; the NaN spoils all of mask_sphere_in
@@ -513,7 +513,7 @@ def test_every_region_metric_follows_the_scoring_rules_through_score_scene(tmp_p
                                 "mask_pyramids_lowres": _block(21, 15)})
     pred = np.zeros((40, 40), F32)
     pred[16, 16] = np.nan
-    values = score_scene(Scene(folder), pred, applicable_metrics(Scene(folder)), rules).values
+    values = score_scene(HCIScene(folder), pred, applicable_metrics(HCIScene(folder)), rules).values
     assert values["pyramids_bumpiness_slanted"] == (0.0 if toolkit else pytest.approx(100 * 16 * 0.05 / 48))
 
 
@@ -521,7 +521,7 @@ def test_a_label_mask_of_the_wrong_size_names_its_file(tmp_path):
     """Kills the size check of the dots' label masks weakened or its message / file lost."""
     from helpers import write_scene
 
-    from lfbench.data.scene import Scene
+    from lfbench.data.hci import HCIScene
     from lfbench.scoring.metrics import get_metric
     from lfbench.scoring.score import score_scene
     from lfbench.utils.errors import DataError
@@ -530,7 +530,7 @@ def test_a_label_mask_of_the_wrong_size_names_its_file(tmp_path):
     _write_labels(folder, "mask_boxes_lowres", np.ones((40, 40)))
     _write_labels(folder, "mask_dots_by_size_lowres", np.ones((30, 40)))
     with pytest.raises(DataError, match="mask is 40x30, ground truth is 40x40") as info:
-        score_scene(Scene(folder), np.zeros((40, 40), F32), [get_metric("missed_dots")])
+        score_scene(HCIScene(folder), np.zeros((40, 40), F32), [get_metric("missed_dots")])
     assert "mask_dots_by_size_lowres.png" in str(info.value)
 
 
@@ -539,7 +539,7 @@ def test_slanted_bumpiness_keeps_the_border(tmp_path):
     15 px border): mask_pyramids reaches into the border, where the prediction is curved."""
     from helpers import write_scene
 
-    from lfbench.data.scene import Scene
+    from lfbench.data.hci import HCIScene
     from lfbench.scoring.metrics import get_metric
     from lfbench.scoring.score import score_scene
 
@@ -550,10 +550,10 @@ def test_slanted_bumpiness_keeps_the_border(tmp_path):
                                 "mask_pyramids_lowres": pyramids})
     y, _ = np.mgrid[0:40, 0:40].astype(np.float64)
     pred = np.where(y < 12, 0.5 * 0.01 * (y - 6) ** 2, 0.0).astype(F32)  # curved on rows 0..11 only
-    score = score_scene(Scene(folder), pred, [get_metric("pyramids_bumpiness_slanted")])
+    score = score_scene(HCIScene(folder), pred, [get_metric("pyramids_bumpiness_slanted")])
     assert score.values["pyramids_bumpiness_slanted"] == 0.0  # rows 15.. are 3 px from the curved part
     # without a mask (a direct call): the union of the three masks, border included (68 + 16 + 16 px)
-    direct = get_metric("pyramids_bumpiness_slanted")(np.zeros((40, 40), F32), pred, scene=Scene(folder),
+    direct = get_metric("pyramids_bumpiness_slanted")(np.zeros((40, 40), F32), pred, scene=HCIScene(folder),
                                                       resolution="lowres")
     assert 0 < direct < 5
 

@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from lfbench.data.scene import HIGHRES, Benchmark
+from lfbench.data.hci import HCIDataset
+from lfbench.data.scene import HIGHRES
 from lfbench.method.registry import create_from_spec
 from lfbench.runs.pool import ScoringPool
 from lfbench.runs.runner import evaluate
@@ -183,7 +184,7 @@ def layout(tmp_path_factory):
     root = tmp_path_factory.mktemp("hci")
     hci = _hci_layout()
     hci.write_benchmark(root / "data", "issue", size=48, scale=4)
-    scenes = [s for s in Benchmark.discover(root / "data") if s.has_gt()]
+    scenes = [s for s in HCIDataset.open(root / "data") if s.has_gt()]
     hci.write_submissions(root / "subs", [(s.name, s.gt_disparity()) for s in scenes], 10)
     return root, scenes
 

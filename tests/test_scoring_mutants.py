@@ -18,6 +18,7 @@ from helpers import scene_parameters, write_scene
 from PIL import Image
 from scipy import ndimage
 
+from lfbench.data.hci import HCIScene
 from lfbench.data.scene import Scene
 from lfbench.scoring.metrics import bad_pix, bad_pix_curve, get_metric
 from lfbench.scoring.region_metrics import (
@@ -286,7 +287,7 @@ def test_score_scene_scores_in_float32(tmp_path):
     expected = _ref_badpix(np.full((N, N), g, F32), pred, 0.07)
     assert expected == 0.0
     for given in (pred, pred.astype(np.float64)):
-        score = score_scene(Scene(folder), given)
+        score = score_scene(HCIScene(folder), given)
         assert score.values["badpix_0.07"] == expected
         assert score.values["badpix_0.03"] == 100.0
 
@@ -311,9 +312,9 @@ def test_region_mask_is_combined_with_the_border_and_the_valid_mask(tmp_path):
     assert scored.sum() == 80
     expected = _ref_badpix(np.zeros((N, N), F32), pred, 0.07, scored)
     assert expected == 25.0
-    metrics = applicable_metrics(Scene(folder))
+    metrics = applicable_metrics(HCIScene(folder))
     assert "discontinuities" in [m.id for m in metrics]
-    score = score_scene(Scene(folder), pred, metrics)
+    score = score_scene(HCIScene(folder), pred, metrics)
     assert score.values["discontinuities"] == expected
     assert score.values["badpix_0.07"] == pytest.approx(100 * 20 / 80)  # general: border & valid
     assert score.values["mse_x100"] == pytest.approx(100 * 20 * np.float32(0.1) ** 2 / 80, rel=1e-6)
@@ -347,7 +348,7 @@ def _backgammon_highres(tmp_path) -> tuple[Scene, np.ndarray, np.ndarray, np.nda
                          masks={"mask_foreground_fattening_highres": fat, "mask_foreground_thinning_highres": thin,
                                 "mask_foreground_fattening_lowres": fat[::scale, ::scale],
                                 "mask_foreground_thinning_lowres": thin[::scale, ::scale]})
-    return Scene(folder), hi, fat, thin
+    return HCIScene(folder), hi, fat, thin
 
 
 def test_backgammon_metrics_at_high_resolution(tmp_path):

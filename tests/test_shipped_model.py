@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-from lfbench.data.scene import Benchmark
+from lfbench.data.hci import HCIDataset
 from lfbench.data.synth import write_benchmark
 from lfbench.method.registry import create, offline_variants
 from lfbench.scoring.score import score_scene
@@ -38,7 +38,7 @@ def test_registry_and_demo_variant():
 def unseen_scene(tmp_path_factory):
     root = tmp_path_factory.mktemp("unseen")
     write_benchmark(root, seed=7, size=96, scenes=1)  # training used seeds 1 and 2 (and antinous)
-    return next(iter(Benchmark.discover(root)))
+    return next(iter(HCIDataset.open(root)))
 
 
 def test_shipped_model_predicts_disparity(unseen_scene):

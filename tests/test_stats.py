@@ -308,12 +308,12 @@ def test_ci_records_and_table():
 def test_collector_errors_reproduce_the_evaluated_metrics(hci_root, shared_data):
     from conftest import require
 
-    from lfbench.data.scene import Benchmark
+    from lfbench.data.hci import HCIDataset
     from lfbench.method.registry import create
     from lfbench.runs.runner import evaluate
 
     maps = require(shared_data / "published" / "subfocal")
-    scenes = [s for s in Benchmark.discover(hci_root).select([]) if s.name == "backgammon"]
+    scenes = [s for s in HCIDataset.open(hci_root).select([]) if s.name == "backgammon"]
     collector = stats.ErrorCollector()
     results = evaluate([create("published", path=maps)], scenes, on_prediction=collector, progress=False)
     (label, scene), = collector.errors

@@ -15,10 +15,12 @@ from helpers import run_cli
 from scipy import ndimage
 
 from lfbench.data import synth
-from lfbench.data.params import read_parameters
+from lfbench.data.hci import HCIDataset, HCIScene
+from lfbench.data.hci.params import read_parameters
 from lfbench.data.pfm import read_pfm
-from lfbench.data.scene import Benchmark, Scene, rgb_to_gray
+from lfbench.data.scene import rgb_to_gray
 from lfbench.data.synth import Affine, Quadric, generate_scene, quantize, view_offsets, write_benchmark
+from lfbench.data.urbanlf import URBANLF_DISPARITY_RANGE
 from lfbench.scoring.score import score_scene
 from lfbench.utils.errors import SpecError
 
@@ -127,6 +129,32 @@ def test_views_warped_by_ground_truth_reproduce_the_centre_view(seed, scene):
     hidden = ~sc.visibility().all(axis=(0, 1))
     hidden[:12], hidden[-12:], hidden[:, :12], hidden[:, -12:] = False, False, False, False  # image borders
     assert hidden.sum() > 50
+
+
+def test_a_disparity_range_maps_the_same_scene_into_it(scene):
+    """``disparity_range`` (issue 30: UrbanLF-Syn's [-0.47, 1.55] px) moves every surface to scale * d +
+    offset: the same layer at every pixel, the ground truth mapped exactly and within the range, the views
+    still matching it (warped by it, they reproduce the centre view); None is the generator's own scene."""
+    lo, hi = URBANLF_DISPARITY_RANGE
+    sc = generate_scene(5, size=SIZE, disparity_range=(lo, hi))
+    scale, offset = synth.disparity_map((lo, hi))
+    assert 0 < scale < 1
+    np.testing.assert_array_equal(sc.layer_id, scene.layer_id)
+    np.testing.assert_allclose(sc.disparity, scale * scene.disparity.astype(np.float64) + offset, atol=1e-5)
+    assert lo <= sc.disparity.min() < sc.disparity.max() <= hi
+    assert sc.disparity.max() - sc.disparity.min() > 0.6 * (hi - lo)  # spread over the range, not squeezed
+    gray = rgb_to_gray(quantize(sc.views).astype(np.float32) / 255.0)
+    visible = seen_in_both(sc)
+    right = np.abs(warp_to_centre(gray, sc.disparity) - gray[4, 4])[visible]
+    assert np.median(right) < 0.01 and np.percentile(right, 90) < 0.04
+    own = generate_scene(5, size=SIZE, disparity_range=None)
+    assert np.array_equal(own.views, scene.views) and np.array_equal(own.disparity, scene.disparity)
+
+
+@pytest.mark.parametrize("bad", [(1.0, 1.0), (2.0, -2.0), (float("nan"), 1.0), (-3.0, 2.0), (-3.6, -3.0)])
+def test_an_impossible_disparity_range_is_refused(bad):
+    with pytest.raises(SpecError, match="disparity range"):
+        generate_scene(5, size=16, disparity_range=bad)
 
 
 def test_inverse_map_inverts_the_forward_projection(scene):
@@ -251,11 +279,11 @@ def test_scene_content_occlusions_fine_structures_and_contrast(seed):
 
 def test_written_scene_loads_in_the_hci_layout(written):
     root, paths = written
-    bench = Benchmark.discover(root)
+    bench = HCIDataset.open(root)
     assert sorted(s.name for s in bench) == ["synth_7_0", "synth_7_1"]
     assert {s.category for s in bench} == {"synthetic"}
     for path in paths:
-        sc = Scene(path)
+        sc = HCIScene(path)
         params = sc.params
         seed = int(params.extra["meta"]["synth_seed"])
         ref = generate_scene(seed, size=48, name=path.name)
@@ -311,7 +339,7 @@ def test_interrupted_write_leaves_nothing(tmp_path, monkeypatch):
 def test_per_scene_categories_and_force(tmp_path):
     paths = write_benchmark(tmp_path, seed=2, size=32, scenes=2, category=["additional", "stratified"])
     assert [p.relative_to(tmp_path).as_posix() for p in paths] == ["additional/synth_2_0", "stratified/synth_2_1"]
-    bench = Benchmark.discover(tmp_path)
+    bench = HCIDataset.open(tmp_path)
     assert [s.category for s in bench.split("train")] == ["additional"]
     with pytest.raises(synth.DataError, match="already exists"):
         write_benchmark(tmp_path, seed=2, size=32, scenes=2, category=["additional", "stratified"])

@@ -18,9 +18,9 @@ import pytest
 import torch
 from PIL import Image
 
-from lfbench.data.params import SceneParameters
+from lfbench.data.hci import HCIDataset, HCIScene
+from lfbench.data.hci.params import SceneParameters
 from lfbench.data.pfm import write_pfm
-from lfbench.data.scene import Benchmark, Scene
 from lfbench.data.shift import angular_offsets, shift_views
 from lfbench.training import checkpoint as ckpt
 from lfbench.training.augment import SampleAugment, apply_augment, flip_rows, rotate90
@@ -85,7 +85,7 @@ def plane_training_root(root: Path) -> Path:
 
 
 def scene_data(root: Path, name: str, invalid_area: Path | None = None):
-    return load_scene_data(next(s for s in Benchmark.discover(root) if s.name == name), invalid_area)
+    return load_scene_data(next(s for s in HCIDataset.open(root) if s.name == name), invalid_area)
 
 
 def centre_mismatch(views: np.ndarray, d: float) -> float:
@@ -150,7 +150,7 @@ def test_gather_takes_the_strided_patch_and_divides_the_label(data_root):
     w = np.array([[0.299, 0.587, 0.114]], np.float32)
     c = {"scene": np.array([0]), "stride": np.array([2]), "y": np.array([3]), "x": np.array([5]), "w": w}
     views, label = sampler._gather(c)
-    gray = Scene(data_root / "additional" / "plane_a").gray_views()  # (9, 9, 40, 40)
+    gray = HCIScene(data_root / "additional" / "plane_a").gray_views()  # (9, 9, 40, 40)
     np.testing.assert_allclose(views[0], gray[:, :, 3:3 + 32:2, 5:5 + 32:2], atol=2e-6)
     np.testing.assert_array_equal(label, np.full((1, 16, 16), 1.0))  # d = 2 at stride 2
 
@@ -357,7 +357,7 @@ def test_training_outputs(reference_run, data_root):
     vals = [e for e in entries if e["event"] == "validation"]
     assert [v["global_step"] for v in vals] == [4, 6]
     # the last validation numbers are BadPix(0.07) / MSE x100 of the final weights (15 px border)
-    scene = Scene(data_root / "stratified" / "val")
+    scene = HCIScene(data_root / "stratified" / "val")
     views = scene.gray_views().reshape(1, 81, 40, 40)
     with torch.no_grad():
         pred = net.eval()(torch.from_numpy(np.ascontiguousarray(views)))[0][0].numpy()

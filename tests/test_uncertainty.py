@@ -131,10 +131,10 @@ def test_plot_writes_a_png_atomically(tmp_path):
 
 
 def test_scene_sparsification_on_a_real_scene(hci_root):
-    from lfbench.data.scene import Benchmark
+    from lfbench.data.hci import HCIDataset
     from lfbench.method.base import Prediction
 
-    scene = next(s for s in Benchmark.discover(hci_root).select([]) if s.name == "backgammon")
+    scene = next(s for s in HCIDataset.open(hci_root).select([]) if s.name == "backgammon")
     gt = scene.gt_disparity()
     rng = np.random.default_rng(5)
     pred = (gt + rng.standard_normal(gt.shape).astype(np.float32) * 0.05).astype(np.float32)
@@ -155,13 +155,13 @@ class _Named:
 def test_collector_table_and_report(tmp_path):
     from helpers import write_scene
 
-    from lfbench.data.scene import Benchmark
+    from lfbench.data.hci import HCIDataset
     from lfbench.method.base import Prediction
 
     rng = np.random.default_rng(3)
     for k in range(2):
         write_scene(tmp_path / "data", f"s{k}", size=40, gt=rng.uniform(-1, 1, (40, 40)).astype(np.float32), seed=k)
-    scenes = list(Benchmark.discover(tmp_path / "data"))
+    scenes = list(HCIDataset.open(tmp_path / "data"))
     rater = U.UncertaintyCollector(measures=("sq", "badpix_0.07"))
     assert rater.measures == ("mse_x100", "badpix_0.07")
     expected_full = []

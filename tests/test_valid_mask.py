@@ -16,6 +16,7 @@ import pytest
 from helpers import assert_one_error_line, run_cli, write_scene
 from PIL import Image
 
+from lfbench.data.hci import HCIScene
 from lfbench.data.scene import Scene
 from lfbench.scoring.metrics import GENERAL_METRICS
 from lfbench.scoring.region_metrics import missed_dots
@@ -47,7 +48,7 @@ def test_a_valid_mask_of_another_size_is_refused(tmp_path, capsys):
     folder = write_scene(tmp_path / "data", "s0", "training", size=N, views=False)
     _save_mask(folder, "valid_mask.png", np.ones((N - 8, N - 8), bool))
     with pytest.raises(DataError, match=f"mask is {N - 8}x{N - 8}, expected {N}x{N}"):
-        Scene(folder).valid_mask()
+        HCIScene(folder).valid_mask()
     rc, _, err = run_cli(capsys, "evaluate", "--data", tmp_path / "data", "--method", "gt", "--out", tmp_path / "out")
     assert_one_error_line(rc, err, str(folder / "valid_mask.png"), f"expected {N}x{N}")
     _save_mask(folder, "valid_mask.png", np.ones((10 * N, 10 * N), bool))  # the high-resolution size too
@@ -67,7 +68,7 @@ def backgammon(tmp_path) -> tuple[Scene, np.ndarray, np.ndarray]:
     pred = np.zeros((N, N), np.float32)
     pred[15:20, 15:25] = 1.0  # wrong only where invalid ...
     pred[20, 15] = 1.0  # ... and on one valid pixel
-    return Scene(folder), valid, pred
+    return HCIScene(folder), valid, pred
 
 
 def test_high_resolution_metrics_leave_out_the_upsampled_valid_mask(backgammon):
@@ -141,7 +142,7 @@ def test_missed_dots_through_score_scene_use_the_valid_mask(tmp_path):
     pred[12:16, 12:16] = 1.0  # dot 1 missed
     from lfbench.scoring.score import applicable_metrics
 
-    scene = Scene(folder)
+    scene = HCIScene(folder)
     assert score_scene(scene, pred, applicable_metrics(scene)).values["missed_dots"] == pytest.approx(50.0)
     valid = np.ones((N, N), bool)
     valid[12:16, 12:16] = False  # dot 1 is outside the valid area: 0 of 1 dot missed

@@ -244,14 +244,14 @@ def _sync() -> None:
 def load_scenes(pairs: tuple[tuple[str, str | None], ...], ev: Evaluation | None = None):
     """The scenes of (folder, category) pairs: those under the evaluation's data root opened by its dataset
     adapter (lfbench.data.dataset), the others (generated ones) as scenes of the HCI layout."""
-    from lfbench.data.scene import Scene
+    from lfbench.data.hci import HCIScene
 
     opened = {}
     if ev is not None and ev.data is not None:
         from lfbench.data.dataset import open_dataset
 
         opened = {str(s.path): s for s in open_dataset(ev.data, ev.dataset)[1].scenes}
-    return [opened.get(path) or Scene(path, category=category) for path, category in pairs]
+    return [opened.get(path) or HCIScene(path, category=category) for path, category in pairs]
 
 
 def scoring_of(ev: Evaluation) -> dict[str, Any]:

@@ -125,6 +125,8 @@ def check_training_data(spec: AblationSpec, out: Path) -> None:
 def prepare_evaluation(spec: AblationSpec, out: Path, log: Log) -> tuple[tuple[str, str], ...]:
     """The evaluation scenes as (folder, category): generated synthetic ones and/or the named HCI ones."""
     from lfbench.data.dataset import DATASETS, open_dataset
+    from lfbench.data.hci import HCIScene
+    from lfbench.data.hci.scene import is_scene_folder
     from lfbench.data.scene import Scene, check_scene_names
 
     ev = spec.evaluation
@@ -132,7 +134,7 @@ def prepare_evaluation(spec: AblationSpec, out: Path, log: Log) -> tuple[tuple[s
     if ev.synthetic is not None:
         syn: SyntheticEval = ev.synthetic
         folder = _generate(out / "eval_data" / syn.folder_name, syn.seed, syn.size, syn.scenes, "synthetic", log)
-        scenes += [Scene(p, category="synthetic") for p in sorted(folder.iterdir()) if (p / "parameters.cfg").is_file()]
+        scenes += [HCIScene(p, category="synthetic") for p in sorted(folder.iterdir()) if is_scene_folder(p)]
     if ev.data is not None:
         if not ev.data.is_dir():
             raise DataError("evaluation.data: data root not found", ev.data)
@@ -142,7 +144,7 @@ def prepare_evaluation(spec: AblationSpec, out: Path, log: Log) -> tuple[tuple[s
                             "protocols; one ablation scores one dataset's scenes", spec.source)
         scenes += [s for s in bench.select(list(ev.scenes)) if s.has_gt()]
     if not scenes:
-        raise DataError("none of the evaluation scenes has ground truth (gt_disp_lowres.pfm)", spec.source)
+        raise DataError("none of the evaluation scenes has ground truth", spec.source)
     return tuple((str(s.path), s.category) for s in check_scene_names(scenes))
 
 

@@ -85,8 +85,8 @@ def run(args: argparse.Namespace) -> int:
     # one line for a root of no (or several) layouts, or a dataset file naming no general metric, before any scene
     dataset, protocol, bench = open_datasets(args.data, args.dataset,
                                              check=lambda p: scored_metrics(p.metrics, p.source))
-    methods = [create_from_spec(spec, {"device": args.device}, method_range_params(protocol.disparity_range))
-               for spec in args.method]  # errors before any work
+    grid = method_range_params(protocol.disparity_range, protocol.disparity_interval)  # unless a spec sets it
+    methods = [create_from_spec(spec, {"device": args.device}, grid) for spec in args.method]  # errors before any work
     if args.label is not None:
         if len(args.label) != len(methods):
             raise SpecError(f"--label: {len(args.label)} label(s) for {len(methods)} --method(s); give one per method")

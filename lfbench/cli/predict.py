@@ -32,17 +32,16 @@ def load_input(path: Path):
 
     import numpy as np
 
+    from lfbench.data.dataset import open_dataset
     from lfbench.data.npyfile import read_npy
-    from lfbench.data.params import MAX_RESOLUTION_PX, MAX_VIEW_PIXELS
-    from lfbench.data.scene import ArrayLightField, Scene
+    from lfbench.data.scene import MAX_RESOLUTION_PX, MAX_VIEW_PIXELS, ArrayLightField
     from lfbench.utils.errors import DataError
 
-    if path.is_dir():
-        from lfbench.data.urbanlf import CENTRE, UrbanLFScene, view_name
-
-        if (path / "parameters.cfg").is_file() or not (path / view_name(CENTRE, CENTRE)).is_file():
-            return Scene(path)
-        return UrbanLFScene(path)  # an UrbanLF-Syn sample folder (1_1.png .. 9_9.png)
+    if path.is_dir():  # one scene folder of any dataset layout (lfbench datasets)
+        _, bench = open_dataset(path)
+        if len(bench.scenes) != 1:
+            raise DataError(f"holds {len(bench.scenes)} scenes: give one scene folder", path)
+        return bench.scenes[0]
     if path.suffix != ".npy":
         raise DataError("input must be a scene folder or a .npy file", path)
 

@@ -4,8 +4,10 @@ UrbanLF-Syn's.
 --layout hci (default): DIR/<category>/synth_<seed>_<i>/ for i = 0..K-1: input_Cam000..png,
 parameters.cfg, gt_disp_lowres.pfm, gt_depth_lowres.pfm and evaluation masks (<mask>_lowres.png).
 --layout urbanlf-syn: DIR/<category, default val>/Image<i>/ for i = 1..K (or i in --numbers): 9x9 views u_v.png
-of WxH px (default 640x480), 5_5_disparity.npy and 5_5_depth.npy. The same seed, size and angular resolution
-always give the same files. An existing scene folder is an error unless --force.
+of WxH px (default 640x480), 5_5_disparity.npy and 5_5_depth.npy, disparities within UrbanLF-Syn's released
+[-0.47, 1.55] px. --disparity-range LOW HIGH maps a scene's disparities into [LOW, HIGH] px (the same layout at
+other depths; hci default: the generator's own, about [-2.1, 2.3]). The same seed, size, angular resolution
+and range always give the same files. An existing scene folder is an error unless --force.
 """
 
 from __future__ import annotations
@@ -38,6 +40,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--category", default=None, metavar="NAME",
                    help="category (split) folder (default synthetic; urbanlf-syn: val)")
     p.add_argument("--angular", type=int, default=9, metavar="A", help="A x A views, odd (default 9)")
+    p.add_argument("--disparity-range", type=float, nargs=2, default=None, metavar=("LOW", "HIGH"),
+                   help="disparities mapped into [LOW, HIGH] px per view step (default: urbanlf-syn -0.47 1.55, "
+                        "UrbanLF-Syn's; hci the generator's own, about -2.1 2.3)")
     p.add_argument("--force", action="store_true", help="overwrite existing scene folders")
     add_flag(p, WORKERS)
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -75,7 +80,8 @@ def run(args: argparse.Namespace) -> int:
             raise SpecError("--layout urbanlf-syn writes 9x9 views: leave out --angular")
         width, height = args.size or (640, 480)
         paths = write_urbanlf(args.out, seed=args.seed, width=width, height=height, scenes=args.scenes,
-                              split=args.category or "val", force=args.force, numbers=args.numbers)
+                              split=args.category or "val", force=args.force, numbers=args.numbers,
+                              **({} if args.disparity_range is None else {"disparity_range": args.disparity_range}))
         for path in paths:
             print(path)
         print(f"wrote {len(paths)} UrbanLF-Syn sample(s) of {width}x{height} px, 9x9 views "
@@ -89,7 +95,8 @@ def run(args: argparse.Namespace) -> int:
     args.size, args.category = width, args.category or "synthetic"
     paths = write_benchmark(args.out, seed=args.seed, size=args.size, scenes=args.scenes, category=args.category,
                             angular=args.angular, force=args.force, progress=not args.no_progress,
-                            workers=available_cores() if args.workers is None else args.workers)
+                            workers=available_cores() if args.workers is None else args.workers,
+                            disparity_range=args.disparity_range)
     for path in paths:
         print(path)
     print(f"wrote {len(paths)} scene(s) of {args.size}x{args.size} px, {args.angular}x{args.angular} views "

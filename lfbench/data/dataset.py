@@ -9,7 +9,8 @@ built-in HCI and UrbanLF-Syn adapters go through the same group, as built-in met
   :class:`~lfbench.data.scene.LightField` scenes (views, angular size, spatial size of any aspect ratio,
   optional ground truth, masks);
 - :attr:`Dataset.protocol`: its scoring protocol (:class:`DatasetProtocol`): border, resolutions, which
-  metrics apply, the scenes scored at high resolution, the disparity range a method should search.
+  metrics apply, the scenes scored at high resolution, the disparity range a method should search and the
+  spacing of its candidate disparities.
 
 :func:`open_dataset` detects the layout of a root (or takes the adapter named) and refuses a root that
 matches none or several in one line (:class:`~lfbench.utils.errors.DataError`, exit 2).
@@ -43,7 +44,9 @@ class DatasetProtocol:
     ``resolutions``: the resolutions numbers may be scored at ('lowres', and 'highres' where the dataset
     has high-resolution ground truth); ``highres_scenes``: the scenes scored at high resolution when their
     high-resolution ground truth exists; ``disparity_range``: (min, max) px per view step a method should
-    search; ``spatial_size``: (H, W) px of its views where the dataset fixes one (None: any);
+    search; ``disparity_interval``: the spacing (px) of the candidate disparities a method searching that
+    range should use (> 0, at most max - min), or None: each method's own (HCI: the plane sweep's 0.25,
+    SubFocal's 0.5 as its paper); ``spatial_size``: (H, W) px of its views where the dataset fixes one (None: any);
     ``angular_size``: (V, U) views where fixed; ``reference_view``: the view scored (words); ``source``: the
     file that declared the protocol (errors in its metric ids name it: lfbench.scoring.metrics.scored_metrics).
     """
@@ -51,6 +54,7 @@ class DatasetProtocol:
     border_px: int
     metrics: tuple[str, ...]
     disparity_range: tuple[float, float]
+    disparity_interval: float | None = None
     resolutions: tuple[str, ...] = (LOWRES,)
     highres_scenes: frozenset[str] = frozenset()
     spatial_size: tuple[int, int] | None = None
@@ -62,6 +66,9 @@ class DatasetProtocol:
         lo, hi = self.disparity_range
         if not lo < hi:
             raise ValueError(f"disparity range must be (min, max) with min < max, got {self.disparity_range}")
+        step = self.disparity_interval
+        if step is not None and not 0 < step <= hi - lo:  # NaN fails too
+            raise ValueError(f"disparity interval must be > 0 and at most max - min = {hi - lo:g} px, got {step}")
         if self.border_px < 0:
             raise ValueError(f"border must be >= 0 px, got {self.border_px}")
 
@@ -72,7 +79,9 @@ class DatasetProtocol:
         lo, hi = self.disparity_range
         lines = [f"views: {views}, {size}; scored: {self.reference_view}, {self.border_px} px border",
                  f"metrics: {', '.join(self.metrics)}", f"resolutions: {', '.join(self.resolutions)}",
-                 f"disparity range: [{lo:g}, {hi:g}] px per view step"]
+                 f"disparity range: [{lo:g}, {hi:g}] px per view step, "
+                 + (f"interval {self.disparity_interval:g} px" if self.disparity_interval is not None
+                    else "each method's own interval")]
         if self.highres_scenes:
             lines.append(f"high-resolution scenes: {', '.join(sorted(self.highres_scenes))}")
         return lines
@@ -185,17 +194,22 @@ def open_datasets(roots: Sequence[str | Path], name: str | None = None, *,
     return dataset, protocol, dataclasses.replace(benches[0], scenes=scenes, others=tuple(roots[1:]))
 
 
-def method_range_params(disparity_range: tuple[float, float]) -> Callable[[Any, dict[str, Any]], dict[str, float]]:
-    """A ``defaults`` hook for :func:`lfbench.method.registry.create_from_spec`: the dataset's disparity range
-    as ``{"d_min": lo, "d_max": hi}`` for a method that has both parameters when the spec sets neither and the
-    range differs from the method's defaults (so that the label names the range searched, and stays as it
-    was where they agree: HCI's [-4, 4] is the plane sweep's default). A method with an ``interval`` searches
-    a grid from ``d_min``: ``d_max`` is then raised to the first grid point at or above the dataset's maximum
-    (UrbanLF-Syn's [-0.5, 1.6] at the plane sweep's 0.25 px: [-0.5, 1.75]), so that the whole range is searched.
+def method_range_params(disparity_range: tuple[float, float], interval: float | None = None
+                        ) -> Callable[[Any, dict[str, Any]], dict[str, float]]:
+    """A ``defaults`` hook for :func:`lfbench.method.registry.create_from_spec`: a dataset's disparity grid
+    (:attr:`DatasetProtocol.disparity_range`, :attr:`DatasetProtocol.disparity_interval`) as the parameters
+    ``d_min``, ``d_max`` and ``interval`` of a method that has them, where they differ from the method's
+    defaults (so that the label names what was searched, and stays as it was where they agree: HCI's [-4, 4]
+    is every method's default range, and HCI leaves the interval to each method).
+
+    A spec that sets ``d_min`` or ``d_max`` decides the range and gets nothing from the dataset; a spec that
+    sets ``interval`` keeps it and gets the dataset's range. A method with an ``interval`` searches a grid
+    from ``d_min``: ``d_max`` is then raised to the first grid point at or above the dataset's maximum
+    (UrbanLF-Syn's [-0.5, 1.6] at 0.25 px: [-0.5, 1.75]), so that the whole range is searched.
 
     A method whose weights fix its disparity grid (a network trained on it: the number and spacing of its
     cost-volume disparities) says so with a classmethod ``range_from_weights(info, params) -> bool``; where it
-    answers True the dataset's range is not applied (it would contradict the weights) and the weights' range
+    answers True the dataset's grid is not applied (it would contradict the weights) and the weights' grid
     is searched (logged). SubFocal: ``weights=`` given, or its shipped checkpoint is the one that loads."""
     lo, hi = (float(v) for v in disparity_range)
 
@@ -203,12 +217,17 @@ def method_range_params(disparity_range: tuple[float, float]) -> Callable[[Any, 
         keys = {"d_min", "d_max"}
         if not keys <= set(info.params) or keys & set(params):
             return {}
+        out: dict[str, float] = {}
         top = hi
         if "interval" in info.params:
             step = float(params.get("interval", info.params["interval"].default))
+            if "interval" not in params and interval is not None and interval != step:
+                step = out["interval"] = float(interval)
             if step > 0:
                 top = round(lo + math.ceil(round((hi - lo) / step, 9)) * step, 9)
-        if (info.params["d_min"].default, info.params["d_max"].default) == (lo, top):
+        if (info.params["d_min"].default, info.params["d_max"].default) != (lo, top):
+            out = {"d_min": lo, "d_max": top, **out}
+        if not out:
             return {}
         fixed = getattr(info.method_class, "range_from_weights", None)
         if fixed is not None and fixed(info, params):
@@ -218,6 +237,6 @@ def method_range_params(disparity_range: tuple[float, float]) -> Callable[[Any, 
                 "%s: searches the disparity grid its weights were trained on (the dataset's [%g, %g] px is not "
                 "laid over weights)", info.name, lo, hi)
             return {}
-        return {"d_min": lo, "d_max": top}
+        return out
 
     return defaults

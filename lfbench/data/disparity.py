@@ -20,7 +20,8 @@ from lfbench.utils.errors import DataError
 
 __all__ = ["EVALUATION_BORDER_PX", "check_disparity", "disparity_problem"]
 
-#: The benchmark's evaluation border (px at low resolution): the widest crop a prediction may have.
+#: The widest crop of a prediction, px per side (the evaluation border of HCI and UrbanLF-Syn: HCI's submissions
+#: are 482x482 of 512x512).
 EVALUATION_BORDER_PX = 15
 
 

@@ -16,6 +16,7 @@ Keys (every one optional except ``views.pattern`` and ``views.angular``)::
     border = 15                    # px ignored at every border
     metrics = ["badpix_0.01", "badpix_0.03", "badpix_0.07", "mse_x100"]
     disparity_range = [-4.0, 4.0]  # what a method with d_min / d_max searches
+    disparity_interval = 0.1       # its spacing, px (> 0, at most max - min; absent: each method's own)
 
 Scenes are the folders under the data root (or ROOT/<category>/<scene>, or ROOT itself) holding the centre
 view. An unknown key or an impossible value is one line naming the file (DataError, exit 2).
@@ -40,7 +41,7 @@ MAX_ANGULAR = 33  # views per axis
 _KEYS: dict[str, set[str]] = {
     "views": {"pattern", "angular", "first"},
     "ground_truth": {"file", "format", "scale", "offset"},
-    "protocol": {"border", "metrics", "disparity_range"},
+    "protocol": {"border", "metrics", "disparity_range", "disparity_interval"},
 }
 DEFAULT_PROTOCOL = DatasetProtocol(border_px=15, metrics=("badpix_0.01", "badpix_0.03", "badpix_0.07", "mse_x100"),
                                    disparity_range=(-4.0, 4.0))
@@ -114,11 +115,16 @@ def read_dataset_spec(path: str | Path) -> tuple[ViewLayout, DatasetProtocol]:
     rng = proto.get("disparity_range", list(DEFAULT_PROTOCOL.disparity_range))
     if not isinstance(rng, list) or len(rng) != 2 or not all(_number(x) for x in rng) or not rng[0] < rng[1]:
         raise DataError(f"'protocol.disparity_range' must be [min, max] px with min < max, got {rng!r}", path)
+    step = proto.get("disparity_interval")
+    if step is not None and (not _number(step) or not 0 < step <= rng[1] - rng[0]):
+        raise DataError(f"'protocol.disparity_interval' must be a number of px > 0 and at most the range's max - min "
+                        f"({rng[1] - rng[0]:g}), got {step!r}", path)
 
     layout = ViewLayout(pattern=pattern, angular=(angular[0], angular[1]), first=first, gt_file=gt_file,
                         gt_format=fmt, gt_scale=float(scale), gt_offset=float(offset))
     protocol = DatasetProtocol(border_px=border, metrics=tuple(metrics), source=path,  # ids checked where scored
                                disparity_range=(float(rng[0]), float(rng[1])), angular_size=layout.angular,
+                               disparity_interval=None if step is None else float(step),
                                reference_view=f"centre view {layout.view_name(*layout.centre)}")
     return layout, protocol
 

@@ -21,7 +21,7 @@ from PIL import Image
 
 from lfbench.data.npyfile import read_npy
 from lfbench.data.pfm import read_pfm
-from lfbench.data.scene import LOWRES, PNGViews, read_png
+from lfbench.data.scene import LOWRES, Scene, read_png
 from lfbench.utils.errors import DataError
 
 __all__ = ["GT_FORMATS", "ViewLayout", "PatternScene", "png_size"]
@@ -95,7 +95,7 @@ def _npy_header(path: Path) -> tuple[tuple[int, ...], np.dtype]:
     return tuple(shape), dtype
 
 
-class PatternScene(PNGViews):
+class PatternScene(Scene):
     """One scene folder of a :class:`ViewLayout`, checked when made, its pixels read when asked for."""
 
     layout: ViewLayout
@@ -107,7 +107,6 @@ class PatternScene(PNGViews):
         self.layout = layout
         self.name = self.path.name
         self.category = category
-        self.params = None  # no camera parameters: the metrics that need them do not apply
         self._spatial_size = self._check_views()
         self._check_gt_header()
 
@@ -116,13 +115,9 @@ class PatternScene(PNGViews):
         """(H, W) of every view, px (checked equal for all of them when the scene was made)."""
         return self._spatial_size
 
-    def __repr__(self) -> str:
-        return f"{type(self).__name__}({self.category}/{self.name})"
-
-    def __reduce__(self):
-        """Pickled as its folder, layout and category, reopened (and checked again) where it is unpickled: a
-        scoring worker (lfbench.runs.pool) gets the scene, never its loaded views."""
-        return _reopen, (type(self), self.path, self.layout, self.category)
+    def reopen_args(self) -> tuple:
+        """Pickled as its folder, layout and category, reopened (and checked again) where it is unpickled."""
+        return self.path, self.layout, self.category
 
     @property
     def angular_size(self) -> tuple[int, int]:
@@ -211,20 +206,6 @@ class PatternScene(PNGViews):
         """The centre view's disparity (H, W) float32 px per view step, or None."""
         return self._gt if resolution == LOWRES else None
 
-    def mask_names(self, resolution: str = LOWRES) -> list[str]:
-        return []
-
-    def mask(self, name: str, resolution: str = LOWRES) -> np.ndarray:
-        raise DataError(f"this layout has no evaluation mask {name!r}", self.path)
-
-    def valid_mask(self) -> np.ndarray | None:
-        return None
-
-
-def _reopen(cls: type[PatternScene], path: Path, layout: ViewLayout, category: str) -> PatternScene:
-    scene = cls.__new__(cls)
-    PatternScene.__init__(scene, path, layout, category)
-    return scene
 
 
 def sample_order(path: Path) -> tuple[int, str]:

@@ -1,17 +1,16 @@
-"""Light fields: an HCI scene folder (lazy) or views held in memory.
+"""Light fields: the contract every dataset's scenes meet, views held in memory, and reading PNG files.
 
-Views are float32 arrays (V, U, H, W) gray or (V, U, H, W, 3) RGB in [0, 1], where
-``views[v, u]`` is ``input_Cam{v * U + u:03d}.png`` (angular row v, column u), so that
-``views.reshape(V * U, H, W)[k]`` is view k. Disparity is in px per view step, (H, W) float32;
-positive = closer than the focus plane (HCI convention).
+Views are float32 arrays (V, U, H, W) gray or (V, U, H, W, 3) RGB in [0, 1], where ``views[v, u]`` is the
+view at angular row v, column u, so that ``views.reshape(V * U, H, W)[k]`` is view k (row-major).
+Disparity is in px per view step, (H, W) float32; positive = closer than the focus plane (HCI's sign).
+Which files hold a dataset's views and ground truth is its adapter's (lfbench.data.dataset): HCI's
+reader is lfbench.data.hci, layouts named by a pattern lfbench.data.pattern.
 """
 
 from __future__ import annotations
 
 import contextlib
 import functools
-import os
-import re
 import warnings
 from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
@@ -21,16 +20,16 @@ from typing import TypeVar
 import numpy as np
 from PIL import Image
 
-from lfbench.data.params import SceneParameters, read_parameters
-from lfbench.data.pfm import read_pfm
 from lfbench.utils.errors import DataError
 from lfbench.utils.names import FileNames
 from lfbench.utils.readfile import check_regular_file
 
+__all__ = ["GRAY_WEIGHTS", "LOWRES", "HIGHRES", "MAX_PNG_PIXELS", "MAX_RESOLUTION_PX", "MAX_VIEW_PIXELS", "rgb_to_gray",
+           "read_png", "read_rgb", "read_mask", "LightField", "ArrayLightField", "PNGViews", "Scene", "Benchmark",
+           "check_scene_names"]
+
 GRAY_WEIGHTS = (0.299, 0.587, 0.114)
 LOWRES, HIGHRES = "lowres", "highres"
-_MASK_RE = re.compile(r"^(?P<name>.+)_(?P<res>lowres|highres)\.png$")
-_NOT_MASKS = {"gt_disp", "gt_depth", "input_Cam040", "stratified_masks"}
 
 
 def rgb_to_gray(rgb: np.ndarray) -> np.ndarray:
@@ -40,14 +39,19 @@ def rgb_to_gray(rgb: np.ndarray) -> np.ndarray:
     return np.clip(out, 0.0, 1.0).astype(np.float32)
 
 
-MAX_PNG_PIXELS = 2**27  # any PNG lfbench reads (HCI high-res masks: 5120x5120 = 2**24.6)
+#: The largest light field lfbench reads: px per side of a view, and pixels of all views together (81 views of
+#: 2574x2574 px); bounds checked before anything is allocated from a file's numbers.
+MAX_RESOLUTION_PX = 16384
+MAX_VIEW_PIXELS = 2**29
+MAX_PNG_PIXELS = 2**27  # any PNG lfbench reads (the largest a dataset holds: 5120x5120 masks = 2**24.6)
 _SIXTEEN_BIT = {"I;16", "I;16B", "I;16L", "I;16N", "I"}  # 16-bit gray PNG (Pillow's modes for it)
 
 
 @contextlib.contextmanager
-def _open_png(path: Path, what: str, size: tuple[int, int] | None) -> Iterator[Image.Image]:
+def _open_png(path: Path, what: str, size: tuple[int, int] | None, said: str = "expected") -> Iterator[Image.Image]:
     """The PNG opened lazily, its dimensions checked from the header before any pixel is decoded
-    (against ``size`` (H, W) when given, else against MAX_PNG_PIXELS). Errors name the file."""
+    (against ``size`` (H, W) when given, else against MAX_PNG_PIXELS; ``said``: who expects that size, for
+    the message). Errors name the file."""
     if path.exists():  # not a device or FIFO (a FIFO would block open); a missing file is reported below
         check_regular_file(path, what)
     try:
@@ -57,7 +61,6 @@ def _open_png(path: Path, what: str, size: tuple[int, int] | None) -> Iterator[I
                 w, h = img.size
                 if size is not None and (h, w) != tuple(size):
                     noun = "view" if what == "view image" else what
-                    said = "parameters.cfg says" if what == "view image" else "expected"
                     raise DataError(f"{noun} is {w}x{h}, {said} {size[1]}x{size[0]}", path)
                 if w * h > MAX_PNG_PIXELS:
                     raise DataError(f"{what} is {w}x{h} px, more than lfbench reads ({MAX_PNG_PIXELS} px)", path)
@@ -102,10 +105,10 @@ def read_png(path: Path, what: str = "image", mode: str | None = None,
         return np.asarray(img.convert(mode) if mode else img)
 
 
-def read_rgb(path: Path, size: tuple[int, int] | None = None) -> np.ndarray:
+def read_rgb(path: Path, size: tuple[int, int] | None = None, *, said: str = "expected") -> np.ndarray:
     """A PNG as float32 (H, W, 3) in [0, 1] (8-bit / 255, 16-bit gray / 65535); DataError naming the
-    file if unreadable or not ``size`` (H, W)."""
-    with _open_png(path, "view image", size) as img:
+    file if unreadable or not ``size`` (H, W) (``said``: who expects that size, for the message)."""
+    with _open_png(path, "view image", size, said) as img:
         if img.mode in _SIXTEEN_BIT:
             gray = _sixteen_bit(img, path, "view image").astype(np.float32) / np.float32(65535.0)
             return np.repeat(gray[..., None], 3, axis=-1)
@@ -191,6 +194,8 @@ class PNGViews(LightField):
     read on first use, kept as RGB and gray."""
 
     spatial_size: tuple[int, int]
+    #: who says the views are ``spatial_size``, for the message about a view of another size
+    size_said: str = "expected"
 
     def view_file(self, row: int, col: int) -> Path:
         """The file of the view at 0-based angular ``row``, ``col``."""
@@ -207,7 +212,7 @@ class PNGViews(LightField):
         views = np.empty((v, u, h, w, 3), dtype=np.float32)
         for r in range(v):
             for c in range(u):
-                views[r, c] = read_rgb(self.view_file(r, c), size=(h, w))
+                views[r, c] = read_rgb(self.view_file(r, c), size=(h, w), said=self.size_said)
         return views
 
     def rgb_views(self) -> np.ndarray:
@@ -225,121 +230,76 @@ class PNGViews(LightField):
         v, u = self.angular_size
         if "_rgb" in self.__dict__:
             return self._rgb[v // 2, u // 2]
-        return read_rgb(self.view_file(v // 2, u // 2), size=self.spatial_size)
+        return read_rgb(self.view_file(v // 2, u // 2), size=self.spatial_size, said=self.size_said)
 
 
 class Scene(PNGViews):
-    """An HCI scene folder, loaded lazily: nothing is read until asked for."""
+    """A scene folder a dataset adapter opened: the contract scoring reads. Views are PNG files
+    (:class:`PNGViews`); the ground truth may exist at several resolutions (``LOWRES``, and ``HIGHRES``
+    where a dataset has it); evaluation masks are named. Each layout's reader subclasses it (HCI:
+    lfbench.data.hci.HCIScene; views named by a pattern: lfbench.data.pattern.PatternScene).
 
-    def __init__(self, path: str | Path, category: str | None = None) -> None:
-        self.path = Path(path)
-        if not self.path.is_dir():
-            raise DataError("scene folder not found", self.path)
-        try:  # a name that is not UTF-8 cannot be written to results.csv, tables or submissions
-            self.path.name.encode("utf-8")
-        except UnicodeEncodeError:
-            raise DataError("scene folder name is not valid UTF-8: rename the folder",
-                            os.fsencode(self.path).decode("utf-8", "backslashreplace")) from None
-        self.params: SceneParameters = read_parameters(self.path / "parameters.cfg")
-        self.name = self.path.name
-        self.category = category or self.params.category or "other"
+    ``path``: the folder; ``category``: the category / split folder it was found in; ``params``: camera
+    parameters with depth <-> disparity conversions where the dataset has them (None: the metrics that
+    need them do not apply). A scene pickles as its folder (a scoring worker reopens it, never receives
+    its loaded views): :meth:`reopen_args`.
+    """
+
+    path: Path
+    category: str
+    params: object | None = None
+
+    def __reduce__(self):
+        return _reopen, (type(self), *self.reopen_args())
+
+    def reopen_args(self) -> tuple:
+        """The arguments ``type(self)(*args)`` reopens this scene with."""
+        return self.path, self.category
 
     def __repr__(self) -> str:
-        return f"Scene({self.category}/{self.name})"
-
-    @property
-    def angular_size(self) -> tuple[int, int]:
-        return self.params.angular_size
-
-    @property
-    def spatial_size(self) -> tuple[int, int]:
-        return self.params.spatial_size
-
-    def view_path(self, k: int) -> Path:
-        return self.path / f"input_Cam{k:03d}.png"
-
-    def _check_views(self) -> None:
-        v, u = self.angular_size
-        missing = [k for k in range(v * u) if not self.view_path(k).is_file()]
-        if missing:
-            shown = ", ".join(self.view_path(k).name for k in missing[:3])
-            more = f" and {len(missing) - 3} more" if len(missing) > 3 else ""
-            raise DataError(f"missing {len(missing)} of {v * u} views: {shown}{more}", self.path)
-
-    def view_file(self, row: int, col: int) -> Path:
-        return self.view_path(row * self.angular_size[1] + col)
-
-    def _views_ready(self) -> None:
-        self._check_views()
+        return f"{type(self).__name__}({self.category}/{self.name})"
 
     def has_gt(self, resolution: str = LOWRES) -> bool:
-        return (self.path / f"gt_disp_{resolution}.pfm").is_file()
+        """Whether ground truth exists at ``resolution``."""
+        raise NotImplementedError
 
     def gt_disparity(self, resolution: str = LOWRES) -> np.ndarray | None:
-        """Ground-truth disparity (H, W) float32 at ``resolution``, or None if the file is absent."""
-        path = self.path / f"gt_disp_{resolution}.pfm"
-        if not path.is_file():
-            return None
-        h, w = self.spatial_size
-        scale = 1 if resolution == LOWRES else self.params.highres_scale
-        gt = read_pfm(path, shape=(h * scale, w * scale), what="ground truth")  # checked before the data is read
-        if gt.ndim != 2:
-            raise DataError("ground truth is a 3-channel PF map, expected a gray Pf map", path)
-        bad = int(np.count_nonzero(~np.isfinite(gt)))
-        if bad:
-            raise DataError(f"ground truth has {bad} non-finite values of {gt.size} (NaN or inf): it cannot be "
-                            "scored against", path)
-        return gt
+        """Ground-truth disparity (H, W) float32 px per view step at ``resolution`` (H, W scaled), or None."""
+        raise NotImplementedError
 
     def mask_names(self, resolution: str = LOWRES) -> list[str]:
-        """Names of the evaluation masks present at ``resolution`` (``<name>_<resolution>.png``)."""
-        names = []
-        for p in sorted(self.path.glob(f"*_{resolution}.png")):
-            m = _MASK_RE.match(p.name)
-            if m and m["name"] not in _NOT_MASKS:
-                names.append(m["name"])
-        return names
+        """Names of the evaluation masks present at ``resolution`` (none unless the layout has masks)."""
+        return []
 
     def mask(self, name: str, resolution: str = LOWRES) -> np.ndarray:
-        """Evaluation mask ``<name>_<resolution>.png`` as bool (H, W)."""
-        path = self.path / f"{name}_{resolution}.png"
-        if not path.is_file():
-            raise DataError(f"no mask {name!r} at {resolution}", path)
-        h, w = self.spatial_size
-        scale = 1 if resolution == LOWRES else self.params.highres_scale
-        return read_mask(path, size=(h * scale, w * scale))
+        """Evaluation mask ``name`` at ``resolution`` as bool (H, W)."""
+        raise DataError(f"this layout has no evaluation mask {name!r}", self.path)
 
     def valid_mask(self) -> np.ndarray | None:
-        """valid_mask.png as bool (H, W) (True = pixel may be scored), or None if absent. It is at the
-        scene's low resolution (parameters.cfg): any other size is refused (DataError naming the file);
-        high-resolution scoring upsamples it as it upsamples predictions (lfbench.scoring.rules)."""
-        path = self.path / "valid_mask.png"
-        return read_mask(path, size=self.spatial_size) if path.is_file() else None
+        """Pixels that may be scored, bool (H, W) at low resolution, or None (all)."""
+        return None
 
 
-# --------------------------------------------------------------------------- benchmark layout
+def _reopen(cls: type[Scene], *args: object) -> Scene:
+    return cls(*args)
 
-CATEGORIES = ("stratified", "training", "test", "additional")
-SPLITS: dict[str, tuple[str, ...]] = {
-    "train": ("additional",),
-    "validation": ("stratified", "training"),
-    "test": ("test",),
-}
+
+# --------------------------------------------------------------------------- a data root
 
 
 @dataclass(frozen=True)
 class Benchmark:
-    """The scenes under a data root laid out as ROOT/<category>/<scene>/parameters.cfg.
+    """The scenes a dataset adapter found under a data root (lfbench.data.dataset.Dataset.open), each with
+    the category (or split) folder it was found in.
 
-    Category folders other than the four HCI ones are kept under their own name ('other' kind).
-    ``splits``: split name -> the categories it selects (default the paper's HCI splits, :data:`SPLITS`;
-    a dataset whose category folders are its splits gives none).
-    ``others``: further roots whose scenes this one holds too (lfbench.data.dataset.open_datasets).
+    ``splits``: split name -> the categories it selects (a dataset with named splits of several category
+    folders declares them, HCI: lfbench.data.hci.SPLITS; none where a dataset's category folders are its
+    splits). ``others``: further roots whose scenes this one holds too (lfbench.data.dataset.open_datasets).
     """
 
     root: Path
     scenes: tuple[Scene, ...]
-    splits: Mapping[str, tuple[str, ...]] = field(default_factory=lambda: SPLITS, compare=False, hash=False)
+    splits: Mapping[str, tuple[str, ...]] = field(default_factory=dict, compare=False, hash=False)
     others: tuple[Path, ...] = ()
 
     @staticmethod
@@ -353,26 +313,6 @@ class Benchmark:
     def roots(self) -> tuple[Path, ...]:
         """Every data root this benchmark's scenes come from."""
         return (self.root, *self.others)
-
-    @classmethod
-    def discover(cls, root: str | Path) -> Benchmark:
-        root = Path(root)
-        if not root.is_dir():
-            raise DataError("data root not found", root)
-        scenes = []
-        if (root / "parameters.cfg").is_file():  # the root is itself one scene
-            scenes.append(Scene(root))
-        else:
-            for cat_dir in sorted(p for p in root.iterdir() if p.is_dir()):
-                if (cat_dir / "parameters.cfg").is_file():  # a flat folder of scenes
-                    scenes.append(Scene(cat_dir, category="other"))
-                    continue
-                for scene_dir in sorted(p for p in cat_dir.iterdir() if p.is_dir()):
-                    if (scene_dir / "parameters.cfg").is_file():
-                        scenes.append(Scene(scene_dir, category=cat_dir.name))
-        if not scenes:
-            raise DataError("no scenes found (expected <root>/<category>/<scene>/parameters.cfg)", root)
-        return cls(root=root, scenes=tuple(scenes))
 
     def __iter__(self) -> Iterator[Scene]:
         return iter(self.scenes)
@@ -388,7 +328,8 @@ class Benchmark:
         return [s for s in self.scenes if s.category in categories]
 
     def split(self, name: str) -> list[Scene]:
-        """The paper's splits: train = additional, validation = stratified + training, test = test."""
+        """The scenes of split ``name`` (:attr:`splits`; HCI's: train = additional, validation = stratified +
+        training, test = test)."""
         if name not in self.splits:
             raise DataError(f"unknown split {name!r}; choose from {', '.join(self.splits)}")
         return self.by_category(*self.splits[name])

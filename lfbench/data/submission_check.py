@@ -259,7 +259,7 @@ def _entries_by_rel(entries: list[_Entry]) -> dict[str, _Entry]:
 
 def parse_size(text: str) -> tuple[int, int]:
     """'512' -> (512, 512); 'WxH' -> (H, W). DataError on anything else."""
-    from lfbench.data.params import MAX_RESOLUTION_PX
+    from lfbench.data.scene import MAX_RESOLUTION_PX
 
     m = re.fullmatch(r"\s*(\d{1,9})\s*(?:[xX]\s*(\d{1,9})\s*)?", text)
     if not m or int(m[1]) <= 0 or (m[2] is not None and int(m[2]) <= 0):

@@ -41,7 +41,7 @@ import numpy as np
 from PIL import Image
 from scipy import ndimage
 
-from lfbench.data.params import SceneParameters
+from lfbench.data.hci.params import SceneParameters
 from lfbench.data.pfm import write_pfm
 from lfbench.data.scene import ArrayLightField, rgb_to_gray
 from lfbench.utils.atomic import check_replaceable, fresh_dir, replace_dir, write_bytes
@@ -55,6 +55,10 @@ MAX_SLOPE_SHIFT = 0.6  # bound on |s| * |grad d| over every view s and surface p
 _MAX_SAMPLES_PER_CHUNK = 1 << 22  # rendering works on groups of views of at most this many samples
 _NEWTON_STEPS = 6
 _HIT_TOL = 1e-3  # px: residual of the inverse map accepted as a hit
+#: Bounds of the generator's own disparities, px per view step (observed on 320 scenes: [-2.05, 2.27]; by
+#: construction the background reaches at most 0.7 / sqrt 2 px below its -1.6, a thin bar 0.2 px above its 2.1).
+GENERATOR_DISPARITY_RANGE = (-2.1, 2.31)
+MAX_SYNTH_DISPARITY = 3.5  # |d| px: the layers' extent covers every view's border up to this disparity
 MASK_NAMES = ("mask_discontinuities", "mask_planes", "mask_smooth_surfaces", "mask_fine", "mask_fine_surrounding",
               "mask_low_texture")
 
@@ -80,6 +84,10 @@ class Affine:
     def max_slope(self) -> float:
         """Largest |grad d| (px of disparity per px)."""
         return math.hypot(self.gx, self.gy)
+
+    def remapped(self, scale: float, offset: float) -> Affine:
+        """The surface of disparity ``scale * d + offset`` (same position, slope times ``scale``)."""
+        return Affine(scale * self.d0 + offset, scale * self.gx, scale * self.gy, self.cx, self.cy)
 
     def solve(self, x, y, su, sv) -> tuple[np.ndarray, np.ndarray]:
         """p with p - s d(p) = (x, y) (closed form; all arguments broadcast)."""
@@ -128,6 +136,10 @@ class Quadric:
 
     def disparity(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         return self._eval(x - self.cx, y - self.cy)[0]
+
+    def remapped(self, scale: float, offset: float) -> Quadric:
+        """The surface of disparity ``scale * d + offset`` (same footprint, height times ``scale``)."""
+        return Quadric(scale * self.d0 + offset, scale * self.h, self.radius, self.cx, self.cy, self.axis)
 
     def max_slope(self) -> float:
         return 2.0 * abs(self.h) / self.radius
@@ -380,13 +392,34 @@ def _dome_shading(surface: Quadric, scale: float, light: np.ndarray):
     return shade
 
 
-def layout_scene(rng: np.random.Generator, size: int, angular: int) -> list[Layer]:
+def disparity_map(disparity_range: tuple[float, float] | None) -> tuple[float, float] | None:
+    """(scale, offset) of the map d -> scale * d + offset taking :data:`GENERATOR_DISPARITY_RANGE` onto
+    ``disparity_range`` (min, max) px, or None for None (the generator's own disparities). SpecError for a
+    range that is not finite, min >= max, wider than the generator's own (its slopes would fold a surface
+    over itself) or beyond +-:data:`MAX_SYNTH_DISPARITY` (views would show past the background)."""
+    if disparity_range is None:
+        return None
+    lo, hi = (float(v) for v in disparity_range)
+    g_lo, g_hi = GENERATOR_DISPARITY_RANGE
+    if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+        raise SpecError(f"disparity range must be finite LOW < HIGH px, got [{lo:g}, {hi:g}]")
+    if hi - lo > g_hi - g_lo + 1e-9 or max(abs(lo), abs(hi)) > MAX_SYNTH_DISPARITY:
+        raise SpecError(f"disparity range [{lo:g}, {hi:g}] px: the generator writes spans of at most "
+                        f"{g_hi - g_lo:g} px within [-{MAX_SYNTH_DISPARITY:g}, {MAX_SYNTH_DISPARITY:g}]")
+    scale = (hi - lo) / (g_hi - g_lo)
+    return scale, lo - scale * g_lo
+
+
+def layout_scene(rng: np.random.Generator, size: int, angular: int,
+                 remap: tuple[float, float] | None = None) -> list[Layer]:
     """The layers of one random scene (positions in px of a size x size centre view).
 
     Far to near: a gently slanted background plane, a large fronto-parallel textured wall, then a
     low-texture panel, a slanted plane, a bump (sphere-like cap), a dent or a cylinder and a front
     block, each in its own cell of a jittered 3 x 3 grid (neighbours may overlap: occlusions), and
-    2-3 thin bars across the image (nearest). Disparities stay within about [-2.2, 2.3] px.
+    2-3 thin bars across the image (nearest). Disparities stay within :data:`GENERATOR_DISPARITY_RANGE`;
+    ``remap`` (scale, offset) (:func:`disparity_map`) moves every surface to ``scale * d + offset`` (the
+    same layout, textures and random draws; a scale <= 1 keeps every surface one-to-one).
     """
     s = float(size)
     c = angular // 2
@@ -410,6 +443,8 @@ def layout_scene(rng: np.random.Generator, size: int, angular: int) -> list[Laye
 
     def add(name, surface, shape, kind, contrast, region="plane", sigma=1.0, shading=None, low=False):
         tex = make_texture(rng, shape.bbox(extent), kind, contrast, sigma=sigma, shading=shading)
+        if remap is not None:
+            surface = surface.remapped(*remap)
         layers.append(_make_layer(name, surface, shape, tex, region, extent, low_texture=low))
 
     # background: a gently slanted far plane covering every view
@@ -721,7 +756,7 @@ MAX_SEED = 2**63 - 1  # seeds are 64-bit signed integers, as in TOML configs
 
 def check_args(size: int, angular: int = 9) -> None:
     """SpecError for sizes outside the bounds, before anything is allocated."""
-    from lfbench.data.params import MAX_CAMS, MAX_VIEW_PIXELS
+    from lfbench.data.hci.params import MAX_CAMS, MAX_VIEW_PIXELS
 
     if int(size) != size or not 16 <= size <= MAX_SYNTH_SIZE:
         raise SpecError(f"size must be an integer from 16 to {MAX_SYNTH_SIZE} px, got {size}")
@@ -753,12 +788,16 @@ def _visibility(layers: Sequence[Layer], x: np.ndarray, y: np.ndarray, lid: np.n
 
 
 def generate_scene(seed: int, size: int = 128, angular: int = 9, name: str | None = None,
-                   category: str = "synthetic") -> SyntheticScene:
-    """Generate one scene, deterministic in (seed, size, angular); ``size`` px square, A x A views."""
+                   category: str = "synthetic", *, disparity_range: tuple[float, float] | None = None
+                   ) -> SyntheticScene:
+    """Generate one scene, deterministic in (seed, size, angular); ``size`` px square, A x A views.
+    ``disparity_range``: (min, max) px the scene's disparities are mapped into (the same layout at other
+    depths: :func:`disparity_map`); None: the generator's own (about [-2.1, 2.3] px)."""
     check_args(size, angular)
+    remap = disparity_map(disparity_range)
     name = name or f"synth_{seed}"
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), int(size), int(angular)]))
-    layers = layout_scene(rng, size, angular)
+    layers = layout_scene(rng, size, angular, remap)
     views = render_views(layers, size, angular)
     views = views.reshape(angular, angular, size, size, 3)
 
@@ -823,10 +862,12 @@ def scene_seed(seed: int, index: int) -> int:
     return int(np.random.SeedSequence([int(seed), int(index)]).generate_state(1, np.uint32)[0])
 
 
-def _write_scene(target: Path, seed: int, size: int, angular: int, category: str) -> Path:
+def _write_scene(target: Path, seed: int, size: int, angular: int, category: str,
+                 disparity_range: tuple[float, float] | None = None) -> Path:
     """Generate one scene and write it as ``target`` (written beside it, renamed into place when complete;
     an existing ``target`` is swapped out only after the new one is whole)."""
-    scene = generate_scene(seed, size=size, angular=angular, name=target.name, category=category)
+    scene = generate_scene(seed, size=size, angular=angular, name=target.name, category=category,
+                           disparity_range=disparity_range)
     target.parent.mkdir(parents=True, exist_ok=True)
     tmp = fresh_dir(target.parent, f".{target.name}.", ".tmp")
     try:
@@ -840,7 +881,8 @@ def _write_scene(target: Path, seed: int, size: int, angular: int, category: str
 
 def write_benchmark(out: str | Path, seed: int = 0, size: int = 128, scenes: int = 4,
                     category: str | Sequence[str] = "synthetic", angular: int = 9, force: bool = False,
-                    progress: bool = False, workers: int = 1) -> list[Path]:
+                    progress: bool = False, workers: int = 1,
+                    disparity_range: tuple[float, float] | None = None) -> list[Path]:
     """Write ``scenes`` scenes as OUT/<category>/synth_<seed>_<i>/ and return their folders.
 
     ``category`` is one name for all scenes or one per scene. Each scene is written into a temporary
@@ -848,8 +890,11 @@ def write_benchmark(out: str | Path, seed: int = 0, size: int = 128, scenes: int
     leaves no half-written scene. An existing scene folder is an error unless ``force``; all
     destinations are checked before anything is generated. ``workers`` > 1 generates that many scenes
     at a time in separate processes; each scene depends only on its own seed, so the files are the same.
+    ``disparity_range``: (min, max) px the disparities are mapped into (:func:`generate_scene`; None: the
+    generator's own).
     """
     check_args(size, angular)
+    disparity_map(disparity_range)  # SpecError for an impossible range, before anything is written
     if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or not 0 <= seed <= MAX_SEED:
         raise SpecError(f"seed must be an integer from 0 to {MAX_SEED}, got {str(seed)[:40]}")
     if int(scenes) != scenes or not 1 <= scenes <= MAX_SYNTH_SCENES:
@@ -869,7 +914,7 @@ def write_benchmark(out: str | Path, seed: int = 0, size: int = 128, scenes: int
             raise DataError("scene folder already exists (use --force to overwrite)", t)
         if os.path.lexists(t) and not stat.S_ISDIR(os.lstat(t).st_mode):  # --force replaces scene folders only
             check_replaceable(t)  # a device, FIFO or socket is refused; a file or link is replaced
-    jobs = [(targets[i], scene_seed(seed, i), size, angular, cats[i]) for i in range(scenes)]
+    jobs = [(targets[i], scene_seed(seed, i), size, angular, cats[i], disparity_range) for i in range(scenes)]
     from tqdm import tqdm
 
     bar = tqdm(total=scenes, desc="synth", unit="scene", disable=not progress)

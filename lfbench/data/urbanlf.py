@@ -9,7 +9,8 @@ HCI sign: positive = nearer than the focus plane). docs/datasets.md gives what p
 these conventions and where they are silent.
 
 Protocol (the challenge's): centre view, 15 px border, BadPix 0.01 / 0.03 / 0.07 and MSE x100, 640x480
-views, disparity searched in [-0.5, 1.6] px (the released range is [-0.47, 1.55]).
+views, disparity searched in [-0.5, 1.6] px at an interval of 0.1 px (the released range is [-0.47, 1.55];
+the grid is the SubFocal paper's for Table III).
 
 Every scene is checked when it is opened as :class:`lfbench.data.pattern.PatternScene` checks a scene.
 """
@@ -23,12 +24,14 @@ from lfbench.data.pattern import PatternScene, ViewLayout, find_scene_dirs, matc
 from lfbench.data.scene import Benchmark, check_scene_names
 from lfbench.utils.errors import DataError
 
-__all__ = ["URBANLF_LAYOUT", "URBANLF_PROTOCOL", "URBANLF_SPLITS", "UrbanLFScene", "UrbanLFSyn", "view_name",
-           "gt_name"]
+__all__ = ["URBANLF_DISPARITY_RANGE", "URBANLF_LAYOUT", "URBANLF_PROTOCOL", "URBANLF_SPLITS", "UrbanLFScene",
+           "UrbanLFSyn", "view_name", "gt_name"]
 
 ANGULAR = 9
 CENTRE = 5  # 1-based index of the centre view along each axis
 URBANLF_SPLITS = ("train", "val", "test")
+#: The disparities of the released ground truth, px per view step (the dataset's README).
+URBANLF_DISPARITY_RANGE = (-0.47, 1.55)
 
 
 def view_name(row: int, col: int) -> str:
@@ -47,7 +50,7 @@ URBANLF_LAYOUT = ViewLayout(pattern="{v}_{u}.png", angular=(ANGULAR, ANGULAR), f
 
 URBANLF_PROTOCOL = DatasetProtocol(
     border_px=15, metrics=("badpix_0.01", "badpix_0.03", "badpix_0.07", "mse_x100"),
-    disparity_range=(-0.5, 1.6), spatial_size=(480, 640), angular_size=(ANGULAR, ANGULAR),
+    disparity_range=(-0.5, 1.6), disparity_interval=0.1, spatial_size=(480, 640), angular_size=(ANGULAR, ANGULAR),
     reference_view="centre view 5_5.png")
 
 
@@ -56,6 +59,9 @@ class UrbanLFScene(PatternScene):
 
     def __init__(self, path: str | Path, category: str = "other") -> None:
         super().__init__(path, URBANLF_LAYOUT, category)
+
+    def reopen_args(self) -> tuple:
+        return self.path, self.category
 
 
 def _is_sample(folder: Path) -> bool:

@@ -372,7 +372,7 @@ def _write_synthetic_scene(folder: Path, size: int, seed: int):
     """An HCI-layout scene folder with parameters.cfg and gt_disp_lowres.pfm (smooth random disparity)."""
     import numpy as np
 
-    from lfbench.data.params import SceneParameters
+    from lfbench.data.hci.params import SceneParameters
     from lfbench.data.pfm import write_pfm
 
     folder.mkdir(parents=True, exist_ok=True)
@@ -395,7 +395,7 @@ def bench_metrics(scenes: int = 12, methods: int = 5, size: int = 512, repeat: i
     size x size scenes (HCI layout in a temporary folder; reading the ground truth is part of the time)."""
     import numpy as np
 
-    from lfbench.data.scene import Scene
+    from lfbench.data.hci import HCIScene
     from lfbench.scoring.metrics import GENERAL_METRICS
     from lfbench.scoring.score import score_scene
 
@@ -412,7 +412,7 @@ def bench_metrics(scenes: int = 12, methods: int = 5, size: int = 512, repeat: i
 
         def run() -> None:
             for folder, per_scene in zip(folders, preds, strict=True):
-                scene = Scene(folder)
+                scene = HCIScene(folder)
                 for pred in per_scene:
                     score_scene(scene, pred, GENERAL_METRICS)
 

@@ -31,7 +31,6 @@ from typing import Any
 
 import numpy as np
 
-from lfbench.data.pattern import PatternScene
 from lfbench.data.scene import Scene
 from lfbench.scoring.metrics import METRICS, Metric, get_metric
 from lfbench.scoring.rules import ScoringRules
@@ -66,13 +65,11 @@ def _stopped_by_pool(signum: int, frame: Any) -> None:
     os.kill(os.getpid(), signal.SIGTERM)
 
 
-def _score_in_worker(scene: Scene | PatternScene | str, category: str | None, predictions: Predictions,
-                     metric_ids: Sequence[str], rules: ScoringRules) -> list[SceneScore]:
-    """Score in a worker: an HCI scene is reopened from its folder (``scene`` its path, ``category``), a
-    pattern-named one arrives pickled as its folder and layout. The scene is marked as being scored here."""
+def _score_in_worker(scene: Scene, predictions: Predictions, metric_ids: Sequence[str],
+                     rules: ScoringRules) -> list[SceneScore]:
+    """Score in a worker: the scene arrives pickled as its folder (lfbench.data.scene.Scene.__reduce__: reopened
+    here, never its loaded views). The scene is marked as being scored here."""
     retain_freed_memory()
-    if isinstance(scene, str):
-        scene = Scene(Path(scene), category or "")
     mark = None if _marks is None else _marks / str(os.getpid())
     if mark is not None:
         mark.write_text(scene.name, encoding="utf-8")
@@ -149,7 +146,7 @@ class ScoringPool:
         """Score ``predictions`` (disparity, runtime s or None, source) on ``scene`` with ``metrics`` under
         ``rules``; returns an object whose ``result()`` is the list of :class:`SceneScore`, in order (RunFailed
         naming the scene when the worker scoring it died)."""
-        if self.jobs == 1 or not isinstance(scene, Scene | PatternScene):
+        if self.jobs == 1 or not isinstance(scene, Scene):
             return _Done(score_predictions(scene, predictions, metrics, rules))
         ids = [m.id for m in metrics]
         for metric in metrics:  # a worker knows the registered metrics only
@@ -159,10 +156,8 @@ class ScoringPool:
             self._marks = Path(tempfile.mkdtemp(prefix="lfbench-scoring-"))
             self._executor = cf.ProcessPoolExecutor(self.jobs, mp_context=multiprocessing.get_context("spawn"),
                                                     initializer=_init_worker, initargs=(str(self._marks),))
-        # a pattern-named scene is pickled as its folder and layout (PatternScene.__reduce__); an HCI one as its path
-        sent = (scene, None) if isinstance(scene, PatternScene) else (str(scene.path), scene.category)
         try:
-            future = self._executor.submit(_score_in_worker, *sent, list(predictions), ids, rules)
+            future = self._executor.submit(_score_in_worker, scene, list(predictions), ids, rules)
         except BrokenProcessPool:  # a worker died since the last task was handed out
             raise self.worker_died(scene.name) from None
         return _Task(self, future, scene.name)

@@ -300,7 +300,7 @@ class SceneReference:
             self._gt[resolution] = _kept(read() if resolution == LOWRES else read(resolution))
         gt = self._gt[resolution]
         if gt is None:
-            raise DataError(f"no ground truth (gt_disp_{resolution}.pfm) to score against", self.path)
+            raise DataError(f"no ground truth at {resolution} to score against", self.path)
         return gt
 
     def shape(self, resolution: str = LOWRES) -> tuple[int, int]:

@@ -31,7 +31,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from lfbench.data.params import SceneParameters
+from lfbench.data.hci.params import SceneParameters
 from lfbench.data.scene import Scene
 from lfbench.scoring.base import NON_NEGATIVE, PERCENT, Metric
 from lfbench.scoring.general import BadPixels, check_maps, percent_of, squared_error

@@ -23,8 +23,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from lfbench.data.dataset import DatasetProtocol
-from lfbench.data.disparity import EVALUATION_BORDER_PX
-from lfbench.data.hci import HCI_HIGHRES_SCENES
+from lfbench.data.hci import HCI_BORDER_PX, HCI_HIGHRES_SCENES
 from lfbench.data.scene import HIGHRES, LOWRES, Scene
 from lfbench.scoring.base import Metric
 
@@ -41,7 +40,7 @@ BENCHMARK_HIGHRES_SCENES = HCI_HIGHRES_SCENES
 class ScoringRules:
     """How a scene is scored. Defaults are the benchmark's."""
 
-    border_px: int = EVALUATION_BORDER_PX
+    border_px: int = HCI_BORDER_PX
     highres_scenes: frozenset[str] = BENCHMARK_HIGHRES_SCENES
     toolkit: bool = False  # reproduce the toolkit's non-finite handling exactly
     allow_highres: bool = True  # False: score everything at low resolution

@@ -64,7 +64,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from lfbench.data.scene import SPLITS
+from lfbench.data.hci import SPLITS
 from lfbench.data.synth import MAX_SYNTH_SIZE, scene_name
 from lfbench.method.params import values_problem
 from lfbench.method.trainable import DEFAULT_TRAINABLE, Trainable, get_trainable

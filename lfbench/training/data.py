@@ -27,12 +27,12 @@ from pathlib import Path
 
 import numpy as np
 
+from lfbench.data.hci.scene import INVALID_AREA_FILE
 from lfbench.data.scene import GRAY_WEIGHTS, Scene, read_png
 from lfbench.training.augment import apply_augment, draw_augment
 from lfbench.training.config import AugmentConfig, DataConfig
 from lfbench.utils.errors import DataError
 
-INVALID_AREA_FILE = "input_Cam040_invalid_ver2.png"
 MAX_ROUNDS = 2000  # rejection rounds per sample before giving up
 
 

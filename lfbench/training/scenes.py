@@ -8,11 +8,12 @@ import logging
 import os
 import shutil
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from lfbench.data.dataset import open_dataset
-from lfbench.data.scene import SPLITS, Benchmark, Scene, check_scene_names
+from lfbench.data.hci import SPLITS, HCIDataset
+from lfbench.data.scene import Benchmark, Scene, check_scene_names
 from lfbench.data.synth import write_benchmark
 from lfbench.data.synth_urbanlf import write_urbanlf
 from lfbench.data.urbanlf import UrbanLFSyn
@@ -75,8 +76,8 @@ def _open_synthetic(data_dir: Path, specs: Sequence[SyntheticSpec]) -> list[Benc
     out = []
     hci = {s.category for s in there if s.layout == "hci"}
     if hci:
-        found = Benchmark.discover(data_dir)
-        out.append(Benchmark(root=data_dir, scenes=tuple(s for s in found.scenes if s.category in hci)))
+        found = HCIDataset.open(data_dir)
+        out.append(replace(found, scenes=tuple(s for s in found.scenes if s.category in hci)))
     for spec in there:
         if spec.layout == "urbanlf-syn":
             out.append(UrbanLFSyn.open(data_dir / spec.category))

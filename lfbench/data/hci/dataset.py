@@ -1,11 +1,13 @@
 """The HCI 4D Light Field Benchmark as a dataset adapter (``hci``): the layout, file names and scoring
-protocol of the benchmark live here (the scene reader itself is :class:`lfbench.data.scene.Scene`).
+protocol of the benchmark (the scene reader is :class:`lfbench.data.hci.scene.HCIScene`).
 
 Layout: ``ROOT/<category>/<scene>/`` with ``parameters.cfg``, views ``input_Cam000.png`` ..
 ``input_Cam080.png``, ground truth ``gt_disp_lowres.pfm`` (and ``gt_disp_highres.pfm``), evaluation masks
 ``<name>_lowres.png``; ROOT may also be a folder of scenes or one scene. Protocol: 512x512 views, 9x9,
 15 px border, backgammon / dots / stripes at high resolution (x10) where their ground truth exists,
-BadPix 0.07 / 0.03 / 0.01, MSE x100 and Q25, disparity searched in [-4, 4] px.
+BadPix 0.07 / 0.03 / 0.01, MSE x100 and Q25, disparity searched in [-4, 4] px at each method's own interval
+(the plane sweep's 0.25 px, SubFocal's 0.5 as in its paper, LFattNet's 1: HCI's numbers are those methods'
+defaults, so HCI declares no interval of its own).
 """
 
 from __future__ import annotations
@@ -13,21 +15,23 @@ from __future__ import annotations
 from pathlib import Path
 
 from lfbench.data.dataset import Dataset, DatasetProtocol
-from lfbench.data.disparity import EVALUATION_BORDER_PX
+from lfbench.data.hci.scene import discover, is_scene_folder
 from lfbench.data.pattern import matches_at_depth
 from lfbench.data.scene import HIGHRES, LOWRES, Benchmark
 
-__all__ = ["HCIDataset", "HCI_PROTOCOL", "HCI_HIGHRES_SCENES"]
+__all__ = ["HCIDataset", "HCI_PROTOCOL", "HCI_HIGHRES_SCENES", "HCI_BORDER_PX"]
+
+#: The benchmark's evaluation border: px left out at every side at low resolution (x10 at high resolution).
+HCI_BORDER_PX = 15
 
 #: The scenes the benchmark scores at high resolution where their high-resolution ground truth exists.
 HCI_HIGHRES_SCENES = frozenset({"backgammon", "dots", "stripes"})
 
 HCI_PROTOCOL = DatasetProtocol(
-    border_px=EVALUATION_BORDER_PX, metrics=("badpix_0.01", "badpix_0.03", "badpix_0.07", "mse_x100", "q25_x100"),
-    disparity_range=(-4.0, 4.0), resolutions=(LOWRES, HIGHRES), highres_scenes=HCI_HIGHRES_SCENES,
-    spatial_size=(512, 512), angular_size=(9, 9), reference_view="centre view input_Cam040.png")
-
-_MARKER = "parameters.cfg"
+    border_px=HCI_BORDER_PX, metrics=("badpix_0.01", "badpix_0.03", "badpix_0.07", "mse_x100", "q25_x100"),
+    disparity_range=(-4.0, 4.0), disparity_interval=None, resolutions=(LOWRES, HIGHRES),
+    highres_scenes=HCI_HIGHRES_SCENES, spatial_size=(512, 512), angular_size=(9, 9),
+    reference_view="centre view input_Cam040.png")
 
 
 class HCIDataset(Dataset):
@@ -40,8 +44,8 @@ class HCIDataset(Dataset):
 
     @classmethod
     def matches(cls, root: Path) -> bool:
-        return matches_at_depth(root, lambda folder: (folder / _MARKER).is_file())
+        return matches_at_depth(root, is_scene_folder)
 
     @classmethod
     def open(cls, root: Path) -> Benchmark:
-        return Benchmark.discover(root)
+        return discover(root)

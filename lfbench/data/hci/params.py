@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from lfbench.data.scene import MAX_RESOLUTION_PX, MAX_VIEW_PIXELS
 from lfbench.utils.errors import DataError
 from lfbench.utils.readfile import read_text
 
@@ -26,8 +27,6 @@ REQUIRED_KEYS: tuple[tuple[str, str, type], ...] = (
 
 # Bounds checked before anything is allocated from these numbers (a 1 kB file must not ask for 100 GB).
 MAX_CAMS = 33  # per side; HCI has 9x9
-MAX_RESOLUTION_PX = 16384  # per side
-MAX_VIEW_PIXELS = 2**29  # num_cams_x * num_cams_y * width * height (81 views of 2574x2574 px)
 MAX_DEPTH_MAP_SCALE = 16  # side ratio of the high-resolution ground truth (HCI: 10)
 MAX_PARAMETERS_BYTES = 1024**2  # the file itself (HCI's: under 1 kB)
 _POSITIVE = {"focal_length_mm", "sensor_size_mm", "focus_distance_m"}
