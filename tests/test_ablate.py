@@ -457,8 +457,9 @@ def _records(path: Path) -> dict:
 
 @pytest.mark.slow
 def test_submitit_local_executor_and_merged_cells_runs_give_the_jobs_1_results(tmp_path):
-    """The cluster path (submitit's local executor: one job per cell, in subprocesses) and two `--cells` runs
-    merged into one results.json give exactly what one `--jobs 1` run in this process gives."""
+    """The cluster path (submitit's local executor: one job per cell, in a subprocess) and two `--cells` runs
+    merged into one results.json (one of them the submitit run) give exactly what one `--jobs 1` run in this
+    process gives."""
     import dataclasses
 
     from lfbench.ablation.executor import ClusterOptions
@@ -467,20 +468,22 @@ def test_submitit_local_executor_and_merged_cells_runs_give_the_jobs_1_results(t
     spec = load_spec(write_spec(tmp_path, TWO_CELLS))
     assert len(spec.cells) == 2
     one = run_ablation(spec, tmp_path / "jobs1", jobs=1, progress=False, log=quiet)
-    cluster = run_ablation(spec, tmp_path / "local", jobs=1, progress=False, log=quiet,
+    # --cells: one cell per run (as two processes or machines would), merged into one results file; the first
+    # through submitit's local executor, the second in this process
+    first, second = (dataclasses.replace(spec, cells=(cell,)) for cell in spec.cells)
+    cluster = run_ablation(first, tmp_path / "split", jobs=1, progress=False, log=quiet,
                            cluster=ClusterOptions("local", timeout_min=10))
-    assert (tmp_path / "local" / "submitit").is_dir()  # the jobs' pickles and logs
-    for a, b in zip(one.markers, cluster.markers, strict=True):
-        assert a["id"] == b["id"] and a["final_sha256"] == b["final_sha256"]  # bit-identical training
-    assert _records(tmp_path / "local" / "results.json") == _records(tmp_path / "jobs1" / "results.json")
-    # --cells: one cell per run (as two processes or machines would), merged into one results file
-    for cell in spec.cells:
-        run_ablation(dataclasses.replace(spec, cells=(cell,)), tmp_path / "split", progress=False, log=quiet)
+    assert (tmp_path / "split" / "submitit").is_dir()  # the job's pickles and logs
+    (a,) = cluster.markers
+    assert a["id"] == one.markers[0]["id"] and a["final_sha256"] == one.markers[0]["final_sha256"]  # bit-identical
+    run_ablation(second, tmp_path / "split", progress=False, log=quiet)
     merged = json.loads((tmp_path / "split" / "results.json").read_text())
     assert _records(tmp_path / "split" / "results.json") == _records(tmp_path / "jobs1" / "results.json")
     assert sorted(m["id"] for m in merged["meta"]["ablation"]["cells"]) == sorted(c.id for c in spec.cells)
+    for m in merged["meta"]["ablation"]["cells"]:  # each cell trained bit-identically, whichever way it ran
+        assert m["final_sha256"] == next(o["final_sha256"] for o in one.markers if o["id"] == m["id"]), m["id"]
     # a second run of a finished cell replaces its records instead of adding them twice
-    run_ablation(dataclasses.replace(spec, cells=spec.cells[:1]), tmp_path / "split", progress=False, log=quiet)
+    run_ablation(first, tmp_path / "split", progress=False, log=quiet)
     assert _records(tmp_path / "split" / "results.json") == _records(tmp_path / "jobs1" / "results.json")
 
 

@@ -4,8 +4,9 @@ that installs and passes it; ``flops()`` may return a number, and a wrong return
 and the plugin (it was a bare TypeError in every bench case); ``lfbench info NAME`` shows the parameter
 count and FLOPs without weights; the sign convention the README states holds on a generated scene.
 
-The template and examples/tiny_plugin are installed as tests/test_example_plugin.py installs plugins and
-checked in a fresh process each; the deliberately broken networks are registered in this process."""
+The template and examples/tiny_plugin are installed as tests/test_example_plugin.py installs plugins; the
+template is checked in a fresh process, the example plugin from the same site in this one; the deliberately
+broken networks are registered in this process."""
 
 from __future__ import annotations
 
@@ -63,33 +64,41 @@ CHECKS = ["build", "forward", "sign", "receptive_radius", "tiling", "flops", "sa
 
 
 @pytest.mark.slow
-def test_the_template_and_the_example_plugin_pass_check_plugin(installed):
-    src, env, _ = installed
+def test_the_template_and_the_example_plugin_pass_check_plugin(installed, monkeypatch, capsys, one_torch_thread):
+    """The template in a fresh process, as a user runs it (its entry point found in the installed site); the
+    example plugin, installed in the same site, in this process (the fresh process would add nothing the
+    template's does not show)."""
+    src, env, site = installed
+    tiny = _import_tiny()  # before the installed copy is registered below
     assert 'kit-net = "lfbench_kit_net.plugin"' in (src / "pyproject.toml").read_text()
     assert 'method = "kit-net"' in (src / "train_kit_net.toml").read_text()
-    for name in (TEMPLATE, "tinycnn"):
-        proc = _lfbench(env, "check-plugin", name)
-        assert proc.returncode == 0, proc.stdout + proc.stderr
-        statuses = _statuses(proc.stdout)
-        assert list(statuses) == CHECKS, proc.stdout
-        # every check runs; the sign needs trained weights (a network with random weights has no sign)
-        assert statuses == {c: SKIP if c == "sign" else OK for c in CHECKS}, proc.stdout
-        assert "no --weights: a network with random weights has no sign" in proc.stdout
-        assert proc.stdout.strip().splitlines()[-1].endswith("passed: 7 ok, 0 failed, 1 skipped")
-    # info: parameter count and FLOPs without weights, equal to the network's own
-    info = _ok(_lfbench(env, "info", "tinycnn:channels=4"))
-    net = _import_tiny().TinyNet(channels=4)
+    proc = _lfbench(env, "check-plugin", TEMPLATE)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    isolate_registries(monkeypatch)
+    monkeypatch.syspath_prepend(str(site))
+    try:
+        rc, out, err = run_cli(capsys, "check-plugin", "tinycnn")
+        assert rc == 0, out + err
+        for stdout in (proc.stdout, out):
+            statuses = _statuses(stdout)
+            assert list(statuses) == CHECKS, stdout
+            # every check runs; the sign needs trained weights (a network with random weights has no sign)
+            assert statuses == {c: SKIP if c == "sign" else OK for c in CHECKS}, stdout
+            assert "no --weights: a network with random weights has no sign" in stdout
+            assert stdout.strip().splitlines()[-1].endswith("passed: 7 ok, 0 failed, 1 skipped")
+        # info: parameter count and FLOPs without weights, equal to the network's own
+        rc, info, err = run_cli(capsys, "info", "tinycnn:channels=4")
+        assert rc == 0, err
+    finally:
+        for name in [m for m in sys.modules if m.split(".")[0] in ("lfbench_tiny", "lfbench_kit_net")]:
+            del sys.modules[name]
+    net = tiny.TinyNet(channels=4)
     count = sum(p.numel() for p in net.parameters())
     assert f"parameters: {count:,} ({count:,} trainable)" in info
     convs = [m for m in net.modules() if isinstance(m, nn.Conv2d)]
     gflop = sum(2.0 * m.in_channels * m.out_channels * 9 for m in convs) * 512 * 512 / 1e9
     assert f"FLOPs of one forward pass at 512x512: {gflop:.4g} GFLOP" in info
     assert "network 'tinycnn' (with channels=4, no weights needed)" in info
-
-
-def _ok(proc: subprocess.CompletedProcess) -> str:
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    return proc.stdout
 
 
 def _import_tiny():

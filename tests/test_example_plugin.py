@@ -16,7 +16,7 @@ import numpy as np
 import pandas as pd
 import pytest
 import torch
-from helpers import install_example_plugin
+from helpers import install_example_plugin, isolate_registries, run_cli
 
 from lfbench.data.hci import HCIDataset
 
@@ -63,6 +63,14 @@ def _tiny_net(config: dict):
         isolate_registries(mp)
         from lfbench_tiny.plugin import TinyNet
     return TinyNet(**config)
+
+
+def _in_this_process(monkeypatch) -> None:
+    """Let ``run_cli`` find the installed plugin in this process (its site is on sys.path through the fixture):
+    isolated registries that load its entry point afresh (its module imported again, so that it registers)."""
+    for name in [m for m in sys.modules if m.split(".")[0] == "lfbench_tiny"]:
+        monkeypatch.delitem(sys.modules, name)
+    isolate_registries(monkeypatch)
 
 
 def test_the_plugin_is_listed_with_its_parameters(plugin):
@@ -126,33 +134,42 @@ def test_evaluate_runs_the_trained_weights(plugin, trained, tmp_path):
     assert reference < 100 * float(np.mean(np.square(gt - untrained_pred)))  # and they predict better
 
 
-def test_golden_records_of_a_relative_and_an_absolute_weights_path_compare_equal(plugin, trained, tmp_path):
+def test_golden_records_of_a_relative_and_an_absolute_weights_path_compare_equal(plugin, trained, tmp_path, capsys,
+                                                                                 monkeypatch, one_torch_thread):
     """Issue 22.5: the same weights named relative to the working folder and by an absolute path (as in CI
-    and on a laptop) give records with the same keys: regress passes instead of 'MISSING' and 'NEW'."""
-    _, env, _ = plugin
+    and on a laptop) give records with the same keys: regress passes instead of 'MISSING' and 'NEW'. (In this
+    process: the fresh processes of the other tests show the installed plugin found from the command line.)"""
+    _in_this_process(monkeypatch)
+    monkeypatch.chdir(tmp_path)
     data = tmp_path / "data"
-    _ok(lfbench(env, "synth", "--out", data, "--seed", "101", "--size", "48", "--scenes", "1", "--no-progress"))
+
+    def ok(*args) -> str:
+        rc, out, err = run_cli(capsys, *args)
+        assert rc == 0, (args, err[-2000:])
+        return out
+
+    ok("synth", "--out", data, "--seed", "101", "--size", "48", "--scenes", "1", "--no-progress")
     shutil.copy(trained / "final.pt", tmp_path / "weights.pt")
-    rel = subprocess.run([sys.executable, "-m", "lfbench", "evaluate", "--data", "data", "--method",
-                          "tinycnn:weights=weights.pt", "--out", "rel"], env=env, capture_output=True, text=True,
-                         timeout=600, cwd=tmp_path)
-    _ok(rel)
-    _ok(lfbench(env, "evaluate", "--data", data, "--method", f"tinycnn:weights={tmp_path / 'weights.pt'}",
-                "--out", tmp_path / "abs"))
-    _ok(lfbench(env, "regress", tmp_path / "golden.json", tmp_path / "rel" / "results.json", "--update"))
-    out = _ok(lfbench(env, "regress", tmp_path / "golden.json", tmp_path / "abs" / "results.json", "--fail-on-new"))
+    ok("evaluate", "--data", "data", "--method", "tinycnn:weights=weights.pt", "--out", "rel")
+    ok("evaluate", "--data", data, "--method", f"tinycnn:weights={tmp_path / 'weights.pt'}", "--out", tmp_path / "abs")
+    ok("regress", tmp_path / "golden.json", tmp_path / "rel" / "results.json", "--update")
+    out = ok("regress", tmp_path / "golden.json", tmp_path / "abs" / "results.json", "--fail-on-new")
     assert "OK: 5 compared, 0 regressions" in out and "MISSING" not in out and "NEW" not in out
     # a user-given label names them too
-    _ok(lfbench(env, "evaluate", "--data", data, "--method", f"tinycnn:weights={tmp_path / 'weights.pt'}",
-                "--label", "tiny-v1", "--out", tmp_path / "named"))
+    ok("evaluate", "--data", data, "--method", f"tinycnn:weights={tmp_path / 'weights.pt'}", "--label", "tiny-v1",
+       "--out", tmp_path / "named")
     methods = {r["method"] for r in json.loads((tmp_path / "named" / "results.json").read_text())["records"]}
     assert methods == {"tiny-v1"}
 
 
-def test_foreign_weights_and_bad_parameters_are_one_line(plugin, trained, tmp_path):
-    _, env, _ = plugin
+def test_foreign_weights_and_bad_parameters_are_one_line(plugin, trained, tmp_path, capsys, monkeypatch):
+    """In this process (bad input stops before any work; the fresh processes of the other tests show the
+    installed plugin found from the command line)."""
+    _in_this_process(monkeypatch)
     data = tmp_path / "data"
-    _ok(lfbench(env, "synth", "--out", data, "--seed", "102", "--size", "48", "--scenes", "1", "--no-progress"))
+    rc, _, err = run_cli(capsys, "synth", "--out", data, "--seed", "102", "--size", "48", "--scenes", "1",
+                         "--no-progress")
+    assert rc == 0, err
     shipped = ROOT / "methods" / "weights" / "subfocal_small.pt"
     (tmp_path / "w.json").write_text('{"state_dict": {}}')
     for spec, message in ((f"tinycnn:weights={shipped}", "a subfocal checkpoint, not tinycnn (run it as subfocal:"),
@@ -163,9 +180,9 @@ def test_foreign_weights_and_bad_parameters_are_one_line(plugin, trained, tmp_pa
                           (f"tinycnn:weights={trained / 'final.pt'},channels=0",
                            "tinycnn:channels: must be in [1, 1024]"),
                           (f"subfocal:weights={trained / 'final.pt'}", "a tinycnn checkpoint, not subfocal")):
-        proc = lfbench(env, "evaluate", "--data", data, "--method", spec, "--out", tmp_path / "never")
-        assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1, proc.stderr
-        assert message in proc.stderr and "weights_only" not in proc.stderr, proc.stderr
+        rc, _, err = run_cli(capsys, "evaluate", "--data", data, "--method", spec, "--out", tmp_path / "never")
+        assert rc == 2 and len(err.strip().splitlines()) == 1, err
+        assert message in err and "weights_only" not in err, err
         assert not (tmp_path / "never").exists()
 
 
@@ -195,7 +212,7 @@ def test_ablate_over_a_plugin_parameter(plugin, tmp_path):
                                    "angular, loss, beta, lr, seed" in proc.stderr
 
 
-def test_bench_times_the_plugin_network(plugin, tmp_path):
+def test_bench_times_the_plugin_network(plugin, tmp_path, capsys, monkeypatch):
     _, env, _ = plugin
     _ok(lfbench(env, "bench", "inference", "--model", "tinycnn", "--size", "16", "--precision", "fp32",
                 "--threads", "1", "--json", tmp_path / "inference.json"))
@@ -213,7 +230,9 @@ def test_bench_times_the_plugin_network(plugin, tmp_path):
     lines = [line for line in out.splitlines() if line.startswith("[train]")]
     assert len(lines) == 2 and "channels 2" in lines[0] and "channels 4" in lines[1]
     assert "path" not in out and "weight_grad" not in out  # SubFocal's training options are SubFocal's
-    # refused in one line before any case process starts (issue 22.9)
+    # refused in one line before any case process starts (issue 22.9): in this process, where the plugin is
+    # installed too, so that no case process could have started unseen
+    _in_this_process(monkeypatch)
     shipped = ROOT / "methods" / "weights" / "subfocal_small.pt"
     for args, message in ((["inference", "--model", "tinycnn", "--width", "3"], "unrecognized arguments: --width"),
                           (["inference", "--model", "tinycnn:channels=0"], "channels: must be in [1, 1024], got 0"),
@@ -221,12 +240,18 @@ def test_bench_times_the_plugin_network(plugin, tmp_path):
                           (["inference", "--model", "tinycnn", "--weights", str(shipped)],
                            "a subfocal checkpoint, not tinycnn"),
                           (["train", "--model", "tinycnn", "--path", "reference"], "unrecognized arguments: --path")):
-        proc = lfbench(env, "bench", *args, "--size", "16", "--threads", "1") if args[0] == "inference" else \
-            lfbench(env, "bench", *args)
-        assert proc.returncode == 2 and message in proc.stderr, (args, proc.stderr)
-        assert len(proc.stderr.strip().splitlines()) == 1 and "cases, each in a fresh process" not in proc.stdout
-    help_text = _ok(lfbench(env, "bench", "--help"))
-    assert "\n  lfbench bench train --width 150 16 --batch 2\n" in help_text  # the examples stay lines
+        extra = ("--size", "16", "--threads", "1") if args[0] == "inference" else ()
+        with monkeypatch.context() as mp:
+            mp.setattr(subprocess, "Popen", _no_case_process)
+            rc, stdout, stderr = run_cli(capsys, "bench", *args, *extra)
+        assert rc == 2 and message in stderr, (args, stderr)
+        assert len(stderr.strip().splitlines()) == 1 and "cases, each in a fresh process" not in stdout
+    rc, help_text, _ = run_cli(capsys, "bench", "--help")
+    assert rc == 0 and "\n  lfbench bench train --width 150 16 --batch 2\n" in help_text  # the examples stay lines
+
+
+def _no_case_process(*args, **kwargs):
+    raise AssertionError(f"a process was started: {args}")
 
 
 def test_ddp_trains_the_plugin_network_in_two_processes(plugin, tmp_path):

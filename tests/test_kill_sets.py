@@ -13,6 +13,7 @@ import os
 import shutil
 import subprocess
 import uuid
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -59,13 +60,26 @@ def _reports(work: Path) -> None:
                      "--figures", "--no-progress"]) == 0
 
 
+@pytest.fixture(scope="module")
+def reports(tmp_path_factory) -> Callable[[Path], None]:
+    """A setup that copies two results folders of :func:`_reports` into a work folder (made once per module: the
+    report tests only read them)."""
+    made = tmp_path_factory.mktemp("reports")
+    _reports(made)
+
+    def setup(work: Path) -> None:
+        shutil.copytree(made, work, symlinks=True, dirs_exist_ok=True)
+
+    return setup
+
+
 @pytest.mark.parametrize("extra", [(), ("--html", "--maps", "maps")], ids=["report", "report-html"])
-def test_report_killed_anywhere_leaves_the_old_set_or_the_new(tmp_path, extra):
+def test_report_killed_anywhere_leaves_the_old_set_or_the_new(tmp_path, extra, reports):
     def report(results: str):  # with --maps: overviews and the toolkit's figures too
         return lambda w: ["report", w / results, "--out", w / "rep",
                           *(w / results / x if x == "maps" else x for x in extra)]
 
-    _assert_counts(check_writer(tmp_path, "rep", report("r1"), report("r2"), setup=_reports))
+    _assert_counts(check_writer(tmp_path, "rep", report("r1"), report("r2"), setup=reports))
 
 
 def test_demo_killed_anywhere_leaves_the_old_set_or_the_new(tmp_path):
@@ -165,9 +179,10 @@ def _fill(mnt: Path, leave: int) -> Path:
 
 @pytest.mark.parametrize("writer", ["evaluate", "evaluate-html", "report", "report-html", "demo",
                                     pytest.param("ablate", marks=pytest.mark.slow)])
-def test_a_full_disk_is_one_line_naming_the_file_and_keeps_the_old_set(tmp_path, capsys, small_disk, writer):
+def test_a_full_disk_is_one_line_naming_the_file_and_keeps_the_old_set(tmp_path, capsys, small_disk, writer,
+                                                                     reports):
     data = tmp_path / "in"
-    (_reports if writer.startswith("report") else _data)(data)
+    (reports if writer.startswith("report") else _data)(data)
     (data / "a.toml").write_text(ABLATION, encoding="utf-8")
     (data / "b.toml").write_text(ABLATION + '[[methods]]\nlabel = "zero"\nspec = "constant:value=0"\n',
                                  encoding="utf-8")
