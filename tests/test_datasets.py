@@ -388,7 +388,8 @@ def test_a_scene_written_by_the_hci_writer_reads_back_exactly(tmp_path: Path):
                     depth=sc.depth, masks=sc.masks)
     assert HCIDataset.matches(tmp_path)
     (scene,) = HCIDataset.open(tmp_path).scenes
-    assert (scene.name, scene.category, scene.angular_size, scene.spatial_size) == ("round", "training", (3, 3), (24, 24))
+    assert (scene.name, scene.category, scene.angular_size, scene.spatial_size) == ("round", "training", (3, 3),
+                                                                                    (24, 24))
     np.testing.assert_array_equal(scene.rgb_views(), views.astype(np.float32) / np.float32(255.0))
     gt = scene.gt_disparity()
     assert gt.dtype == np.float32 and np.array_equal(gt, sc.disparity)

@@ -26,8 +26,8 @@ from lfbench.utils.names import FileNames
 from lfbench.utils.readfile import check_regular_file
 
 __all__ = ["GRAY_WEIGHTS", "LOWRES", "HIGHRES", "MAX_PNG_PIXELS", "MAX_RESOLUTION_PX", "MAX_VIEW_PIXELS", "rgb_to_gray",
-           "read_png", "read_rgb", "read_mask", "png_bytes", "LightField", "ArrayLightField", "PNGViews", "Scene", "Benchmark",
-           "check_scene_names"]
+           "read_png", "read_rgb", "read_mask", "png_bytes", "LightField", "ArrayLightField", "PNGViews", "Scene",
+           "Benchmark", "check_scene_names"]
 
 GRAY_WEIGHTS = (0.299, 0.587, 0.114)
 LOWRES, HIGHRES = "lowres", "highres"
