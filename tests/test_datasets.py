@@ -329,10 +329,11 @@ def test_jobs_score_urbanlf_scenes_in_workers_with_the_same_numbers(urban_root: 
 _HCI_FILE_NAMES = ("input_Cam", "parameters.cfg", "gt_disp_", "gt_depth_")
 
 
-def _file_name_literals(path: Path) -> list[tuple[int, str]]:
+def _file_name_literals(path: Path, suffixes: tuple[str, ...] = ()) -> list[tuple[int, str]]:
     """(line, text) of every string in ``path``'s code that starts with an HCI file name (a file named in
-    code: ``folder / "parameters.cfg"``, ``f"input_Cam{k:03d}.png"``); docstrings, comments and prose (help
-    texts that mention a file mid-sentence) are not file names and are left out."""
+    code: ``folder / "parameters.cfg"``, ``f"input_Cam{k:03d}.png"``) or, with ``suffixes``, ends with one of
+    them; docstrings, comments and prose (help texts that mention a file mid-sentence) are not file names and
+    are left out."""
     import ast
 
     tree = ast.parse(path.read_text(encoding="utf-8"))
@@ -342,15 +343,14 @@ def _file_name_literals(path: Path) -> list[tuple[int, str]]:
                   and isinstance(node.body[0].value, ast.Constant)}
     found = []
     for node in ast.walk(tree):
-        if isinstance(node, ast.JoinedStr):  # an f-string: its first literal part is where a name starts
-            first = node.values[0] if node.values else None
-            text = first.value if isinstance(first, ast.Constant) and isinstance(first.value, str) else ""
-        elif isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in docstrings:
-            text = node.value
-        else:
-            continue
-        if text.startswith(_HCI_FILE_NAMES):
-            found.append((node.lineno, text))
+        if isinstance(node, ast.JoinedStr):  # an f-string: its first and last literal parts hold the name's ends
+            ends = [part.value if isinstance(part, ast.Constant) and isinstance(part.value, str) else ""
+                    for part in (node.values[:1] + node.values[-1:])] if node.values else ["", ""]
+            if ends[0].startswith(_HCI_FILE_NAMES) or (suffixes and ends[-1].endswith(suffixes)):
+                found.append((node.lineno, "".join(ends)))
+        elif (isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in docstrings
+              and (node.value.startswith(_HCI_FILE_NAMES) or (suffixes and node.value.endswith(suffixes)))):
+            found.append((node.lineno, node.value))
     return found
 
 
@@ -377,6 +377,9 @@ def test_hci_file_names_live_in_the_hci_adapter_only():
              and (lines := _file_name_literals(p))}
     assert named == {}
     assert _file_name_literals(folder / "hci" / "scene.py")  # the check sees the names where they are
+    # likewise the UrbanLF-Syn writer takes its file names (views, disparity, depth) from the urbanlf adapter
+    assert _file_name_literals(folder / "synth_urbanlf.py", (".png", ".npy")) == []
+    assert _file_name_literals(folder / "urbanlf.py", (".png", ".npy"))
 
 
 def test_a_scene_written_by_the_hci_writer_reads_back_exactly(tmp_path: Path):
