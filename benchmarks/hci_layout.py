@@ -26,6 +26,7 @@ import numpy as np
 from PIL import Image
 
 from lfbench.data.hci.params import SceneParameters
+from lfbench.data.hci.scene import PARAMETERS_FILE, gt_file_name, mask_file_name
 from lfbench.data.pfm import write_pfm
 from lfbench.data.submission import write_submission_map
 
@@ -167,16 +168,16 @@ def _write_png(path: Path, mask: np.ndarray) -> None:
 
 def _write_scene(folder: Path, name: str, category: str, size: int, scale: int, highres: bool, seed: int) -> None:
     folder.mkdir(parents=True, exist_ok=True)
-    (folder / "parameters.cfg").write_text(_params(name, category, size, scale).to_cfg(), encoding="utf-8")
+    (folder / PARAMETERS_FILE).write_text(_params(name, category, size, scale).to_cfg(), encoding="utf-8")
     if category == "test":  # the benchmark hides the test scenes' ground truth
         return
     layout = _LAYOUTS.get(name, _photoreal)
     for res, factor in (("lowres", 1), *((("highres", scale),) if highres else ())):
         gt, masks = layout(size, factor, seed)
-        write_pfm(folder / f"gt_disp_{res}.pfm", np.broadcast_to(gt, (size * factor,) * 2).astype(np.float32))
+        write_pfm(folder / gt_file_name(res), np.broadcast_to(gt, (size * factor,) * 2).astype(np.float32))
         for mask_name, mask in masks.items():
             if res == "lowres" or mask_name in _HIGHRES_MASKS:
-                _write_png(folder / f"{mask_name}_{res}.png", np.broadcast_to(mask, (size * factor,) * 2))
+                _write_png(folder / mask_file_name(mask_name, res), np.broadcast_to(mask, (size * factor,) * 2))
         del gt, masks
 
 

@@ -326,9 +326,41 @@ def test_jobs_score_urbanlf_scenes_in_workers_with_the_same_numbers(urban_root: 
 # ------------------------------------------------------------------------------------------- the seam itself
 
 
+_HCI_FILE_NAMES = ("input_Cam", "parameters.cfg", "gt_disp_", "gt_depth_")
+
+
+def _file_name_literals(path: Path, suffixes: tuple[str, ...] = ()) -> list[tuple[int, str]]:
+    """(line, text) of every string in ``path``'s code that starts with an HCI file name (a file named in
+    code: ``folder / "parameters.cfg"``, ``f"input_Cam{k:03d}.png"``) or, with ``suffixes``, ends with one of
+    them; docstrings, comments and prose (help texts that mention a file mid-sentence) are not file names and
+    are left out."""
+    import ast
+
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    docstrings = {id(node.body[0].value) for node in ast.walk(tree)
+                  if isinstance(node, ast.Module | ast.ClassDef | ast.FunctionDef | ast.AsyncFunctionDef)
+                  and node.body and isinstance(node.body[0], ast.Expr)
+                  and isinstance(node.body[0].value, ast.Constant)}
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.JoinedStr):  # an f-string: its first and last literal parts hold the name's ends
+            ends = [part.value if isinstance(part, ast.Constant) and isinstance(part.value, str) else ""
+                    for part in (node.values[:1] + node.values[-1:])] if node.values else ["", ""]
+            if ends[0].startswith(_HCI_FILE_NAMES) or (suffixes and ends[-1].endswith(suffixes)):
+                found.append((node.lineno, "".join(ends)))
+        elif (isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in docstrings
+              and (node.value.startswith(_HCI_FILE_NAMES) or (suffixes and node.value.endswith(suffixes)))):
+            found.append((node.lineno, node.value))
+    return found
+
+
 def test_hci_file_names_live_in_the_hci_adapter_only():
     """Issue 30.1: the generic data code (the scene contract, the dataset seam, the pattern layouts) names no
-    HCI file; HCI's view names, parameters.cfg and PFM ground truth are lfbench/data/hci/'s."""
+    HCI file; HCI's view names, parameters.cfg and PFM ground truth are lfbench/data/hci/'s, for reading and
+    for writing (the synthetic generator and the metrics bench write their HCI scenes through
+    lfbench.data.hci.write, the scoring benchmarks through lfbench.data.hci.scene's names): no module of lfbench
+    or benchmarks/ outside lfbench/data/hci/ names one of its files in code."""
+    import lfbench
     import lfbench.data as data
 
     folder = Path(data.__file__).parent
@@ -339,6 +371,38 @@ def test_hci_file_names_live_in_the_hci_adapter_only():
             assert hci_only not in text, (name, hci_only)
     hci = "".join(p.read_text(encoding="utf-8") for p in (folder / "hci").glob("*.py"))
     assert all(word in hci for word in ("input_Cam", "parameters.cfg", "gt_disp_", "SceneParameters"))
+    package = Path(lfbench.__file__).parent
+    code = [*package.rglob("*.py"), *(Path(__file__).parents[1] / "benchmarks").glob("*.py")]
+    named = {str(p): lines for p in sorted(code) if (folder / "hci") not in p.parents
+             and (lines := _file_name_literals(p))}
+    assert named == {}
+    assert _file_name_literals(folder / "hci" / "scene.py")  # the check sees the names where they are
+    # likewise the UrbanLF-Syn writer takes its file names (views, disparity, depth) from the urbanlf adapter
+    assert _file_name_literals(folder / "synth_urbanlf.py", (".png", ".npy")) == []
+    assert _file_name_literals(folder / "urbanlf.py", (".png", ".npy"))
+
+
+def test_a_scene_written_by_the_hci_writer_reads_back_exactly(tmp_path: Path):
+    """lfbench.data.hci.write and the HCI reader agree on every file: a generated scene written by the writer
+    opens through the HCI adapter with the generated views (as quantized), ground truth, masks and parameters."""
+    from lfbench.data.hci.write import write_hci_scene
+
+    sc = generate_scene(5, size=24, angular=3, name="round", category="training")
+    views = quantize(sc.views)
+    write_hci_scene(tmp_path / "training" / "round", sc.params, views=views, disparity=sc.disparity,
+                    depth=sc.depth, masks=sc.masks)
+    assert HCIDataset.matches(tmp_path)
+    (scene,) = HCIDataset.open(tmp_path).scenes
+    assert (scene.name, scene.category, scene.angular_size, scene.spatial_size) == ("round", "training", (3, 3),
+                                                                                    (24, 24))
+    np.testing.assert_array_equal(scene.rgb_views(), views.astype(np.float32) / np.float32(255.0))
+    gt = scene.gt_disparity()
+    assert gt.dtype == np.float32 and np.array_equal(gt, sc.disparity)
+    assert scene.params == sc.params
+    assert sorted(scene.mask_names()) == sorted(sc.masks)
+    for name, mask in sc.masks.items():
+        np.testing.assert_array_equal(scene.mask(name), mask)
+    assert not scene.has_gt("highres")
 
 
 def test_an_hci_scene_pickles_as_its_folder(tmp_path: Path):

@@ -329,7 +329,9 @@ def test_interrupted_write_leaves_nothing(tmp_path, monkeypatch):
     def boom(*args, **kwargs):
         raise OSError("disk full")
 
-    monkeypatch.setattr(synth, "write_pfm", boom)
+    import lfbench.data.hci.write as hci_write
+
+    monkeypatch.setattr(hci_write, "write_pfm", boom)  # the HCI writer fails half-way through the scene
     with pytest.raises(OSError):
         write_benchmark(tmp_path, seed=1, size=32, scenes=1)
     leftovers = [p for p in tmp_path.rglob("*") if p.is_file() or p.name.startswith(".")]

@@ -1,4 +1,4 @@
-"""Light fields: the contract every dataset's scenes meet, views held in memory, and reading PNG files.
+"""Light fields: the contract every dataset's scenes meet, views held in memory, and reading and writing PNG files.
 
 Views are float32 arrays (V, U, H, W) gray or (V, U, H, W, 3) RGB in [0, 1], where ``views[v, u]`` is the
 view at angular row v, column u, so that ``views.reshape(V * U, H, W)[k]`` is view k (row-major).
@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import io
 import warnings
 from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
@@ -25,8 +26,8 @@ from lfbench.utils.names import FileNames
 from lfbench.utils.readfile import check_regular_file
 
 __all__ = ["GRAY_WEIGHTS", "LOWRES", "HIGHRES", "MAX_PNG_PIXELS", "MAX_RESOLUTION_PX", "MAX_VIEW_PIXELS", "rgb_to_gray",
-           "read_png", "read_rgb", "read_mask", "LightField", "ArrayLightField", "PNGViews", "Scene", "Benchmark",
-           "check_scene_names"]
+           "read_png", "read_rgb", "read_mask", "png_bytes", "LightField", "ArrayLightField", "PNGViews", "Scene",
+           "Benchmark", "check_scene_names"]
 
 GRAY_WEIGHTS = (0.299, 0.587, 0.114)
 LOWRES, HIGHRES = "lowres", "highres"
@@ -122,6 +123,13 @@ def read_mask(path: Path, size: tuple[int, int] | None = None) -> np.ndarray:
     if arr.ndim == 3:
         arr = arr[..., :3].any(axis=-1) if arr.shape[2] >= 3 else arr[..., 0]
     return arr.astype(bool)
+
+
+def png_bytes(array: np.ndarray) -> bytes:
+    """``array`` (H, W) or (H, W, 3) uint8 encoded as a PNG (zlib level 6; the synthetic scenes' bytes)."""
+    buf = io.BytesIO()
+    Image.fromarray(array).save(buf, format="PNG", compress_level=6)
+    return buf.getvalue()
 
 
 class LightField:

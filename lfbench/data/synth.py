@@ -1,4 +1,5 @@
-"""Synthetic light fields in the HCI layout with exact ground truth (the embedded default benchmark).
+"""Synthetic light fields with exact ground truth (the embedded default benchmark), written in the HCI layout
+by :mod:`lfbench.data.hci.write` (:func:`write_scene`, :func:`write_benchmark`).
 
 Geometry is the benchmark's (docs/benchmark-rules.md, Geometry): a surface point with disparity
 d (px per view step) seen at centre-view pixel p = (x, y) appears in view (u, v) at ``p - s d`` with
@@ -28,7 +29,6 @@ The centre-view ground truth is the winner's disparity at each pixel centre: exa
 
 from __future__ import annotations
 
-import io
 import math
 import os
 import shutil
@@ -38,13 +38,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from PIL import Image
 from scipy import ndimage
 
 from lfbench.data.hci.params import SceneParameters
-from lfbench.data.pfm import write_pfm
+from lfbench.data.hci.write import write_hci_scene
 from lfbench.data.scene import ArrayLightField, rgb_to_gray
-from lfbench.utils.atomic import check_replaceable, fresh_dir, replace_dir, write_bytes
+from lfbench.utils.atomic import check_replaceable, fresh_dir, replace_dir
 from lfbench.utils.errors import DataError, SpecError
 
 GENERATOR_VERSION = "1"
@@ -697,7 +696,7 @@ class SyntheticScene:
     views: (V, U, H, W, 3) float32 RGB in [0, 1] (views[v, u] = view k = v * U + u);
     disparity: (H, W) float32 centre-view disparity in px per view step; depth: (H, W) float32 in m
     (from ``params``); layer_id: (H, W) int16 index into ``layers`` at each pixel centre;
-    masks: name -> (H, W) bool (``<name>_lowres.png`` files). ``visibility()`` (computed on first use):
+    masks: name -> (H, W) bool (the scene's evaluation masks). ``visibility()`` (computed on first use):
     (V, U, H, W) bool, True where the centre pixel's surface point is seen in view (u, v).
     """
 
@@ -826,30 +825,12 @@ def quantize(views: np.ndarray) -> np.ndarray:
     return np.round(np.clip(views, 0.0, 1.0) * 255.0).astype(np.uint8)
 
 
-def _png_bytes(array: np.ndarray) -> bytes:
-    buf = io.BytesIO()
-    Image.fromarray(array).save(buf, format="PNG", compress_level=6)
-    return buf.getvalue()
-
-
 def write_scene(scene: SyntheticScene, folder: str | Path) -> Path:
-    """Write ``scene`` in the HCI layout into ``folder`` (created), each file atomically.
-
-    Files: input_Cam000..png (8-bit RGB), parameters.cfg, gt_disp_lowres.pfm, gt_depth_lowres.pfm,
-    <mask>_lowres.png (8-bit gray, 255 = in mask).
-    """
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
-    v, u = scene.views.shape[:2]
-    q = quantize(scene.views)
-    for k in range(v * u):
-        write_bytes(folder / f"input_Cam{k:03d}.png", _png_bytes(q[k // u, k % u]))
-    write_bytes(folder / "parameters.cfg", scene.params.to_cfg().encode("utf-8"))
-    write_pfm(folder / "gt_disp_lowres.pfm", scene.disparity)
-    write_pfm(folder / "gt_depth_lowres.pfm", scene.depth)
-    for name, mask in scene.masks.items():
-        write_bytes(folder / f"{name}_lowres.png", _png_bytes(np.where(mask, 255, 0).astype(np.uint8)))
-    return folder
+    """Write ``scene`` in the HCI layout into ``folder`` (created), each file atomically: its views quantized
+    (:func:`quantize`), parameters, ground-truth disparity and depth, and masks, as
+    :func:`lfbench.data.hci.write.write_hci_scene` names them."""
+    return write_hci_scene(folder, scene.params, views=quantize(scene.views), disparity=scene.disparity,
+                           depth=scene.depth, masks=scene.masks)
 
 
 def scene_name(seed: int, index: int) -> str:

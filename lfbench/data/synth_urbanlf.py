@@ -20,8 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
-from lfbench.data.synth import _png_bytes, check_args, disparity_map, generate_scene, quantize, scene_seed
-from lfbench.data.urbanlf import ANGULAR, URBANLF_DISPARITY_RANGE, gt_name, view_name
+from lfbench.data.scene import png_bytes
+from lfbench.data.synth import check_args, disparity_map, generate_scene, quantize, scene_seed
+from lfbench.data.urbanlf import ANGULAR, URBANLF_DISPARITY_RANGE, depth_name, gt_name, view_name
 from lfbench.utils.atomic import fresh_dir, replace_dir, write_bytes
 from lfbench.utils.errors import DataError, SpecError
 
@@ -51,9 +52,9 @@ def write_urbanlf_scene(folder: str | Path, seed: int, width: int, height: int, 
     try:
         for r in range(ANGULAR):
             for c in range(ANGULAR):
-                write_bytes(tmp / view_name(r + 1, c + 1), _png_bytes(q[r, c]))
+                write_bytes(tmp / view_name(r + 1, c + 1), png_bytes(q[r, c]))
         write_bytes(tmp / gt_name(), _npy_bytes(scene.disparity[crop]))
-        write_bytes(tmp / "5_5_depth.npy", _npy_bytes(scene.depth[crop]))
+        write_bytes(tmp / depth_name(), _npy_bytes(scene.depth[crop]))
         replace_dir(tmp, folder)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)

@@ -44,6 +44,11 @@ def gt_name(row: int = CENTRE, col: int = CENTRE) -> str:
     return f"{row}_{col}_disparity.npy"
 
 
+def depth_name(row: int = CENTRE, col: int = CENTRE) -> str:
+    """The depth file of a view (default the centre's), m, not read: ``'<row>_<col>_depth.npy'``."""
+    return f"{row}_{col}_depth.npy"
+
+
 #: ``u_v.png`` read as angular row u, column v (lfbench's ``{v}_{u}`` with 1-based indices).
 URBANLF_LAYOUT = ViewLayout(pattern="{v}_{u}.png", angular=(ANGULAR, ANGULAR), first=1, gt_file=gt_name(),
                             gt_format="npy")

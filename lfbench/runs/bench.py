@@ -369,23 +369,22 @@ def bench_train(batch: int = 2, patch: int = 32, steps: int = 2, channels_last: 
 
 
 def _write_synthetic_scene(folder: Path, size: int, seed: int):
-    """An HCI-layout scene folder with parameters.cfg and gt_disp_lowres.pfm (smooth random disparity)."""
+    """An HCI-layout scene folder (lfbench.data.hci.write) with its parameters and a smooth random ground-truth
+    disparity (size x size px), returned."""
     import numpy as np
 
     from lfbench.data.hci.params import SceneParameters
-    from lfbench.data.pfm import write_pfm
+    from lfbench.data.hci.write import write_hci_scene
 
-    folder.mkdir(parents=True, exist_ok=True)
     params = SceneParameters(focal_length_mm=100.0, image_resolution_x_px=size, image_resolution_y_px=size,
                              sensor_size_mm=35.0, num_cams_x=9, num_cams_y=9, baseline_mm=90.0,
                              focus_distance_m=8.0, disp_min=-2.0, disp_max=2.0, name=folder.name,
                              category="synthetic")
-    (folder / "parameters.cfg").write_text(params.to_cfg(), encoding="utf-8")
     rng = np.random.default_rng(seed)
     y, x = np.mgrid[0:size, 0:size] / size
     gt = (1.5 * np.sin(2 * np.pi * (x * rng.uniform(0.5, 2) + rng.uniform())) * np.cos(2 * np.pi * y)).astype(
         np.float32)
-    write_pfm(folder / "gt_disp_lowres.pfm", gt)
+    write_hci_scene(folder, params, disparity=gt)
     return gt
 
 

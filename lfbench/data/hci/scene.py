@@ -17,7 +17,8 @@ from lfbench.data.pfm import read_pfm
 from lfbench.data.scene import LOWRES, Benchmark, Scene, read_mask
 from lfbench.utils.errors import DataError
 
-__all__ = ["CATEGORIES", "SPLITS", "PARAMETERS_FILE", "INVALID_AREA_FILE", "HCIScene", "discover", "is_scene_folder"]
+__all__ = ["CATEGORIES", "SPLITS", "PARAMETERS_FILE", "INVALID_AREA_FILE", "HCIScene", "discover", "is_scene_folder",
+           "view_file_name", "gt_file_name", "depth_file_name", "mask_file_name"]
 
 CATEGORIES = ("stratified", "training", "test", "additional")
 #: The paper's splits of the HCI categories.
@@ -29,6 +30,28 @@ SPLITS: dict[str, tuple[str, ...]] = {
 PARAMETERS_FILE = "parameters.cfg"
 #: SubFocal's training masks of the areas to leave out, one per scene (``<folder>/<scene>/<file>``).
 INVALID_AREA_FILE = "input_Cam040_invalid_ver2.png"
+
+
+def view_file_name(k: int) -> str:
+    """The file of view ``k`` (row-major, 0-based): ``input_Cam{k:03d}.png``."""
+    return f"input_Cam{k:03d}.png"
+
+
+def gt_file_name(resolution: str = LOWRES) -> str:
+    """The ground-truth disparity file at ``resolution``: ``gt_disp_<resolution>.pfm``."""
+    return f"gt_disp_{resolution}.pfm"
+
+
+def depth_file_name(resolution: str = LOWRES) -> str:
+    """The ground-truth depth file (m) at ``resolution``: ``gt_depth_<resolution>.pfm``."""
+    return f"gt_depth_{resolution}.pfm"
+
+
+def mask_file_name(name: str, resolution: str = LOWRES) -> str:
+    """The evaluation mask ``name`` at ``resolution``: ``<name>_<resolution>.png``."""
+    return f"{name}_{resolution}.png"
+
+
 _MASK_RE = re.compile(r"^(?P<name>.+)_(?P<res>lowres|highres)\.png$")
 _NOT_MASKS = {"gt_disp", "gt_depth", "input_Cam040", "stratified_masks"}
 
@@ -65,7 +88,7 @@ class HCIScene(Scene):
         return self.params.spatial_size
 
     def view_path(self, k: int) -> Path:
-        return self.path / f"input_Cam{k:03d}.png"
+        return self.path / view_file_name(k)
 
     def _check_views(self) -> None:
         v, u = self.angular_size
@@ -82,11 +105,11 @@ class HCIScene(Scene):
         self._check_views()
 
     def has_gt(self, resolution: str = LOWRES) -> bool:
-        return (self.path / f"gt_disp_{resolution}.pfm").is_file()
+        return (self.path / gt_file_name(resolution)).is_file()
 
     def gt_disparity(self, resolution: str = LOWRES) -> np.ndarray | None:
         """Ground-truth disparity (H, W) float32 at ``resolution``, or None if the file is absent."""
-        path = self.path / f"gt_disp_{resolution}.pfm"
+        path = self.path / gt_file_name(resolution)
         if not path.is_file():
             return None
         h, w = self.spatial_size
@@ -111,7 +134,7 @@ class HCIScene(Scene):
 
     def mask(self, name: str, resolution: str = LOWRES) -> np.ndarray:
         """Evaluation mask ``<name>_<resolution>.png`` as bool (H, W)."""
-        path = self.path / f"{name}_{resolution}.png"
+        path = self.path / mask_file_name(name, resolution)
         if not path.is_file():
             raise DataError(f"no mask {name!r} at {resolution}", path)
         h, w = self.spatial_size
