@@ -125,8 +125,7 @@ def _add_network_flags(p: argparse.ArgumentParser, bench: str, model: str) -> No
     if bench == "train":
         for option in trainable.train_bench_options:
             if option.flag not in taken:
-                group.add_argument(option.flag, dest=f"opt_{option.name}", nargs="+", choices=option.choices,
-                                   help=option.help)
+                add_flag(group, option, default=None, nargs="+", dest=f"opt_{option.name}")
 
 
 def _common(p: argparse.ArgumentParser) -> None:

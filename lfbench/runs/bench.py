@@ -318,8 +318,11 @@ def bench_train(batch: int = 2, patch: int = 32, steps: int = 2, channels_last: 
 
     set_threads(threads)
     dev = case_device(device)
-    options = {o.name for o in get_trainable(model).train_bench_options}
+    options = {o.name: o for o in get_trainable(model).train_bench_options}
     variant = {k: params.pop(k) for k in list(params) if k in options}
+    for key, value in variant.items():  # as the flag checks it (BenchOption is a declared Flag)
+        if problem := options[key].problem(value):
+            raise SpecError(f"network {model!r}: {key}: {problem}")
     trainable, net = _network(model, params, None, seed)
     try:
         as_trained = trainable.prepare_training(net, **variant)
