@@ -266,9 +266,9 @@ def _tampered(small_checkpoint: Path, tmp_path: Path, change) -> Path:
 
 
 @pytest.mark.parametrize(("change", "problem"), [
-    (lambda c: c["config"].update(width=10**7), "width must be a whole number from 1 to 1024"),
-    (lambda c: c["config"].update(width=2.5), "width must be a whole number"),
-    (lambda c: c["config"].update(angular=100001), "angular must be a whole number from 1 to 15"),
+    (lambda c: c["config"].update(width=10**7), "width: must be in [1, 1024], got 10000000"),
+    (lambda c: c["config"].update(width=2.5), "width: expected int, got float"),
+    (lambda c: c["config"].update(angular=100001), "angular: must be in [1, 15], got 100001"),
     (lambda c: c["config"].update(interval=1e-7), "more than 1024"),
     (lambda c: c["config"].update(d_max=float("inf")), "must be finite"),
     (lambda c: c["state_dict"].pop(next(iter(c["state_dict"]))), "missing 1 tensors (e.g. 'extractor."),
