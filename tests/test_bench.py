@@ -254,6 +254,26 @@ def test_train_bench_interleaves_the_reference_and_fast_paths():
     assert 0 < r["cpu_seconds"]
 
 
+def test_a_network_s_train_bench_options_are_declared_flags(capsys):
+    import argparse
+
+    from lfbench.cli.bench import add_arguments
+    from lfbench.method.trainable import get_trainable
+    from lfbench.utils.options import Param
+
+    path = {o.name: o for o in get_trainable("subfocal").train_bench_options}["path"]
+    assert isinstance(path, Param) and path.choices == ("fast", "reference") and path.default == ("fast",)
+    parser = argparse.ArgumentParser(prog="lfbench bench")
+    add_arguments(parser)
+    with pytest.raises(SystemExit) as exc:
+        parser.parse_args(["train", "--path", "fast", "bogus"])
+    assert exc.value.code == 2
+    assert "argument --path: expected one of 'fast', 'reference', got 'bogus'" in capsys.readouterr().err
+    with pytest.raises(SpecError, match="network 'subfocal': weight_grad: expected one of 'auto', 'gemm', "
+                                        "'native', got 'fastest'"):
+        bench.bench_train(width=2, batch=1, patch=8, steps=1, threads=1, weight_grad="fastest")
+
+
 def test_train_bench_compares_weight_gradients_on_the_fast_path_only(monkeypatch):
     import argparse
 

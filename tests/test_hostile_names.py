@@ -230,9 +230,9 @@ def test_ablation_title_and_method_label_cannot_inject(tmp_path, capsys):
 
     note = "note " + MATHTEXT_BREAKER + "\n\\input{x}\r\\write18{rm}"
     assert sweep_main([str(tmp_path / "ab"), str(tmp_path / "sweep"), "--caption", note]) == 0
-    captions, rows = read_tex(tmp_path / "sweep" / "table4_sweep.tex")
+    captions, rows = read_tex(tmp_path / "sweep" / "interval_sweep.tex")
     assert captions == [one_line(note)] and len(rows) == 2
-    assert (tmp_path / "sweep" / "figures" / "table4_sweep.png").is_file()
+    assert (tmp_path / "sweep" / "figures" / "interval_sweep.png").is_file()
 
 
 def _toml(text: str) -> str:

@@ -60,10 +60,10 @@ def test_table_rows_means_and_order(run):
 def test_command_writes_table_and_figure(run, tmp_path, capsys):
     out = tmp_path / "out"
     assert main([str(run), str(out), "--caption", "made-up numbers"]) == 0
-    csv = pd.read_csv(out / "table4_sweep.csv", comment="#")
+    csv = pd.read_csv(out / "interval_sweep.csv", comment="#")
     assert len(csv) == 6
-    assert (out / "figures" / "table4_sweep.png").stat().st_size > 1000
-    assert "made-up numbers" in (out / "table4_sweep.md").read_text()
+    assert (out / "figures" / "interval_sweep.png").stat().st_size > 1000
+    assert "made-up numbers" in (out / "interval_sweep.md").read_text()
     assert main([str(tmp_path / "nothing"), str(out)]) == 2
     assert "not an ablation output folder" in capsys.readouterr().err
 

@@ -397,6 +397,15 @@ def test_training_writes_tensorboard_events_and_a_learning_curve(reference_run):
     assert (out / "learning_curve.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+def test_validation_entries_name_their_badpix_threshold_for_the_curve(reference_run):
+    from lfbench.training.curves import _validation_labels, read_metrics
+
+    cfg, out, _ = reference_run
+    vals = [e for e in read_metrics(out / "metrics.jsonl") if e["event"] == "validation"]
+    assert [v["threshold"] for v in vals] == [cfg.validation.threshold] * 2 == [0.07, 0.07]
+    assert _validation_labels(vals) == ("BadPix 0.07 (%)", "MSE x100")  # the learning curve's axis labels
+
+
 def test_without_tensorboard_the_run_says_so_in_one_line(monkeypatch, caplog):
     from lfbench.training import curves
 

@@ -59,7 +59,7 @@ def write_config(path: Path, cfg: dict) -> Path:
     ({"model": {"widht": 16}}, "[model] unknown key(s): widht (accepted: angular, attention, d_max, d_min, "
                                "interpolation, interval, width)"),
     # the network's own check of a value, before the data is generated or anything is written
-    ({"model": {"width": 0}}, "[model]: width must be a whole number from 1 to 1024, got 0"),
+    ({"model": {"width": 0}}, "model.width: must be in [1, 1024], got 0"),
     ({"model": {"interpolation": "bicubic"}}, "[model]: interpolation must be one of"),
     # data names: checked against the data roots and the synthetic sets the run would generate
     ({"data": {"validation": ["nosuch"]}}, "[data] no scene 'nosuch'; available: synth_1_0"),

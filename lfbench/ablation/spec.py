@@ -64,12 +64,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from lfbench.data.synth import MAX_SYNTH_SCENES, MAX_SYNTH_SIZE
+from lfbench.data.synth import MAX_SYNTH_SIZE
 from lfbench.method.registry import parse_spec as parse_method_spec
 from lfbench.method.trainable import DEFAULT_TRAINABLE, Trainable, get_trainable
 from lfbench.training.config import STAGE_KEYS, TrainConfig, comparable, model_problem
 from lfbench.utils.envvars import expand_vars
 from lfbench.utils.errors import SpecError
+from lfbench.utils.flags import SCENE_COUNT
 from lfbench.utils.names import FileNames
 from lfbench.utils.options import Table, option, parse_section
 from lfbench.utils.tomlfile import read_toml
@@ -115,7 +116,7 @@ class SyntheticEval:
 
     seed: int = option(0, low=0, help="generator seed")
     size: int = option(64, low=32, high=MAX_SYNTH_SIZE, help="height and width of every scene (px)")
-    scenes: int = option(3, low=1, high=MAX_SYNTH_SCENES, help="number of scenes")
+    scenes: int = option(3, low=1, high=SCENE_COUNT.range.high, help="number of scenes")
 
     @property
     def folder_name(self) -> str:

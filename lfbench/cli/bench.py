@@ -56,7 +56,6 @@ MAX_SIZE = 4096  # px per side of a timed light field (as lfbench synth)
 MAX_BATCH = 4096  # as a training config's batch_size
 MAX_PATCH = 1024  # px, as a training config's patch
 MAX_COUNT = 10**6  # steps, repeats, rounds, scenes, methods
-DEFAULT_MODEL = DEFAULT_TRAINABLE  # the network a bench times without --model
 SIZE = Flag("size", int, 512, "image size in px (a size x size scene, 81 views)", Range(8, MAX_SIZE), "S")
 TILE = Flag("tile", int, 0, "core tile size in px (0 = the network's choice: SubFocal's from --max-memory)",
             Range(0, MAX_SIZE), "PX")
@@ -100,7 +99,7 @@ def _model_in(args: list[str]) -> str:
             return args[i + 1]
         if arg.startswith("--model="):
             return arg.split("=", 1)[1]
-    return DEFAULT_MODEL
+    return DEFAULT_TRAINABLE
 
 
 def _add_network_flags(p: argparse.ArgumentParser, bench: str, model: str) -> None:
@@ -126,8 +125,7 @@ def _add_network_flags(p: argparse.ArgumentParser, bench: str, model: str) -> No
     if bench == "train":
         for option in trainable.train_bench_options:
             if option.flag not in taken:
-                group.add_argument(option.flag, dest=f"opt_{option.name}", nargs="+", choices=option.choices,
-                                   help=option.help)
+                add_flag(group, option, default=None, nargs="+", dest=f"opt_{option.name}")
 
 
 def _common(p: argparse.ArgumentParser) -> None:
@@ -135,8 +133,9 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--table", type=Path, metavar="OUT.md", help="also write the table (Markdown) here")
     add_flag(p, THREADS)
     add_flag(p, TIMEOUT)
-    p.add_argument("--model", default=DEFAULT_MODEL, metavar="NAME[:key=value,...]",
-                   help=f"trainable network to time, with parameters (default {DEFAULT_MODEL}; see lfbench methods)")
+    p.add_argument("--model", default=DEFAULT_TRAINABLE, metavar="NAME[:key=value,...]",
+                   help=f"trainable network to time, with parameters (default {DEFAULT_TRAINABLE}; see lfbench "
+                        "methods)")
 
 
 def _device_option(p: argparse.ArgumentParser) -> None:

@@ -20,13 +20,13 @@ HELP = "run a mini benchmark on generated synthetic scenes (no dataset needed)"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    from lfbench.data.synth import SYNTH_SIZE
     from lfbench.runs.demo import DEFAULT_SCENES, DEFAULT_SEED, DEFAULT_SIZE
 
     p.add_argument("--out", type=Path, default=Path("lfbench-demo"), metavar="DIR",
                    help="output folder (default: ./lfbench-demo)")
     add_flag(p, SEED, default=DEFAULT_SEED)
-    p.add_argument("--size", type=int, default=DEFAULT_SIZE, metavar="S",
-                   help=f"scene width and height in px (default {DEFAULT_SIZE})")
+    add_flag(p, SYNTH_SIZE, default=DEFAULT_SIZE)
     add_flag(p, SCENE_COUNT, default=DEFAULT_SCENES)
     p.add_argument("--methods", action="append", metavar="SPEC,...",
                    help="methods to run, comma-separated specs (default: every registered method that runs offline)")

@@ -26,6 +26,8 @@ WORKERS = Flag("workers", int | None, None, "scenes generated at a time in separ
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    from lfbench.data.synth import ANGULAR
+
     p.add_argument("--out", required=True, type=Path, metavar="DIR", help="data root to write into")
     add_flag(p, SEED)
     p.add_argument("--layout", choices=("hci", "urbanlf-syn"), default="hci",
@@ -39,7 +41,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "the paper's Table III samples); replaces --scenes")
     p.add_argument("--category", default=None, metavar="NAME",
                    help="category (split) folder (default synthetic; urbanlf-syn: val)")
-    p.add_argument("--angular", type=int, default=9, metavar="A", help="A x A views, odd (default 9)")
+    add_flag(p, ANGULAR)
     p.add_argument("--disparity-range", type=float, nargs=2, default=None, metavar=("LOW", "HIGH"),
                    help="disparities mapped into [LOW, HIGH] px per view step (default: urbanlf-syn -0.47 1.55, "
                         "UrbanLF-Syn's; hci the generator's own, about -2.1 2.3)")

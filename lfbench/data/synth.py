@@ -36,15 +36,18 @@ import stat
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from scipy import ndimage
 
-from lfbench.data.hci.params import SceneParameters
+from lfbench.data.hci.params import MAX_CAMS, SceneParameters
 from lfbench.data.hci.write import write_hci_scene
 from lfbench.data.scene import ArrayLightField, rgb_to_gray
 from lfbench.utils.atomic import check_replaceable, fresh_dir, replace_dir
 from lfbench.utils.errors import DataError, SpecError
+from lfbench.utils.flags import SCENE_COUNT, SEED, Flag
+from lfbench.utils.options import Param, Range
 
 GENERATOR_VERSION = "1"
 SUPERSAMPLE = 2  # samples per pixel along each axis
@@ -749,18 +752,30 @@ def plane_views(disparity: float, size: int, angular: int = 9, seed: int = 0) ->
 
 
 MAX_SYNTH_SIZE = 4096  # px per side of a generated view
-MAX_SYNTH_SCENES = 1000
-MAX_SEED = 2**63 - 1  # seeds are 64-bit signed integers, as in TOML configs
+#: The side and the angular resolution of generated views, declared once: ``lfbench demo --size`` and ``lfbench
+#: synth --angular`` read and check them at parse time, :func:`check_args` from Python (the seed and the number
+#: of scenes are the shared flags lfbench.utils.flags.SEED and SCENE_COUNT).
+SYNTH_SIZE = Flag("size", int, 128, "scene width and height in px", Range(16, MAX_SYNTH_SIZE), "S")
+ANGULAR = Flag("angular", int, 9, "A x A views, odd (3: the centre view and its neighbours)", Range(3, MAX_CAMS), "A")
+
+
+def require(param: Param, value: Any) -> Any:
+    """``value`` checked as ``param`` declares it (a numpy integer taken as an int); SpecError ``size: must be in
+    [16, 4096], got 8`` otherwise."""
+    problem = param.problem(int(value) if isinstance(value, np.integer) else value)
+    if problem:
+        raise SpecError(f"{param.name}: {problem}")
+    return value
 
 
 def check_args(size: int, angular: int = 9) -> None:
     """SpecError for sizes outside the bounds, before anything is allocated."""
-    from lfbench.data.hci.params import MAX_CAMS, MAX_VIEW_PIXELS
+    from lfbench.data.hci.params import MAX_VIEW_PIXELS
 
-    if int(size) != size or not 16 <= size <= MAX_SYNTH_SIZE:
-        raise SpecError(f"size must be an integer from 16 to {MAX_SYNTH_SIZE} px, got {size}")
-    if int(angular) != angular or not 3 <= angular <= MAX_CAMS or angular % 2 == 0:
-        raise SpecError(f"angular must be an odd integer from 3 (a centre view) to {MAX_CAMS}, got {angular}")
+    require(SYNTH_SIZE, size)
+    require(ANGULAR, angular)
+    if angular % 2 == 0:
+        raise SpecError(f"angular: must be odd (a centre view), got {angular}")
     if size * size * angular * angular > MAX_VIEW_PIXELS:
         raise SpecError(f"{angular}x{angular} views of {size}x{size} px is more than lfbench reads "
                         f"({MAX_VIEW_PIXELS} px): use a smaller size or angular resolution")
@@ -876,10 +891,8 @@ def write_benchmark(out: str | Path, seed: int = 0, size: int = 128, scenes: int
     """
     check_args(size, angular)
     disparity_map(disparity_range)  # SpecError for an impossible range, before anything is written
-    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or not 0 <= seed <= MAX_SEED:
-        raise SpecError(f"seed must be an integer from 0 to {MAX_SEED}, got {str(seed)[:40]}")
-    if int(scenes) != scenes or not 1 <= scenes <= MAX_SYNTH_SCENES:
-        raise SpecError(f"scenes must be an integer from 1 to {MAX_SYNTH_SCENES}, got {scenes}")
+    require(SEED, seed)
+    require(SCENE_COUNT, scenes)
     if int(workers) != workers or workers < 1:
         raise SpecError(f"workers must be a positive integer, got {workers}")
     cats = [category] * scenes if isinstance(category, str) else list(category)

@@ -42,14 +42,16 @@ import inspect
 import itertools
 import math
 import numbers
+import typing
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, ClassVar, Protocol
+from typing import TYPE_CHECKING, Any, ClassVar, Literal, Protocol
 
 from lfbench.data.disparity import disparity_problem
 from lfbench.method.checkpoint import read_weights
 from lfbench.method.params import Param, docstring_help, signature_params, values_problem
 from lfbench.utils.errors import DataError, PluginError
+from lfbench.utils.flags import Flag
 from lfbench.utils.registry import Lazy, Registry
 
 if TYPE_CHECKING:  # torch is imported where a network is built, not by `lfbench methods`
@@ -100,18 +102,22 @@ class StageOptions(Protocol):
 
 
 @dataclasses.dataclass(frozen=True)
-class BenchOption:
-    """An option a network adds to ``lfbench bench train`` (``--NAME V [V ...]``; each value is a variant
-    the bench times): e.g. SubFocal's training ``path`` (fast or reference)."""
+class BenchOption(Flag):
+    """An option a network adds to ``lfbench bench train`` (``--NAME V [V ...]``; each value is a variant the
+    bench times), declared as every flag is: its type is a ``Literal`` of its choices (read and checked by the
+    one declared-option check: ``expected one of 'fast', 'reference', got 'x'``); ``default``: the values timed
+    when it is not given (None: unset). E.g. SubFocal's training ``path`` (fast or reference); make one with
+    :meth:`of`."""
 
-    name: str
-    choices: tuple[str, ...]
-    help: str
-    default: tuple[str | None, ...] = (None,)  # the values timed when the option is not given (None: unset)
+    @classmethod
+    def of(cls, name: str, choices: tuple[str, ...], help: str, default: tuple[str | None, ...] = (None,)
+           ) -> BenchOption:
+        """The option ``--name`` taking one or more of ``choices``."""
+        return cls(name, Literal[tuple(choices)], tuple(default), help, None, "{" + ",".join(choices) + "}")
 
     @property
-    def flag(self) -> str:
-        return "--" + self.name.replace("_", "-")
+    def choices(self) -> tuple[str, ...]:
+        return typing.get_args(self.kind)
 
 
 class Trainable:

@@ -4,11 +4,11 @@ interpolations, from an ablation run of ``[[methods]]`` whose specs carry ``inte
 ``python -m lfbench.reports.sweep_table RUN_DIR OUT_DIR`` reads RUN_DIR/methods/*/{method.json, results.json}
 (each method's own results, so a run still in progress gives the rows it has) and writes into OUT_DIR:
 
-- ``table4_sweep.{md,tex,csv}``: one row per (scene group, interpolation, sub-pixel fit, interval) with
+- ``interval_sweep.{md,tex,csv}``: one row per (scene group, interpolation, sub-pixel fit, interval) with
   every general metric the methods were scored in (in the one display order, headed by each Metric's label:
   BadPix 0.07 / 0.03 / 0.01 (%), MSE x100, Q25) and the mean time per scene (s); scene groups: each real scene by
   name (scored at low resolution, 512 x 512, as the benchmark's lowres numbers) and ``synthetic (mean of n)``;
-- ``figures/table4_sweep.png``: the first of them (BadPix 0.07) against the interval, one line per
+- ``figures/interval_sweep.png``: the first of them (BadPix 0.07) against the interval, one line per
   interpolation and fit, one panel per scene group.
 """
 
@@ -144,8 +144,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         if frame.empty:
             raise DataError("no finished method results under methods/", args.run_dir)
         table = sweep_table(frame)
-        written = write_table(table, args.out_dir, "table4_sweep", args.caption)
-        written.append(sweep_figure(table, args.out_dir / "figures" / "table4_sweep.png", table_metrics(frame)[0]))
+        written = write_table(table, args.out_dir, "interval_sweep", args.caption)
+        written.append(sweep_figure(table, args.out_dir / "figures" / "interval_sweep.png", table_metrics(frame)[0]))
     except LFBenchError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -60,7 +60,6 @@ from lfbench.utils.subprocesses import safe_path_env
 
 PRECISIONS = ("fp32", "bf16")
 BENCHES = ("peak", "inference", "volume", "train", "metrics")  # the order of the tables
-DEFAULT_MODEL = DEFAULT_TRAINABLE  # the network a bench times without --model
 
 
 # --------------------------------------------------------------------------- machine and memory
@@ -250,9 +249,10 @@ def _described(record: dict, net, params: dict[str, Any]) -> dict:
     return record
 
 
-def bench_inference(size: int = 512, precision: str = "fp32", *, model: str = DEFAULT_MODEL, weights: str | None = None,
-                    max_memory_gb: float | None = 4.0, tile: int = 0, threads: int = 0, repeat: int = 1, seed: int = 0,
-                    device: str = "cpu", statistic: str = "best", **params: Any) -> dict:
+def bench_inference(size: int = 512, precision: str = "fp32", *, model: str = DEFAULT_TRAINABLE,
+                    weights: str | None = None, max_memory_gb: float | None = 4.0, tile: int = 0, threads: int = 0,
+                    repeat: int = 1, seed: int = 0, device: str = "cpu", statistic: str = "best",
+                    **params: Any) -> dict:
     """One size x size light field (random views, made on the CPU: the copy to ``device`` is timed) through the
     network's ``Trainable.infer`` on ``device``; best of ``repeat`` runs, or their mean (``statistic="mean"``,
     after one warm-up run: how a paper's runtime is usually measured, e.g. 9x9x256x256, mean of 50).
@@ -302,7 +302,7 @@ def bench_inference(size: int = 512, precision: str = "fp32", *, model: str = DE
 
 
 def bench_train(batch: int = 2, patch: int = 32, steps: int = 2, channels_last: bool = True, threads: int = 0,
-                seed: int = 0, *, model: str = DEFAULT_MODEL, device: str = "cpu", precision: str = "fp32",
+                seed: int = 0, *, model: str = DEFAULT_TRAINABLE, device: str = "cpu", precision: str = "fp32",
                 warmup: int = 1, **params: Any) -> dict:
     """Training steps per second: the network (``params`` over its defaults) in training mode, Adam (lr 1e-3,
     eps 1e-7) on an L1 loss of its disparity for random (batch, N, patch, patch) views against random
@@ -318,8 +318,11 @@ def bench_train(batch: int = 2, patch: int = 32, steps: int = 2, channels_last: 
 
     set_threads(threads)
     dev = case_device(device)
-    options = {o.name for o in get_trainable(model).train_bench_options}
+    options = {o.name: o for o in get_trainable(model).train_bench_options}
     variant = {k: params.pop(k) for k in list(params) if k in options}
+    for key, value in variant.items():  # as the flag checks it (BenchOption is a declared Flag)
+        if problem := options[key].problem(value):
+            raise SpecError(f"network {model!r}: {key}: {problem}")
     trainable, net = _network(model, params, None, seed)
     try:
         as_trained = trainable.prepare_training(net, **variant)
@@ -428,7 +431,7 @@ _FUNCTIONS = {"inference": bench_inference, "train": bench_train, "metrics": ben
 
 # --------------------------------------------------------------------------- running cases
 
-def bench_function(bench: str, model: str = DEFAULT_MODEL) -> Callable[..., dict]:
+def bench_function(bench: str, model: str = DEFAULT_TRAINABLE) -> Callable[..., dict]:
     """The function of a bench: lfbench's own (inference, train, metrics) or one the network ``model``
     contributes (``Trainable.benches``, e.g. SubFocal's peak and volume)."""
     if bench in _FUNCTIONS:
@@ -449,7 +452,7 @@ def run_case(bench: str, params: dict) -> dict:
     if bench in _FUNCTIONS:
         fn = _FUNCTIONS[bench]
     else:
-        fn = bench_function(bench, params.pop("model", DEFAULT_MODEL))
+        fn = bench_function(bench, params.pop("model", DEFAULT_TRAINABLE))
     load_before = _load()
     record = fn(**params)
     machine = machine_info()

@@ -3,18 +3,21 @@ torch is imported when the method is made."""
 
 from __future__ import annotations
 
-import math
+import functools
 from typing import Annotated, Literal
 
 import numpy as np
 
 from lfbench.data.scene import LightField
 from lfbench.method.base import Method, Prediction
+from lfbench.method.params import Param, Range, signature_params, values_problem
 from lfbench.method.registry import register_method
 from lfbench.utils.errors import DataError
 from lfbench.utils.hardware import DEVICE_HELP
+from lfbench.utils.options import Bounds
 
 MAX_RADIUS_PX = 256  # norm_radius and arm_length: windows wider than this only cost time and memory
+POSITIVE = Bounds(0, None, low_open=True)  # arm_tau and temperature: finite numbers > 0
 
 
 @register_method("planesweep")
@@ -35,15 +38,16 @@ class PlaneSweep(Method):
         occlusion: Annotated[Literal["subsets", "none"], "subsets (best of all/half-aperture/centre-row/centre-"
                                                          "column view subsets per pixel) or none"] = "subsets",
         norm_radius: Annotated[int, "radius in px of the local contrast normalisation of the views (0: raw gray "
-                                    "levels)"] = 2,
-        arm_length: Annotated[int, "longest arm in px of the cross-shaped aggregation windows (0: no aggregation)"]
-        = 16,
-        arm_tau: Annotated[float, "gray-level tolerance (0..1) under which the aggregation arms keep growing"] = 0.02,
+                                    "levels)", Range(0, MAX_RADIUS_PX)] = 2,
+        arm_length: Annotated[int, "longest arm in px of the cross-shaped aggregation windows (0: no aggregation)",
+                              Range(0, MAX_RADIUS_PX)] = 16,
+        arm_tau: Annotated[float, "gray-level tolerance (0..1) under which the aggregation arms keep growing",
+                           POSITIVE] = 0.02,
         subpixel: Annotated[Literal["equiangular", "parabola", "none"],
                             "fit through the cost minimum: equiangular (suits the L1 cost), parabola or none"]
         = "equiangular",
         temperature: Annotated[float, "softmax temperature of the returned distribution, in units of each pixel's "
-                                      "mean cost"] = 0.05,
+                                      "mean cost", POSITIVE] = 0.05,
         device: Annotated[str, f"where the sweep runs: {DEVICE_HELP}"] = "auto",
     ) -> None:
         from lfbench_methods.planesweep.estimator import OCCLUSION_MODES, SUBPIXEL_FITS, VIEW_SETS
@@ -59,11 +63,10 @@ class PlaneSweep(Method):
                                      ("occlusion", occlusion, OCCLUSION_MODES), ("subpixel", subpixel, SUBPIXEL_FITS)):
             if value not in allowed:
                 raise ValueError(f"{name} must be one of {', '.join(allowed)}, got {value!r}")
-        if not (0 <= norm_radius <= MAX_RADIUS_PX and 0 <= arm_length <= MAX_RADIUS_PX):
-            raise ValueError(f"norm_radius and arm_length must be from 0 to {MAX_RADIUS_PX} px, "
-                             f"got {norm_radius}, {arm_length}")
-        if not (0 < arm_tau < math.inf and 0 < temperature < math.inf):
-            raise ValueError(f"arm_tau and temperature must be finite numbers > 0, got {arm_tau}, {temperature}")
+        problem = values_problem(_declared(), {"norm_radius": norm_radius, "arm_length": arm_length,
+                                               "arm_tau": arm_tau, "temperature": temperature})
+        if problem:
+            raise ValueError(f"{problem[0]}: {problem[1]}")  # the declared Range / Bounds, as a spec value is checked
         self.interval = float(interval)
         self.interpolation = interpolation
         self.views = views
@@ -101,3 +104,9 @@ class PlaneSweep(Method):
 
 
 __all__ = ["PlaneSweep", "MAX_RADIUS_PX"]
+
+
+@functools.cache
+def _declared() -> dict[str, Param]:
+    """The declared parameters of :class:`PlaneSweep` (types, defaults, bounds)."""
+    return signature_params(PlaneSweep)

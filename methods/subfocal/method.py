@@ -79,7 +79,7 @@ class SubFocal(NetworkMethod):
         device: Annotated[str, DEVICE_HELP] = "auto",
         tf32: Annotated[bool, "allow TF32 in CUDA fp32 convolutions and matmuls (default off: IEEE fp32)"] = False,
     ) -> None:
-        from lfbench_methods.subfocal.network import MAX_WIDTH, check_config
+        from lfbench_methods.subfocal.network import check_config, network_params
 
         from lfbench.utils.hardware import require_bf16, resolve_device
 
@@ -91,8 +91,8 @@ class SubFocal(NetworkMethod):
         check_config(d_min, d_max, interval, interpolation)  # the network's checks (width: ours, None allowed)
         if precision not in ("fp32", "bf16"):
             raise ValueError(f"precision must be fp32 or bf16, got {precision!r}")
-        if width is not None and not 1 <= width <= MAX_WIDTH:
-            raise ValueError(f"width must be from 1 to {MAX_WIDTH}, got {width}")
+        if width is not None and (problem := network_params()["width"].problem(width)):
+            raise ValueError(f"width: {problem}")  # the network's declared Range
         if tile < 0 or threads < 0 or not 0 < max_memory_gb < float("inf"):
             raise ValueError("tile and threads must be >= 0 and max_memory_gb a finite number > 0")
         self.trainable = get_trainable("subfocal")

@@ -25,6 +25,7 @@ statistics once per view, view 0 first.
 
 from __future__ import annotations
 
+import functools
 import math
 import numbers
 from typing import Annotated
@@ -35,6 +36,7 @@ from lfbench_methods.subfocal.weight_grad import check_weight_grad, training_con
 from torch import nn
 
 from lfbench.data.shift import INTERPOLATIONS, angular_offsets, disparity_grid, shift_views
+from lfbench.method.params import Param, Range, signature_params
 
 BN_EPS = 1e-3
 BN_MOMENTUM = 0.01  # Keras momentum 0.99
@@ -395,6 +397,12 @@ class Aggregation(nn.Module):
         return self.out(F.relu(self.classify(x))).squeeze(1)
 
 
+@functools.cache
+def network_params() -> dict[str, Param]:
+    """The declared build parameters of :class:`SubFocalNet` (type, default, help, :class:`Range`)."""
+    return signature_params(SubFocalNet)
+
+
 def check_config(d_min: float, d_max: float, interval: float, interpolation: str, width: int | None = None,
                  attention: bool | None = None, angular: int | None = None) -> None:
     """ValueError naming the first bad :class:`SubFocalNet` build parameter (the grid: a bad or oversized one),
@@ -403,15 +411,17 @@ def check_config(d_min: float, d_max: float, interval: float, interpolation: str
     if interpolation not in INTERPOLATIONS:
         raise ValueError(f"interpolation must be one of {', '.join(INTERPOLATIONS)}, "
                          f"got {str(interpolation)[:40]!r}")
-    for name, value, top in (("width", width, MAX_WIDTH), ("angular", angular, MAX_ANGULAR)):
+    declared = network_params()
+    for name, value in (("width", width), ("attention", attention), ("angular", angular)):
         if value is None:
             continue
-        if isinstance(value, bool) or not isinstance(value, numbers.Integral) or not 1 <= value <= top:
-            raise ValueError(f"{name} must be a whole number from 1 to {top}, got {str(value)[:40]}")
+        if isinstance(value, numbers.Integral) and not isinstance(value, bool):
+            value = int(value)  # a numpy integer
+        problem = declared[name].problem(value)
+        if problem:
+            raise ValueError(f"{name}: {problem}")
     if angular is not None and angular % 2 == 0:
         raise ValueError(f"angular must be odd, got {angular}")
-    if attention is not None and not isinstance(attention, bool):
-        raise ValueError(f"attention must be true or false, got {str(attention)[:40]}")
     disparity_grid(d_min, d_max, interval)
 
 
@@ -426,9 +436,10 @@ class SubFocalNet(nn.Module):
                  interval: Annotated[float, "disparity step of the cost volume in px (paper 0.5)"] = 0.5,
                  interpolation: Annotated[str, "sub-pixel shift of the features: nearest, bilinear (paper) or "
                                                "phase (Fourier)"] = "bilinear",
-                 width: Annotated[int, "channels of the 3D aggregation (paper 150)"] = 150,
+                 width: Annotated[int, "channels of the 3D aggregation (paper 150)", Range(1, MAX_WIDTH)] = 150,
                  attention: Annotated[bool, "channel attention over the views on/off"] = True,
-                 angular: Annotated[int, "views per angular row (9 for the HCI scenes)"] = 9) -> None:
+                 angular: Annotated[int, "views per angular row, odd (9 for the HCI scenes)",
+                                    Range(1, MAX_ANGULAR)] = 9) -> None:
         super().__init__()
         check_config(d_min, d_max, interval, interpolation, width, attention, angular)  # before any allocation
         self._config = {"d_min": float(d_min), "d_max": float(d_max), "interval": float(interval),

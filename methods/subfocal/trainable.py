@@ -32,9 +32,9 @@ class SubFocalTrainable(Trainable):
     axes = ("interval", "interpolation", "width", "attention", "d_min", "d_max")
     benches = {"peak": bench_peak, "volume": bench_volume}
     train_bench_options = (
-        BenchOption("path", TRAINING_PATHS, "training path(s): fast (what lfbench train runs) and/or reference "
+        BenchOption.of("path", TRAINING_PATHS, "training path(s): fast (what lfbench train runs) and/or reference "
                     "(the original ops: the 'before' of the training speed-up)", default=("fast",)),
-        BenchOption("weight_grad", WEIGHT_GRADS, "fast path: convolution weight gradients as matrix products "
+        BenchOption.of("weight_grad", WEIGHT_GRADS, "fast path: convolution weight gradients as matrix products "
                     "where they pay (auto, the default), on every layer they apply to (gemm), or PyTorch's own "
                     "(native)"),
     )

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Table IV without training: the plane sweep (methods/planesweep.py) at disparity intervals 1 / 0.5 / 0.25 / 0.1
 # x nearest / bilinear / phase (and bilinear without its sub-pixel fit) on backgammon, antinous and 4 synthetic
-# scenes; writes table4_sweep.{md,tex,csv}, figures/table4_sweep.png and results.json here (the full run stays in
+# scenes; writes interval_sweep.{md,tex,csv}, figures/interval_sweep.png and results.json here (the full run stays in
 # runs/planesweep_table4; finished methods are not re-run, so an interrupted run continues).
 # About 25 min on 2 free cores (1 thread): ~1-10 s per synthetic scene, 15-90 s per 512x512 scene per method.
 #   LFBENCH_HCI_ROOT=../shared/data/hci bash results/planesweep_table4/make.sh
