@@ -13,6 +13,7 @@ from types import SimpleNamespace
 
 import pandas as pd
 import pytest
+from helpers import isolate_registries
 from test_ablate import quiet, write_spec
 from test_table3 import write_paper3
 
@@ -112,7 +113,8 @@ class _Costly(Trainable):
         return 10.0 * model.get("channels", 1) * steps
 
 
-def test_the_cost_of_a_cell_is_its_trainables_hook():
+def test_the_cost_of_a_cell_is_its_trainables_hook(monkeypatch):
+    isolate_registries(monkeypatch)  # the toy network is forgotten after the test (others list every network)
     register_trainable("toycost-29")(_Costly)
     task = SimpleNamespace(network="toycost-29", stage1_dir=None,
                            config={"model": {"channels": 4}, "stages": [{"steps": 3}, {"steps": 2}]})
