@@ -254,17 +254,25 @@ def load_scenes(pairs: tuple[tuple[str, str | None], ...], ev: Evaluation | None
     return [opened.get(path) or HCIScene(path, category=category) for path, category in pairs]
 
 
+def evaluation_dataset(ev: Evaluation):
+    """The dataset adapter of the evaluation's data root (given or detected); None for generated scenes alone."""
+    if ev.data is None:
+        return None
+    from lfbench.data.dataset import dataset_of
+
+    return dataset_of(ev.data, ev.dataset)
+
+
 def scoring_of(ev: Evaluation) -> dict[str, Any]:
     """How the cells are scored (``evaluate_to_folder``'s rules and metrics): by the protocol of the dataset of
     the evaluation's data root, as ``lfbench evaluate`` scores it; generated scenes alone by the default rules."""
     from lfbench.scoring.rules import ScoringRules
 
-    if ev.data is None:
+    dataset = evaluation_dataset(ev)
+    if dataset is None:
         return {"rules": ScoringRules(allow_highres=not ev.lowres_only)}
-    from lfbench.data.dataset import dataset_of
     from lfbench.scoring.metrics import scored_metrics
 
-    dataset = dataset_of(ev.data, ev.dataset)
     protocol = dataset.protocol_for(ev.data)
     return {"rules": ScoringRules.of_protocol(protocol, allow_highres=not ev.lowres_only),
             "metrics": scored_metrics(protocol.metrics, protocol.source), "meta": {"dataset": dataset.name}}

@@ -41,6 +41,7 @@ from typing import Any
 from lfbench.ablation.cell import (
     MAPS,
     CellTask,
+    evaluation_dataset,
     is_done,
     link_data_folder,
     load_scenes,
@@ -381,8 +382,8 @@ def run_ablation(spec: AblationSpec, out: str | Path, *, jobs: int = 1, progress
     markers = run_cells(tasks, executor, progress, log)
     timings = time_cells(tasks, spec.evaluation.threads or per_job or cores, progress, log, executor)
     markers = [{**m, **{k: v for k, v in t.items() if k != "key"}} for m, t in zip(markers, timings, strict=True)]
-    dataset = scoring_of(spec.evaluation).get("meta", {})  # the dataset of the data root, when there is one
-    combined = Results(meta={**dataset,
+    dataset = evaluation_dataset(spec.evaluation)  # the dataset of the data root, when there is one
+    combined = Results(meta={**({"dataset": dataset.name} if dataset is not None else {}),
                              "ablation": {"title": spec.title, "spec": str(spec.source), "table": spec.table,
                                           "budget": spec.budget_label(), "shared_stage1": spec.shared_stage1,
                                           "cells": markers}})
