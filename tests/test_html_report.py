@@ -391,8 +391,22 @@ def _errors(driver) -> list[str]:
     return [e["message"] for e in driver.get_log("browser") if e.get("level") == "SEVERE"]
 
 
+def _settle(driver, url_has: str | None = None, timeout_s: float = 60.0) -> None:
+    """Wait until the page (whose address contains ``url_has`` where given) has loaded and every image has
+    finished, loaded or broken: a navigation started by a click is asynchronous, and on a loaded machine the
+    next step can otherwise read a page whose images are still on their way (CI saw all 11 of a method page's images
+    incomplete, though the scene page before had loaded the same files)."""
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    WebDriverWait(driver, timeout_s).until(lambda d: (url_has is None or url_has in d.current_url)
+                                           and d.execute_script("return document.readyState") == "complete"
+                                           and d.execute_script(
+                                               "return Array.from(document.images).every(i => i.complete)"))
+
+
 def _images_loaded(driver) -> list[str]:
-    """The src of every image that did not load."""
+    """The src of every image that did not load (once the page has settled)."""
+    _settle(driver)
     return driver.execute_script(
         "return Array.from(document.images).filter(i => !(i.complete && i.naturalWidth > 0)).map(i => i.src);")
 
@@ -432,12 +446,12 @@ def test_site_in_a_headless_browser(site, browser, tmp_path):
 
     # a scene page: every map loads, and it links back to the index
     browser.find_element(By.CSS_SELECTOR, "a.card").click()
-    assert "scene-" in browser.current_url
+    _settle(browser, "/scene-")
     assert _images_loaded(browser) == []
     assert len(browser.find_elements(By.CSS_SELECTOR, ".method-row img")) == 3 * 3
     browser.save_screenshot(str(tmp_path / "scene.png"))
     browser.find_element(By.CSS_SELECTOR, "a.back").click()
-    assert browser.current_url.endswith("/index.html")
+    _settle(browser, "/index.html")  # the click's navigation has finished before the next one starts
 
     # a method page
     browser.get((html / f"method-{safe_name('published:good')}.html").as_uri())
