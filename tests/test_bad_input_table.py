@@ -218,6 +218,13 @@ CASES: list[tuple[str, Callable[[Path], list], tuple[str, ...], tuple[str, ...]]
     ("check-plugin-bad-param", lambda t: ["check-plugin", "subfocal:width=0"], ("width",), ()),
     ("check-plugin-no-weights", lambda t: ["check-plugin", "subfocal", "--weights", t / "nope.pt"],
      ("nope.pt", "not found"), ()),
+    ("check-dataset-missing", lambda t: ["check-dataset", t / "nope"], ("nope", "data root not found"), ()),
+    ("check-dataset-unknown", lambda t: ["check-dataset", _scene(t).parent.parent, "--dataset", "nosuchset"],
+     ("nosuchset",), ()),
+    ("check-dataset-bad-toml", lambda t: ["check-dataset", _file(t, "d/lfbench-dataset.toml",
+                                                                 '[views]\npattern = "v{k}.png"\nangular = 3\n'
+                                                                 'reverse_rows = 1\n').parent],
+     ("lfbench-dataset.toml", "'views.reverse_rows' must be true or false"), ()),
     ("new-plugin-bad-name", lambda t: ["new-plugin", "Bad Name", "--out", t / "p"], ("plugin name 'Bad Name'",),
      ("p",)),
     ("new-plugin-taken", lambda t: ["new-plugin", "subfocal", "--out", t / "p"], ("registered already",), ("p",)),

@@ -45,6 +45,7 @@ BUILTIN_COMMANDS = {
     "validate-submission": "lfbench.cli.validate_submission",
     "bench": "lfbench.cli.bench",
     "check-plugin": "lfbench.cli.check_plugin",
+    "check-dataset": "lfbench.cli.check_dataset",
     "new-plugin": "lfbench.cli.new_plugin",
 }
 _HELP_BYTES = 1 << 20  # the most of a plugin command's source read for its HELP

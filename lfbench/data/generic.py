@@ -7,9 +7,12 @@ Keys (every one optional except ``views.pattern`` and ``views.angular``)::
     pattern = "view_{v}_{u}.png"   # {v} angular row, {u} column (or {k} = v * U + u), from `first`
     angular = [9, 9]               # rows, columns (or one number for a square grid)
     first = 0                      # the first index: 0 or 1
+    reverse_rows = false           # the files count rows bottom to top (`lfbench check-dataset` tells)
+    reverse_columns = false        # ... columns right to left
+    transpose = false              # ... the first index is the column (square grids)
     [ground_truth]
     file = "disparity.pfm"         # the centre view's disparity, px per view step (absent file: not scored)
-    format = "pfm"                 # pfm, npy or png16 (16-bit PNG: disparity = value * scale + offset)
+    format = "pfm"                 # pfm, npy or png16 (16-bit gray PNG); disparity = value * scale + offset
     scale = 1.0
     offset = 0.0
     [protocol]
@@ -39,7 +42,7 @@ __all__ = ["SPEC_FILE", "GenericDataset", "read_dataset_spec"]
 SPEC_FILE = "lfbench-dataset.toml"
 MAX_ANGULAR = 33  # views per axis
 _KEYS: dict[str, set[str]] = {
-    "views": {"pattern", "angular", "first"},
+    "views": {"pattern", "angular", "first", "reverse_rows", "reverse_columns", "transpose"},
     "ground_truth": {"file", "format", "scale", "offset"},
     "protocol": {"border", "metrics", "disparity_range", "disparity_interval"},
 }
@@ -103,8 +106,12 @@ def read_dataset_spec(path: str | Path) -> tuple[ViewLayout, DatasetProtocol]:
     if not _number(scale) or scale == 0 or not _number(offset):
         raise DataError(f"'ground_truth.scale' must be a finite non-zero number and 'offset' finite, got {scale!r}, "
                         f"{offset!r}", path)
-    if fmt != "png16" and ("scale" in gt or "offset" in gt):
-        raise DataError(f"'ground_truth.scale' and 'offset' apply to format png16 only (format is {fmt})", path)
+    turns = {key: views.get(key, False) for key in ("reverse_rows", "reverse_columns", "transpose")}
+    for key, value in turns.items():
+        if not isinstance(value, bool):
+            raise DataError(f"'views.{key}' must be true or false, got {str(value)[:40]!r}", path)
+    if turns["transpose"] and angular[0] != angular[1]:
+        raise DataError(f"'views.transpose' needs a square grid of views, got {angular[0]}x{angular[1]}", path)
 
     border = proto.get("border", DEFAULT_PROTOCOL.border_px)
     if not isinstance(border, int) or isinstance(border, bool) or not 0 <= border <= 1024:
@@ -121,7 +128,9 @@ def read_dataset_spec(path: str | Path) -> tuple[ViewLayout, DatasetProtocol]:
                         f"({rng[1] - rng[0]:g}), got {step!r}", path)
 
     layout = ViewLayout(pattern=pattern, angular=(angular[0], angular[1]), first=first, gt_file=gt_file,
-                        gt_format=fmt, gt_scale=float(scale), gt_offset=float(offset))
+                        gt_format=fmt, gt_scale=float(scale), gt_offset=float(offset),
+                        transpose=turns["transpose"], reverse_rows=turns["reverse_rows"],
+                        reverse_cols=turns["reverse_columns"])
     protocol = DatasetProtocol(border_px=border, metrics=tuple(metrics), source=path,  # ids checked where scored
                                disparity_range=(float(rng[0]), float(rng[1])), angular_size=layout.angular,
                                disparity_interval=None if step is None else float(step),

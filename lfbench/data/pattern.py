@@ -37,7 +37,12 @@ class ViewLayout:
     ``pattern``: view file name with ``{v}``/``{u}`` (row, column) or ``{k}`` (row-major index);
     ``angular``: (V, U) rows and columns of views; ``first``: the first index (0 or 1);
     ``gt_file``: the centre view's ground-truth disparity file (None: no ground truth);
-    ``gt_format``: 'pfm', 'npy' or 'png16' (16-bit PNG: disparity = value * ``gt_scale`` + ``gt_offset``).
+    ``gt_format``: 'pfm', 'npy' or 'png16'; disparity = value * ``gt_scale`` + ``gt_offset`` (a negative scale
+    flips a sign convention opposite to HCI's);
+    ``reverse_rows`` / ``reverse_cols``: the files count rows from the bottom / columns from the right;
+    ``transpose``: the files' row index is lfbench's column (square grids). Reversal applies to lfbench's
+    indices, then transposition, as :class:`lfbench.data.orientation.Orientation` reads a grid, so the
+    reading ``lfbench check-dataset`` names is the one these keys declare.
     """
 
     pattern: str
@@ -47,11 +52,18 @@ class ViewLayout:
     gt_format: str = "npy"
     gt_scale: float = 1.0
     gt_offset: float = 0.0
+    transpose: bool = False
+    reverse_rows: bool = False
+    reverse_cols: bool = False
 
     def view_name(self, row: int, col: int) -> str:
-        """The file of the view at 0-based angular ``row``, ``col``."""
-        u_count = self.angular[1]
-        return self.pattern.format(v=row + self.first, u=col + self.first, k=row * u_count + col + self.first)
+        """The file of the view at 0-based angular ``row``, ``col`` (lfbench's ``views[row, col]``)."""
+        rows, cols = self.angular
+        row = rows - 1 - row if self.reverse_rows else row
+        col = cols - 1 - col if self.reverse_cols else col
+        if self.transpose:
+            row, col = col, row
+        return self.pattern.format(v=row + self.first, u=col + self.first, k=row * cols + col + self.first)
 
     @property
     def centre(self) -> tuple[int, int]:
@@ -195,7 +207,9 @@ class PatternScene(Scene):
             raw = read_png(path, "ground truth", size=(h, w))
             if raw.dtype != np.uint16 or raw.ndim != 2:
                 raise DataError("ground truth is not a 16-bit gray PNG", path)
-            gt = raw.astype(np.float64) * self.layout.gt_scale + self.layout.gt_offset
+            gt = raw.astype(np.float64)
+        if (self.layout.gt_scale, self.layout.gt_offset) != (1.0, 0.0):
+            gt = gt * self.layout.gt_scale + self.layout.gt_offset
         bad = int(np.count_nonzero(~np.isfinite(gt)))
         if bad:
             raise DataError(f"ground truth has {bad} non-finite values of {gt.size} (NaN or inf): it cannot be "
