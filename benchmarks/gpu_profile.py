@@ -33,8 +33,10 @@ def _cases(quick: bool) -> tuple[list, list]:
             [(16, 512), (150, 128), (150, 256), (150, 512)])
 
 
-def train_rate(device, width: int, batch: int, steps: int, profile_to: Path | None) -> float:
-    """Training steps per second of SubFocal (interval 0.5) on random (batch, 81, 32, 32) views."""
+def train_rate(device, width: int, batch: int, steps: int, profile_to: Path | None, *, warmup: int = 5,
+               profiled_steps: int = 3) -> float:
+    """Training steps per second of SubFocal (interval 0.5) on random (batch, 81, 32, 32) views, after
+    ``warmup`` untimed steps; ``profile_to``: a profiler table of ``profiled_steps`` more steps."""
     import torch
     from lfbench_methods.subfocal.network import SubFocalNet
 
@@ -51,7 +53,7 @@ def train_rate(device, width: int, batch: int, steps: int, profile_to: Path | No
         disparity.abs().mean().backward()
         opt.step()
 
-    for _ in range(5):
+    for _ in range(warmup):
         step()
     sync(device)
     start = time.perf_counter()
@@ -64,11 +66,11 @@ def train_rate(device, width: int, batch: int, steps: int, profile_to: Path | No
 
         activities = [ProfilerActivity.CPU] + ([ProfilerActivity.CUDA] if device.type == "cuda" else [])
         with profile(activities=activities) as prof:
-            for _ in range(3):
+            for _ in range(profiled_steps):
                 step()
             sync(device)
         key = "cuda_time_total" if device.type == "cuda" else "cpu_time_total"
-        profile_to.write_text(f"3 training steps, width {width}, batch {batch}, sorted by {key}\n"
+        profile_to.write_text(f"{profiled_steps} training steps, width {width}, batch {batch}, sorted by {key}\n"
                               + prof.key_averages().table(sort_by=key, row_limit=30) + "\n\nsorted by cpu_time_total\n"
                               + prof.key_averages().table(sort_by="cpu_time_total", row_limit=15), encoding="utf-8")
     return rate
@@ -131,7 +133,9 @@ def main(argv: list[str] | None = None) -> int:
         case: dict = {"width": width, "batch": batch, "steps": steps}
         try:
             table = args.out / f"profile_w{width}_b{batch}.txt" if profiled else None
-            case["steps_per_s"] = train_rate(device, width, batch, steps, table)
+            # quick: one warm-up and one profiled step (the profiler's table costs ~6 s per profiled step on a CPU)
+            case["steps_per_s"] = train_rate(device, width, batch, steps, table,
+                                             **({"warmup": 1, "profiled_steps": 1} if args.quick else {}))
         except Exception as exc:  # noqa: BLE001 - a failed case is recorded, the others still run
             case["error"] = f"{type(exc).__name__}: {exc}"[:300]
         report["train"].append(case)
