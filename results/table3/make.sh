@@ -14,5 +14,9 @@ SIZE=${SIZE:-160x120}  # small, for a 2-core CPU (the real samples are 640x480)
 # grid ([-0.5, 1.6] at 0.1 px, the paper's)
 rm -rf "$HERE/run" "$HERE/report"
 lfbench synth --layout urbanlf-syn --size "$SIZE" --numbers 11,27,34,50,54,68,69,70 --seed 0 --out "$DATA"
-lfbench evaluate --data "$DATA" --method planesweep --method gt --method constant --out "$HERE/run" --no-progress
+# subfocal:width=16: the shipped checkpoint (results/shipped_model: trained on lfbench's synthetic HCI-layout
+# scenes and antinous; it searches its own [-4, 4] at 0.5 px on any dataset)
+lfbench evaluate --data "$DATA" --method subfocal:width=16 --method planesweep --method gt --method constant \
+    --out "$HERE/run" --no-progress
 lfbench report "$HERE/run" --out "$HERE/report" --paper "$PAPER" --format md,csv
+python "$HERE/paired.py" "$HERE/run" subfocal planesweep
