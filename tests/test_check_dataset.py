@@ -12,7 +12,7 @@ from helpers import assert_one_error_line, run_cli, write_scene
 from PIL import Image
 
 from lfbench.data.generic import SPEC_FILE
-from lfbench.data.orientation import AS_READ, ORIENTATIONS, check_orientation, warp_error
+from lfbench.data.orientation import AS_READ, ORIENTATIONS, check_orientation, distinct_readings, warp_error
 from lfbench.data.synth import generate_scene, plane_views, quantize
 
 SIGN = ORIENTATIONS[1]
@@ -65,6 +65,17 @@ def test_no_disparity_leaves_the_reading_undecided(scene):
     flat = np.broadcast_to(scene.gray_views()[3, 3], scene.gray_views().shape)
     check = check_orientation("s", flat, np.zeros_like(scene.disparity))
     assert check.ratio == 1.0 and not check.decided and not check.agrees
+
+
+def test_a_row_of_views_has_two_readings_and_they_are_told_apart(scene):
+    """On one row of views reversing the rows changes nothing and reversing the columns is negating the
+    disparity: two readings remain, and the check still tells them apart."""
+    assert distinct_readings(1, 7) == [AS_READ, SIGN]
+    assert len(distinct_readings(3, 5)) == 4 and len(distinct_readings(7, 7)) == 8
+    row = scene.gray_views()[3:4]
+    check = check_orientation("s", row, scene.disparity)
+    assert set(check.errors) == {AS_READ, SIGN} and check.agrees
+    assert check_orientation("s", row[:, ::-1], scene.disparity).best is SIGN
 
 
 def test_a_grid_without_a_centre_view_is_refused(scene):
@@ -135,6 +146,22 @@ def test_cli_without_ground_truth_is_one_line(tmp_path, capsys):
     (folder / "gt_disp_lowres.pfm").unlink()
     rc, _, err = run_cli(capsys, "check-dataset", str(tmp_path / "hci"), "--no-progress")
     assert_one_error_line(rc, err, "none of the selected scenes has ground truth")
+
+
+def test_cli_refuses_a_grid_without_a_centre_view_before_any_work(scene, tmp_path, capsys):
+    root = tmp_path / "even"
+    root.mkdir()
+    (root / SPEC_FILE).write_text('[views]\npattern = "view_{v}_{u}.png"\nangular = 6\n'
+                                  '[ground_truth]\nfile = "gt.npy"\n')
+    folder = root / "street"
+    folder.mkdir()
+    views = quantize(scene.views)
+    for v in range(6):
+        for u in range(6):
+            Image.fromarray(views[v, u]).save(folder / f"view_{v}_{u}.png")
+    np.save(folder / "gt.npy", scene.disparity)
+    rc, _, err = run_cli(capsys, "check-dataset", str(root), "--no-progress")
+    assert_one_error_line(rc, err, "street", "the view grid is 6x6: check-dataset needs a centre view")
 
 
 @pytest.mark.realdata

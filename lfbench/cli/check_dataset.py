@@ -35,6 +35,11 @@ def run(args: argparse.Namespace) -> int:
     with_gt = [s for s in scenes if s.has_gt()]
     if not with_gt:
         raise DataError(f"none of the selected scenes has ground truth to check against ({dataset.name})", args.data)
+    for scene in with_gt:  # before any work: the readings turn the grid about its centre view
+        rows, cols = scene.angular_size
+        if rows % 2 == 0 or cols % 2 == 0:
+            raise DataError(f"the view grid is {rows}x{cols}: check-dataset needs a centre view (odd rows and "
+                            "columns)", getattr(scene, "path", args.data))
     checks = []
     for scene in tqdm(with_gt, desc="check-dataset", unit="scene", disable=args.no_progress, leave=False):
         check = check_orientation(scene.name, scene.gray_views(), scene.gt_disparity(), border_px=border)

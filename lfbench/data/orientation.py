@@ -20,7 +20,7 @@ import torch
 import torch.nn.functional as F
 
 __all__ = ["AS_READ", "DECISIVE_RATIO", "ORIENTATIONS", "Orientation", "OrientationCheck", "check_orientation",
-           "orientation_errors", "warp_error"]
+           "distinct_readings", "orientation_errors", "warp_error"]
 
 #: The best reading must beat every other by this factor (error ratio) for the check to name it.
 DECISIVE_RATIO = 1.25
@@ -115,11 +115,27 @@ def warp_error(gray: np.ndarray, disparity: np.ndarray, *, border_px: int = 0) -
     return total / count if count else math.nan
 
 
+def distinct_readings(rows: int, cols: int) -> list[Orientation]:
+    """The readings that differ on a rows x cols grid, in :data:`ORIENTATIONS` order: the transposed ones only
+    for a square grid, and of readings that order the views alike (on one row of views, reversing the rows
+    changes nothing) the first."""
+    grid = np.arange(rows * cols).reshape(rows, cols)
+    seen: set[bytes] = set()
+    readings = []
+    for o in ORIENTATIONS:
+        if o.transpose and rows != cols:
+            continue
+        key = np.ascontiguousarray(o.apply(grid)).tobytes()
+        if key not in seen:
+            seen.add(key)
+            readings.append(o)
+    return readings
+
+
 def orientation_errors(gray: np.ndarray, disparity: np.ndarray, *, border_px: int = 0) -> dict[Orientation, float]:
-    """:func:`warp_error` under every reading of the grid (the transposed ones only for a square grid)."""
-    square = gray.shape[0] == gray.shape[1]
+    """:func:`warp_error` under every distinct reading of the grid (:func:`distinct_readings`)."""
     return {o: warp_error(o.apply(gray), disparity, border_px=border_px)
-            for o in ORIENTATIONS if square or not o.transpose}
+            for o in distinct_readings(gray.shape[0], gray.shape[1])}
 
 
 @dataclass(frozen=True)
