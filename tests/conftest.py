@@ -1,7 +1,8 @@
 """Shared fixtures. Real-data tests read LFBENCH_HCI_ROOT (the HCI data root, e.g. ../shared/data/hci)
 and skip cleanly when it is unset; the folder beside it (its parent) holds published/, reference/
 and paper/ when present. Every test that uses the ``hci_root`` fixture (directly or through another
-fixture) carries the ``realdata`` marker, so ``-m "not realdata"`` runs without the data. Every test
+fixture) carries the ``realdata`` marker, so ``-m "not realdata"`` runs without the data; so does every test
+that uses ``urbanlf_root`` (the released UrbanLF-Syn, LFBENCH_URBANLF_ROOT, not available here). Every test
 that uses the ``slurm_cluster`` fixture (a single-node SLURM cluster, tests/slurm_cluster.py) carries the
 ``slurm`` marker: ``pytest -m slurm`` runs just them."""
 
@@ -31,7 +32,7 @@ def pytest_sessionstart(session) -> None:
 
 def pytest_collection_modifyitems(config, items) -> None:
     for item in items:
-        if "hci_root" in getattr(item, "fixturenames", ()):
+        if {"hci_root", "urbanlf_root"} & set(getattr(item, "fixturenames", ())):
             item.add_marker(pytest.mark.realdata)
         if "slurm_cluster" in getattr(item, "fixturenames", ()):
             item.add_marker(pytest.mark.slurm)
@@ -44,6 +45,16 @@ def hci_root() -> Path:
     if root is None:
         pytest.skip("LFBENCH_HCI_ROOT is not set (real HCI data not available)")
     return root
+
+
+@pytest.fixture(scope="session")
+def urbanlf_root() -> Path:
+    """The released UrbanLF-Syn root (ROOT/{train,val,test}/ImageN); skips the test when LFBENCH_URBANLF_ROOT is
+    unset (it is not on this project's machines: the tests that use it are for whoever has the data)."""
+    value = os.environ.get("LFBENCH_URBANLF_ROOT")
+    if not value or not Path(value).is_dir():
+        pytest.skip("LFBENCH_URBANLF_ROOT is not set (the released UrbanLF-Syn is not available)")
+    return Path(value)
 
 
 @pytest.fixture(scope="session")
