@@ -133,6 +133,15 @@ def test_a_toml_transpose_needs_a_square_grid(tmp_path, capsys):
     assert_one_error_line(rc, err, SPEC_FILE, "'views.transpose' needs a square grid of views, got 3x5")
 
 
+def test_cli_a_border_wider_than_the_scene_is_undecided_and_says_why(scene, tmp_path, capsys):
+    root = _toml_dataset(tmp_path / "wide", scene, AS_READ)
+    spec = root / SPEC_FILE
+    spec.write_text(spec.read_text().replace("border = 4", "border = 30"))  # 48 px views: nothing inside
+    rc, out, _ = run_cli(capsys, "check-dataset", str(root), "--no-progress")
+    assert rc == 0 and "undecided (no pixel of the centre view inside the 30 px border" in out
+    assert "0 of 1 scenes with ground truth agree with lfbench's reading, 0 contradict it, 1 undecided" in out
+
+
 def test_cli_on_urbanlf_syn_layout_agrees(tmp_path, capsys):
     rc, _, err = run_cli(capsys, "synth", "--layout", "urbanlf-syn", "--out", str(tmp_path / "u"), "--size", "64x48",
                          "--scenes", "1", "--no-progress")

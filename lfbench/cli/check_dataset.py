@@ -9,6 +9,7 @@ when no scene contradicts lfbench's reading, 1 when one does (the line says what
 from __future__ import annotations
 
 import argparse
+import math
 from pathlib import Path
 
 HELP = "check from the ground truth that lfbench reads a dataset's view grid and disparity sign as it was made"
@@ -48,7 +49,9 @@ def run(args: argparse.Namespace) -> int:
         runner_up = min((o for o in check.errors if o is not best), key=lambda o: check.errors[o])
         said = (f"{scene.name}: {best.name}: mean error {check.errors[best]:.4f} against {check.errors[runner_up]:.4f} "
                 f"({runner_up.name}), {ratio:.2f}x")
-        if not check.decided:
+        if not math.isfinite(check.errors[best]):
+            said += f" - undecided (no pixel of the centre view inside the {border} px border samples another view)"
+        elif not check.decided:
             said += " - undecided (too little disparity or texture to tell the readings apart)"
         elif best is not AS_READ:
             said += f" - CONTRADICTS lfbench's reading ({dataset.name}); a TOML dataset would {best.toml_fix}"
