@@ -26,27 +26,26 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
-    from lfbench.data.dataset import open_dataset
-    from lfbench.data.orientation import AS_READ, check_orientation
+    from lfbench.data.dataset import open_datasets
+    from lfbench.data.orientation import AS_READ, check_orientation, has_centre_view
     from lfbench.utils.errors import DataError
 
-    dataset, bench = open_dataset(args.data, args.dataset)
-    border = dataset.protocol_for(args.data).border_px
+    dataset, protocol, bench = open_datasets([args.data], args.dataset)
+    border = protocol.border_px
     scenes = bench.select([s for s in args.scenes.split(",") if s.strip()])
     with_gt = [s for s in scenes if s.has_gt()]
     if not with_gt:
         raise DataError(f"none of the selected scenes has ground truth to check against ({dataset.name})", args.data)
     for scene in with_gt:  # before any work: the readings turn the grid about its centre view
         rows, cols = scene.angular_size
-        if rows % 2 == 0 or cols % 2 == 0:
+        if not has_centre_view(rows, cols):
             raise DataError(f"the view grid is {rows}x{cols}: check-dataset needs a centre view (odd rows and "
-                            "columns)", getattr(scene, "path", args.data))
+                            "columns)", scene.path)
     checks = []
     for scene in tqdm(with_gt, desc="check-dataset", unit="scene", disable=args.no_progress, leave=False):
         check = check_orientation(scene.name, scene.gray_views(), scene.gt_disparity(), border_px=border)
         checks.append(check)
-        best, ratio = check.best, check.ratio
-        runner_up = min((o for o in check.errors if o is not best), key=lambda o: check.errors[o])
+        best, runner_up, ratio = check.best, check.runner_up, check.ratio
         said = (f"{scene.name}: {best.name}: mean error {check.errors[best]:.4f} against {check.errors[runner_up]:.4f} "
                 f"({runner_up.name}), {ratio:.2f}x")
         if not math.isfinite(check.errors[best]):

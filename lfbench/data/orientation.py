@@ -20,7 +20,7 @@ import torch
 import torch.nn.functional as F
 
 __all__ = ["AS_READ", "DECISIVE_RATIO", "ORIENTATIONS", "Orientation", "OrientationCheck", "check_orientation",
-           "distinct_readings", "orientation_errors", "warp_error"]
+           "distinct_readings", "has_centre_view", "orientation_errors", "warp_error"]
 
 #: The best reading must beat every other by this factor (error ratio) for the check to name it.
 DECISIVE_RATIO = 1.25
@@ -75,6 +75,11 @@ ORIENTATIONS: tuple[Orientation, ...] = (
 AS_READ = ORIENTATIONS[0]
 
 
+def has_centre_view(rows: int, cols: int) -> bool:
+    """Whether a rows x cols grid has a centre view (odd both ways), which every reading turns the grid about."""
+    return rows % 2 == 1 and cols % 2 == 1
+
+
 def warp_error(gray: np.ndarray, disparity: np.ndarray, *, border_px: int = 0) -> float:
     """Mean absolute difference between the centre view and the views of its row, column and diagonals, warped
     onto it by ``disparity``.
@@ -84,7 +89,7 @@ def warp_error(gray: np.ndarray, disparity: np.ndarray, *, border_px: int = 0) -
     and the ``border_px`` frame of the centre are left out. Occlusions add error to every reading alike.
     """
     n_rows, n_cols, h, w = gray.shape
-    if n_rows % 2 == 0 or n_cols % 2 == 0:
+    if not has_centre_view(n_rows, n_cols):
         raise ValueError(f"the view grid must have a centre view (odd size), got {n_rows}x{n_cols}")
     if disparity.shape != (h, w):
         raise ValueError(f"disparity is {disparity.shape}, the views are {h}x{w}")
@@ -146,13 +151,22 @@ class OrientationCheck:
     errors: dict[Orientation, float]  # mean absolute error (gray levels in [0, 1]) per reading
 
     @property
+    def ranked(self) -> list[Orientation]:
+        """The readings, least error first."""
+        return sorted(self.errors, key=lambda o: self.errors[o])
+
+    @property
     def best(self) -> Orientation:
-        return min(self.errors, key=lambda o: self.errors[o])
+        return self.ranked[0]
+
+    @property
+    def runner_up(self) -> Orientation:
+        return self.ranked[1]
 
     @property
     def ratio(self) -> float:
-        """The second-best reading's error over the best's (>= 1; inf when the best is exact)."""
-        first, second = sorted(self.errors.values())[:2]
+        """The runner-up's error over the best's (>= 1; inf when the best is exact)."""
+        first, second = (self.errors[o] for o in self.ranked[:2])
         return math.inf if first == 0 < second else (second / first if first > 0 else 1.0)
 
     @property
