@@ -64,8 +64,39 @@ def _offline(name: str) -> Callable[[Scene, Path], tuple[list[Method], np.ndarra
     return make
 
 
+def _epinet(scene: Scene, tmp: Path) -> tuple[list[Method], np.ndarray | None]:
+    """No checkpoint ships for epinet: a small EPINET (2 filters, 1 merged block) with fixed random weights,
+    saved as lfbench train saves weights and run through weights=."""
+    import torch
+    from lfbench_methods.epinet.network import EPINet
+
+    from lfbench.training.checkpoint import export_weights
+
+    torch.manual_seed(0)
+    export_weights(tmp / "epinet_f2.pt", EPINet(filters=2, depth=1), method="epinet")
+    return [create("epinet", weights=tmp / "epinet_f2.pt")], None
+
+
+def _random_network(name: str, **model: object) -> Callable[[Scene, Path], tuple[list[Method], np.ndarray | None]]:
+    """No checkpoint ships for the network ``name``: its network of ``model`` with fixed random weights, saved as
+    lfbench train saves weights and run through weights=."""
+    def make(scene: Scene, tmp: Path) -> tuple[list[Method], np.ndarray | None]:
+        import torch
+
+        from lfbench.method.trainable import TRAINABLES
+        from lfbench.training.checkpoint import export_weights
+
+        torch.manual_seed(0)
+        export_weights(tmp / f"{name}.pt", TRAINABLES.get(name).build(**model), method=name)
+        return [create(name, weights=tmp / f"{name}.pt")], None
+
+    return make
+
+
 #: How the test gets a runnable instance of a method that cannot run from its defaults alone.
-PROVIDERS = {"published": _published, "lfattnet": _lfattnet}
+PROVIDERS = {"published": _published, "lfattnet": _lfattnet, "epinet": _epinet,
+             "distgdisp": _random_network("distgdisp", features=2, channels=4, d_min=-2.0, d_max=2.0),
+             "oaccnet": _random_network("oaccnet", d_min=-2.0, d_max=2.0)}
 
 
 @pytest.mark.parametrize("name", [info.name for info in list_methods()])

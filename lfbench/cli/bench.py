@@ -26,6 +26,13 @@ Examples:
   lfbench bench inference --model tinycnn:layers=3 --channels 4 8 --size 128   # a plugin's network
   lfbench bench inference --size 256 --repeat 50 --mean --precision fp32 --interval 0.1 --d-min -0.5 \\
       --d-max 1.6 --no-peak --json table3_runtime.json   # the runtime column of SubFocal's Table III
+  lfbench bench inference --model subfocal:interval=0.1,d_min=-0.5,d_max=1.6 lfattnet:d_min=-1,d_max=2 \\
+      --size 256 --repeat 50 --mean --precision fp32 --no-peak   # several networks, each with its ratio to SubFocal
+
+``inference --model A B ...`` (or --model repeated) times several networks one after the other at the same input,
+each with the parameters of its spec (their own flags are not offered then); every row gets ratio_to_reference,
+its time over that of --ratio-to's network (default subfocal when timed, else the first) at the same size and
+precision.
 
 --device (auto, cpu, cuda, cuda:K; default auto) places the peak, inference and training cases: on CUDA
 the clocks are read after torch.cuda.synchronize, peak_memory_gb is torch.cuda.max_memory_allocated and
@@ -85,21 +92,25 @@ class _NetworkParser(argparse.ArgumentParser):
             self._network_flags = True
             from lfbench.utils.errors import LFBenchError
 
+            models = _models_in(list(args or []))
             try:
-                _add_network_flags(self, self._bench, _model_in(list(args or [])))
+                if len(models) == 1:  # several networks: each one's parameters are in its --model spec
+                    _add_network_flags(self, self._bench, models[0])
             except LFBenchError as exc:
                 self.error(f"--model: {exc}")
         return super().parse_known_args(args, namespace)
 
 
-def _model_in(args: list[str]) -> str:
-    """The value of ``--model`` in ``args`` (the default network when absent)."""
+def _models_in(args: list[str]) -> list[str]:
+    """The values of every ``--model`` in ``args`` (``--model A B``, ``--model A --model B``; the default
+    network when absent)."""
+    found: list[str] = []
     for i, arg in enumerate(args):
-        if arg == "--model" and i + 1 < len(args):
-            return args[i + 1]
-        if arg.startswith("--model="):
-            return arg.split("=", 1)[1]
-    return DEFAULT_TRAINABLE
+        if arg == "--model":
+            found += itertools.takewhile(lambda a: not a.startswith("-"), args[i + 1:])
+        elif arg.startswith("--model="):
+            found.append(arg.split("=", 1)[1])
+    return found or [DEFAULT_TRAINABLE]
 
 
 def _add_network_flags(p: argparse.ArgumentParser, bench: str, model: str) -> None:
@@ -128,14 +139,26 @@ def _add_network_flags(p: argparse.ArgumentParser, bench: str, model: str) -> No
                 add_flag(group, option, default=None, nargs="+", dest=f"opt_{option.name}")
 
 
-def _common(p: argparse.ArgumentParser) -> None:
+def _common(p: argparse.ArgumentParser, several: bool = False) -> None:
+    """The flags of every bench; ``several``: ``--model`` takes several networks (the inference bench)."""
     p.add_argument("--json", type=Path, metavar="OUT.json", help="write the records (a JSON list) here")
     p.add_argument("--table", type=Path, metavar="OUT.md", help="also write the table (Markdown) here")
     add_flag(p, THREADS)
     add_flag(p, TIMEOUT)
-    p.add_argument("--model", default=DEFAULT_TRAINABLE, metavar="NAME[:key=value,...]",
-                   help=f"trainable network to time, with parameters (default {DEFAULT_TRAINABLE}; see lfbench "
-                        "methods)")
+    if not several:
+        p.add_argument("--model", default=DEFAULT_TRAINABLE, metavar="NAME[:key=value,...]",
+                       help=f"trainable network to time, with parameters (default {DEFAULT_TRAINABLE}; see lfbench "
+                            "methods)")
+        return
+    p.add_argument("--model", nargs="+", action="extend", default=None, metavar="NAME[:key=value,...]",
+                   help=f"trainable network(s) to time, with parameters (default {DEFAULT_TRAINABLE}; see lfbench "
+                        "methods). Several (--model A B or --model A --model B) are timed one after the other on "
+                        "the same input, each with the parameters of its spec (their own flags are then not "
+                        "offered), and each row gets its time's ratio to --ratio-to's")
+    p.add_argument("--ratio-to", metavar="NAME[:key=value,...]",
+                   help=f"the network whose time the others are divided by: one of the --model values, or the name "
+                        f"of one (its first) (default: {DEFAULT_TRAINABLE} when timed, else the first --model; "
+                        "only with several networks unless given)")
 
 
 def _device_option(p: argparse.ArgumentParser) -> None:
@@ -174,7 +197,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     i = _bench_parser(sub, "inference", help="one scene per network parameter x precision (seconds, peak memory, "
                                              "GFLOP/s)")
     _inference_options(i, 512)
-    _common(i)
+    _common(i, several=True)
     v = _bench_parser(sub, "volume", help="the cost volume alone (GB/s; SubFocal's own bench)")
     add_flag(v, SIZE)
     add_flag(v, INTERVAL, nargs="+", default=[0.5])
@@ -212,7 +235,8 @@ def _model(args: argparse.Namespace) -> tuple[str, dict, object]:
     from lfbench.method.params import coerce_params, parse_spec
     from lfbench.method.trainable import get_trainable
 
-    name, raw = parse_spec(args.model)
+    spec = args.model if isinstance(args.model, str) else (args.model or [DEFAULT_TRAINABLE])[0]
+    name, raw = parse_spec(spec)
     trainable = get_trainable(name)
     return name, coerce_params(raw, trainable.parameters(), name, "network"), trainable
 
@@ -354,7 +378,8 @@ def _line(record: dict) -> str:
     if "skipped" in record:
         return f"[{record.get('bench')}] {record.get('precision', '')} skipped: {record['skipped']}"
     network = list(record.get("network_params", []))
-    keys = [k for k in ("size", *network, "precision", "method", "batch", *record.get("variant", []), "seconds",
+    keys = [k for k in ("model_spec", "size", *network, "precision", "method", "batch", *record.get("variant", []),
+                        "seconds",
                         "peak_memory_gb", "gflops_per_s", "gb_per_s", "steps_per_s", "cpu_seconds", "scores_per_s")
             if k in record]
     load = (record.get("machine") or {}).get("load_average")
@@ -368,8 +393,30 @@ def _output(args: argparse.Namespace, records: list[dict]) -> list[dict]:
     return records if args.which != "inference" else [r for r in records if r.get("bench") == "inference"]
 
 
+def _networks(args: argparse.Namespace) -> tuple[list[str], str | None]:
+    """(the --model specs to time, one after the other; the spec whose time the others are divided by, None when
+    one network is timed without --ratio-to). SpecError (exit 2) for a --ratio-to that is none of them."""
+    from lfbench.method.params import parse_spec
+    from lfbench.utils.errors import SpecError
+
+    if not isinstance(args.model, list):  # the benches that time one network
+        return [args.model], None
+    models = list(dict.fromkeys(args.model or [DEFAULT_TRAINABLE]))
+    names = [parse_spec(m)[0] for m in models]
+    asked = getattr(args, "ratio_to", None)
+    if asked is None:
+        if len(models) == 1:
+            return models, None
+        asked = DEFAULT_TRAINABLE if DEFAULT_TRAINABLE in names else models[0]
+    if asked in models:
+        return models, asked
+    if asked in names:
+        return models, models[names.index(asked)]
+    raise SpecError(f"--ratio-to {asked}: not one of the networks timed ({', '.join(models)})")
+
+
 def run(args: argparse.Namespace) -> int:
-    from lfbench.runs.bench import attach_peaks, run_isolated, table, write_json
+    from lfbench.runs.bench import attach_peaks, attach_ratios, run_isolated, table, write_json
 
     if args.which is None:  # the default: the suite with its defaults
         parser = argparse.ArgumentParser()
@@ -385,16 +432,27 @@ def run(args: argparse.Namespace) -> int:
         if getattr(args, name, None) is not None:
             setattr(args, name, check_output_file(getattr(args, name)))
     records: list[dict] = []
-    cases = _cases(args)
-    _check_networks(args, cases)
+    models, reference = _networks(args)
+    cases: list[tuple[str, dict]] = []
+    specs: list[str | None] = []  # the --model spec of each case (None: a peak, no network's)
+    for model in models:
+        args.model = model
+        mine = _cases(args)
+        _check_networks(args, mine)
+        cases += mine
+        specs += [model if bench == "inference" else None for bench, _ in mine]
     print(f"lfbench bench {args.which}: {len(cases)} cases, each in a fresh process", flush=True)
-    for bench, params in cases:
+    for (bench, params), spec in zip(cases, specs, strict=True):
         record = run_isolated(bench, params, args.timeout)
+        if reference is not None and spec is not None:
+            record["model_spec"] = spec
         records.append(record)
         print(_line(record), flush=True)
         if args.json:
             write_json(args.json, _output(args, records))
     records = attach_peaks(records)
+    if reference is not None:
+        records = attach_ratios(records, reference)
     if args.json:
         write_json(args.json, _output(args, records))
     text = table(records)

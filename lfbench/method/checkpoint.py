@@ -43,7 +43,8 @@ def sniff(head: bytes) -> str | None:
     if not head:
         return "an empty file"
     if head.startswith(b"\x89HDF\r\n\x1a\n"):
-        return "an HDF5 file (a Keras checkpoint? lfbench convert-keras turns SubFocal's into weights)"
+        return ("an HDF5 file (a Keras checkpoint? lfbench convert-keras turns SubFocal's, LFattNet's and EPINET's "
+                "into weights)")
     if head.startswith(b"\x93NUMPY"):
         return "a NumPy array file"
     if head.startswith((b"\x89PNG", b"\xff\xd8\xff", b"GIF8", b"II*\x00", b"MM\x00*")):

@@ -200,7 +200,7 @@ class NetworkMethod(Method):
         v, u = lf.angular_size
         if (v, u) != (angular, angular):
             raise DataError(f"{self.label}: needs a {angular}x{angular} light field, got {v}x{u} views ({lf.name})")
-        views = lf.gray_views()  # (V, U, H, W) float32 in [0, 1]
+        views = self.trainable.views_of(lf)  # (V, U, H, W) float32 in [0, 1]
         x = torch.from_numpy(np.ascontiguousarray(views.reshape(1, v * u, *views.shape[2:]), dtype=np.float32))
         if self.device.type == "cuda":
             set_fp32_numerics(tf32=False)  # fp32 is IEEE fp32

@@ -19,15 +19,23 @@ its ``lfbench.methods`` entry points, and says:
 
 The network contract (a ``torch.nn.Module``):
 
-- ``forward(views)``: views (B, N, H, W) float32 gray in [0, 1], N = angular^2, view k at angular row
+- ``forward(views)``: views (B, N, H, W) float32 gray in [0, 1] (from RGB with the trainable's
+  :attr:`Trainable.gray_weights` where the light field has colour), N = angular^2, view k at angular row
   ``k // angular``, column ``k % angular`` -> ``(disparity, probability)``: disparity (B, H, W) float32 in px
   per view step, probability (B, D, H, W) float32 over ``disparities`` (softmax over D) or None; the sign is
   the HCI data's: a point of the centre view at (x, y) with disparity d appears in view (u, v) at
   (x - (u - c) d, y - (v - c) d), c = angular // 2;
 - ``angular`` (int, default 9): views per angular row;
+- ``output_margin`` (optional int, default 0): px per side of the returned map that are filled, not computed
+  (a network of valid convolutions: :meth:`Trainable.output_margin`); losses skip them;
 - ``disparities``: (D,) tensor of the candidate disparities (px), evenly spaced, when it has a distribution;
 - ``config()`` (optional): the build keyword arguments that rebuild it (stored in checkpoints; default:
-  the ``[model]`` parameters it was built with).
+  the ``[model]`` parameters it was built with);
+- ``forward(views, target=target)`` in training, for a network whose trainable sets
+  :attr:`Trainable.training_target`: the ground truth (B, H, W) px of the batch's patches, the loss's
+  target (e.g. OACC-Net builds its occlusion mask from it); every training forward (``lfbench train``,
+  ``bench train``, ``check-plugin``) goes through :meth:`Trainable.training_forward`; inference and
+  validation never pass it.
 
 Weights files (``final.pt``, ``best.pt``, ``stage<k>_<name>.pt``) hold ``{"format", "method",
 "state_dict", "config", "training"}``; :meth:`Trainable.load` rebuilds the network from one, read by
@@ -135,6 +143,11 @@ class Trainable:
     method: ClassVar[str] = ""
     #: Whether forward returns a probability over ``disparities`` (needed by the distribution losses).
     distribution: ClassVar[bool] = False
+    #: Whether forward takes the ground truth in training (``forward(views, target=...)``, see the contract).
+    training_target: ClassVar[bool] = False
+    #: The network's own RGB -> gray weights (R, G, B), used by its method on light fields that have colour
+    #: (None: lfbench's 0.299 / 0.587 / 0.114; e.g. OACC-Net's authors average the channels).
+    gray_weights: ClassVar[tuple[float, float, float] | None] = None
     #: The parameters an ablation may vary (None = every build parameter), in the order error messages list.
     axes: ClassVar[tuple[str, ...] | None] = None
     #: Defaults that replace the network's own (a variant: e.g. ``lfattnet`` is SubFocal with interval 1).
@@ -232,6 +245,12 @@ class Trainable:
 
         return torch.optim.Adam(net.parameters(), lr=stage.lr, betas=stage.betas, eps=stage.eps)
 
+    def training_forward(self, net: Any, views: torch.Tensor, target: torch.Tensor
+                         ) -> tuple[torch.Tensor, torch.Tensor | None]:
+        """One training forward pass of ``net`` (or its DDP wrapper): ``net(views, target=target)`` when
+        :attr:`training_target` is set, else ``net(views)``; target (B, H, W) px, the loss's."""
+        return net(views, target=target) if self.training_target else net(views)
+
     # -- weights ---------------------------------------------------------------------------------
 
     def load(self, path: str | Path, **overrides: Any) -> torch.nn.Module:
@@ -259,12 +278,29 @@ class Trainable:
 
     # -- running ---------------------------------------------------------------------------------
 
+    def views_of(self, lf: Any) -> Any:
+        """The (V, U, H, W) float32 views in [0, 1] the network reads from a light field (``lf``: a
+        lfbench.data.scene.LightField): by default its gray with :attr:`gray_weights` where it has colour, else
+        ``lf.gray_views()`` (0.299 R + 0.587 G + 0.114 B); a network trained on another conversion declares its
+        weights (OACC-Net) or says so here (DistgDisp: numpy's mean of R, G and B, as the authors compute it)."""
+        from lfbench.data.scene import weighted_gray_views
+
+        return weighted_gray_views(lf, self.gray_weights)
+
     def receptive_radius(self, net: torch.nn.Module) -> int | None:
         """px of context one output pixel of ``net`` depends on, when that is finite (a stack of k x k
         convolutions: the sum of (k - 1) / 2 over the layers): inference may then run in exact tiles.
         Default: the network's ``receptive_radius`` attribute; None (no such attribute): whole images only."""
         radius = getattr(net, "receptive_radius", None)
         return int(radius) if isinstance(radius, int) and not isinstance(radius, bool) and radius >= 0 else None
+
+    def output_margin(self, net: torch.nn.Module) -> int:
+        """px on each side of ``net``'s full-size output that the network does not compute but fills (e.g.
+        EPINET's valid convolutions: 11 px, filled by edge replication): training losses compare only the inner
+        part, ``[m:H-m, m:W-m]``, of prediction and target, and a patch must be larger than 2 m. Default: the
+        network's ``output_margin`` attribute (an int >= 0), else 0."""
+        margin = getattr(net, "output_margin", 0)
+        return int(margin) if isinstance(margin, int) and not isinstance(margin, bool) and margin >= 0 else 0
 
     def can_tile(self, net: torch.nn.Module) -> bool:
         """Whether :meth:`infer` runs ``net`` in exact tiles when given ``tile`` (default: when it has a
@@ -299,9 +335,11 @@ class Trainable:
     def check_forward(self, net: torch.nn.Module, size: int = 16) -> None:
         """ValueError when ``net`` fails one :meth:`infer` pass on a size x size light field of random views
         (on its device), or returns what the network contract does not allow: what a bench checks before it
-        starts its cases, for a network that has no :meth:`check` of its own."""
+        starts its cases, for a network that has no :meth:`check` of its own. A network of valid convolutions
+        gets a light field large enough for one computed pixel (size >= 2 * output_margin + 1)."""
         import torch
 
+        size = max(size, 2 * self.output_margin(net) + 1)
         angular = int(getattr(net, "angular", 9))
         device = next(iter(net.parameters()), torch.empty(0)).device
         views = torch.rand((1, angular * angular, size, size), generator=torch.Generator().manual_seed(0))
@@ -462,6 +500,16 @@ def contract_problem(out: Any, size: int | tuple[int, int], disparities: Any) ->
     return None
 
 
+def crop_margin(disparity: torch.Tensor, probability: torch.Tensor | None, target: torch.Tensor, margin: int
+                ) -> tuple[torch.Tensor, torch.Tensor | None, torch.Tensor]:
+    """The inner part of a prediction and its target that a loss compares: ``margin`` px cut from every side
+    of disparity (B, H, W), probability (B, D, H, W) or None and target (B, H, W) (no copy: views)."""
+    if margin <= 0:
+        return disparity, probability, target
+    inner = (..., slice(margin, -margin), slice(margin, -margin))
+    return disparity[inner], None if probability is None else probability[inner], target[inner]
+
+
 def plugin_failure(what: str, exc: BaseException) -> str:
     """One line for an exception a plugin's code raised (its constructor or forward): ``what failed:
     RuntimeError: <first line of the message>`` (an allocator's refusal, a CUDA error, a bug)."""
@@ -604,6 +652,6 @@ def get_trainable(name: str) -> Trainable:
 __all__ = ["Trainable", "StageOptions", "BenchOption", "network_from_state", "check_state_dict", "network_bytes",
            "check_network_size", "contract_problem", "construct", "ConstructorError", "plugin_failure",
            "flops_problem", "plugin_source", "network_summary", "FLOPS_CONTRACT", "to_channels_last",
-           "tiled_forward", "MAX_NETWORK_BYTES",
+           "tiled_forward", "crop_margin", "MAX_NETWORK_BYTES",
            "TRAINABLES", "DEFAULT_TRAINABLE", "ENTRY_POINT_GROUP", "register_trainable", "get_trainable",
            "trainable_registry"]

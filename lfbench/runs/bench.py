@@ -313,7 +313,7 @@ def bench_train(batch: int = 2, patch: int = 32, steps: int = 2, channels_last: 
     ``precision`` bf16: the forward pass under bf16 autocast, as ``[training] precision = "bf16"`` trains."""
     import torch
 
-    from lfbench.method.trainable import get_trainable, to_channels_last
+    from lfbench.method.trainable import crop_margin, get_trainable, to_channels_last
     from lfbench.utils.malloc import retain_freed_memory
 
     set_threads(threads)
@@ -341,12 +341,17 @@ def bench_train(batch: int = 2, patch: int = 32, steps: int = 2, channels_last: 
 
     dtype = torch_dtype(precision)
     autocast = (lambda: torch.autocast(dev.type, dtype=dtype)) if dtype != torch.float32 else contextlib.nullcontext
+    margin = trainable.output_margin(net)  # the border the network fills: lfbench train's loss leaves it out
+    if patch <= 2 * margin:
+        raise SpecError(f"network {model!r}: --patch {patch} leaves nothing to train on (its output loses {margin} px "
+                        f"per side); use --patch {2 * margin + 1} or more")
 
     def step() -> None:
         opt.zero_grad(set_to_none=True)
         with autocast():
-            disp, _ = net(views)
-        torch.nn.functional.l1_loss(disp, target).backward()
+            disp, _ = trainable.training_forward(net, views, target)
+        inner, _, label = crop_margin(disp, None, target, margin)
+        torch.nn.functional.l1_loss(inner.float(), label).backward()
         opt.step()
 
     baseline = memory_now_gb(dev)
@@ -532,9 +537,35 @@ def attach_peaks(records: Sequence[dict]) -> list[dict]:
     return out
 
 
+def attach_ratios(records: Sequence[dict], reference: str) -> list[dict]:
+    """Add to each inference record of a run that timed several networks ``ratio_to_reference``: its seconds over
+    those of the record of network ``reference`` (its ``model_spec``) at the same size, precision and device,
+    and ``reference`` (as papers compare runtimes: SubFocal's Table III, LFattNet 0.743 s / SubFocal 1.839 s =
+    0.40). A record without such a reference (it failed, or was skipped) gets none."""
+    out = [dict(r) for r in records]
+
+    def timed(r: dict) -> bool:
+        return r.get("bench") == "inference" and "error" not in r and "skipped" not in r and r.get("seconds")
+
+    def key(r: dict) -> tuple:
+        return r.get("size"), r.get("precision"), r.get("device")
+
+    refs: dict[tuple, dict] = {}
+    for r in out:
+        if timed(r) and r.get("model_spec") == reference:
+            refs.setdefault(key(r), r)
+    for r in out:
+        ref = refs.get(key(r))
+        if timed(r) and ref is not None:
+            r["reference"] = reference
+            r["ratio_to_reference"] = r["seconds"] / ref["seconds"]
+    return out
+
+
 _COLUMNS = {
     "peak": ["precision", "shape", "seconds", "gflops_per_s", "gflops_per_cpu_s"],
-    "inference": ["size", "<network>", "precision", "seconds", "peak_memory_gb", "gflops_per_s", "fraction_of_peak",
+    "inference": ["model_spec", "size", "<network>", "precision", "seconds", "ratio_to_reference", "peak_memory_gb",
+                  "gflops_per_s", "fraction_of_peak",
                   "fraction_of_peak_cpu", "fp32_floor_s", "ratio_to_fp32_floor", "ratio_to_fp32_floor_cpu",
                   "bf16_floor_s", "ratio_to_bf16_floor", "ratio_to_bf16_floor_cpu", "tile", "tiles", "phases_s"],
     "volume": ["size", "interval", "precision", "method", "seconds", "volume_gb", "gb_per_s", "peak_memory_gb"],
@@ -542,6 +573,9 @@ _COLUMNS = {
               "cpu_seconds", "gflops_per_s", "fraction_of_peak", "fraction_of_peak_cpu", "peak_memory_gb"],
     "metrics": ["scenes", "methods", "size", "seconds", "scores_per_s", "mpixels_per_s", "peak_memory_gb"],
 }
+
+
+_ONLY_WHEN_SET = ("model_spec", "ratio_to_reference")  # columns of a run that timed several networks
 
 
 def format_value(value: object) -> str:
@@ -570,6 +604,8 @@ def _columns(bench: str, rows: Sequence[dict]) -> list[str]:
     interval, a plugin's channels), ``<variant>`` for the training options they chose (SubFocal's path)."""
     cols: list[str] = []
     for col in _COLUMNS[bench]:
+        if col in _ONLY_WHEN_SET and not any(col in r for r in rows):
+            continue  # a run of one network: no network and ratio columns
         if col in ("<network>", "<variant>"):
             key = "network_params" if col == "<network>" else "variant"
             cols += [k for k in dict.fromkeys(k for r in rows for k in r.get(key, [])) if k not in cols]

@@ -64,7 +64,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from lfbench.data.hci import SPLITS
+from lfbench.data.dataset import DATASETS
+from lfbench.data.disparity import EVALUATION_BORDER_PX
 from lfbench.data.synth import MAX_SYNTH_SIZE, scene_name
 from lfbench.method.params import values_problem
 from lfbench.method.trainable import DEFAULT_TRAINABLE, Trainable, get_trainable
@@ -198,9 +199,13 @@ class DataConfig:
         if not self.train:
             return self.synthetic
         names = {*self.train, *self.validation}
-        split_categories = {c for n in names if n in SPLITS for c in SPLITS[n]}
-        return tuple(s for s in self.synthetic if s.category in names | split_categories
-                     or names.intersection(s.scene_names()))
+
+        def selected(spec: SyntheticSpec) -> bool:  # by category, by a split of its layout's adapter, or by name
+            splits = DATASETS.get(spec.layout).splits
+            return (spec.category in names or any(spec.category in splits.get(n, ()) for n in names)
+                    or bool(names.intersection(spec.scene_names())))
+
+        return tuple(s for s in self.synthetic if selected(s))
 
     @staticmethod
     def check_options(values: dict[str, Any], t: Table) -> None:
@@ -262,7 +267,7 @@ class TrainingConfig:
 class ValidationConfig:
     every: int = option(0, low=0, help="steps between validations (0: only at the end of each stage)")
     max_size: int = option(0, low=0, help="centre-crop larger images to this many px (0: whole image)")
-    border: int = option(15, low=0, help="pixels left out at each image border when scoring")
+    border: int = option(EVALUATION_BORDER_PX, low=0, help="pixels left out at each image border when scoring")
     threshold: float = option(0.07, low=0.0, low_open=True, help="BadPix threshold (px)")
 
 

@@ -47,7 +47,7 @@ import torch
 from torch.nn.parallel import DistributedDataParallel
 from tqdm import tqdm
 
-from lfbench.method.trainable import check_state_dict, get_trainable, to_channels_last
+from lfbench.method.trainable import check_state_dict, crop_margin, get_trainable, to_channels_last
 from lfbench.training import checkpoint as ckpt
 from lfbench.training.batches import batch_source
 from lfbench.training.config import TrainConfig, resume_view
@@ -84,6 +84,7 @@ class Trainer:
     def __init__(self, cfg: TrainConfig, out: Path, ctx: DistContext, command: str | None = None,
                  progress: bool | None = None, loggers: Sequence[RunLogger] = ()) -> None:
         self.cfg, self.ctx, self.paths = cfg, ctx, RunPaths(Path(out))
+        self.trainable = get_trainable(cfg.method)  # its training_forward: the target to a network that takes it
         self.loggers = list(loggers) if ctx.is_main else []  # see every metrics.jsonl entry
         self.command = command
         self.progress = progress
@@ -440,12 +441,13 @@ class Trainer:
                  f"{tc.batch_size} ({ctx.world_size} process(es) x {tc.accumulate} micro-batch(es) of {micro}), "
                  f"patch {cfg.data.patch}, from step {step}")
         pinned = tc.pin_memory and ctx.device.type == "cuda"
+        margin = get_trainable(cfg.method).output_margin(model)  # the border the network fills: not in the loss
         batches = batch_source(sampler, cfg, si, step, st.steps, ctx.rank * local_batch, local_batch, pinned)
         bar = self._progress(st, step, label)
         window = _Window()
         try:
             while step < st.steps:
-                step_loss = self._step(net, model, optimizer, loss_fn, batches.get(step), micro, pinned)
+                step_loss = self._step(net, model, optimizer, loss_fn, batches.get(step), micro, pinned, margin)
                 if ctx.any(not np.isfinite(step_loss)):
                     raise LFBenchError(f"the loss became {step_loss} at stage {si + 1} step {step + 1}; "
                                        f"lower the learning rate (the last checkpoint is {self.paths.checkpoint})")
@@ -467,8 +469,9 @@ class Trainer:
         if si + 1 < len(cfg.stages) and ctx.any(self.stop.set):
             self._interrupted(si + 1, 0)
 
-    def _step(self, net, model, optimizer, loss_fn, batch, micro: int, pinned: bool) -> float:
-        """Forward and backward of one step's batch (in ``accumulate`` micro-batches); returns its loss."""
+    def _step(self, net, model, optimizer, loss_fn, batch, micro: int, pinned: bool, margin: int = 0) -> float:
+        """Forward and backward of one step's batch (in ``accumulate`` micro-batches); returns its loss, taken
+        over the inner part of the patch (``margin`` px cut per side: the border the network fills)."""
         ctx, tc = self.ctx, self.cfg.training
         views, target = batch
         v, t = torch.as_tensor(views), torch.as_tensor(target)
@@ -486,9 +489,10 @@ class Trainer:
             sync = contextlib.nullcontext() if (not ctx.enabled or m == tc.accumulate - 1) else net.no_sync()
             with sync:
                 with autocast():  # bf16 forward when training.precision = 'bf16'; the loss in fp32
-                    disp, prob = net(v[sl])
+                    disp, prob = self.trainable.training_forward(net, v[sl], t[sl])
                 disp, prob = disp.float(), None if prob is None else prob.float()
-                loss = loss_fn(disp, prob, t[sl], disparities) / tc.accumulate
+                disp, prob, target = crop_margin(disp, prob, t[sl], margin)
+                loss = loss_fn(disp, prob, target, disparities) / tc.accumulate
                 loss.backward()
             step_loss += float(loss.detach())
         return step_loss

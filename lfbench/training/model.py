@@ -24,6 +24,15 @@ def check_model(cfg: TrainConfig) -> None:
         raise SpecError(f"[model]: {exc}", cfg.source) from None
 
 
+def model_angular(cfg: TrainConfig) -> int:
+    """Views per angular row the config's network takes (its ``angular``; 9 where it declares none), read from
+    a build on PyTorch's meta device (shapes only: nothing allocated or initialised)."""
+    check_model(cfg)
+    with torch.device("meta"):
+        net = construct(get_trainable(cfg.method).build, cfg.model)
+    return int(getattr(net, "angular", 9))
+
+
 def load_init_weights(cfg: TrainConfig) -> tuple[Path, dict[str, torch.Tensor]]:
     """(path, state_dict) of ``cfg.init``: exported weights (``{"state_dict", "config", ...}``, loaded with
     weights_only=True); DataError naming the file when it is missing, unreadable or not in that format."""
@@ -43,9 +52,15 @@ def build_model(cfg: TrainConfig) -> torch.nn.Module:
     check_model(cfg)
     trainable = get_trainable(cfg.method)
     try:
-        return construct(trainable.build, cfg.model)
+        model = construct(trainable.build, cfg.model)
     except (TypeError, ValueError) as exc:
         raise SpecError(f"[model]: {exc}", cfg.source) from None
+    margin = trainable.output_margin(model)
+    if cfg.data.patch <= 2 * margin:
+        raise SpecError(f"[data] patch: {cfg.data.patch} px leaves nothing to train on: {cfg.method}'s output loses "
+                        f"{margin} px per side (the loss compares the inner part); use patch >= {2 * margin + 1}",
+                        cfg.source)
+    return model
 
 
 def network_config(cfg: TrainConfig, model: torch.nn.Module) -> dict[str, Any]:
@@ -73,5 +88,5 @@ def describe_optimizer(optimizer: torch.optim.Optimizer) -> str:
     return f"{type(optimizer).__name__} lr {group['lr']:g}{eps}"
 
 
-__all__ = ["build_model", "check_model", "describe_optimizer", "load_init_weights", "network_config",
+__all__ = ["build_model", "check_model", "model_angular", "describe_optimizer", "load_init_weights", "network_config",
            "stage_optimizer"]

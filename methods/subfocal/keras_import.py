@@ -19,12 +19,12 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from lfbench_methods.keras_hdf5 import read_hdf5
 from lfbench_methods.subfocal.network import SubFocalNet, count_trainable
 from torch import nn
 
 from lfbench.utils.atomic import write_bytes
 from lfbench.utils.errors import DataError
-from lfbench.utils.readfile import check_regular_file
 
 _SUFFIX = re.compile(r"^(?P<base>.*?)(?:_(?P<n>\d+))?$")
 
@@ -90,24 +90,7 @@ def _layer_arrays(group, path: Path, budget: list[int]) -> dict[str, np.ndarray]
 def read_keras_layers(path: Path) -> tuple[list[tuple[str, dict]], list[tuple[str, dict]]]:
     """Read an HDF5 checkpoint: (top-level layers, nested-model layers), each a list of
     (name, {weight name: array}) for layers that hold weights, in file order of ``layer_names``."""
-    import h5py
-
-    if Path(path).exists():  # a FIFO would block HDF5's open, a device never end
-        check_regular_file(path, "Keras checkpoint")
-    try:
-        f = h5py.File(path, "r")
-    except FileNotFoundError:
-        raise DataError("checkpoint not found", path) from None
-    except OSError as exc:
-        raise DataError(f"not an HDF5 file ({str(exc).splitlines()[0]})", path) from None
-    try:
-        with f:
-            return _read_layers(f, path)
-    except DataError:
-        raise
-    except (KeyError, TypeError, ValueError, AttributeError, OSError, RuntimeError) as exc:
-        reason = " ".join(str(exc).split())[:120] or type(exc).__name__
-        raise DataError(f"not a Keras checkpoint of the expected structure ({reason})", path) from None
+    return read_hdf5(path, _read_layers, "a Keras checkpoint of the expected structure")
 
 
 def _read_layers(f, path: Path) -> tuple[list[tuple[str, dict]], list[tuple[str, dict]]]:

@@ -229,9 +229,10 @@ class SubFocal(NetworkMethod):
         reason = self.missing_reason()
         if reason:
             return reason
+        angular = self.load_network().angular  # the weights' grid of views (9x9 for HCI; a 7x7 net takes 7x7)
         v, u = lf.angular_size
-        if (v, u) != (9, 9):
-            return f"needs a 9x9 light field, got {v}x{u} views"
+        if (v, u) != (angular, angular):
+            return f"needs a {angular}x{angular} light field, got {v}x{u} views"
         return None
 
     def predict(self, lf: LightField) -> Prediction:
@@ -242,10 +243,11 @@ class SubFocal(NetworkMethod):
         from lfbench.utils.hardware import set_fp32_numerics
         from lfbench.utils.threads import torch_threads
 
-        v, u = lf.angular_size
-        if (v, u) != (9, 9):
-            raise DataError(f"{self.label}: needs a 9x9 light field, got {v}x{u} views ({lf.name})")
         net = self.load_network()
+        v, u = lf.angular_size
+        if (v, u) != (net.angular, net.angular):
+            raise DataError(f"{self.label}: needs a {net.angular}x{net.angular} light field, got {v}x{u} views "
+                            f"({lf.name})")
         views = lf.gray_views()
         x = torch.from_numpy(np.ascontiguousarray(views.reshape(v * u, *views.shape[2:]), dtype=np.float32))
         if self.device.type == "cuda":
