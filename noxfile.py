@@ -20,9 +20,10 @@ def _install(session: nox.Session) -> None:
 
 @nox.session
 def tests(session: nox.Session) -> None:
-    """The unit and end-to-end tests (real-data tests run when LFBENCH_HCI_ROOT is set)."""
+    """Every test, the slow ones included (-m ""; posargs replace it); real-data tests run when LFBENCH_HCI_ROOT
+    is set."""
     _install(session)
-    session.run("pytest", "-q", *session.posargs)
+    session.run("pytest", "-q", *(session.posargs or ["-m", ""]))
 
 
 @nox.session

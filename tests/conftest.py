@@ -4,11 +4,17 @@ and paper/ when present. Every test that uses the ``hci_root`` fixture (directly
 fixture) carries the ``realdata`` marker, so ``-m "not realdata"`` runs without the data; so does every test
 that uses ``urbanlf_root`` (the released UrbanLF-Syn, LFBENCH_URBANLF_ROOT, not available here). Every test
 that uses the ``slurm_cluster`` fixture (a single-node SLURM cluster, tests/slurm_cluster.py) carries the
-``slurm`` marker: ``pytest -m slurm`` runs just them."""
+``slurm`` marker: ``pytest -m slurm`` runs just them.
+
+Tests over ~10 CPU s carry the ``slow`` marker and are left out of the default run (pyproject's addopts); CI runs
+them as its second step (``pytest -q -m slow``; tests/README.md). Every run ends with the tests that took more
+than that without the marker, and ``--cpu-times FILE`` writes every test's CPU and wall seconds as JSON."""
 
 from __future__ import annotations
 
+import json
 import os
+import time
 from pathlib import Path
 
 import pytest
@@ -28,6 +34,44 @@ def pytest_sessionstart(session) -> None:
 
     REGISTRY.names()
     TRAINABLES.names()
+
+
+#: A test over this many CPU seconds (setup, call and teardown; its own and its finished child processes') belongs
+#: in the slow run (@pytest.mark.slow).
+SLOW_CPU_S = 10.0
+_TIMES = pytest.StashKey[dict]()
+
+
+def pytest_addoption(parser) -> None:
+    parser.addoption("--cpu-times", metavar="FILE", default=None,
+                     help="write each test's CPU seconds (user + system of pytest and of the child processes it "
+                          "waited for, setup to teardown), wall seconds and slow mark to FILE (JSON)")
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_protocol(item, nextitem):
+    """Time each test in CPU seconds (os.times: this process and its finished children) and wall seconds. A session
+    or module fixture's setup counts for the first test that uses it."""
+    before, start = os.times(), time.perf_counter()
+    yield
+    after = os.times()
+    cpu = sum(after[k] - before[k] for k in range(4))  # user, system, children's user, children's system
+    item.config.stash.setdefault(_TIMES, {})[item.nodeid] = {
+        "cpu_s": round(cpu, 3), "wall_s": round(time.perf_counter() - start, 3),
+        "slow": item.get_closest_marker("slow") is not None}
+
+
+def pytest_terminal_summary(terminalreporter, exitstatus, config) -> None:
+    times = config.stash.get(_TIMES, {})
+    path = config.getoption("--cpu-times")
+    if path:
+        Path(path).write_text(json.dumps(dict(sorted(times.items(), key=lambda kv: -kv[1]["cpu_s"])), indent=1) + "\n")
+    unmarked = sorted(((t["cpu_s"], nodeid) for nodeid, t in times.items()
+                       if t["cpu_s"] > SLOW_CPU_S and not t["slow"]), reverse=True)
+    if unmarked:
+        terminalreporter.write_sep("-", f"over {SLOW_CPU_S:.0f} CPU s without @pytest.mark.slow (tests/README.md)")
+        for cpu, nodeid in unmarked:
+            terminalreporter.write_line(f"{cpu:8.1f} CPU s  {nodeid}")
 
 
 def pytest_collection_modifyitems(config, items) -> None:
@@ -71,6 +115,17 @@ def slurm_cluster(tmp_path_factory):
         if os.environ.get("LFBENCH_REQUIRE_SLURM") == "1":
             pytest.fail(f"LFBENCH_REQUIRE_SLURM=1 but the SLURM test cluster did not start: {exc}")
         pytest.skip(f"no SLURM test cluster: {exc}")
+
+
+@pytest.fixture(scope="session")
+def example_plugin(tmp_path_factory) -> tuple[Path, dict[str, str]]:
+    """examples/tiny_plugin installed once per session the way a user installs it (helpers.install_example_plugin):
+    (its site folder, an environment whose PYTHONPATH holds it, one OpenMP thread). Shared: never write into the
+    site; a test that changes the example's files works on a copy of its own (helpers.example_copy)."""
+    from helpers import install_example_plugin
+
+    _, site, env = install_example_plugin(tmp_path_factory.mktemp("example_plugin"))
+    return site, env
 
 
 @pytest.fixture(scope="session")

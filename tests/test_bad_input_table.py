@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 from lfbench.cli import BUILTIN_COMMANDS
 from lfbench.data.pfm import write_pfm
 
-SIZE = 24
+SIZE = 32  # px: 2 px scored inside the 15 px border (a border that leaves none is refused)
 
 
 def _scene(tmp: Path) -> Path:

@@ -20,7 +20,7 @@ from helpers import assert_one_error_line, run_cli, write_scene, write_submissio
 
 from lfbench.utils.errors import DataError, SpecError
 
-SIZE = 24
+SIZE = 32  # px: 2 px scored inside the 15 px border (a border that leaves none is refused)
 SECONDS = 30  # each bad input must be answered well within this
 
 

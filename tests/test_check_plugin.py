@@ -10,6 +10,7 @@ broken networks are registered in this process."""
 
 from __future__ import annotations
 
+import os
 import re
 import subprocess
 import sys
@@ -19,7 +20,7 @@ from typing import Annotated
 import numpy as np
 import pytest
 import torch
-from helpers import assert_one_error_line, install_example_plugin, install_package, isolate_registries, run_cli
+from helpers import assert_one_error_line, install_package, isolate_registries, run_cli
 from torch import nn
 
 from lfbench.method.params import Range
@@ -36,10 +37,12 @@ TEMPLATE = "kit-net"
 
 
 @pytest.fixture(scope="module")
-def installed(tmp_path_factory):
-    """(template source folder, environment whose PYTHONPATH holds examples/tiny_plugin and the template, site)."""
+def installed(example_plugin, tmp_path_factory):
+    """(template source folder, environment whose PYTHONPATH holds the template and examples/tiny_plugin, their
+    sites: the template's first)."""
     tmp = tmp_path_factory.mktemp("kit")
-    _, site, env = install_example_plugin(tmp)
+    example_site, env = example_plugin
+    site = tmp / "site"
     src = tmp / "template"
     proc = subprocess.run([sys.executable, "-m", "lfbench", "new-plugin", TEMPLATE, "--out", str(src)], env=env,
                           capture_output=True, text=True, timeout=120)
@@ -48,7 +51,7 @@ def installed(tmp_path_factory):
     assert written == ["README.md", "lfbench_kit_net/__init__.py", "lfbench_kit_net/plugin.py", "pyproject.toml",
                        "train_kit_net.toml"], written
     install_package(src, site)
-    return src, env, site
+    return src, {**env, "PYTHONPATH": os.pathsep.join((str(site), env["PYTHONPATH"]))}, (site, example_site)
 
 
 def _lfbench(env: dict, *args: str) -> subprocess.CompletedProcess:
@@ -68,14 +71,15 @@ def test_the_template_and_the_example_plugin_pass_check_plugin(installed, monkey
     """The template in a fresh process, as a user runs it (its entry point found in the installed site); the
     example plugin, installed in the same site, in this process (the fresh process would add nothing the
     template's does not show)."""
-    src, env, site = installed
+    src, env, sites = installed
     tiny = _import_tiny()  # before the installed copy is registered below
     assert 'kit-net = "lfbench_kit_net.plugin"' in (src / "pyproject.toml").read_text()
     assert 'method = "kit-net"' in (src / "train_kit_net.toml").read_text()
     proc = _lfbench(env, "check-plugin", TEMPLATE)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     isolate_registries(monkeypatch)
-    monkeypatch.syspath_prepend(str(site))
+    for site in sites:
+        monkeypatch.syspath_prepend(str(site))
     try:
         rc, out, err = run_cli(capsys, "check-plugin", "tinycnn")
         assert rc == 0, out + err
@@ -117,7 +121,7 @@ def _import_tiny():
 @pytest.fixture()
 def template(installed, monkeypatch):
     """The template's plugin module imported in this process (its network registered as ``kit-net``)."""
-    _, _, site = installed
+    _, _, (site, _) = installed
     isolate_registries(monkeypatch)
     monkeypatch.syspath_prepend(str(site))
     import lfbench_kit_net.plugin as module

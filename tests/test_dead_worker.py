@@ -17,7 +17,7 @@ from lfbench.runs.pool import KILL_WORKER_ENV
 def root(tmp_path_factory):
     root = tmp_path_factory.mktemp("data")
     for i, name in enumerate(("alpha", "beta", "gamma")):
-        write_scene(root, name, "training", size=24, seed=i)
+        write_scene(root, name, "training", size=32, seed=i)
     return root
 
 

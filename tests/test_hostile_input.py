@@ -20,7 +20,7 @@ from PIL import Image
 from lfbench.data.hci import HCIScene
 from lfbench.data.pfm import write_pfm
 
-SIZE = 24
+SIZE = 32  # px: 2 px scored inside the 15 px border (a border that leaves none is refused)
 
 
 @pytest.fixture()
@@ -222,7 +222,7 @@ def _npy_header_only(path: Path, shape: tuple[int, ...], descr: str = "<f4", pay
     ((100000, 100000, 81), b"\0" * 64, "views of 100000x100000 px"),
     ((0, 4, 81), b"", "views of 4x0 px: each side must be from 1"),
     ((4, 4, 81), b"\0" * 100, "truncated .npy"),
-    ((2, 2, 80), b"\0" * 1280, "expected (H, W, 81) views, got shape (2, 2, 80)"),
+    ((2, 2, 80), b"\0" * 1280, "square A x A grid (N = A^2, A from 2 to 33, e.g. 81 for 9x9), got shape (2, 2, 80)"),
 ])
 def test_npy_header_is_checked_before_loading(tmp_path, capsys, shape, payload, problem):
     path = tmp_path / "views.npy"

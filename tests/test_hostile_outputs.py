@@ -16,7 +16,7 @@ from lfbench.results import Results
 from lfbench.utils.errors import DataError
 from lfbench.utils.outputs import JOURNAL, MANIFEST, recover
 
-SIZE = 24
+SIZE = 32  # px: 2 px scored inside the 15 px border (a border that leaves none is refused)
 
 
 @pytest.fixture()

@@ -20,7 +20,7 @@ import pytest
 from helpers import assert_one_error_line, run_cli, write_scene
 from killpoints import check_writer, visible
 
-SIZE = 24
+SIZE = 32  # px: 2 px scored inside the 15 px border (a border that leaves none is refused)
 
 pytestmark = pytest.mark.skipif(not hasattr(os, "fork"), reason="the kill points run the command in a forked child")
 

@@ -45,8 +45,19 @@ def test_readme_metric_plugin_is_scored_bootstrapped_tabled_and_gated(tmp_path):
     _install_readme_plugin(tmp_path / "site")
     write_scene(tmp_path / "data", "tiny", size=40)
     out = tmp_path / "out"
-    proc = _lfbench("evaluate", "--data", tmp_path / "data", "--method", "constant:value=0.25", "--out", out,
-                    "--jobs", "2", "--ci", "--ci-resamples", "50", "--no-progress", pythonpath=tmp_path / "site")
+    # installed but not asked for: the dataset's protocol alone says what is scored (issue 38)
+    base = ("evaluate", "--data", tmp_path / "data", "--method", "constant:value=0.25", "--no-progress")
+    proc = _lfbench(*base, "--out", tmp_path / "plain", pythonpath=tmp_path / "site")
+    assert proc.returncode == 0, proc.stderr
+    records = json.loads((tmp_path / "plain" / "results.json").read_text())["records"]
+    assert [r["metric"] for r in records] == ["badpix_0.01", "badpix_0.03", "badpix_0.07", "mse_x100", "q25_x100"]
+    proc = _lfbench(*base, "--out", tmp_path / "bad", "--metrics", "epe,nope", pythonpath=tmp_path / "site")
+    assert proc.returncode == 2 and not (tmp_path / "bad").exists()
+    line = proc.stderr.strip().splitlines()[-1]
+    assert line.startswith("lfbench evaluate: error: --metrics: Unknown metric 'nope'. Available: "), proc.stderr
+    assert "epe" in line and "badpix_<t>" in line and "missed_dots" not in line  # the general metrics only
+    proc = _lfbench(*base, "--out", out, "--metrics", "epe,badpix_0.07", "--jobs", "2", "--ci", "--ci-resamples",
+                    "50", pythonpath=tmp_path / "site")
     assert proc.returncode == 0, proc.stderr
     records = json.loads((out / "results.json").read_text())["records"]
     metrics = [r["metric"] for r in records]

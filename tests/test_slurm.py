@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 import torch
-from helpers import example_grid, install_example_plugin
+from helpers import example_copy, example_grid
 
 # The example plugin's ablation over channels, each cell once per seed: 4 cells of 25 training steps.
 GRID = example_grid()
@@ -37,10 +37,11 @@ lr = [1e-3]
 
 
 @pytest.fixture(scope="module")
-def plugin(slurm_cluster, tmp_path_factory):
+def plugin(slurm_cluster, example_plugin, tmp_path_factory):
     """(the example plugin's folder, with the specs of these tests; the environment whose PYTHONPATH holds it
     and whose SLURM_CONF names the test cluster)."""
-    src, _, env = install_example_plugin(tmp_path_factory.mktemp("slurm_plugin"))
+    _, env = example_plugin
+    src = example_copy(tmp_path_factory.mktemp("slurm_plugin") / "src")
     for name, text in (("grid.toml", GRID), ("long.toml", LONG), ("failing.toml", FAILING)):
         (src / name).write_text(text)
     return src, {**env, "SLURM_CONF": slurm_cluster.env["SLURM_CONF"]}

@@ -103,8 +103,8 @@ def _submission(tmp_path, runtimes: dict[str, str | None]):
     """Two scenes a and b; the submission's runtime files as given (None: no file)."""
     data = tmp_path / "data"
     for name in runtimes:
-        write_scene(data, name, "training", size=24)
-    sub = write_submission(tmp_path / "sub", {name: np.ones((24, 24), np.float32) for name in runtimes},
+        write_scene(data, name, "training", size=32)
+    sub = write_submission(tmp_path / "sub", {name: np.ones((32, 32), np.float32) for name in runtimes},
                            {name: text or "" for name, text in runtimes.items()})
     for name, text in runtimes.items():
         if text is None:

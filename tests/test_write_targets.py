@@ -33,7 +33,7 @@ def _file(path: Path, text: str) -> Path:
 
 
 def _scene(t: Path) -> Path:
-    return write_scene(t / "data", "tiny", "training", size=24)
+    return write_scene(t / "data", "tiny", "training", size=32)
 
 
 # name -> (the path the command writes, relative to tmp_path; argv given tmp_path). Every command that writes a

@@ -21,6 +21,10 @@ The checks (:func:`check_plugin`, in order; a check whose prerequisite failed is
   network) and give the same output;
 - ``training``: one optimizer step (the trainable's ``configure_optimizers``, lfbench's L1 loss, and a
   distribution loss when it has a distribution) is finite and changes every parameter.
+
+A network that declares an output margin (valid convolutions: :meth:`Trainable.output_margin`) is checked on
+light fields of at least 2 x margin + 4 px, and its training step's loss compares the inner part, as
+``lfbench train`` does.
 """
 
 from __future__ import annotations
@@ -33,8 +37,9 @@ from pathlib import Path
 from types import SimpleNamespace
 from typing import TYPE_CHECKING, Any
 
-from lfbench.method.trainable import Trainable, get_trainable, plugin_source
+from lfbench.method.trainable import Trainable, crop_margin, get_trainable, plugin_source
 from lfbench.utils.errors import LFBenchError, PluginError, SpecError
+from lfbench.utils.watchdog import TimeLimitExceeded, time_limit
 
 if TYPE_CHECKING:
     import torch
@@ -63,20 +68,32 @@ class _Failed(Exception):
 
 
 def check_plugin(name: str, params: dict[str, Any] | None = None, *, weights: str | Path | None = None,
-                 size: int = 20, seed: int = 0) -> list[Finding]:
+                 size: int = 20, seed: int = 0, timeout: float | None = None) -> list[Finding]:
     """Every check of the module docstring on network ``name`` built with ``params`` (its network parameters)
     and, with ``weights``, the trained weights of that file (read as the network method reads them).
-    SpecError/DataError (exit 2) for an unknown name, bad parameters or an unreadable weights file."""
+    SpecError/DataError (exit 2) for an unknown name, bad parameters or an unreadable weights file; LFBenchError
+    (exit 2) when a check, or the parameters' check that builds the network, runs past ``timeout`` seconds (None:
+    no bound; lfbench.utils.watchdog)."""
     import torch
 
     trainable = get_trainable(name)
     params = dict(params or {})
+
+    def too_long(what: str) -> LFBenchError:
+        return LFBenchError(f"network {name!r} ({plugin_source(trainable)}): {what} did not finish within "
+                            f"{timeout:g} s (--timeout): its constructor or forward runs too long")
+
     try:
-        trainable.check_values(params)
-        if params:
-            trainable.check_params(params)
+        with time_limit(timeout):
+            trainable.check_values(params)
+            if params:
+                trainable.check_params(params)
+    except TimeLimitExceeded:
+        raise too_long("building it from its parameters") from None
     except (TypeError, ValueError) as exc:
-        if not params or _builds(trainable, {}):  # the values given are bad (the defaults build): bad input
+        with time_limit(timeout):
+            builds = not params or _builds(trainable, {})
+        if builds:  # the values given are bad (the defaults build): bad input
             raise SpecError(f"network {name!r}: {exc}") from None
     ctx = _Context(trainable, params, size, seed)
     findings: list[Finding] = []
@@ -87,13 +104,18 @@ def check_plugin(name: str, params: dict[str, Any] | None = None, *, weights: st
             findings.append(Finding(check, SKIP, f"needs a passing {' and '.join(missing)} check"))
             return
         try:
-            status, text = fn()
+            with time_limit(timeout):
+                status, text = fn()
+        except TimeLimitExceeded:
+            raise too_long(f"the {check} check") from None
         except _Failed as exc:
             status, text = FAIL, str(exc)
         except LFBenchError:
             raise
         except Exception as exc:  # noqa: BLE001 - whatever the plugin raised: one line naming it
             status, text = FAIL, f"raised {_one_line(exc)}"
+        except SystemExit as exc:  # sys.exit in a plugin's code would end the check with exit 0 and no word
+            status, text = FAIL, f"raised SystemExit({exc.code!r}): a network must never exit the process"
         findings.append(Finding(check, status, text))
 
     with torch.random.fork_rng(devices=[]):
@@ -105,7 +127,11 @@ def check_plugin(name: str, params: dict[str, Any] | None = None, *, weights: st
                                                   f"(lfbench train CONFIG --out RUN) and run check-plugin {name} "
                                                   "--weights RUN/final.pt"))
         else:
-            trained = trainable.load(weights)  # DataError naming the file: bad input
+            try:
+                with time_limit(timeout):
+                    trained = trainable.load(weights)  # DataError naming the file: bad input
+            except TimeLimitExceeded:
+                raise too_long("loading --weights") from None
             run("sign", lambda: ctx.sign(trained), "forward")
         run("receptive_radius", ctx.receptive_radius, "forward")
         run("tiling", ctx.tiling, "forward")
@@ -119,7 +145,7 @@ def _builds(trainable: Trainable, params: dict[str, Any]) -> bool:
     """Whether the network builds from ``params`` (on the meta device where it can)."""
     try:
         trainable.check(params)
-    except Exception:  # noqa: BLE001 - whatever the constructor raised
+    except (Exception, SystemExit):  # noqa: BLE001 - whatever the constructor raised
         return False
     return True
 
@@ -162,7 +188,7 @@ class _Context:
 
         try:
             net = self.fresh()
-        except Exception as exc:  # noqa: BLE001 - the constructor's own error
+        except (Exception, SystemExit) as exc:  # noqa: BLE001 - the constructor's own error
             raise _Failed(f"{self.trainable.name}({_kwargs(self.params)}) raised {_one_line(exc)}: the network must "
                           "build from its parameters' defaults") from None
         if not isinstance(net, torch.nn.Module):
@@ -171,6 +197,9 @@ class _Context:
         if not isinstance(angular, int) or isinstance(angular, bool) or not 1 <= angular <= 15:
             raise _Failed(f"angular is {angular!r}: declare the views per angular row as an int (9 for HCI)")
         self.net = net.eval()
+        # a network of valid convolutions needs more than its output margin on each side: the checks' light
+        # fields grow to fit it (e.g. EPINET's 11 px: at least 23 px)
+        self.size = max(self.size, 2 * self.trainable.output_margin(net) + 4)
         count = sum(p.numel() for p in net.parameters())
         if not count:
             raise _Failed("the network has no parameters: lfbench trains and loads parameters (nn.Parameter, "
@@ -353,13 +382,16 @@ class _Context:
         optimizer = made[0] if isinstance(made, tuple) else made
         before = {k: p.detach().clone() for k, p in net.named_parameters()}
         g = torch.Generator().manual_seed(self.seed + 4)
-        views = torch.rand((2, self.angular ** 2, 16, 16), generator=g)
+        margin = self.trainable.output_margin(net)
+        side = 16 + 2 * margin  # the loss compares 16 x 16 px, as for a network without a margin
+        views = torch.rand((2, self.angular ** 2, side, side), generator=g)
         values = getattr(net, "disparities", None)
         lo, hi = (float(values.min()), float(values.max())) if isinstance(values, torch.Tensor) else (-2.0, 2.0)
-        target = lo + (hi - lo) * (0.1 + 0.8 * torch.rand((2, 16, 16), generator=g))
+        target = lo + (hi - lo) * (0.1 + 0.8 * torch.rand((2, side, side), generator=g))
         loss_name = "l1+js" if self.trainable.distribution else "l1"
         optimizer.zero_grad(set_to_none=True)
-        disparity, probability = net(views)
+        disparity, probability, target = crop_margin(*self.trainable.training_forward(net, views, target), target,
+                                                     margin)  # as lfbench train compares
         loss = make_loss(loss_name)(disparity, probability, target, values)
         value = float(loss.detach())
         if not math.isfinite(value):

@@ -33,6 +33,12 @@ def _visible(text: str) -> str:
                    else ch for ch in text)
 
 
+def exception_line(exc: BaseException, width: int = 160) -> str:
+    """``TypeName: first line of the message`` of an exception a plugin's code raised, for one error line."""
+    first = (str(exc).strip().splitlines() or [""])[0][:width]
+    return f"{type(exc).__name__}: {first}" if first else type(exc).__name__
+
+
 class Interrupted(LFBenchError):
     """Work stopped on request (SIGINT/SIGTERM) after saving what it had done: a stop, not an error; the
     same command resumes it. The CLI prints its message (``stopped at ...``) without ``error:``, exit code 130."""

@@ -16,7 +16,7 @@ from pathlib import Path
 from lfbench.utils.errors import DataError, LFBenchError
 
 __all__ = ["MAX_CSV_COLUMNS", "MAX_CSV_ROWS", "MAX_TEXT_BYTES", "check_regular_file", "file_sha256", "read_bytes",
-           "read_csv", "read_text"]
+           "read_csv", "read_head", "read_text"]
 
 #: The default cap of a text file lfbench reads (configs, specs, CSVs, golden files are far smaller).
 MAX_TEXT_BYTES = 64 * 1024**2
@@ -35,6 +35,8 @@ def _open(path: Path, what: str, error: type[LFBenchError]) -> int:
     try:
         fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0))
     except FileNotFoundError:
+        if os.path.islink(path):
+            raise error(f"{what} is a symbolic link that leads nowhere", path) from None
         raise error(f"{what} not found", path) from None
     except IsADirectoryError:
         raise error(f"{what} is a folder, expected a file", path) from None
@@ -52,6 +54,19 @@ def check_regular_file(path: str | Path, what: str = "file", *, error: type[LFBe
     """``error`` naming ``path`` unless it is an existing regular file (after following links): for readers
     that open the file themselves (PIL, numpy, torch) and must not be handed a device or a FIFO."""
     os.close(_open(Path(path), what, error))
+
+
+def read_head(path: str | Path, n: int, what: str = "file", *, error: type[LFBenchError] = DataError) -> bytes:
+    """The first ``n`` bytes of the regular file ``path`` (fewer when it is shorter): a header read without
+    handing the file to a decoder; ``error`` naming it as :func:`read_bytes` does."""
+    path = Path(path)
+    fd = _open(path, what, error)
+    try:
+        return os.read(fd, n)
+    except OSError as exc:
+        raise error(f"cannot read {what}: {exc.strerror or exc}", path) from None
+    finally:
+        os.close(fd)
 
 
 def read_bytes(path: str | Path, what: str = "file", max_bytes: int = MAX_TEXT_BYTES, *,
