@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import csv
 import io
+import math
 import platform
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import asdict, dataclass, field
@@ -24,7 +25,7 @@ from lfbench.utils.jsonfile import json_text, read_json
 from lfbench.utils.names import file_names
 from lfbench.utils.outputs import check_complete, check_within
 
-__all__ = ["CSV_COLUMNS", "Record", "Results", "RunInfo", "check_names", "check_unique"]
+__all__ = ["CSV_COLUMNS", "Record", "Results", "RunInfo", "check_names", "check_unique", "protocol_meta"]
 
 CSV_COLUMNS = ("method", "scene", "metric", "value", "resolution")
 
@@ -71,6 +72,20 @@ class Results:
     @property
     def metrics(self) -> list[str]:
         return list(dict.fromkeys(r.metric for r in self.records))
+
+    @property
+    def protocol_metrics(self) -> list[str]:
+        """The metric ids of the protocol the results were scored under (``meta.protocol.metrics``, written by
+        ``lfbench evaluate``): what figures and pages take their BadPix thresholds from; the metrics of the
+        records for results that do not record it."""
+        return list((self.meta.get("protocol") or {}).get("metrics") or self.metrics)
+
+    @property
+    def disparity_range(self) -> tuple[float, float] | None:
+        """The (min, max) disparity (px per view step) of the results' dataset protocol
+        (``meta.protocol.disparity_range``), or None when not recorded."""
+        found = (self.meta.get("protocol") or {}).get("disparity_range")
+        return (float(found[0]), float(found[1])) if found else None
 
     @property
     def data_roots(self) -> list[Path]:
@@ -241,6 +256,10 @@ def _is_int(v: Any) -> bool:
     return isinstance(v, int) and not isinstance(v, bool)
 
 
+def _is_finite_number(v: Any) -> bool:
+    return isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+
+
 #: The meta keys lfbench reads back, each with the JSON type it must have (other keys are kept as they are).
 _META_TYPES: dict[str, tuple[type, str]] = {
     "data_root": (str, "a folder name (a string)"), "created": (str, "a string"),
@@ -248,7 +267,15 @@ _META_TYPES: dict[str, tuple[type, str]] = {
     "scenes": (list, "a list of folder names"), "methods": (dict, "an object"),
     "dataset": (str, "a dataset name (a string; see `lfbench datasets`)"),
     "data_roots": (list, "a list of folder names"), "references": (list, "a list of method labels"),
+    "protocol": (dict, "an object (metrics, disparity_range)"),
 }
+
+
+def protocol_meta(metrics: Sequence[str], disparity_range: tuple[float, float]) -> dict[str, Any]:
+    """What results record of their dataset protocol (``meta.protocol``, read back by
+    :attr:`Results.protocol_metrics` and :attr:`Results.disparity_range`): its metric ids and disparity range
+    (px per view step); the border is ``meta.scoring.border_px``."""
+    return {"metrics": list(metrics), "disparity_range": [float(disparity_range[0]), float(disparity_range[1])]}
 
 
 def _check_meta(meta: dict[str, Any], path: Path) -> None:
@@ -263,6 +290,14 @@ def _check_meta(meta: dict[str, Any], path: Path) -> None:
         raise DataError("'meta.data_roots' must be folder names", path)
     if any(not isinstance(r, str) for r in meta.get("references") or []):
         raise DataError("'meta.references' must be method labels (strings)", path)
+    protocol = meta.get("protocol") or {}
+    if not isinstance(protocol.get("metrics", []), list) or any(not isinstance(m, str)
+                                                                for m in protocol.get("metrics", [])):
+        raise DataError("'meta.protocol.metrics' must be a list of metric ids", path)
+    lo_hi = protocol.get("disparity_range")
+    if lo_hi is not None and not (isinstance(lo_hi, list) and len(lo_hi) == 2
+                                  and all(_is_finite_number(v) for v in lo_hi) and lo_hi[0] < lo_hi[1]):
+        raise DataError("'meta.protocol.disparity_range' must be [min, max], finite numbers with min < max", path)
     try:
         ScoringRules.from_meta(meta)  # the recorded rules, as every reader takes them
     except ValueError as exc:

@@ -6,7 +6,7 @@ from pathlib import Path
 from typing import Annotated
 
 from lfbench.data.scene import LightField
-from lfbench.data.submission import check_inside, disp_map_path, read_submission_map
+from lfbench.data.submission import check_inside, find_disp_map, read_submission_map
 from lfbench.method.base import Method, Prediction
 from lfbench.method.registry import register_method
 from lfbench.utils.errors import DataError
@@ -23,8 +23,8 @@ def _scene_shape(lf: LightField) -> tuple[int, int] | None:
 class PublishedResults(Method):
     """Precomputed results in the benchmark's submission layout (disp_maps/, runtimes/)."""
 
-    def __init__(self, path: Annotated[Path, "the submission folder (holding disp_maps/<scene>.pfm and "
-                                             "runtimes/<scene>.txt)"]) -> None:
+    def __init__(self, path: Annotated[Path, "the submission folder (holding disp_maps/<scene>.pfm or .npy "
+                                             "and runtimes/<scene>.txt)"]) -> None:
         super().__init__(path=path)
         self.path = Path(path)
         if not (self.path / "disp_maps").is_dir():
@@ -32,17 +32,18 @@ class PublishedResults(Method):
 
     @property
     def label(self) -> str:
-        return f"published:{self.path.resolve().name}"
+        """``published:<folder name>``, or the label given (``--label``, :meth:`with_label`)."""
+        return super().label if self._given_label else f"published:{self.path.resolve().name}"
 
     def available_for(self, lf: LightField) -> str | None:
-        p = disp_map_path(self.path, lf.name)
+        p = find_disp_map(self.path, lf.name)
         if not (p.exists() or p.is_symlink()):
             return f"no {p}"
         check_inside(self.path, p)
         return None
 
     def predict(self, lf: LightField) -> Prediction:
-        path = disp_map_path(self.path, lf.name)
+        path = find_disp_map(self.path, lf.name)
         if not (path.exists() or path.is_symlink()):
             raise DataError(f"no disparity map for scene {lf.name!r}", path)
         disparity, runtime = read_submission_map(self.path, lf.name, max_shape=_scene_shape(lf))

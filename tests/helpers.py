@@ -269,13 +269,18 @@ def example_grid() -> str:
     return text.replace(base, base + "seeds = [1, 2]\n")
 
 
+def example_copy(folder: Path) -> Path:
+    """examples/tiny_plugin copied to ``folder`` (its sources and specs, no build outputs), for a test to change."""
+    shutil.copytree(EXAMPLE_PLUGIN, folder, ignore=shutil.ignore_patterns("build", "*.egg-info", "__pycache__"))
+    return folder
+
+
 def install_example_plugin(tmp: Path) -> tuple[Path, Path, dict[str, str]]:
     """examples/tiny_plugin copied to tmp/src and installed into tmp/site the way a user installs it: pip install
     --target (no network: --no-index, --no-deps, no build isolation); where setuptools is absent (venvs of
     Python >= 3.12), the same distribution written by hand (the package and a dist-info with the pyproject's
     entry points). Returns (src, site, an environment whose PYTHONPATH holds site, one OpenMP thread)."""
-    src, site = tmp / "src", tmp / "site"
-    shutil.copytree(EXAMPLE_PLUGIN, src, ignore=shutil.ignore_patterns("build", "*.egg-info", "__pycache__"))
+    src, site = example_copy(tmp / "src"), tmp / "site"
     install_package(src, site)
     assert (site / "lfbench_tiny" / "plugin.py").is_file()
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in (str(site), os.environ.get("PYTHONPATH")) if p),

@@ -158,6 +158,12 @@ def test_predict_views_npy_with_a_plugin_method(data, tmp_path, plugin, capsys):
                            tmp_path / "views.npy", "--out", tmp_path / "c.pfm")
     assert rc == 0, err
     assert np.array_equal(read_pfm(tmp_path / "c.pfm"), 2 * views[:, :, 40])  # centre = view 40
+    # any square grid: 7x7 views (49 channels), the centre is view 3 * 7 + 3 = 24 (issue 38)
+    np.save(tmp_path / "views7.npy", views[:, :, :49])
+    rc, out, err = run_cli(capsys, "predict", "--method", plugin["centre"], "--input", tmp_path / "views7.npy",
+                           "--out", tmp_path / "c7.pfm")
+    assert rc == 0, err
+    assert np.array_equal(read_pfm(tmp_path / "c7.pfm"), views[:, :, 24])
     # the same method on a scene folder: the gray centre view
     rc, _, err = run_cli(capsys, "predict", "--method", plugin["centre"], "--input",
                          data["root"] / "training" / "beta", "--out", tmp_path / "b.npy")
@@ -291,7 +297,7 @@ def test_validate_nan_prediction(data, capsys):
 
 
 @pytest.mark.parametrize("make, fragment", [
-    (lambda p: np.save(p, np.zeros((4, 4, 80), np.float32)), "expected (H, W, 81) views, got shape (4, 4, 80)"),
+    (lambda p: np.save(p, np.zeros((4, 4, 80), np.float32)), "A from 2 to 33, e.g. 81 for 9x9), got shape (4, 4, 80)"),
     (lambda p: np.save(p, np.full((4, 4, 81), np.nan, np.float32)), "views must be finite"),
     (lambda p: np.save(p, np.array([{"a": 1}], dtype=object), allow_pickle=True), "cannot read .npy"),
     (lambda p: p.write_bytes(b"garbage"), "cannot read .npy"),
@@ -459,11 +465,11 @@ def test_plugin_commands_come_from_entry_points(tmp_path, monkeypatch, capsys):
             sys.modules.pop(name, None)
 
 
-def test_convert_keras_is_the_subfocal_plugin_command():
+def test_convert_keras_is_a_plugin_command():
     from importlib import metadata
 
     eps = {ep.name: ep.value for ep in metadata.entry_points(group="lfbench.commands")}
-    assert eps.get("convert-keras") == "lfbench_methods.subfocal.cli"
+    assert eps.get("convert-keras") == "lfbench_methods.convert_keras"
     assert "convert-keras" not in main.__globals__["BUILTIN_COMMANDS"]
 
 

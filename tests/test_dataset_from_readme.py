@@ -144,7 +144,7 @@ def test_generic_layout_bad_views_and_ground_truth(tmp_path: Path, capsys):
     root = tmp_path / "root"
     (root).mkdir()
     (root / SPEC_FILE).write_text('[views]\npattern = "v{k}.png"\nangular = 3\nfirst = 1\n'
-                                  '[ground_truth]\nfile = "gt.npy"\n', encoding="utf-8")
+                                  '[ground_truth]\nfile = "gt.npy"\n[protocol]\nborder = 4\n', encoding="utf-8")
     scene = root / "s"
     scene.mkdir()
     for k in range(1, 10):
@@ -165,11 +165,13 @@ def test_generic_layout_bad_views_and_ground_truth(tmp_path: Path, capsys):
 
 
 def _generic_root(tmp_path: Path, gt_format: str = "npy") -> Path:
-    """ROOT/lfbench-dataset.toml and one 3x3 scene ROOT/s/ of 20x16 px views v1.png .. v9.png and gt.<format>."""
+    """ROOT/lfbench-dataset.toml and one 3x3 scene ROOT/s/ of 20x16 px views v1.png .. v9.png and gt.<format>
+    (a 4 px border: the default 15 px would leave no pixel of 20x16 views to score)."""
     root = tmp_path / "root"
     root.mkdir()
     (root / SPEC_FILE).write_text('[views]\npattern = "v{k}.png"\nangular = 3\nfirst = 1\n'
-                                  f'[ground_truth]\nfile = "gt.{gt_format}"\n', encoding="utf-8")
+                                  f'[ground_truth]\nfile = "gt.{gt_format}"\n[protocol]\nborder = 4\n',
+                                  encoding="utf-8")
     scene = root / "s"
     scene.mkdir()
     for k in range(1, 10):

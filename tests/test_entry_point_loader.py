@@ -33,7 +33,7 @@ def test_commands_are_a_registry_of_lazy_modules():
     assert isinstance(commands, Registry) and commands.group == "lfbench.commands"
     names = commands.registered()
     assert names[:len(BUILTIN_COMMANDS)] == list(BUILTIN_COMMANDS)  # the built-ins first, in their order
-    assert "convert-keras" in names and commands.target("convert-keras") == "lfbench_methods.subfocal.cli"
+    assert "convert-keras" in names and commands.target("convert-keras") == "lfbench_methods.convert_keras"
     with pytest.raises(SpecError, match=r"^Unknown command 'nope'\. Available: ablate, bench, "):
         commands.get("nope")
 

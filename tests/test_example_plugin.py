@@ -16,7 +16,7 @@ import numpy as np
 import pandas as pd
 import pytest
 import torch
-from helpers import install_example_plugin, isolate_registries, run_cli
+from helpers import example_copy, isolate_registries, run_cli
 
 from lfbench.data.hci import HCIDataset
 
@@ -26,9 +26,10 @@ pytestmark = pytest.mark.slow
 
 
 @pytest.fixture(scope="module")
-def plugin(tmp_path_factory):
+def plugin(example_plugin, tmp_path_factory):
     """(example folder copy, environment whose PYTHONPATH holds the installed plugin, site folder)."""
-    src, site, env = install_example_plugin(tmp_path_factory.mktemp("tiny_plugin"))
+    site, env = example_plugin
+    src = example_copy(tmp_path_factory.mktemp("tiny_plugin") / "src")
     sys.path.insert(0, str(site))
     yield src, env, site
     sys.path.remove(str(site))

@@ -481,3 +481,48 @@ def test_pages_read_well_at_1400_by_1000(site, browser, tmp_path):
     assert len(heights) == 2 and max(heights) <= 120, heights
     assert _errors(browser) == []
     browser.set_window_size(1366, 768)
+
+
+def _urbanlf_shaped_site(out: Path) -> Path:
+    """A site as UrbanLF-Syn results give it (issue 38): Table III's eight samples, methods named by long specs,
+    and the paper's per-scene table beside ours (13 number columns with long ids), no maps."""
+    import pandas as pd
+
+    from lfbench.reports.html import SiteInputs, SiteSection, build_site
+    from lfbench.results import Record, Results
+
+    samples = [f"Image{n}" for n in (11, 27, 34, 50, 54, 68, 69, 70)]
+    methods = ["planesweep:d_min=-0.5,d_max=1.6,interval=0.1", "planesweep:d_min=-0.5,d_max=2.0,interval=0.5,"
+               "subpixel=none", "constant:value=0.5", "subfocal:width=16,weights=sha256:0123456789abcdef"]
+    rng = np.random.default_rng(0)
+    records = [Record(m, s, metric, float(rng.uniform(0, 100)), "lowres") for m in methods for s in samples
+               for metric in ("badpix_0.07", "badpix_0.03", "badpix_0.01", "mse_x100")]
+    results = Results(records, meta={"dataset": "urbanlf-syn", "scoring": {"border_px": 15}})
+    columns = {f"Img{s[5:]}": rng.uniform(0, 100, 8) for s in samples}
+    columns |= {"badpix_0.07": rng.uniform(0, 100, 8), "scenes": [8] * 8, "runtime_s_9x9x256x256": rng.uniform(0, 2, 8),
+                "params_millions": rng.uniform(4, 6, 8), "runtime_s (this run, per scene)": rng.uniform(0, 9, 8)}
+    table = pd.DataFrame(columns, index=pd.Index([*methods, "LFattNet (paper)", "DistgDisp (paper)",
+                                                  "OACC-Net (paper)", "SubFocal (paper)"], name="method"))
+    inputs = SiteInputs(results, sections=[SiteSection("table3", "table3: ours beside the paper", table, ["c"])])
+    return build_site(inputs, out)
+
+
+def test_urbanlf_leaderboard_and_table_iii_fit_at_1400(browser, tmp_path):
+    """No table of an UrbanLF-Syn report scrolls sideways at 1400 px: long method specs wrap after their commas
+    (never inside a number), column ids after their underscores, and number columns stay narrow."""
+    from selenium.webdriver.common.by import By
+
+    index = _urbanlf_shaped_site(tmp_path / "html")
+    assert "planesweep:<wbr>d_min=-0.5,<wbr>d_max=1.6,<wbr>interval=0.1" in index.read_text(encoding="utf-8")
+    browser.set_window_size(1400, 1000)
+    browser.get(index.as_uri())
+    _settle(browser)
+    wraps = browser.find_elements(By.CSS_SELECTOR, ".table-wrap")
+    assert len(wraps) == 6  # the overview, Table III and one table per metric
+    widths = browser.execute_script(
+        "return Array.from(document.querySelectorAll('.table-wrap')).map(w => [w.scrollWidth, w.clientWidth]);")
+    assert all(scroll <= client for scroll, client in widths), widths
+    assert browser.execute_script("return document.documentElement.scrollWidth <= window.innerWidth")
+    browser.save_screenshot(str(tmp_path / "urbanlf.png"))
+    assert _errors(browser) == []
+    browser.set_window_size(1366, 768)

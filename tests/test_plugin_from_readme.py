@@ -41,7 +41,7 @@ def _files(section: str) -> dict[str, str]:
 
 def _commands(section: str) -> list[list[str]]:
     """The ``lfbench ...`` lines of the bash block that runs the README's plugin (comments stripped)."""
-    block = next(body for lang, body in code_blocks(section) if lang == "bash" and "epinet" in body)
+    block = next(body for lang, body in code_blocks(section) if lang == "bash" and "epistack" in body)
     return [shlex.split(line.split("  #")[0]) for line in block.splitlines() if line.startswith("lfbench ")]
 
 
@@ -50,7 +50,7 @@ def readme_plugin(tmp_path_factory):
     """(source folder written from the README, environment with the plugin installed)."""
     section = _section()
     files = _files(section)
-    assert set(files) == {"my_lfnet/plugin.py", "pyproject.toml", "train_epinet.toml"}, set(files)
+    assert set(files) == {"my_lfnet/plugin.py", "pyproject.toml", "train_epistack.toml"}, set(files)
     src = tmp_path_factory.mktemp("readme_plugin")
     for name, text in files.items():
         (src / name).parent.mkdir(parents=True, exist_ok=True)
@@ -83,19 +83,19 @@ def test_the_readme_plugin_runs_with_the_readme_commands(readme_plugin):
     outputs = [_run(env, src, [*c, "--no-progress"] if c[1] in ("train", "synth", "evaluate") else c)
                for c in commands]
     listing = outputs[0]
-    assert "epinet: EPI streams through the centre row and column, a distribution over disparity bins." in listing
+    assert "epistack: EPI streams through the centre row and column, a distribution over disparity bins." in listing
     assert "features (int [1, 256], default 8): channels of each EPI stream" in listing
 
     # trained: both stages ran, the distribution loss too, and the weights say which network they hold
     final = torch.load(src / "runs" / "epi" / "final.pt", map_location="cpu", weights_only=True)
-    assert final["method"] == "epinet" and final["training"]["steps"] == 70
+    assert final["method"] == "epistack" and final["training"]["steps"] == 70
     log = [json.loads(line) for line in (src / "runs" / "epi" / "metrics.jsonl").read_text().splitlines()]
     assert [e["stage_name"] for e in log if e["event"] == "train"][-1] == "js"
 
     # evaluated: the records are the network's, rebuilt here by hand from the weights file
     saved = json.loads((src / "runs" / "epi" / "eval" / "results.json").read_text())
     (label,) = {r["method"] for r in saved["records"]}
-    assert label.startswith("epinet:weights=sha256:")
+    assert label.startswith("epistack:weights=sha256:")
     with pytest.MonkeyPatch.context() as mp:  # its registration is forgotten afterwards
         isolate_registries(mp)
         mp.syspath_prepend(str(src))
@@ -128,5 +128,5 @@ def test_the_readme_plugin_runs_with_the_readme_commands(readme_plugin):
                       "flops": "skip", "save/load": "ok", "training": "ok"}, outputs[7]
     assert "receptive_radius: 2 px" in outputs[7]
     # the 70 steps above teach it no disparity: the sign check says so instead of passing
-    weights = _lfbench_fails(env, src, ["lfbench", "check-plugin", "epinet", "--weights", "runs/epi/final.pt"])
+    weights = _lfbench_fails(env, src, ["lfbench", "check-plugin", "epistack", "--weights", "runs/epi/final.pt"])
     assert "FAIL  sign: on planes at +1 and -1 px it predicts" in weights and "Train longer" in weights

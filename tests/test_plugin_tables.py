@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
-from helpers import install_example_plugin
+from helpers import example_copy
 
 pytestmark = pytest.mark.slow
 SCENE = "synth_11_0"  # the example spec's one evaluation scene
@@ -36,11 +36,12 @@ def paper_folder(folder: Path) -> Path:
 
 
 @pytest.fixture(scope="module")
-def ablated(tmp_path_factory):
+def ablated(example_plugin, tmp_path_factory):
     """The example's channels ablation with two seeds and the zero map as a baseline, run with --html while
     a paper folder is set in the environment."""
     base = tmp_path_factory.mktemp("plugin_tables")
-    src, _, env = install_example_plugin(base)
+    _, env = example_plugin
+    src = example_copy(base / "src")
     paper = paper_folder(base / "paper")
     env = {**env, "LFBENCH_PAPER_DIR": str(paper)}
     env.pop("LFBENCH_HCI_ROOT", None)

@@ -271,8 +271,8 @@ def test_metric_order_and_labels_come_from_the_metrics():
 
 
 # lfbench/scoring from the bottom up: a module may import only those before it (and data, utils)
-SCORING_LAYERS = ("pixels", "resample", "pixelwise", "base", "general", "rules", "prepare", "region_metrics", "metrics",
-                  "builtin", "score", "stats", "uncertainty")
+SCORING_LAYERS = ("policy", "pixels", "resample", "pixelwise", "base", "general", "rules", "prepare", "region_metrics",
+                  "metrics", "builtin", "protocol", "score", "stats", "uncertainty")
 
 
 def _lfbench_imports(path: Path) -> list[tuple[str, list[str]]]:

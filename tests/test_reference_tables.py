@@ -204,7 +204,8 @@ def test_an_ordering_in_a_metric_where_higher_is_better_is_tested_in_its_directi
                         index=["k=1_seed=1", "k=1_seed=2", "k=2_seed=1", "k=2_seed=2"])
     scores = pd.DataFrame({"method": list(info.index), "scene": ["s"] * 4, "metric": ["accuracy"] * 4,
                            "value": [50.0, 51.0, 90.0, 92.0]})
-    monkeypatch.setattr(significance.METRICS, "find", lambda _: SimpleNamespace(higher_is_better=True))
+    accuracy = SimpleNamespace(higher_is_better=True, badness=lambda v: -v)  # as Metric.badness where higher is better
+    monkeypatch.setattr(significance.METRICS, "find", lambda _: accuracy)
     row = significance.significance_table(table, info, scores).iloc[0]
     assert row["claim (paper)"] == "k 2 better than 1" and row["better"] == "k=2"
     assert row["difference (worse - better)"] == pytest.approx(40.5) and row["verdict"] == "reproduced"

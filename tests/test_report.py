@@ -234,10 +234,27 @@ def test_report_regenerates_the_evaluate_tables(evaluated, tmp_path, capsys):
     for name in TABLE_FILES:
         assert (tmp_path / "r" / name).read_text() == (evaluated / "eval" / name).read_text(), name
     out = capsys.readouterr().out
-    assert "published:sub" in out and "badpix_series.csv" in out
+    # the maps the run saved are drawn without --maps (issue 38): overviews, and the exact curves of the run
+    assert "published:sub" in out and f"saved maps in {evaluated / 'eval' / 'maps'}" in out
     curves = tmp_path / "r" / "figures"
     assert (curves / "badpix_series.png").stat().st_size > 5000
-    assert sorted(p.name for p in curves.iterdir() if p.is_dir()) == ["synth_3_0", "synth_3_1"]
+    assert sorted(p.name for p in curves.iterdir() if p.is_dir()) == ["synth_3_0", "synth_3_1", "toolkit"]
+    assert (curves / "overview_synth_3_0.png").is_file()
+    saved = evaluated / "eval" / "figures" / "badpix_series.csv"
+    assert (curves / "badpix_series.csv").read_text() == saved.read_text()
+
+
+def test_report_without_the_scenes_takes_the_saved_curves(evaluated, tmp_path, capsys):
+    """Saved maps whose data root is not at hand (results copied elsewhere) are not drawn: the saved curves are."""
+    copy = tmp_path / "copy"
+    shutil.copytree(evaluated / "eval", copy)
+    data = json.loads((copy / "results.json").read_text())
+    data["meta"]["data_root"] = str(tmp_path / "gone")
+    (copy / "results.json").write_text(json.dumps(data))
+    capsys.readouterr()
+    assert main(["report", str(copy), "--out", str(tmp_path / "r")]) == 0
+    assert f"BadPix series from {copy / 'figures' / 'badpix_series.csv'}" in capsys.readouterr().out
+    assert not (tmp_path / "r" / "figures" / "overview_synth_3_0.png").exists()
 
 
 def test_report_with_paper_columns_and_formats(evaluated, tmp_path):

@@ -40,6 +40,10 @@ def test_legend_labels_wrap_to_the_legend_width():
     assert all(len(line) <= LEGEND_WIDTH for line in wrapped.split("\n")) and len(wrapped.split("\n")) > 1
     assert wrapped.replace("\n", "") == LONG  # every character kept
     assert legend_label("gt") == "gt"
+    # breaks only after a comma or a space: never inside a number or a key=value (issue 38)
+    assert legend_label("planesweep:d_min=-2.0,d_max=2.0 (4 scenes)") == "planesweep:d_min=-2.0,\nd_max=2.0 (4 scenes)"
+    assert legend_label("a" * 40 + ",b") == "a" * 40 + ",\nb"  # a longer token stays whole
+    assert legend_label("one two three", width=7) == "one two\nthree"
 
 
 def _extents(fig):

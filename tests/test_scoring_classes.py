@@ -46,11 +46,11 @@ N, S = 20, 10  # a scene of N x N px whose high-resolution ground truth is S tim
 RULES = ScoringRules(border_px=2)
 
 
-def _highres_scene(root, name: str = "backgammon", seed: int = 5) -> Scene:
-    """A high-resolution scene (backgammon: scored at high resolution) whose high-res ground truth is not a
-    repeat of its low-res one."""
-    gt_hi = np.random.default_rng(seed).uniform(-1, 1, (N * S, N * S)).astype(F32)
-    return HCIScene(write_scene(root, name, "stratified", size=N, views=False, gt=gt_hi[::S, ::S].copy(),
+def _highres_scene(root, name: str = "backgammon", seed: int = 5, n: int = N) -> Scene:
+    """A high-resolution scene (backgammon: scored at high resolution) of n x n px whose high-res ground truth is
+    not a repeat of its low-res one."""
+    gt_hi = np.random.default_rng(seed).uniform(-1, 1, (n * S, n * S)).astype(F32)
+    return HCIScene(write_scene(root, name, "stratified", size=n, views=False, gt=gt_hi[::S, ::S].copy(),
                              gt_highres=gt_hi))
 
 
@@ -84,8 +84,9 @@ def test_runtime_records_are_low_resolution_on_a_scene_scored_at_high_resolution
     assert score.resolution["badpix_0.07"] == "highres"  # the scene is scored at high resolution ...
     assert score.resolution["runtime"] == score.resolution["runtime_log"] == "lowres"  # ... the time is the map's
     assert score.values["runtime"] == 2.0 and score.values["runtime_log"] == pytest.approx(math.log10(2.0))
-    sub = write_submission(tmp_path / "sub", {"backgammon": pred}, {"backgammon": "2.5\n"})
-    rc, _, err = run_cli(capsys, "-q", "evaluate", "--data", tmp_path / "data", "--method", f"published:path={sub}",
+    _highres_scene(tmp_path / "data32", n=32)  # the HCI protocol's 15 px border leaves 2 px of 32 to score
+    sub = write_submission(tmp_path / "sub", {"backgammon": np.zeros((32, 32), F32)}, {"backgammon": "2.5\n"})
+    rc, _, err = run_cli(capsys, "-q", "evaluate", "--data", tmp_path / "data32", "--method", f"published:path={sub}",
                          "--all-metrics", "--out", tmp_path / "out", "--no-progress")
     assert rc == 0, err
     records = json.loads((tmp_path / "out" / "results.json").read_text())["records"]

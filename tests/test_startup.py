@@ -57,7 +57,7 @@ def test_light_commands_import_neither_torch_nor_plugin_commands(command, tmp_pa
     code, modules = _imports(*args, cwd=tmp_path)
     assert code == 0, (command, code)
     assert not [m for m in modules if m.split(".")[0] == "torch"], f"lfbench {command} imported torch"
-    assert "lfbench_methods.subfocal.cli" not in modules  # the plugin command convert-keras: not imported
+    assert "lfbench_methods.convert_keras" not in modules  # the plugin command convert-keras: not imported
     if command != "methods":  # listing methods imports the modules that register them (light ones)
         assert not [m for m in modules if m.startswith("lfbench_methods")], modules
     if command in ("--help", "regress"):
@@ -93,3 +93,20 @@ def test_the_public_api_is_imported_on_first_use(tmp_path):
         import lfbench
 
         lfbench.nope  # noqa: B018
+
+
+def test_evaluating_a_submission_imports_no_statistics_it_does_not_use(tmp_path):
+    """Issue 39.7: scipy.stats came with the report writers (through the bootstrap module) and cost more CPU than
+    scoring one submission (1.4 s); `lfbench evaluate` without --ci or comparisons never calls it. It is
+    imported where a test is computed (and still is: --ci works, test_stats)."""
+    from helpers import write_scene, write_submission
+
+    root = tmp_path / "data"
+    write_scene(root, "tiny", size=40, views=False)
+    sub = write_submission(tmp_path / "sub", {"tiny": __import__("numpy").full((40, 40), 1.25, "float32")})
+    code, modules = _imports("-q", "evaluate", "--data", str(root), "--method", f"published:path={sub}",
+                             "--out", str(tmp_path / "out"), "--no-progress", cwd=tmp_path)
+    assert code == 0
+    assert (tmp_path / "out" / "results.csv").is_file()
+    assert "scipy.stats" not in modules, [m for m in modules if m.startswith("scipy.stats")][:5]
+    assert not [m for m in modules if m.split(".")[0] == "torch"], "evaluating a submission imported torch"

@@ -42,8 +42,11 @@ def _fmt(value: float) -> str:
 
 
 def _bound_name(metric: str) -> str:
-    """'95% high' when lower is better (the interval's end nearest a worse value), else '95% low'."""
-    return f"{round(LEVEL * 100)}% {'high' if get_metric(metric).lower_is_better else 'low'}"
+    """'95% high' when lower is better (the interval's end nearest a worse value), '95% low' when higher is
+    better, '95% far end' (from 0) for a signed metric."""
+    found = get_metric(metric)
+    end = "far end" if found.signed else "low" if found.higher_is_better else "high"
+    return f"{round(LEVEL * 100)}% {end}"
 
 
 def scene_groups(scores: pd.DataFrame) -> dict[str, str]:
@@ -78,13 +81,13 @@ def verdict(cell: dict[tuple[str, str], tuple[float, float]], baseline: dict[tup
     for (metric, group), (mean, bound) in cell.items():
         base = baseline.get((metric, group), math.nan)
         where = f"{get_metric(metric).name} on {group}"
-        better = (lambda a, b: a < b) if get_metric(metric).lower_is_better else (lambda a, b: a > b)
+        badness = get_metric(metric).badness  # a signed metric: its magnitude
         if not (math.isfinite(mean) and math.isfinite(base)):
             unscored += 1
             open_.append(f"{where} (no score)")
-        elif not better(mean, base):
+        elif not badness(mean) < badness(base):
             failed.append(f"{where} ({_fmt(mean)} vs {_fmt(base)})")
-        elif seeds and not (math.isfinite(bound) and better(bound, base)):
+        elif seeds and not (math.isfinite(bound) and badness(bound) < badness(base)):
             open_.append(f"{where} ({_bound_name(metric)} {_fmt(bound)} vs {_fmt(base)})")
     if failed:
         return f"{NOT_BEATEN}: " + "; ".join(failed)
@@ -116,7 +119,7 @@ def baselines_table(info: pd.DataFrame, scores: pd.DataFrame, baselines: Sequenc
                 vals = [float(values.loc[(c, group), metric]) for c in cells.index if (c, group) in values.index]
                 mean, low, high = t_interval(vals)
                 low, high, _ = within_range(metric, low, high)  # the cell's interval within the metric's range
-                bound = (high if get_metric(metric).lower_is_better else low) if seeds else math.nan
+                bound = get_metric(metric).worst_end(low, high) if seeds else math.nan
                 mine[(metric, group)] = (mean, bound)
                 name = get_metric(metric).name
                 row[f"{name}, {group}, cell"] = mean
@@ -156,8 +159,7 @@ def summary_lines(table: pd.DataFrame, baselines: Sequence[str], groups: Sequenc
 
 def baselines_caption(metrics: Sequence[str] = VERDICT_METRICS, *, seeds: bool) -> str:
     """The rule of the verdict columns, in words."""
-    how = ", ".join(f"{get_metric(m).name} ({'lower' if get_metric(m).lower_is_better else 'higher'} is better)"
-                    for m in metrics)
+    how = ", ".join(f"{get_metric(m).name} ({get_metric(m).direction})" for m in metrics)
     rule = (f"'{BEATS}' = better than the baseline on each of {how} on every scene group (synthetic: the mean over its "
             "scenes)")
     if seeds:

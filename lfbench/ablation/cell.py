@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 
 from lfbench.ablation.spec import Evaluation
+from lfbench.data.synth import SYNTH_LAYOUT
 from lfbench.method.trainable import DEFAULT_TRAINABLE
 from lfbench.utils.atomic import write_bytes, write_text
 from lfbench.utils.errors import DataError, SpecError
@@ -62,6 +63,7 @@ class CellTask:
     evaluation: Evaluation
     threads: int
     progress: bool | None = None
+    angular: tuple[int, int] = (9, 9)  # (V, U) views of the evaluation scenes: the light field the cell is timed on
 
     @property
     def path(self) -> Path:
@@ -216,13 +218,16 @@ def make_method(weights: Path, ev: Evaluation, threads: int, network: str = DEFA
                           max_memory_gb=ev.max_memory_gb, precision=ev.precision)
 
 
-def time_whole_scene(method, size: int, repeats: int, warmup: int, seed: int = 0) -> list[float]:
-    """Seconds of ``repeats`` predictions of one whole 9 x 9 x size x size light field (random views:
-    the network's cost does not depend on the content), after ``warmup`` untimed ones."""
+def time_whole_scene(method, size: int, repeats: int, warmup: int, seed: int = 0,
+                     angular: tuple[int, int] = (9, 9)) -> list[float]:
+    """Seconds of ``repeats`` predictions of one whole V x U x size x size light field (``angular`` = (V, U):
+    the evaluation scenes' views; random views: the network's cost does not depend on the content), after
+    ``warmup`` untimed ones."""
     from lfbench.data.scene import ArrayLightField
 
     rng = np.random.default_rng(seed)
-    lf = ArrayLightField(views=rng.random((9, 9, size, size), dtype=np.float32), name=f"timing_{size}px")
+    v, u = angular
+    lf = ArrayLightField(views=rng.random((v, u, size, size), dtype=np.float32), name=f"timing_{size}px")
     for _ in range(warmup):
         method.predict(lf)
     out = []
@@ -241,17 +246,27 @@ def _sync() -> None:
         torch.cuda.synchronize()
 
 
+#: The dataset layout of the ablation's generated scenes (lfbench.data.synth writes them; this adapter reads them).
+GENERATED_LAYOUT = SYNTH_LAYOUT
+
+
+def open_generated(folder: str | Path):
+    """One generated scene folder, opened by the adapter of :data:`GENERATED_LAYOUT` (DataError naming the
+    folder when it is not one)."""
+    from lfbench.data.dataset import DATASETS
+
+    return DATASETS.get(GENERATED_LAYOUT).open(Path(folder)).scenes[0]
+
+
 def load_scenes(pairs: tuple[tuple[str, str | None], ...], ev: Evaluation | None = None):
     """The scenes of (folder, category) pairs: those under the evaluation's data root opened by its dataset
-    adapter (lfbench.data.dataset), the others (generated ones) as scenes of the HCI layout."""
-    from lfbench.data.hci import HCIScene
-
+    adapter (lfbench.data.dataset), the others (generated ones) by :func:`open_generated`."""
     opened = {}
     if ev is not None and ev.data is not None:
         from lfbench.data.dataset import open_dataset
 
         opened = {str(s.path): s for s in open_dataset(ev.data, ev.dataset)[1].scenes}
-    return [opened.get(path) or HCIScene(path, category=category) for path, category in pairs]
+    return [opened.get(path) or open_generated(path) for path, _ in pairs]
 
 
 def evaluation_dataset(ev: Evaluation):
@@ -263,19 +278,28 @@ def evaluation_dataset(ev: Evaluation):
     return dataset_of(ev.data, ev.dataset)
 
 
-def scoring_of(ev: Evaluation) -> dict[str, Any]:
-    """How the cells are scored (``evaluate_to_folder``'s rules and metrics): by the protocol of the dataset of
-    the evaluation's data root, as ``lfbench evaluate`` scores it; generated scenes alone by the default rules."""
-    from lfbench.scoring.rules import ScoringRules
+def scoring_of(ev: Evaluation):
+    """How the cells and extra methods are scored (lfbench.scoring.protocol.Scoring: rules, metrics and the method
+    grid), by the protocol of the dataset of the evaluation's data root, as ``lfbench evaluate`` scores it;
+    generated scenes alone by the protocol of the adapter of their layout (:data:`GENERATED_LAYOUT`)."""
+    from lfbench.data.dataset import DATASETS
+    from lfbench.scoring.protocol import protocol_scoring
 
     dataset = evaluation_dataset(ev)
-    if dataset is None:
-        return {"rules": ScoringRules(allow_highres=not ev.lowres_only)}
-    from lfbench.scoring.metrics import scored_metrics
+    protocol = DATASETS.get(GENERATED_LAYOUT).protocol if dataset is None else dataset.protocol_for(ev.data)
+    return protocol_scoring(protocol, allow_highres=not ev.lowres_only)
 
-    protocol = dataset.protocol_for(ev.data)
-    return {"rules": ScoringRules.of_protocol(protocol, allow_highres=not ev.lowres_only),
-            "metrics": scored_metrics(protocol.metrics, protocol.source), "meta": {"dataset": dataset.name}}
+
+def scoring_kwargs(ev: Evaluation) -> dict[str, Any]:
+    """``evaluate_to_folder``'s rules, metrics and meta of :func:`scoring_of`."""
+    from lfbench.results import protocol_meta
+
+    scoring = scoring_of(ev)
+    dataset = evaluation_dataset(ev)
+    protocol = scoring.protocol  # what the pages show: its metrics and disparity range
+    meta = {**({"dataset": dataset.name} if dataset is not None else {}), **scoring.meta(),
+            "protocol": protocol_meta(protocol.metrics, protocol.disparity_range)}
+    return {"rules": scoring.rules, "metrics": list(scoring.metrics), "meta": meta}
 
 
 def evaluate_weights(label: str, weights: Path, ev: Evaluation, scenes, threads: int, out: Path,
@@ -288,34 +312,36 @@ def evaluate_weights(label: str, weights: Path, ev: Evaluation, scenes, threads:
 
     return evaluate_to_folder([make_method(weights, ev, threads, network)], scenes, out, label=label,
                               writers=[Maps(MAPS, per_method=False, uncertainty=True)] if save_maps else [],
-                              progress=False, **scoring_of(ev))
+                              progress=False, **scoring_kwargs(ev))
 
 
-def timing_key(ev: Evaluation, threads: int) -> dict[str, Any]:
-    return {"time_size": ev.time_size, "repeats": ev.time_repeats, "warmup": ev.time_warmup, "threads": threads,
-            "device": resolve_device(ev.device), "tile": ev.tile, "max_memory_gb": ev.max_memory_gb,
-            "precision": ev.precision}
+def timing_key(ev: Evaluation, threads: int, angular: tuple[int, int] = (9, 9)) -> dict[str, Any]:
+    return {"time_size": ev.time_size, "angular": list(angular), "repeats": ev.time_repeats,
+            "warmup": ev.time_warmup, "threads": threads, "device": resolve_device(ev.device), "tile": ev.tile,
+            "max_memory_gb": ev.max_memory_gb, "precision": ev.precision}
 
 
-def time_cell(cell_dir: str | Path, ev: Evaluation, threads: int, network: str = DEFAULT_TRAINABLE) -> dict[str, Any]:
+def time_cell(cell_dir: str | Path, ev: Evaluation, threads: int, network: str = DEFAULT_TRAINABLE,
+              angular: tuple[int, int] = (9, 9)) -> dict[str, Any]:
     """Test time of a finished cell (CELL/timing.json, reused when the timing settings are the same):
-    the median of ``time_repeats`` whole-scene predictions. Run one cell at a time, with nothing else
-    of the ablation running, so that the cells' times compare."""
+    the median of ``time_repeats`` whole-scene predictions of ``angular`` (V, U) views, the evaluation scenes'.
+    Run one cell at a time, with nothing else of the ablation running, so that the cells' times compare."""
     path = Path(cell_dir) / TIMING
     weights = Path(cell_dir) / "final.pt"
     recorded = (read_marker(cell_dir) or {}).get("final_sha256")
     if weights_digest(weights) != recorded:  # the weights timed are the ones the cell scored
         raise DataError("not the weights the cell recorded (final_sha256 of its cell.json); run lfbench ablate "
                         "again to re-make the cell", weights)
-    key = {**timing_key(ev, threads), "final_sha256": recorded}
+    key = {**timing_key(ev, threads, angular), "final_sha256": recorded}
     with contextlib.suppress(DataError):
         old = read_json(path, "cell timing")
         if isinstance(old, dict) and old.get("key") == key:
             return old
     with torch_threads(None):  # the method sets its own count; restore ours afterwards
         method = make_method(weights, ev, threads, network)
-        times = time_whole_scene(method, ev.time_size, ev.time_repeats, ev.time_warmup)
+        times = time_whole_scene(method, ev.time_size, ev.time_repeats, ev.time_warmup, angular=angular)
     out = {"key": key, "test_s": float(np.median(times)), "test_s_all": times, "time_size": ev.time_size,
+           "time_angular": list(angular),
            "threads": threads, "device": key["device"], "host": socket.gethostname(),
            "slurm_job_id": os.environ.get("SLURM_JOB_ID")}
     write_text(path, json_text(out, indent=2, sort_keys=True) + "\n")

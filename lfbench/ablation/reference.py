@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import sys
 
-from lfbench.ablation.spec import SPECIAL_AXES, SpecFile, loss_axes
+from lfbench.ablation.spec import NETWORK_AXIS, SPECIAL_AXES, SpecFile, loss_axes
 from lfbench.utils.options import reference_markdown
 
 COMMAND = "python -m lfbench.ablation.reference > docs/ablation-spec.md"
@@ -28,9 +28,14 @@ Grid axes: the network's own parameters (the base config's `method`; `Trainable.
 `[model]`; {", ".join(f"`{a}`" for a in SPECIAL_AXES)} (the last stage's loss, a name or a table
 `{{loss = "uafl", beta = 0.5}}`; the last stage's lr; the config's seed); a parameter a registered loss
 declares ({", ".join(f"`{a}`" for a in loss_axes())}: the last stage's); or any dotted training-config key as in
-`[set]`. `table` names a table the spec's reference declares (`[[tables]]` of its paper file:
-[the paper reference](paper-reference.md)); the cells stand beside it as its declaration says. A cell's id
-is `axis=value` joined by `_` (e.g. `interval=0.5_interpolation=phase`).
+`[set]`. `{NETWORK_AXIS}` (the training config's network, a registered trainable) makes cells of different
+networks: applied first, it starts the cell's `[model]` from that network's defaults (the base's `[model]` and
+`[budget] model` are the base network's), so each network is one `[[grid]]` table with its own `model.KEY`
+axes (e.g. `ablations/table3_paper.toml`); an unregistered network is refused naming the registered ones.
+`table` names a table the spec's reference declares (`[[tables]]` of its paper file:
+[the paper reference](paper-reference.md)); the cells stand beside it as its declaration says (a dataset's
+per-scene table, e.g. `table3` of UrbanLF-Syn: as `table_<id>_paper` when the cells are scored on that
+dataset). A cell's id is `axis=value` joined by `_` (e.g. `interval=0.5_interpolation=phase`).
 """
 
 

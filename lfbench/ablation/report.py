@@ -107,12 +107,16 @@ def load_paper_tables(paper: str | Path | None, log: Log, reference: Reference |
 # --------------------------------------------------------------------------- the cells
 
 def ablation_metrics(results: Results) -> list[str]:
-    """The metric ids the ablation's tables show: the ordered metrics of the protocol of the dataset the
-    results are of (results.json ``meta.dataset``; lfbench.data.dataset) that the results hold, else every
+    """The metric ids the ablation's tables show: the ordered metrics of the protocol the results were scored
+    by (results.json ``meta.protocol_metrics``, lfbench.scoring.protocol.Scoring.meta; results written before
+    it was recorded: the protocol of the adapter ``meta.dataset`` names) that the results hold, else every
     general metric they hold (lfbench.scoring.metrics.metric_order)."""
     held = set(results.to_frame()["metric"]) if results.records else set()
     dataset = results.meta.get("dataset")
-    if dataset:
+    recorded = results.meta.get("protocol_metrics")
+    if isinstance(recorded, list) and all(isinstance(m, str) for m in recorded):
+        declared = recorded
+    elif dataset:
         from lfbench.data.dataset import DATASETS
 
         declared = DATASETS.get(str(dataset)).protocol.metrics
@@ -403,6 +407,10 @@ class AblationTables(OutputWriter):
         written = []
         for table in scene_tables(self.paper, run.results.meta):
             both = scene_table_with_paper(run.results, self.paper, table)
+            if PARAMS_COLUMN in both.columns:  # each cell's network beside the paper's (e.g. Table III's M)
+                for cell_id_, millions in cell_parameters(self.spec).items():
+                    if cell_id_ in both.index:
+                        both.loc[cell_id_, PARAMS_COLUMN] = millions
             if not both.empty:
                 written += write_table(both, run.stage, f"table_{table.id}_paper",
                                        [*caption_lines(self.spec, f"{table.id} beside the paper's"), table.caption])
@@ -425,23 +433,38 @@ class AblationTables(OutputWriter):
         sig = significance_table(table, info, scores)
         if not sig.empty:
             metric = get_metric(ordering_metric(table))
-            better = "higher" if metric.higher_is_better else "lower"
             caption = caption_lines(spec, f"the paper's orderings, paired t-test over seeds ({metric.label}, "
-                                          f"{better} is better; two-sided, alpha {ALPHA:g})")
+                                          f"{metric.direction}; two-sided, alpha {ALPHA:g})")
             sig = sig.set_index("claim (paper)")
             written += write_table(sig, out, "table_significance", caption)
             self.sections.append(SiteSection("significance", "The paper's orderings", sig, caption))
         return written
 
 
+#: A paper table's extra column (its declared name) that our cells fill with their network's parameter count (M).
+PARAMS_COLUMN = "params_millions"
+
+
+def cell_parameters(spec: AblationSpec) -> dict[str, float]:
+    """Each cell's trainable-parameter count in millions: its network (the config's ``method``) built with its
+    [model] on PyTorch's meta device (lfbench.method.trainable.network_summary; nothing allocated)."""
+    from lfbench.ablation.spec import trainable_of
+    from lfbench.method.trainable import network_summary
+
+    return {cell.id: network_summary(trainable_of(cell.config), dict(cell.config["model"]))["trainable"] / 1e6
+            for cell in spec.cells}
+
+
 def spec_table(spec: AblationSpec, reference: Reference | None) -> PaperTable | None:
-    """The declared table the spec's ``table`` names in its reference (None: none, tables12, or no reference)."""
+    """The declared ablation table the spec's ``table`` names in its reference (None: none, tables12, no
+    reference, or a dataset's per-scene table such as table3, which the cells stand beside as
+    ``table_<id>_paper`` when they are scored on that dataset: AblationTables._scene_tables)."""
     if reference is None or spec.table in NO_TABLE:
         return None
     table = reference.table(spec.table)
     if table is None:
         raise SpecError(f"table: reference {reference.name!r} declares no table {spec.table!r}", spec.source)
-    return table
+    return None if table.dataset else table
 
 
 class AblationFigures(OutputWriter):
@@ -548,8 +571,8 @@ def best_cell(spec: AblationSpec, results: Results, metric: str = "badpix_0.07")
     if means.empty:
         return None
     order = {c.id: i for i, c in enumerate(spec.cells)}
-    sign = -1.0 if get_metric(metric).higher_is_better else 1.0
-    return min(means.index, key=lambda m: (sign * float(means[m]), order[m]))
+    badness = get_metric(metric).badness
+    return min(means.index, key=lambda m: (badness(means[m]), order[m]))
 
 
 def drawn_map_folders(spec: AblationSpec, results: Results, folder: Path, maps: str = "all") -> dict[str, Path]:

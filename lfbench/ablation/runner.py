@@ -39,14 +39,17 @@ from pathlib import Path
 from typing import Any
 
 from lfbench.ablation.cell import (
+    GENERATED_LAYOUT,
     MAPS,
     CellTask,
     evaluation_dataset,
     is_done,
     link_data_folder,
     load_scenes,
+    open_generated,
     read_marker,
     run_cell,
+    scoring_kwargs,
     scoring_of,
 )
 from lfbench.ablation.executor import ClusterOptions, Executor, executor_for
@@ -106,10 +109,31 @@ def prepare_training_data(cells: tuple[Cell, ...], out: Path, log: Log) -> dict[
     for cell in cells:
         links[cell.id] = {}
         for syn in cell.train_config().data.synthetic_in_use():
-            name = f"{syn.category}_s{syn.seed}_{syn.size}px_{syn.scenes}"
-            folder = _generate(out / "data" / name, syn.seed, syn.size, syn.scenes, syn.category, log)
+            folder = _generate(shared_data_folder(out, syn), syn.seed, syn.size, syn.scenes, syn.category, log)
             links[cell.id][syn.category] = str(folder)
     return links
+
+
+def shared_data_folder(out: Path, syn) -> Path:
+    """OUT/data/<set>: where the [[data.synthetic]] set ``syn`` is generated once for every cell."""
+    return out / "data" / f"{syn.category}_s{syn.seed}_{syn.size}px_{syn.scenes}"
+
+
+def stale_links(data_dir: Path, out: Path, cfg) -> set[str]:
+    """The categories of ``cfg``'s synthetic sets in use whose link in ``data_dir`` (a cell's or stage 1's data
+    folder) leads anywhere but the shared set (OUT/data/<set>): an earlier version's absolute link, a link into
+    another folder. They are re-pointed before training (link_data_folder), never followed."""
+    stale = set()
+    for syn in cfg.data.synthetic_in_use():
+        link = data_dir / syn.category
+        if link.is_symlink():
+            try:
+                right = link.resolve(strict=True) == shared_data_folder(out, syn).resolve()
+            except (OSError, RuntimeError):  # dangling or a loop
+                right = False
+            if not right:
+                stale.add(syn.category)
+    return stale
 
 
 def check_training_data(spec: AblationSpec, out: Path) -> None:
@@ -118,29 +142,32 @@ def check_training_data(spec: AblationSpec, out: Path) -> None:
     seen = set()
     for cell in spec.cells:
         key = json.dumps([cell.config["data"], cell.config["validation"]], sort_keys=True)
-        if key not in seen:
-            seen.add(key)
-            check_data(cell.train_config(spec.source), out / "cells" / cell.id / "data")
+        data_dir = out / "cells" / cell.id / "data"
+        cfg = cell.train_config(spec.source)
+        renew = stale_links(data_dir, out, cfg)
+        if (key, tuple(sorted(renew))) not in seen:
+            seen.add((key, tuple(sorted(renew))))
+            check_data(cfg, data_dir, renew)
 
 
 def prepare_evaluation(spec: AblationSpec, out: Path, log: Log) -> tuple[tuple[str, str], ...]:
-    """The evaluation scenes as (folder, category): generated synthetic ones and/or the named HCI ones."""
+    """The evaluation scenes as (folder, category): generated synthetic ones and/or the named ones of the
+    evaluation's data root."""
     from lfbench.data.dataset import DATASETS, open_dataset
-    from lfbench.data.hci import HCIScene
-    from lfbench.data.hci.scene import is_scene_folder
     from lfbench.data.scene import Scene, check_scene_names
 
     ev = spec.evaluation
     scenes: list[Scene] = []
+    generated = DATASETS.get(GENERATED_LAYOUT)
     if ev.synthetic is not None:
         syn: SyntheticEval = ev.synthetic
         folder = _generate(out / "eval_data" / syn.folder_name, syn.seed, syn.size, syn.scenes, "synthetic", log)
-        scenes += [HCIScene(p, category="synthetic") for p in sorted(folder.iterdir()) if is_scene_folder(p)]
+        scenes += [open_generated(p) for p in sorted(folder.iterdir()) if generated.matches(p)]
     if ev.data is not None:
         if not ev.data.is_dir():
             raise DataError("evaluation.data: data root not found", ev.data)
         dataset, bench = open_dataset(ev.data, ev.dataset)
-        if ev.synthetic is not None and dataset.protocol_for(ev.data) != DATASETS.get("hci").protocol:
+        if ev.synthetic is not None and dataset.protocol_for(ev.data) != generated.protocol:
             raise SpecError(f"evaluation: synthetic scenes (HCI layout) and {dataset.name} scenes are scored by two "
                             "protocols; one ablation scores one dataset's scenes", spec.source)
         scenes += [s for s in bench.select(list(ev.scenes)) if s.has_gt()]
@@ -191,8 +218,29 @@ def _shared_stage1(spec: AblationSpec, folder: Path, links: dict[str, str], thre
 
 # --------------------------------------------------------------------------- cells
 
+def evaluation_angular(spec: AblationSpec, scenes: tuple[tuple[str, str], ...]) -> tuple[int, int]:
+    """(V, U) views of the evaluation scenes (what every cell is scored and timed on), checked against the
+    network of every cell before anything trains: SpecError naming the spec when the scenes differ in angular
+    size or a cell's network takes another (its ``angular``, from a build on PyTorch's meta device)."""
+    from lfbench.training.model import model_angular
+
+    sizes = {tuple(s.angular_size) for s in load_scenes(scenes, spec.evaluation)}
+    if len(sizes) != 1:
+        raise SpecError("evaluation: the scenes differ in angular size ("
+                        + ", ".join(f"{u}x{v}" for v, u in sorted(sizes)) + "); one ablation scores one size",
+                        spec.source)
+    v, u = sizes.pop()
+    for cell in spec.cells:
+        angular = model_angular(cell.train_config(spec.source))
+        if (angular, angular) != (v, u):
+            raise SpecError(f"cell {cell.id}: its network takes {angular}x{angular} views, the evaluation scenes have "
+                            f"{u}x{v}: no cell is trained", spec.source)
+    return v, u
+
+
 def make_tasks(spec: AblationSpec, out: Path, links: dict[str, dict[str, str]], scenes: tuple[tuple[str, str], ...],
-               threads: int, stage1: Path | None, progress: bool | None) -> list[CellTask]:
+               threads: int, stage1: Path | None, progress: bool | None,
+               angular: tuple[int, int] = (9, 9)) -> list[CellTask]:
     tasks = []
     for cell in spec.cells:
         config = json.loads(json.dumps(cell.config))
@@ -202,7 +250,7 @@ def make_tasks(spec: AblationSpec, out: Path, links: dict[str, dict[str, str]], 
             eval_fingerprint=sha256_of([spec.evaluation.fingerprint(), scene_keys(scenes, out)]),
             cell_dir=str(out / "cells" / cell.id), data_links=links[cell.id],
             stage1_dir=str(stage1) if stage1 is not None else None, scenes=scenes, evaluation=spec.evaluation,
-            threads=threads, progress=progress))
+            threads=threads, progress=progress, angular=angular))
     return tasks
 
 
@@ -278,7 +326,9 @@ def time_cells(tasks: list[CellTask], threads: int, progress: bool | None, log: 
         executor.map(functools.partial(_time_all, threads=threads), [batch], labels=["test time"], threads=threads,
                      on_done=timings.extend)
     for t, timing in zip(tasks, timings, strict=True):
-        log(f"cell {t.cell_id}: test time {timing['test_s']:.2f} s for 9x9x{timing['time_size']}x{timing['time_size']}"
+        v, u = t.angular
+        side = timing["time_size"]
+        log(f"cell {t.cell_id}: test time {timing['test_s']:.2f} s for {u}x{v}x{side}x{side}"
             f" ({timing['device']}, {threads} thread{'s' if threads != 1 else ''})")
     return timings
 
@@ -287,7 +337,7 @@ def _time_all(tasks, threads: int) -> list[dict[str, Any]]:
     """:func:`lfbench.ablation.cell.time_cell` of each task, one after the other."""
     from lfbench.ablation.cell import time_cell
 
-    return [time_cell(t.cell_dir, t.evaluation, threads, t.network) for t in tasks]
+    return [time_cell(t.cell_dir, t.evaluation, threads, t.network, t.angular) for t in tasks]
 
 
 # --------------------------------------------------------------------------- extra methods
@@ -296,12 +346,12 @@ def run_methods(spec: AblationSpec, out: Path, scenes: tuple[tuple[str, str], ..
     """Score the spec's [[methods]] (cached in OUT/methods/<label>/ with a marker, like cells)."""
 
     ev = spec.evaluation
-    scoring = scoring_of(ev)
+    scoring, grid = scoring_kwargs(ev), scoring_of(ev).grid  # the protocol's rules, metrics and method grid
     loaded = load_scenes(scenes, ev)
     out_list = []
     for m in spec.methods:
         folder = out / "methods" / file_name(m.label)
-        method = create_from_spec(m.spec)
+        method = create_from_spec(m.spec, {}, grid)
         # the method's files (weights) by content: other weights under the same path are another method
         content = {k: v["sha256"] for k, v in method.provenance().items() if isinstance(v, dict)}
         key = sha256_of([m.spec, content, ev.fingerprint(), scene_keys(scenes, out)])
@@ -314,9 +364,9 @@ def run_methods(spec: AblationSpec, out: Path, scenes: tuple[tuple[str, str], ..
                 log(f"method {m.label}: finished earlier, skipped")
                 continue
             log(f"method {m.label}: {changed}; scored again")
-        res = evaluate_to_folder([method], loaded, folder, rules=scoring["rules"], metrics=scoring.get("metrics"),
+        res = evaluate_to_folder([method], loaded, folder, rules=scoring["rules"], metrics=scoring["metrics"],
                                  label=m.label, writers=[Maps(MAPS, per_method=False, uncertainty=True)],
-                                 progress=False, meta={**scoring.get("meta", {}),
+                                 progress=False, meta={**scoring["meta"],
                                                        "method": {"label": m.label, "spec": m.spec}})
         if res.records:  # a method that served no scene (e.g. weights not there yet) is tried again next time
             record = {"label": m.label, "spec": m.spec, "key": key,
@@ -361,29 +411,31 @@ def run_ablation(spec: AblationSpec, out: str | Path, *, jobs: int = 1, progress
     out = Path(out)
     executor = executor_for(cluster, jobs=jobs, folder=out / "submitit", log=log)
     executor.check()  # before any work: no data generated, nothing submitted
+    check_folders(spec, out)  # what is re-used from OUT resolves inside it, before anything is read
     check_training_data(spec, out)
     prepare_output_folder(out)
     check_output_entries(out)
     with _set_lock(out):
         recover(out)  # a cut commit of an earlier run is finished (or its journal refused) before any work
         read_manifest(out)
-    check_folders(spec, out)
     cores = available_cores()
     per_job = executor.cpus_per_item  # a cluster job's CPUs, not this machine's cores
     threads = spec.budget.threads or per_job or max(1, cores // jobs)
     log(f"{spec.title}: {len(spec.cells)} cell(s), {len(spec.methods)} extra method(s), budget "
         f"{spec.budget_label()}; {jobs} process(es) x {threads} thread(s) on {cores} core(s)")
     scenes = prepare_evaluation(spec, out, log)
+    angular = evaluation_angular(spec, scenes)  # a network that cannot take the scenes: refused before any training
     links = prepare_training_data(spec.cells, out, log)
     stage1 = None
     if spec.shared_stage1 and spec.cells:
         stage1 = run_shared_stage1(spec, out, links[spec.cells[0].id], spec.budget.threads or cores, progress, log)
-    tasks = make_tasks(spec, out, links, scenes, threads, stage1, progress)
+    tasks = make_tasks(spec, out, links, scenes, threads, stage1, progress, angular)
     markers = run_cells(tasks, executor, progress, log)
     timings = time_cells(tasks, spec.evaluation.threads or per_job or cores, progress, log, executor)
     markers = [{**m, **{k: v for k, v in t.items() if k != "key"}} for m, t in zip(markers, timings, strict=True)]
     dataset = evaluation_dataset(spec.evaluation)  # the dataset of the data root, when there is one
     combined = Results(meta={**({"dataset": dataset.name} if dataset is not None else {}),
+                             **scoring_of(spec.evaluation).meta(),
                              "ablation": {"title": spec.title, "spec": str(spec.source), "table": spec.table,
                                           "budget": spec.budget_label(), "shared_stage1": spec.shared_stage1,
                                           "cells": markers}})
@@ -409,14 +461,32 @@ def run_ablation(spec: AblationSpec, out: str | Path, *, jobs: int = 1, progress
 
 def check_folders(spec: AblationSpec, out: Path) -> None:
     """DataError when a folder the run trains, scores or generates into (stage1, cells/<id>, methods/<label>,
-    data, eval_data, submitit) leads out of OUT through a symbolic link: an ablation writes inside OUT only."""
+    data, eval_data, submitit), or anything below one of them (a cell's data folder, its checkpoint, maps, ...),
+    leads out of OUT through a symbolic link: an ablation reads and writes inside OUT only. The links of a
+    data folder to the synthetic sets in use (CELL/data/<category>, stage1/data/<category>) are exempt: one that
+    leads elsewhere is re-pointed (link_data_folder), never followed. Checked before anything is read or written."""
     from lfbench.utils.outputs import check_within
 
+    if not out.is_dir():
+        return
     names = ["cells", "methods", "stage1", "data", "eval_data", "submitit"]
     names += [f"cells/{c.id}" for c in spec.cells] + [f"methods/{file_name(m.label)}" for m in spec.methods]
     for name in names:
         if (out / name).is_symlink():
             check_within(out / name, out, "the ablation folder")
+    in_use = {c.id: {s.category for s in c.train_config(spec.source).data.synthetic_in_use()} for c in spec.cells}
+    relinked = {out / "cells" / cid / "data" / cat for cid, cats in in_use.items() for cat in cats}
+    relinked |= {out / "stage1" / "data" / cat for cats in in_use.values() for cat in cats}
+    trees = ["stage1", "data", "eval_data"] + [f"cells/{c.id}" for c in spec.cells]
+    trees += [f"methods/{file_name(m.label)}" for m in spec.methods]
+    for tree in trees:
+        if not (out / tree).is_dir():
+            continue
+        for folder, dirs, files in os.walk(out / tree):  # links are listed, never followed
+            for entry in (*dirs, *files):
+                path = Path(folder) / entry
+                if path.is_symlink() and path not in relinked:
+                    check_within(path, out, "the ablation folder")
 
 
 def _set_lock(out: Path):

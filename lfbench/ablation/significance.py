@@ -38,7 +38,7 @@ from scipy import stats
 
 from lfbench.ablation.facts import same_value
 from lfbench.reports.reference import PaperTable
-from lfbench.scoring.metrics import METRICS
+from lfbench.scoring.metrics import METRICS, Metric
 
 __all__ = ["ALPHA", "Comparison", "comparisons", "paired_t", "scene_scores", "seeds_table",
            "ordering_metric", "significance_table", "t_interval", "verdict"]
@@ -194,7 +194,7 @@ def significance_table(table: PaperTable | None, info: pd.DataFrame, scores: pd.
     metric, else :data:`ORDERING_METRIC`)."""
     metric = metric or ordering_metric(table)
     found = METRICS.find(metric)
-    higher = found is not None and found.higher_is_better
+    badness = (found or Metric.undefined(metric)).badness
     values = scene_scores(scores, metric)
     cell_scores = {c: dict(zip(g["scene"], g["value"], strict=True)) for c, g in values.groupby("method")}
     rows = []
@@ -213,10 +213,9 @@ def significance_table(table: PaperTable | None, info: pd.DataFrame, scores: pd.
             b_vals.append(float(np.mean([cell_scores[cell][s] for s in common])))
             w_vals.append(float(np.mean([cell_scores[other][s] for s in common])))
             seeds.append(seed)
-        # d = worse - better; for a metric where higher is better, the paper's ordering means worse < better: the
-        # test then runs on the negated scores, so that a positive difference is always "as the paper says"
-        sign = -1.0 if higher else 1.0
-        test = paired_t([sign * v for v in b_vals], [sign * v for v in w_vals])
+        # d = worse - better of the scores' badness (negated where higher is better, the magnitude of a signed
+        # metric), so that a positive difference is always "as the paper says"
+        test = paired_t([badness(v) for v in b_vals], [badness(v) for v in w_vals])
         rows.append({"claim (paper)": comp.claim, "better": comp.better, "worse": comp.worse, "metric": metric,
                      "seeds": test["n"], "better mean": float(np.mean(b_vals)) if b_vals else math.nan,
                      "worse mean": float(np.mean(w_vals)) if w_vals else math.nan,

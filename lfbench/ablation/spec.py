@@ -79,6 +79,11 @@ NO_TABLE = ("tables12", "none")  # a spec without a reference table (Tables I/II
 #: Axes of every training config, whatever the network: the last stage's loss and learning rate, the seed (and,
 #: beside them, each keyword parameter a registered loss declares: :func:`loss_axes`).
 SPECIAL_AXES = ("loss", "lr", "seed")
+#: The axis that sets the network a cell trains (the training config's top-level ``method``, a registered
+#: trainable). It is applied first and starts the cell's [model] afresh (the base's [model] holds the base
+#: network's parameters): the new network's own parameters come from ``model.KEY`` (or ``KEY``) axes of the same
+#: [[grid]] table, so one spec can compare several networks, one [[grid]] table each.
+NETWORK_AXIS = "method"
 DEVICES = ("cpu", "cuda", "auto")
 MAX_CELLS = 1024  # cells (x seeds) one spec may define: counted before any cell is made
 MAX_REPEATS = 1000  # timed (and warm-up) runs of the test time
@@ -226,8 +231,8 @@ class SpecFile:
                                            "also by name or `last`")
     grid: tuple[dict[str, Any], ...] = option(
         (), help="the cells: the union of the products of every [[grid]] table's axis = [values] (identical configs "
-                 "run once); axes: the network's parameters, seed, loss, a loss parameter (beta), lr or a dotted "
-                 "training-config key")
+                 "run once); axes: the network's parameters, seed, loss, a loss parameter (beta), lr, method (the "
+                 "network, one [[grid]] table each) or a dotted training-config key")
     stage1: Stage1 = option(factory=Stage1, help="a stage 1 shared by the cells")
     evaluation: Evaluation = option(factory=Evaluation, help="the scenes and timing every cell is scored with")
     methods: tuple[ExtraMethod, ...] = option((), help="more rows for Tables I/II: any registered method spec")
@@ -364,8 +369,9 @@ def parse_spec(raw: dict[str, Any], source: Path, text: str = "") -> AblationSpe
 
 
 def _check_table(table: str, reference: str | None, network: str, source: Path) -> None:
-    """SpecError unless ``table`` is none / tables12 or a table the spec's reference declares for ablations
-    (its ``[report] reference``, else its network's: lfbench.reports.reference)."""
+    """SpecError unless ``table`` is none / tables12 or a table the spec's reference declares (its ``[report]
+    reference``, else its network's: lfbench.reports.reference): one for ablations, or a dataset's per-scene
+    table (e.g. table3, UrbanLF-Syn), beside which the cells stand when they are scored on that dataset."""
     if table in NO_TABLE:
         return
     from lfbench.reports.reference import get_reference, reference_for_network
@@ -373,7 +379,7 @@ def _check_table(table: str, reference: str | None, network: str, source: Path) 
     if reference == "none":  # no reference: the spec's table is not written
         return
     ref = get_reference(reference) if reference is not None else reference_for_network(network)
-    known = [t.id for t in ref.ablation_tables()] if ref is not None else []
+    known = [t.id for t in ref.tables] if ref is not None else []
     if table not in known:
         whose = f"reference {ref.name!r}" if ref is not None else f"no reference of network {network!r}"
         raise SpecError(f"table: expected one of {', '.join([*known, *NO_TABLE])} ({whose}), got {table!r}", source)
@@ -556,6 +562,9 @@ def apply_axis(cfg: dict[str, Any], axis: str, value: Any, fail: Callable[[str],
     """Write one grid value into a training config (dict layout of TrainConfig.to_dict())."""
     stages = cfg["stages"]
     last = stages[-1]
+    if axis == NETWORK_AXIS:
+        _set_network(cfg, value, fail)
+        return
     model_axes = trainable_of(cfg).ablation_axes()
     if axis in model_axes:
         cfg["model"][axis] = value
@@ -581,8 +590,21 @@ def apply_axis(cfg: dict[str, Any], axis: str, value: Any, fail: Callable[[str],
     elif "." in axis:
         _set_dotted(cfg, axis, value, fail)
     else:
-        fail(f"unknown axis; use {', '.join(model_axes + (SPECIAL_AXES[0], *loss_axes(), *SPECIAL_AXES[1:]))} or a "
+        fail(f"unknown axis; use {', '.join(model_axes + (SPECIAL_AXES[0], *loss_axes(), *SPECIAL_AXES[1:]))}, "
+             f"{NETWORK_AXIS} or a "
              "dotted training-config key (e.g. model.width, stages.2.lr)")
+
+
+def _set_network(cfg: dict[str, Any], value: Any, fail: Callable[[str], None]) -> None:
+    """The :data:`NETWORK_AXIS`: the cell trains the registered trainable ``value``, its [model] starting empty
+    (the network's defaults); an unregistered name fails naming the registered ones."""
+    from lfbench.method.trainable import TRAINABLES
+
+    if not isinstance(value, str) or TRAINABLES.find(value) is None:
+        fail(f"{value!r} is not a registered trainable network (registered: {', '.join(TRAINABLES.names())}); "
+             "install the network's package first, or comment out this [[grid]] table")
+    cfg["method"] = value
+    cfg["model"] = {}
 
 
 def loss_axes() -> tuple[str, ...]:
@@ -638,7 +660,9 @@ def _expand_grid(grid_raw: list[Any], base: dict[str, Any], source: Path) -> tup
         for a in axes:
             if not isinstance(g[a], list) or not g[a]:
                 _fail(source, f"grid[{gi}].{a}", f"expected a non-empty list of values, got {g[a]!r}")
-        axes.sort(key=lambda a: a != "loss")  # the loss resets the stage's parameters: set it first
+        # The network first (it resets [model] and decides which axes are its parameters), then the loss (it
+        # resets the stage's parameters).
+        axes.sort(key=lambda a: (a != NETWORK_AXIS, a != "loss"))
         for combo in itertools.product(*(g[a] for a in axes)):
             values = dict(zip(axes, combo, strict=True))
             order = [a for a in g if a in values]

@@ -2,7 +2,7 @@
 ``add_arguments(parser)`` and ``run(args) -> int``; heavy imports happen inside run().
 
 Plugins add subcommands the same way: a module with ``HELP``, ``add_arguments`` and ``run``, named by an
-entry point of the group ``lfbench.commands`` (``convert-keras = "lfbench_methods.subfocal.cli"``).
+entry point of the group ``lfbench.commands`` (``convert-keras = "lfbench_methods.convert_keras"``).
 Commands are registered lazily (lfbench.utils.registry): a command's module is imported only when that
 command runs; ``lfbench --help`` reads a plugin command's ``HELP = "..."`` from its source without
 importing it. So starting ``lfbench`` imports neither torch nor any plugin. A plugin command cannot

@@ -44,6 +44,7 @@ def run(args: argparse.Namespace) -> int:
     checks = []
     for scene in tqdm(with_gt, desc="check-dataset", unit="scene", disable=args.no_progress, leave=False):
         check = check_orientation(scene.name, scene.gray_views(), scene.gt_disparity(), border_px=border)
+        scene.release_views()  # one scene's views in memory at a time
         checks.append(check)
         best, runner_up, ratio = check.best, check.runner_up, check.ratio
         said = (f"{scene.name}: {best.name}: mean error {check.errors[best]:.4f} against {check.errors[runner_up]:.4f} "

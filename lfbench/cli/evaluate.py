@@ -18,6 +18,10 @@ HELP = "score methods on a dataset's scenes (results.json, results.csv, tables)"
 CI_BLOCK = Flag("ci_block", int, 16, "tile size of the block bootstrap in px (1 = independent pixels; errors of "
                 "neighbours correlate)", Range(1, 4096), "PX")
 CI_RESAMPLES = Flag("ci_resamples", int, 1000, "bootstrap resamples", Range(1, 10**6), "N")
+METRIC_IDS = Flag("metrics", str, "", "comma-separated ids of general metrics scored besides the dataset protocol's "
+                  "(e.g. a metric plugin's, badpix_0.05, q50_x100); the protocol's are "
+                  "always scored, an installed metric only where the protocol lists it or it is named here", None,
+                  "IDS")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -47,6 +51,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--lowres-only", action="store_true",
                    help="score every scene at its views' resolution (HCI: 512x512), even where high-resolution "
                         "ground truth exists")
+    add_flag(p, METRIC_IDS)
     p.add_argument("--all-metrics", action="store_true",
                    help="also score the region and stratified metrics wherever the scene has their mask files, "
                         "and the toolkit's runtime and runtime_log (log10 s) wherever the method reports a "
@@ -72,21 +77,27 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from lfbench.data.dataset import method_range_params, open_datasets
+    from lfbench.data.dataset import open_datasets
     from lfbench.method.registry import create_from_spec
     from lfbench.reports import writers as w
     from lfbench.reports.html import SITE_DIR, check_site_dir
     from lfbench.reports.tables import per_scene_table, render
+    from lfbench.results import protocol_meta
     from lfbench.runs.folder import evaluate_to_folder
-    from lfbench.scoring.metrics import scored_metrics
-    from lfbench.scoring.rules import ScoringRules
+    from lfbench.scoring.protocol import protocol_scoring
     from lfbench.utils.errors import DataError, SpecError
 
     # one line for a root of no (or several) layouts, or a dataset file naming no general metric, before any scene
-    dataset, protocol, bench = open_datasets(args.data, args.dataset,
-                                             check=lambda p: scored_metrics(p.metrics, p.source))
-    grid = method_range_params(protocol.disparity_range, protocol.disparity_interval)  # unless a spec sets it
-    methods = [create_from_spec(spec, {"device": args.device}, grid) for spec in args.method]  # errors before any work
+    extra = [m.strip() for m in args.metrics.split(",") if m.strip()]  # --metrics: scored beside the protocol's
+
+    def scoring_of(protocol):  # its rules, metrics (ids checked: before any scene is opened) and method grid
+        return protocol_scoring(protocol, toolkit=args.toolkit_nonfinite, allow_highres=not args.lowres_only,
+                                extra=extra)
+
+    dataset, protocol, bench = open_datasets(args.data, args.dataset, check=scoring_of)
+    scoring = scoring_of(protocol)
+    # errors before any work; the protocol's disparity grid unless a spec sets it
+    methods = [create_from_spec(spec, {"device": args.device}, scoring.grid) for spec in args.method]
     if args.label is not None:
         if len(args.label) != len(methods):
             raise SpecError(f"--label: {len(args.label)} label(s) for {len(methods)} --method(s); give one per method")
@@ -100,17 +111,16 @@ def run(args: argparse.Namespace) -> int:
     if not scenes:
         raise DataError(f"none of the selected scenes has ground truth ({dataset.name} layout: {dataset.layout})",
                         ", ".join(map(str, args.data)))
-    rules = ScoringRules.of_protocol(protocol, toolkit=args.toolkit_nonfinite, allow_highres=not args.lowres_only)
-    metrics = scored_metrics(protocol.metrics, protocol.source)
     writers = [*([w.SceneFigures()] if args.figures else []), *([w.Maps()] if args.save_maps or args.html else []),
                w.Tables(),
                *([w.BootstrapCIs(w.CIOptions(resamples=args.ci_resamples, block=args.ci_block))] if args.ci else []),
                *([w.UncertaintyRatings()] if args.uncertainty else []), *([w.Site()] if args.html else [])]
     meta = {"data_root": str(args.data[0]), "dataset": dataset.name,
+            "protocol": protocol_meta(protocol.metrics, protocol.disparity_range),  # what the pages show
             "methods": {m.label: m.provenance() for m in methods}}
     if len(args.data) > 1:  # readers take every root from here (Results.data_roots); data_root: the first
         meta["data_roots"] = [str(r) for r in args.data]
-    results = evaluate_to_folder(methods, scenes, args.out, rules=rules, metrics=metrics,
+    results = evaluate_to_folder(methods, scenes, args.out, rules=scoring.rules, metrics=list(scoring.metrics),
                                  all_metrics=args.all_metrics, writers=writers,
                                  meta=meta, progress=not args.no_progress, jobs=args.jobs)
     if args.out / "table_uncertainty.md" in results.files:

@@ -1,6 +1,7 @@
 """Predict a disparity map with one method for one light field (a scene folder or VIEWS.npy).
 
-VIEWS.npy is float32 (H, W, 81) gray in [0, 1], channel k = view k. The output is a PFM
+VIEWS.npy is float (H, W, N) gray in [0, 1] of a square A x A grid (N = A^2: 81 for 9x9, 49 for 7x7), channel
+k = view k (row-major: view (v, u) is channel v * A + u). The output is a PFM
 (submission format) or a .npy; with --extras the distribution and uncertainty are saved beside it.
 """
 
@@ -12,13 +13,16 @@ from pathlib import Path
 from lfbench.cli.argtypes import add_flag
 from lfbench.utils.flags import DEVICE
 
+MAX_ANGULAR = 33  # views per side of a VIEWS.npy grid
+
 HELP = "predict a disparity map for a scene or sample folder or a VIEWS.npy"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--method", required=True, metavar="SPEC", help="method spec name[:key=value,...]")
     p.add_argument("--input", required=True, type=Path,
-                   help="scene folder (HCI layout), UrbanLF-Syn sample folder (ImageN/) or VIEWS.npy (H, W, 81)")
+                   help="scene folder (HCI layout), UrbanLF-Syn sample folder (ImageN/) or "
+                        "VIEWS.npy (H, W, N) of an A x A grid, N = A^2")
     p.add_argument("--out", required=True, type=Path, help="OUT.pfm or OUT.npy")
     add_flag(p, DEVICE, detail="every method that has a device parameter (a spec's own device=... wins; default: "
                                "the method's, auto)")
@@ -46,11 +50,13 @@ def load_input(path: Path):
         raise DataError("input must be a scene folder or a .npy file", path)
 
     def check(shape: tuple[int, ...], dtype: np.dtype) -> str | None:
-        if len(shape) != 3 or shape[2] != 81:
-            return f"expected (H, W, 81) views, got shape {shape}"
+        side = math.isqrt(shape[2]) if len(shape) == 3 else 0
+        if len(shape) != 3 or side * side != shape[2] or not 2 <= side <= MAX_ANGULAR:
+            return (f"expected (H, W, N) views of a square A x A grid (N = A^2, A from 2 to {MAX_ANGULAR}, e.g. 81 "
+                    f"for 9x9), got shape {shape}")
         if not 1 <= min(shape[:2]) or max(shape[:2]) > MAX_RESOLUTION_PX or math.prod(shape) > MAX_VIEW_PIXELS:
             return (f"views of {shape[1]}x{shape[0]} px: each side must be from 1 to {MAX_RESOLUTION_PX} "
-                    f"and all 81 views at most {MAX_VIEW_PIXELS} px")
+                    f"and all {shape[2]} views at most {MAX_VIEW_PIXELS} px")
         if not np.issubdtype(dtype, np.floating):
             return f"views must be floating-point values in [0, 1], got {dtype}"
         return None

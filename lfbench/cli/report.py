@@ -9,8 +9,9 @@ samples and their mean beside its rows; lfbench.reports.paper_scenes). lfbench s
 paper's tables: --paper DIR names the folder (e.g. ../shared/data/paper); a bare --paper finds it
 through $LFBENCH_PAPER_DIR or $LFBENCH_HCI_ROOT/../paper. The BadPix series (t = 0 .. 0.1 px) come from the curves an
 `evaluate --figures` run saved (RESULTS_DIR/figures/badpix_series.csv, or --curves CSV); without them, from the BadPix
-thresholds the results hold (0.01, 0.03, 0.07). With --maps (maps saved by `evaluate --save-maps`)
-the per-scene overviews and exact curves are drawn from the saved maps.
+thresholds the results hold (0.01, 0.03, 0.07). With saved maps (--maps DIR, by default RESULTS_DIR/maps of
+`evaluate --save-maps` where the results' data root is at hand) the per-scene overviews and exact curves are drawn
+from them.
 
 With --html, OUT/html/index.html: a self-contained static site (leaderboard with ranks, a page per
 scene with every method's maps, a page per method; opens from the file system, no network) drawn
@@ -42,7 +43,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--curves", type=Path, metavar="CSV",
                    help="BadPix curves CSV (default: RESULTS_DIR/figures/badpix_series.csv when present)")
     p.add_argument("--maps", type=Path, metavar="DIR",
-                   help="saved maps (OUT/maps of `evaluate --save-maps`): draw per-scene overviews from them")
+                   help="saved maps (OUT/maps of `evaluate --save-maps`): draw per-scene overviews from them (default: "
+                        "the results folder's maps/ where there is one and the scenes' data root is at hand)")
     p.add_argument("--data", type=Path, action="append", metavar="ROOT",
                    help="the data root of the scenes, for --maps and the site (default: the ones recorded in the "
                         "results); repeat for results scored on several roots")

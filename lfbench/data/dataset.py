@@ -19,20 +19,27 @@ matches none or several in one line (:class:`~lfbench.utils.errors.DataError`, e
 from __future__ import annotations
 
 import dataclasses
+import logging
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
 
 from lfbench.data.scene import LOWRES, Benchmark
-from lfbench.utils.errors import DataError, SpecError
+from lfbench.utils.errors import DataError, LFBenchError, SpecError, exception_line
 from lfbench.utils.registry import Registry
 
-__all__ = ["DATASET_GROUP", "DATASETS", "Dataset", "DatasetProtocol", "detect_dataset", "dataset_of",
+_log = logging.getLogger(__name__)
+
+__all__ = ["DATASET_GROUP", "DATASETS", "DEFAULT_METRICS", "Dataset", "DatasetProtocol", "detect_dataset", "dataset_of",
            "open_datasets", "open_dataset", "method_range_params"]
 
 DATASET_GROUP = "lfbench.datasets"
+
+#: The general metrics a protocol scores unless it says otherwise (BadPix 0.01 / 0.03 / 0.07, MSE x100); its border
+#: unless it says otherwise is lfbench.data.disparity.EVALUATION_BORDER_PX.
+DEFAULT_METRICS: tuple[str, ...] = ("badpix_0.01", "badpix_0.03", "badpix_0.07", "mse_x100")
 
 
 @dataclass(frozen=True)
@@ -47,7 +54,9 @@ class DatasetProtocol:
     search; ``disparity_interval``: the spacing (px) of the candidate disparities a method searching that
     range should use (> 0, at most max - min), or None: each method's own (HCI: the plane sweep's 0.25,
     SubFocal's 0.5 as its paper); ``spatial_size``: (H, W) px of its views where the dataset fixes one (None: any);
-    ``angular_size``: (V, U) views where fixed; ``reference_view``: the view scored (words); ``source``: the
+    ``angular_size``: (V, U) views where fixed; ``reference_view``: the view scored (words); ``scorer``: how BadPix
+    compares and what a non-finite value counts as (lfbench.scoring.policy: 'lfbench' or 'paper-author');
+    ``source``: the
     file that declared the protocol (errors in its metric ids name it: lfbench.scoring.metrics.scored_metrics).
     """
 
@@ -60,6 +69,7 @@ class DatasetProtocol:
     spatial_size: tuple[int, int] | None = None
     angular_size: tuple[int, int] | None = None
     reference_view: str = "centre view"
+    scorer: str = "lfbench"  # BadPix's comparison and the non-finite policy: lfbench.scoring.policy
     source: Path | None = dataclasses.field(default=None, compare=False)  # the file that declared it, if any
 
     def __post_init__(self) -> None:
@@ -71,6 +81,8 @@ class DatasetProtocol:
             raise ValueError(f"disparity interval must be > 0 and at most max - min = {hi - lo:g} px, got {step}")
         if self.border_px < 0:
             raise ValueError(f"border must be >= 0 px, got {self.border_px}")
+        if self.scorer not in ("lfbench", "paper-author"):
+            raise ValueError(f"scorer must be 'lfbench' or 'paper-author', got {self.scorer!r}")
 
     def describe(self) -> list[str]:
         """The protocol as lines for ``lfbench datasets``."""
@@ -84,6 +96,9 @@ class DatasetProtocol:
                     else "each method's own interval")]
         if self.highres_scenes:
             lines.append(f"high-resolution scenes: {', '.join(sorted(self.highres_scenes))}")
+        if self.scorer != "lfbench":
+            lines.append(f"scorer: {self.scorer} (BadPix |error| >= t, NaN good in BadPix and NaN in MSE; "
+                         "lfbench.scoring.policy)")
         return lines
 
 
@@ -98,6 +113,10 @@ class Dataset:
     protocol: ClassVar[DatasetProtocol]
     #: how a data root is laid out (one line)
     layout: ClassVar[str] = ""
+    #: split name -> the category folders it selects, where the dataset names splits of several categories
+    #: (HCI's train / validation / test; none where its category folders are its splits): what a training
+    #: config's names select among the scenes it generates in this layout
+    splits: ClassVar[Mapping[str, tuple[str, ...]]] = {}
 
     @classmethod
     def matches(cls, root: Path) -> bool:
@@ -130,10 +149,14 @@ def detect_dataset(root: str | Path) -> type[Dataset]:
     root = Path(root)
     if not root.is_dir():
         raise DataError("data root not found", root)
-    hits = [name for name in DATASETS.names() if DATASETS.get(name).matches(root)]
+    failed: list[str] = []
+    hits = [name for name in DATASETS.names() if _matches(DATASETS.get(name), root, failed)]
+    for line in failed if hits else ():
+        _log.warning("dataset adapter %s; left out of the detection", line)
     if not hits:
+        why = f"; adapter {failed[0]}" if failed else ""
         raise DataError(f"no scenes found: no known dataset layout ({', '.join(DATASETS.names()) or 'none installed'}; "
-                        "see `lfbench datasets`)", root)
+                        f"see `lfbench datasets`){why}", root)
     if len(hits) > 1:
         raise DataError(f"the layout matches several datasets ({', '.join(hits)}): choose one with --dataset NAME",
                         root)
@@ -152,15 +175,77 @@ def dataset_of(root: str | Path, name: str | None = None) -> type[Dataset]:
         raise DataError(str(exc)) from None
     if not root.is_dir():
         raise DataError("data root not found", root)
-    if not dataset.matches(root):
+    failed: list[str] = []
+    if not _matches(dataset, root, failed):
+        if failed:
+            raise DataError(f"dataset adapter {failed[0]}", root)
         raise DataError(f"not laid out as dataset {name!r} ({dataset.layout})", root)
     return dataset
+
+
+def _plugin(dataset: type[Dataset]) -> str | None:
+    """``'name' (module.Class)`` of a plugin's adapter; None for lfbench's own (whose errors keep their traceback)."""
+    module = str(getattr(dataset, "__module__", ""))
+    return None if module.split(".")[0] == "lfbench" else f"{dataset.name!r} ({module}.{dataset.__qualname__})"
+
+
+def _failure(what: str, exc: BaseException) -> str:
+    return f"{what} failed: {exception_line(exc)}"
+
+
+def _matches(dataset: type[Dataset], root: Path, failed: list[str]) -> bool:
+    """``dataset.matches(root)``; a plugin's adapter whose matches() raises is left out (its line appended to
+    ``failed``): one broken adapter never breaks the detection of every root."""
+    plugin = _plugin(dataset)
+    if plugin is None:
+        return dataset.matches(root)
+    try:
+        return dataset.matches(root) is True
+    except LFBenchError as exc:
+        failed.append(f"{plugin}: {exc}")
+    except Exception as exc:  # noqa: BLE001 - whatever the plugin's code raised: isolated, named
+        failed.append(_failure(f"{plugin}: matches()", exc))
+    return False
+
+
+def _open(dataset: type[Dataset], root: Path) -> Benchmark:
+    """``dataset.open(root)``; a plugin's adapter that raises (not a one-line LFBenchError) is one DataError naming
+    it and the root."""
+    plugin = _plugin(dataset)
+    if plugin is None:
+        return dataset.open(root)
+    try:
+        bench = dataset.open(root)
+    except LFBenchError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - whatever the plugin's code raised: one line
+        raise DataError(_failure(f"dataset adapter {plugin}: open()", exc), root) from None
+    if not isinstance(bench, Benchmark):
+        raise DataError(f"dataset adapter {plugin}: open() returned a {type(bench).__name__}, expected a Benchmark",
+                        root)
+    return bench
+
+
+def _protocol(dataset: type[Dataset], root: Path) -> DatasetProtocol:
+    plugin = _plugin(dataset)
+    if plugin is None:
+        return dataset.protocol_for(root)
+    try:
+        protocol = dataset.protocol_for(root)
+    except LFBenchError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - whatever the plugin's code raised: one line
+        raise DataError(_failure(f"dataset adapter {plugin}: protocol_for()", exc), root) from None
+    if not isinstance(protocol, DatasetProtocol):
+        raise DataError(f"dataset adapter {plugin}: protocol_for() returned a {type(protocol).__name__}, expected a "
+                        "DatasetProtocol", root)
+    return protocol
 
 
 def open_dataset(root: str | Path, name: str | None = None) -> tuple[type[Dataset], Benchmark]:
     """The adapter (``name``, else detected: :func:`dataset_of`) and the scenes of ``root``."""
     dataset = dataset_of(root, name)
-    return dataset, dataset.open(Path(root))
+    return dataset, _open(dataset, Path(root))
 
 
 def open_datasets(roots: Sequence[str | Path], name: str | None = None, *,
@@ -181,17 +266,29 @@ def open_datasets(roots: Sequence[str | Path], name: str | None = None, *,
             raise DataError(f"data root given twice (also as {seen[key]})", root)
         seen[key] = root
     dataset = dataset_of(roots[0], name)
-    protocol = dataset.protocol_for(roots[0])
+    protocol = _protocol(dataset, roots[0])
     for root in roots[1:]:
+        if name is None and _detected(root) not in (None, dataset):  # another dataset: say so, not "not laid out"
+            raise DataError(f"is dataset '{_detected(root).name}', {roots[0]} is '{dataset.name}': one results file "
+                            "holds one dataset's numbers (their protocols differ); evaluate each into its own --out",
+                            root)
         other = dataset_of(root, name or dataset.name)
-        if other.protocol_for(root) != protocol:
+        if _protocol(other, root) != protocol:
             raise DataError(f"scored by another protocol than {roots[0]} (one results file holds one dataset's "
                             "numbers): evaluate it on its own", root)
     if check is not None:
         check(protocol)
-    benches = [dataset.open(root) for root in roots]
+    benches = [_open(dataset, root) for root in roots]
     scenes = tuple(s for bench in benches for s in bench.scenes)
     return dataset, protocol, dataclasses.replace(benches[0], scenes=scenes, others=tuple(roots[1:]))
+
+
+def _detected(root: Path) -> type[Dataset] | None:
+    """The dataset ``root`` is detected as, or None where detection fails (no or several layouts)."""
+    try:
+        return detect_dataset(root)
+    except DataError:
+        return None
 
 
 def method_range_params(disparity_range: tuple[float, float], interval: float | None = None

@@ -20,8 +20,10 @@ from lfbench.utils.errors import DataError
 
 __all__ = ["EVALUATION_BORDER_PX", "check_disparity", "disparity_problem"]
 
-#: The widest crop of a prediction, px per side (the evaluation border of HCI and UrbanLF-Syn: HCI's submissions
-#: are 482x482 of 512x512).
+#: The evaluation border, px left out at every side at low resolution: the one place it is written. The border of
+#: every protocol that does not declare its own (HCI's, UrbanLF-Syn's, a dataset TOML's default), of training
+#: validation and of figures drawn without a protocol; and the widest crop of a prediction (HCI's submissions are
+#: 482x482 of 512x512).
 EVALUATION_BORDER_PX = 15
 
 

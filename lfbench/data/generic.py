@@ -20,6 +20,8 @@ Keys (every one optional except ``views.pattern`` and ``views.angular``)::
     metrics = ["badpix_0.01", "badpix_0.03", "badpix_0.07", "mse_x100"]
     disparity_range = [-4.0, 4.0]  # what a method with d_min / d_max searches
     disparity_interval = 0.1       # its spacing, px (> 0, at most max - min; absent: each method's own)
+    scorer = "lfbench"             # BadPix |e| > t, non-finite rule of lfbench; "paper-author": |e| >= t, NaN
+                                   # good in BadPix and NaN in MSE (lfbench.scoring.policy)
 
 Scenes are the folders under the data root (or ROOT/<category>/<scene>, or ROOT itself) holding the centre
 view. An unknown key or an impossible value is one line naming the file (DataError, exit 2).
@@ -28,10 +30,13 @@ view. An unknown key or an impossible value is one line naming the file (DataErr
 from __future__ import annotations
 
 import math
+import os
+import string
 from pathlib import Path
 from typing import Any
 
-from lfbench.data.dataset import Dataset, DatasetProtocol
+from lfbench.data.dataset import DEFAULT_METRICS, Dataset, DatasetProtocol
+from lfbench.data.disparity import EVALUATION_BORDER_PX
 from lfbench.data.pattern import GT_FORMATS, PatternScene, ViewLayout, find_scene_dirs
 from lfbench.data.scene import Benchmark, check_scene_names
 from lfbench.utils.errors import DataError, LFBenchError
@@ -44,10 +49,9 @@ MAX_ANGULAR = 33  # views per axis
 _KEYS: dict[str, set[str]] = {
     "views": {"pattern", "angular", "first", "reverse_rows", "reverse_columns", "transpose"},
     "ground_truth": {"file", "format", "scale", "offset"},
-    "protocol": {"border", "metrics", "disparity_range", "disparity_interval"},
+    "protocol": {"border", "metrics", "disparity_range", "disparity_interval", "scorer"},
 }
-DEFAULT_PROTOCOL = DatasetProtocol(border_px=15, metrics=("badpix_0.01", "badpix_0.03", "badpix_0.07", "mse_x100"),
-                                   disparity_range=(-4.0, 4.0))
+DEFAULT_PROTOCOL = DatasetProtocol(border_px=EVALUATION_BORDER_PX, metrics=DEFAULT_METRICS, disparity_range=(-4.0, 4.0))
 
 
 def _number(value: Any) -> bool:
@@ -59,6 +63,21 @@ def _file_name(value: Any, key: str, path: Path) -> str:
     if not isinstance(value, str) or not value or "/" in value or "\\" in value or value in (".", ".."):
         raise DataError(f"'{key}' must be a file name inside the scene folder, got {str(value)[:60]!r}", path)
     return value
+
+
+def _check_fields(pattern: str, path: Path) -> None:
+    """DataError unless every replacement field of ``pattern`` is a bare ``{v}``, ``{u}`` or ``{k}`` (no positional
+    field such as ``{0}``, no conversion, no format spec such as ``{v:>999999999}``, balanced braces): checked
+    before the pattern formats a name."""
+    try:
+        parsed = list(string.Formatter().parse(pattern))
+    except ValueError:
+        raise DataError(f"'views.pattern' has unbalanced braces: {pattern[:60]!r}", path) from None
+    for _, name, spec, conversion in parsed:
+        if name is not None and (name not in ("u", "v", "k") or spec or conversion):
+            shown = "{" + name + (f"!{conversion}" if conversion else "") + (f":{spec}" if spec else "") + "}"
+            raise DataError(f"'views.pattern' may hold only the fields {{v}}, {{u}} and {{k}} (no format spec); got "
+                            f"{shown[:40]!r}", path)
 
 
 def read_dataset_spec(path: str | Path) -> tuple[ViewLayout, DatasetProtocol]:
@@ -81,6 +100,7 @@ def read_dataset_spec(path: str | Path) -> tuple[ViewLayout, DatasetProtocol]:
     views, gt, proto = (table.get(s, {}) for s in _KEYS)
 
     pattern = _file_name(views.get("pattern"), "views.pattern", path)
+    _check_fields(pattern, path)
     fields = {f for f in ("{u}", "{v}", "{k}") if f in pattern}
     if fields not in ({"{u}", "{v}"}, {"{k}"}):
         raise DataError("'views.pattern' must name a view by {v} and {u} (row, column) or by {k}, e.g. "
@@ -127,6 +147,10 @@ def read_dataset_spec(path: str | Path) -> tuple[ViewLayout, DatasetProtocol]:
         raise DataError(f"'protocol.disparity_interval' must be a number of px > 0 and at most the range's max - min "
                         f"({rng[1] - rng[0]:g}), got {step!r}", path)
 
+    scorer = proto.get("scorer", "lfbench")
+    if scorer not in ("lfbench", "paper-author"):
+        raise DataError(f"'protocol.scorer' must be \"lfbench\" or \"paper-author\", got {str(scorer)[:40]!r}", path)
+
     layout = ViewLayout(pattern=pattern, angular=(angular[0], angular[1]), first=first, gt_file=gt_file,
                         gt_format=fmt, gt_scale=float(scale), gt_offset=float(offset),
                         transpose=turns["transpose"], reverse_rows=turns["reverse_rows"],
@@ -134,7 +158,7 @@ def read_dataset_spec(path: str | Path) -> tuple[ViewLayout, DatasetProtocol]:
     protocol = DatasetProtocol(border_px=border, metrics=tuple(metrics), source=path,  # ids checked where scored
                                disparity_range=(float(rng[0]), float(rng[1])), angular_size=layout.angular,
                                disparity_interval=None if step is None else float(step),
-                               reference_view=f"centre view {layout.view_name(*layout.centre)}")
+                               reference_view=f"centre view {layout.view_name(*layout.centre)}", scorer=scorer)
     return layout, protocol
 
 
@@ -159,7 +183,7 @@ class GenericDataset(Dataset):
         root = Path(root)
         layout, _ = read_dataset_spec(root / SPEC_FILE)
         centre = layout.view_name(*layout.centre)
-        found = find_scene_dirs(root, lambda folder: (folder / centre).is_file())
+        found = find_scene_dirs(root, lambda folder: os.path.lexists(folder / centre))  # a FIFO: refused, not skipped
         scenes = [PatternScene(folder, layout, category) for folder, category in found]
         if not scenes:
             raise DataError(f"no scene folders holding {centre} (the centre view {SPEC_FILE} names)", root)

@@ -12,22 +12,25 @@ ground-truth value is found when it is read. Each problem is one DataError namin
 from __future__ import annotations
 
 import functools
+import os
 import re
+import struct
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from PIL import Image
 
 from lfbench.data.npyfile import read_npy
 from lfbench.data.pfm import read_pfm
-from lfbench.data.scene import LOWRES, Scene, read_png
+from lfbench.data.scene import LOWRES, MAX_PNG_PIXELS, MAX_RESOLUTION_PX, MAX_VIEW_PIXELS, PNGScene, read_png
 from lfbench.utils.errors import DataError
+from lfbench.utils.readfile import check_regular_file, read_head
 
-__all__ = ["GT_FORMATS", "ViewLayout", "PatternScene", "png_size"]
+__all__ = ["GT_FORMATS", "ViewLayout", "PatternScene", "check_view_bytes", "finite_float32", "png_size"]
 
 GT_FORMATS = ("pfm", "npy", "png16")
 _FIELD = re.compile(r"\{([uvk])\}")
+_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
 
 @dataclass(frozen=True)
@@ -83,20 +86,21 @@ class ViewLayout:
 
 
 def png_size(path: Path, what: str = "view image") -> tuple[int, int]:
-    """(H, W) of a PNG from its header; DataError naming the file when it is not a readable PNG."""
-    try:
-        with Image.open(path) as img:
-            w, h = img.size
-            if img.format != "PNG":
-                raise DataError(f"{what} is a {img.format} file, expected a PNG", path)
-    except FileNotFoundError:
-        raise DataError(f"missing {what}", path) from None
-    except (OSError, ValueError, SyntaxError) as exc:
-        raise DataError(f"cannot read {what}: {' '.join(str(exc).split())[:120]}", path) from None
+    """(H, W) of a PNG from its IHDR chunk (its first 24 bytes, read without a decoder: a header that claims
+    20000x20000 px is refused here, never handed to PIL); DataError naming the file when it is not a regular
+    file (a FIFO is never opened blocking), not a PNG, or larger than MAX_PNG_PIXELS."""
+    head = read_head(path, 24, what)
+    if len(head) < 24 or head[:8] != _PNG_SIGNATURE or head[12:16] != b"IHDR":
+        raise DataError(f"{what} is not a PNG file (no PNG signature and IHDR header)", path)
+    w, h = struct.unpack(">II", head[16:24])
+    if w == 0 or h == 0 or w * h > MAX_PNG_PIXELS:
+        raise DataError(f"{what} is {w}x{h} px by its header: not a size lfbench reads (1 to {MAX_PNG_PIXELS} px)",
+                        path)
     return h, w
 
 
 def _npy_header(path: Path) -> tuple[tuple[int, ...], np.dtype]:
+    check_regular_file(path, "ground truth")
     try:
         with open(path, "rb") as f:
             version = np.lib.format.read_magic(f)
@@ -107,7 +111,30 @@ def _npy_header(path: Path) -> tuple[tuple[int, ...], np.dtype]:
     return tuple(shape), dtype
 
 
-class PatternScene(Scene):
+def check_view_bytes(size: tuple[int, int], angular: tuple[int, int], path: Path) -> None:
+    """DataError naming ``path`` (the centre view) unless views of ``size`` (H, W) on an ``angular`` (V, U) grid
+    fit lfbench's bounds (MAX_RESOLUTION_PX per side, MAX_VIEW_PIXELS in all): checked from the headers, before
+    the (V, U, H, W, 3) float32 views are allocated."""
+    (h, w), (v, u) = size, angular
+    if max(h, w) > MAX_RESOLUTION_PX or v * u * h * w > MAX_VIEW_PIXELS:
+        gib = v * u * h * w * 3 * 4 / 1024**3
+        raise DataError(f"views of {w}x{h} px on a {v}x{u} grid ({gib:.3g} GiB as float RGB): more than lfbench reads "
+                        f"(at most {MAX_RESOLUTION_PX} px per side and {MAX_VIEW_PIXELS} px in all views)", path)
+
+
+def finite_float32(gt: np.ndarray, path: Path) -> np.ndarray:
+    """``gt`` as float32; DataError naming ``path`` when a value is NaN or infinite after the cast (a float64
+    1e300 overflows float32 to inf: refused, never scored)."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        out = np.asarray(gt, dtype=np.float32)
+    bad = int(np.count_nonzero(~np.isfinite(out)))
+    if bad:
+        raise DataError(f"ground truth has {bad} non-finite values of {out.size} (NaN or inf, or beyond float32's "
+                        "range): it cannot be scored against", path)
+    return out
+
+
+class PatternScene(PNGScene):
     """One scene folder of a :class:`ViewLayout`, checked when made, its pixels read when asked for."""
 
     layout: ViewLayout
@@ -119,7 +146,7 @@ class PatternScene(Scene):
         self.layout = layout
         self.name = self.path.name
         self.category = category
-        self._spatial_size = self._check_views()
+        self._spatial_size = self._view_sizes()
         self._check_gt_header()
 
     @property
@@ -138,7 +165,7 @@ class PatternScene(Scene):
     def view_file(self, row: int, col: int) -> Path:
         return self.path / self.layout.view_name(row, col)
 
-    def _check_views(self) -> tuple[int, int]:
+    def _view_sizes(self) -> tuple[int, int]:
         """(H, W) of the views; DataError for a missing, unexpected or differently sized view."""
         names = self.layout.names()
         expected = set(names)
@@ -154,6 +181,7 @@ class PatternScene(Scene):
                             self.path)
         centre = self.view_file(*self.layout.centre)
         size = png_size(centre)
+        check_view_bytes(size, self.layout.angular, centre)
         for name in names:
             got = png_size(self.path / name)
             if got != size:
@@ -176,8 +204,9 @@ class PatternScene(Scene):
     def _check_gt_header(self) -> None:
         """The ground truth's shape (and dtype) from its header, where the format has a cheap one."""
         path = self.gt_path
-        if path is None or not path.is_file():
+        if path is None or not os.path.lexists(path):
             return
+        check_regular_file(path, "ground truth")  # a folder, FIFO, device or broken link is refused, not skipped
         fmt = self.layout.gt_format
         if fmt == "npy":
             problem = self._gt_problem(*_npy_header(path))
@@ -189,12 +218,14 @@ class PatternScene(Scene):
             raise DataError(problem, path)
 
     def has_gt(self, resolution: str = LOWRES) -> bool:
-        return resolution == LOWRES and self.gt_path is not None and self.gt_path.is_file()
+        """Whether the ground-truth file is there: anything under its name counts (a folder, FIFO or broken link
+        there is an error when read, never a scene without ground truth left out of the mean)."""
+        return resolution == LOWRES and self.gt_path is not None and os.path.lexists(self.gt_path)
 
     @functools.cached_property
     def _gt(self) -> np.ndarray | None:
         path = self.gt_path
-        if path is None or not path.is_file():
+        if path is None or not os.path.lexists(path):
             return None
         fmt, (h, w) = self.layout.gt_format, self.spatial_size
         if fmt == "npy":
@@ -210,11 +241,7 @@ class PatternScene(Scene):
             gt = raw.astype(np.float64)
         if (self.layout.gt_scale, self.layout.gt_offset) != (1.0, 0.0):
             gt = gt * self.layout.gt_scale + self.layout.gt_offset
-        bad = int(np.count_nonzero(~np.isfinite(gt)))
-        if bad:
-            raise DataError(f"ground truth has {bad} non-finite values of {gt.size} (NaN or inf): it cannot be "
-                            "scored against", path)
-        return np.asarray(gt, dtype=np.float32)
+        return finite_float32(gt, path)
 
     def gt_disparity(self, resolution: str = LOWRES) -> np.ndarray | None:
         """The centre view's disparity (H, W) float32 px per view step, or None."""

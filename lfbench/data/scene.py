@@ -10,7 +10,6 @@ reader is lfbench.data.hci, layouts named by a pattern lfbench.data.pattern.
 from __future__ import annotations
 
 import contextlib
-import functools
 import io
 import warnings
 from collections.abc import Iterable, Iterator, Mapping
@@ -26,8 +25,8 @@ from lfbench.utils.names import FileNames
 from lfbench.utils.readfile import check_regular_file
 
 __all__ = ["GRAY_WEIGHTS", "LOWRES", "HIGHRES", "MAX_PNG_PIXELS", "MAX_RESOLUTION_PX", "MAX_VIEW_PIXELS", "rgb_to_gray",
-           "read_png", "read_rgb", "read_mask", "png_bytes", "LightField", "ArrayLightField", "PNGViews", "Scene",
-           "Benchmark", "check_scene_names"]
+           "read_png", "read_rgb", "read_mask", "png_bytes", "LightField", "ArrayLightField", "Scene",
+           "PNGScene", "Benchmark", "check_scene_names", "weighted_gray_views"]
 
 GRAY_WEIGHTS = (0.299, 0.587, 0.114)
 LOWRES, HIGHRES = "lowres", "highres"
@@ -38,6 +37,17 @@ def rgb_to_gray(rgb: np.ndarray) -> np.ndarray:
     r, g, b = GRAY_WEIGHTS
     out = rgb[..., 0] * r + rgb[..., 1] * g + rgb[..., 2] * b
     return np.clip(out, 0.0, 1.0).astype(np.float32)
+
+
+def weighted_gray_views(lf: LightField, weights: tuple[float, float, float] | None) -> np.ndarray:
+    """(V, U, H, W) float32 gray views of ``lf`` with the RGB ``weights`` (a network's own preprocessing, e.g.
+    OACC-Net's mean of R, G and B) when it has colour (``rgb_views``); otherwise, or for None, its gray views."""
+    rgb = getattr(lf, "rgb_views", None)
+    if weights is None or rgb is None:
+        return lf.gray_views()
+    r, g, b = (np.float32(w) for w in weights)
+    views = rgb()
+    return np.clip(views[..., 0] * r + views[..., 1] * g + views[..., 2] * b, 0.0, 1.0).astype(np.float32)
 
 
 #: The largest light field lfbench reads: px per side of a view, and pixels of all views together (81 views of
@@ -197,65 +207,95 @@ class ArrayLightField(LightField):
         return self.gt
 
 
-class PNGViews(LightField):
-    """A light field whose views are PNG files, one per view (:meth:`view_file`), all ``spatial_size`` (H, W):
-    read on first use, kept as RGB and gray."""
+class Scene(LightField):
+    """A scene a dataset adapter opened: the contract evaluation, checking and training read, whatever stores
+    its views. An adapter provides the views through one public method, :meth:`load_views` (and, where it can
+    read the centre view alone more cheaply, :meth:`load_center_view`); the scene keeps what was loaded until
+    :meth:`release_views` (evaluation and ``check-dataset`` release each scene once scored, so that memory
+    holds one scene's views at a time). The ground truth may exist at several resolutions (``LOWRES``, and
+    ``HIGHRES`` where a dataset has it); evaluation masks are named. Views stored as PNG files, one per view:
+    :class:`PNGScene` (HCI: lfbench.data.hci.HCIScene; views named by a pattern: lfbench.data.pattern.PatternScene).
 
-    spatial_size: tuple[int, int]
-    #: who says the views are ``spatial_size``, for the message about a view of another size
-    size_said: str = "expected"
-
-    def view_file(self, row: int, col: int) -> Path:
-        """The file of the view at 0-based angular ``row``, ``col``."""
-        raise NotImplementedError
-
-    def _views_ready(self) -> None:
-        """Called before the views are read (e.g. a check that every file is there)."""
-
-    @functools.cached_property
-    def _rgb(self) -> np.ndarray:
-        self._views_ready()
-        v, u = self.angular_size
-        h, w = self.spatial_size
-        views = np.empty((v, u, h, w, 3), dtype=np.float32)
-        for r in range(v):
-            for c in range(u):
-                views[r, c] = read_rgb(self.view_file(r, c), size=(h, w), said=self.size_said)
-        return views
-
-    def rgb_views(self) -> np.ndarray:
-        """(V, U, H, W, 3) float32 RGB in [0, 1]; ``[r, c]`` is the view at angular row r, column c."""
-        return self._rgb
-
-    @functools.cached_property
-    def _gray(self) -> np.ndarray:
-        return rgb_to_gray(self._rgb)
-
-    def gray_views(self) -> np.ndarray:
-        return self._gray
-
-    def center_view(self) -> np.ndarray:
-        v, u = self.angular_size
-        if "_rgb" in self.__dict__:
-            return self._rgb[v // 2, u // 2]
-        return read_rgb(self.view_file(v // 2, u // 2), size=self.spatial_size, said=self.size_said)
-
-
-class Scene(PNGViews):
-    """A scene folder a dataset adapter opened: the contract scoring reads. Views are PNG files
-    (:class:`PNGViews`); the ground truth may exist at several resolutions (``LOWRES``, and ``HIGHRES``
-    where a dataset has it); evaluation masks are named. Each layout's reader subclasses it (HCI:
-    lfbench.data.hci.HCIScene; views named by a pattern: lfbench.data.pattern.PatternScene).
-
-    ``path``: the folder; ``category``: the category / split folder it was found in; ``params``: camera
-    parameters with depth <-> disparity conversions where the dataset has them (None: the metrics that
-    need them do not apply). A scene pickles as its folder (a scoring worker reopens it, never receives
-    its loaded views): :meth:`reopen_args`.
+    ``path``: the folder (or file) it was opened from; ``category``: the category / split folder it was
+    found in; ``params``: camera parameters with depth <-> disparity conversions where the dataset has them
+    (None: the metrics that need them do not apply); ``invalid_area_file``: the file name, in a training run's
+    ``data.invalid_area/<scene>/`` folder, of a mask of pixels training leaves out, where the layout has such
+    masks (SubFocal's for HCI; None: none). A scene pickles as :meth:`reopen_args` (a scoring worker reopens it,
+    never receives its loaded views).
     """
 
     path: Path
     category: str
     params: object | None = None
+    invalid_area_file: str | None = None
+
+    # -- views: what an adapter provides --------------------------------------------------------
+
+    def load_views(self) -> np.ndarray:
+        """The views read from storage: (V, U, H, W, 3) float32 RGB in [0, 1], or (V, U, H, W) float32 gray;
+        ``[r, c]`` is the view at angular row r, column c. Called once until :meth:`release_views`."""
+        raise NotImplementedError
+
+    def load_center_view(self) -> np.ndarray:
+        """The centre view read from storage ((H, W, 3) RGB or (H, W) gray float32 in [0, 1]); default: taken
+        from :meth:`load_views` (override where one view can be read alone)."""
+        v, u = self.angular_size
+        return self.load_views()[v // 2, u // 2]
+
+    def load_views_uint8(self) -> np.ndarray:
+        """The views as stored 8-bit RGB (V, U, H, W, 3) uint8 (what training keeps in memory); default:
+        :meth:`load_views` rounded to 1/255 steps (exact for views read from 8-bit files)."""
+        views = self.load_views()
+        if views.ndim == 4:
+            views = np.repeat(views[..., None], 3, axis=-1)
+        return np.round(np.clip(views, 0.0, 1.0) * np.float32(255.0)).astype(np.uint8)
+
+    # -- views: what the benchmark reads (loaded once, kept until released) -----------------------
+
+    def _loaded(self) -> np.ndarray:
+        views = self.__dict__.get("_views")
+        if views is None:
+            views = self.__dict__["_views"] = self._checked_views(self.load_views())
+        return views
+
+    def _checked_views(self, views: np.ndarray) -> np.ndarray:
+        """``views`` as float32, refused (DataError naming the scene) unless (V, U, H, W[, 3]) of this scene."""
+        views = np.asarray(views, dtype=np.float32)
+        v, u = self.angular_size
+        if views.ndim not in (4, 5) or views.shape[:2] != (v, u) or (views.ndim == 5 and views.shape[4] != 3):
+            raise DataError(f"{type(self).__name__}.load_views gave an array of shape {views.shape}, expected "
+                            f"({v}, {u}, H, W, 3) or ({v}, {u}, H, W)", getattr(self, "path", None))
+        return views
+
+    def rgb_views(self) -> np.ndarray:
+        """(V, U, H, W, 3) float32 RGB in [0, 1] (gray repeated where the scene has no colour)."""
+        views = self._loaded()
+        return np.repeat(views[..., None], 3, axis=-1) if views.ndim == 4 else views
+
+    def gray_views(self) -> np.ndarray:
+        gray = self.__dict__.get("_gray")
+        if gray is None:
+            views = self._loaded()
+            gray = self.__dict__["_gray"] = views if views.ndim == 4 else rgb_to_gray(views)
+        return gray
+
+    def center_view(self) -> np.ndarray:
+        views = self.__dict__.get("_views")
+        if views is not None:
+            v, u = self.angular_size
+            return views[v // 2, u // 2]
+        return self.load_center_view()
+
+    def views_uint8(self) -> np.ndarray:
+        """(V, U, H, W, 3) uint8 RGB: :meth:`load_views_uint8`, not kept (training holds its own copy)."""
+        return self.load_views_uint8()
+
+    def release_views(self) -> None:
+        """Forget the loaded views (the next use reads them again): one scene in memory at a time."""
+        self.__dict__.pop("_views", None)
+        self.__dict__.pop("_gray", None)
+
+    # -- the rest of the contract ---------------------------------------------------------------
 
     def __reduce__(self):
         return _reopen, (type(self), *self.reopen_args())
@@ -286,6 +326,46 @@ class Scene(PNGViews):
     def valid_mask(self) -> np.ndarray | None:
         """Pixels that may be scored, bool (H, W) at low resolution, or None (all)."""
         return None
+
+
+class PNGScene(Scene):
+    """A scene whose views are PNG files, one per view (:meth:`view_file`), all ``spatial_size`` (H, W)."""
+
+    spatial_size: tuple[int, int]
+    #: who says the views are ``spatial_size``, for the message about a view of another size
+    size_said: str = "expected"
+
+    def view_file(self, row: int, col: int) -> Path:
+        """The file of the view at 0-based angular ``row``, ``col``."""
+        raise NotImplementedError
+
+    def check_views(self) -> None:
+        """Called before the views are read (e.g. a check that every file is there)."""
+
+    def load_views(self) -> np.ndarray:
+        self.check_views()
+        v, u = self.angular_size
+        h, w = self.spatial_size
+        views = np.empty((v, u, h, w, 3), dtype=np.float32)
+        for r in range(v):
+            for c in range(u):
+                views[r, c] = read_rgb(self.view_file(r, c), size=(h, w), said=self.size_said)
+        return views
+
+    def load_center_view(self) -> np.ndarray:
+        v, u = self.angular_size
+        return read_rgb(self.view_file(v // 2, u // 2), size=self.spatial_size, said=self.size_said)
+
+    def load_views_uint8(self) -> np.ndarray:
+        """Each PNG's pixels as 8-bit RGB (16-bit gray scaled by its bit depth: lfbench.data.scene.read_png)."""
+        self.check_views()
+        v, u = self.angular_size
+        h, w = self.spatial_size
+        out = np.empty((v, u, h, w, 3), dtype=np.uint8)
+        for r in range(v):  # one file per view: reading is per file by nature
+            for c in range(u):
+                out[r, c] = read_png(self.view_file(r, c), "view image", "RGB", size=(h, w))
+        return out
 
 
 def _reopen(cls: type[Scene], *args: object) -> Scene:

@@ -752,6 +752,8 @@ def plane_views(disparity: float, size: int, angular: int = 9, seed: int = 0) ->
 
 
 MAX_SYNTH_SIZE = 4096  # px per side of a generated view
+#: The dataset adapter (lfbench.data.dataset.DATASETS) that reads what :func:`write_benchmark` writes.
+SYNTH_LAYOUT = "hci"
 #: The side and the angular resolution of generated views, declared once: ``lfbench demo --size`` and ``lfbench
 #: synth --angular`` read and check them at parse time, :func:`check_args` from Python (the seed and the number
 #: of scenes are the shared flags lfbench.utils.flags.SEED and SCENE_COUNT).

@@ -8,18 +8,21 @@ bottom, left to right) and scores the centre view's ``5_5_disparity.npy`` (px pe
 HCI sign: positive = nearer than the focus plane). docs/datasets.md gives what public sources say about
 these conventions and where they are silent.
 
-Protocol (the challenge's): centre view, 15 px border, BadPix 0.01 / 0.03 / 0.07 and MSE x100, 640x480
-views, disparity searched in [-0.5, 1.6] px at an interval of 0.1 px (the released range is [-0.47, 1.55];
-the grid is the SubFocal paper's for Table III).
+Protocol (the challenge's): centre view, 15 px border, BadPix 0.01 / 0.03 / 0.07 and MSE x100 as the SubFocal
+paper's first author scores them (scorer ``paper-author``, lfbench.scoring.policy: |error| >= t, NaN good in
+BadPix and NaN in MSE), 640x480 views, disparity searched in [-0.5, 1.6] px at an interval of 0.1 px (the
+released range is [-0.47, 1.55]; the grid is the SubFocal paper's for Table III).
 
 Every scene is checked when it is opened as :class:`lfbench.data.pattern.PatternScene` checks a scene.
 """
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
-from lfbench.data.dataset import Dataset, DatasetProtocol
+from lfbench.data.dataset import DEFAULT_METRICS, Dataset, DatasetProtocol
+from lfbench.data.disparity import EVALUATION_BORDER_PX
 from lfbench.data.pattern import PatternScene, ViewLayout, find_scene_dirs, matches_at_depth
 from lfbench.data.scene import Benchmark, check_scene_names
 from lfbench.utils.errors import DataError
@@ -54,9 +57,9 @@ URBANLF_LAYOUT = ViewLayout(pattern="{v}_{u}.png", angular=(ANGULAR, ANGULAR), f
                             gt_format="npy")
 
 URBANLF_PROTOCOL = DatasetProtocol(
-    border_px=15, metrics=("badpix_0.01", "badpix_0.03", "badpix_0.07", "mse_x100"),
+    border_px=EVALUATION_BORDER_PX, metrics=DEFAULT_METRICS,
     disparity_range=(-0.5, 1.6), disparity_interval=0.1, spatial_size=(480, 640), angular_size=(ANGULAR, ANGULAR),
-    reference_view="centre view 5_5.png")
+    reference_view="centre view 5_5.png", scorer="paper-author")
 
 
 class UrbanLFScene(PatternScene):
@@ -70,7 +73,9 @@ class UrbanLFScene(PatternScene):
 
 
 def _is_sample(folder: Path) -> bool:
-    return (folder / view_name(CENTRE, CENTRE)).is_file()
+    """Whether ``folder`` holds a centre view: anything under its name (a FIFO or a broken link there is refused
+    when the sample is opened, never a sample left out)."""
+    return os.path.lexists(folder / view_name(CENTRE, CENTRE))
 
 
 class UrbanLFSyn(Dataset):

@@ -24,6 +24,7 @@ from __future__ import annotations
 import csv
 import io
 import logging
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -32,11 +33,12 @@ from typing import Any
 import numpy as np
 from PIL import Image
 
+from lfbench.data.disparity import EVALUATION_BORDER_PX
 from lfbench.data.scene import LightField
-from lfbench.data.submission import disp_map_path, read_submission_map
+from lfbench.data.submission import find_disp_map, read_submission_map
 from lfbench.method.base import Prediction
 from lfbench.reports.plotting import add_colorbar, as_gray, colormap, legend_label, method_colours, pyplot, save_figure
-from lfbench.scoring.metrics import METRICS, BadPixels, bad_pix_curve
+from lfbench.scoring.metrics import METRICS, BadPixels, bad_pix_curve, metric_order
 from lfbench.scoring.prepare import SceneReference, align_prediction
 from lfbench.scoring.rules import ScoringRules
 from lfbench.utils.atomic import write_bytes, write_text
@@ -51,6 +53,46 @@ BADPIX_THRESHOLD = 0.07  # px
 ERROR_LIMIT = 0.2  # px, range of the signed error maps
 CURVE_THRESHOLDS = np.round(np.arange(101) * 0.001, 3)  # 0 .. 0.1 px in steps of 0.001 (exact decimals)
 MARKED_THRESHOLDS = (0.01, 0.03, 0.07)
+
+
+
+@dataclass(frozen=True)
+class Thresholds:
+    """The BadPix thresholds (px) a run's protocol scores, as the figures show them: ``marked`` (dotted lines
+    on the BadPix series) and ``primary`` (the BadPix maps and their captions). The default is the
+    benchmark's (0.01, 0.03, 0.07; maps at 0.07)."""
+
+    marked: tuple[float, ...] = MARKED_THRESHOLDS
+    primary: float = BADPIX_THRESHOLD
+
+    @classmethod
+    def of_metrics(cls, metric_ids: Sequence[str]) -> Thresholds:
+        """The thresholds of the ``badpix_<t>`` ids among ``metric_ids`` (a protocol's metrics): every one
+        marked, the first in table order (:func:`lfbench.scoring.metrics.metric_order`: BadPix 0.07 first where
+        scored) the primary; the default when there is none."""
+        found = {m: t for m in metric_order(metric_ids) if (t := badpix_threshold(m)) is not None}
+        if not found:
+            return cls()
+        return cls(marked=tuple(sorted(set(found.values()))), primary=next(iter(found.values())))
+
+    @property
+    def curve(self) -> np.ndarray:
+        """The thresholds of a BadPix series: :data:`CURVE_THRESHOLDS` (0 .. 0.1 px) unless a marked one lies
+        beyond, then 101 from 0 to 1.25 x the largest (rounded up to 0.01 px)."""
+        top = max(self.marked)
+        if top <= CURVE_THRESHOLDS[-1]:
+            return CURVE_THRESHOLDS
+        return np.round(np.linspace(0.0, math.ceil(top * 125) / 100, 101), 6)
+
+
+def badpix_threshold(metric_id: str) -> float | None:
+    """The threshold (px) of a general BadPix(t) metric by its definition (its pixel sample), else None."""
+    m = METRICS.find(metric_id)
+    sample = None if m is None or m.pixelwise is None else m.pixelwise.sample
+    if isinstance(sample, BadPixels) and m.category == "general" and m.bootstrap is not None:
+        return float(sample.threshold)
+    return None
+
 
 # BadPix map codes and colours (RGB in [0, 1]); GOOD is a grey level, never pure red.
 OUTSIDE, GOOD, BAD = 0, 1, 2
@@ -171,7 +213,7 @@ class MethodPanels:
 def method_panels(label: str, lf: LightField, prediction: Prediction | np.ndarray, *,
                   gt: np.ndarray | None = None, mask: np.ndarray | None = None,
                   background: np.ndarray | None = None, disp_range: tuple[float, float] | None = None,
-                  threshold: float = BADPIX_THRESHOLD, border_px: int = 15) -> MethodPanels:
+                  threshold: float = BADPIX_THRESHOLD, border_px: int = EVALUATION_BORDER_PX) -> MethodPanels:
     """The panels of one prediction on one light field at low resolution. ``gt``, ``mask`` and
     ``background`` default to the scene's ground truth, evaluation mask and centre view."""
     pred = prediction if isinstance(prediction, Prediction) else Prediction(disparity=np.asarray(prediction))
@@ -250,7 +292,7 @@ def draw_method_row(panels: MethodPanels, path: str | Path, resolution_note: str
 @plain_text
 def draw_scene_header(lf: LightField, path: str | Path, gt: np.ndarray | None,
                       disp_range: tuple[float, float], threshold: float = BADPIX_THRESHOLD,
-                      border_px: int = 15) -> Path:
+                      border_px: int = EVALUATION_BORDER_PX) -> Path:
     """The first row of a scene overview: centre view | ground truth | colour legend | notes."""
     fig, axes = _row_figure(f"scene {lf.name}")
     center = np.clip(np.asarray(lf.center_view(), dtype=np.float32), 0, 1)
@@ -336,18 +378,21 @@ def average_curves(curves: Sequence[Curve]) -> dict[str, tuple[np.ndarray, np.nd
 
 
 def plot_mean_series(averaged: Mapping[str, tuple[np.ndarray, np.ndarray, int]], path: str | Path, title: str, *,
-                     markers: bool = False, colours: Mapping[str, str] | None = None) -> Path:
+                     markers: bool = False, colours: Mapping[str, str] | None = None,
+                     marked: Sequence[float] = MARKED_THRESHOLDS) -> Path:
     """:func:`plot_badpix_series` of series averaged over scenes (method -> (t, values, number of scenes), as
     :func:`average_curves` and :func:`curves_from_records` give them), each labelled with its scene count."""
     return plot_badpix_series({m: (t, v) for m, (t, v, _) in averaged.items()}, path, title, markers=markers,
-                              colours=colours, scenes={m: k for m, (_, _, k) in averaged.items()})
+                              colours=colours, scenes={m: k for m, (_, _, k) in averaged.items()}, marked=marked)
 
 
 @plain_text
 def badpix_series_figure(series: Mapping[str, tuple[np.ndarray, np.ndarray]], title: str, *, markers: bool = False,
-                         colours: Mapping[str, str] | None = None, scenes: Mapping[str, int] | None = None) -> Any:
+                         colours: Mapping[str, str] | None = None, scenes: Mapping[str, int] | None = None,
+                         marked: Sequence[float] = MARKED_THRESHOLDS) -> Any:
     """The figure of :func:`plot_badpix_series` (not saved): the legend beside the axes, never over the
-    curves, its labels wrapped (plotting.legend_label)."""
+    curves, its labels wrapped (plotting.legend_label); dotted lines at the ``marked`` thresholds (px), the
+    axis from 0 to 0.1 px or to the largest threshold drawn or marked."""
     plt = pyplot()
     colours = colours if colours is not None else method_colours(list(series))
     fig, ax = plt.subplots(figsize=(8.4, 4.2))
@@ -355,9 +400,9 @@ def badpix_series_figure(series: Mapping[str, tuple[np.ndarray, np.ndarray]], ti
         label = method if scenes is None else f"{method} ({scenes[method]} scene{'s' if scenes[method] != 1 else ''})"
         ax.plot(t, v, marker="o" if markers else None, markersize=4, linewidth=1.5, label=legend_label(label),
                 color=colours.get(method))
-    for t in MARKED_THRESHOLDS:
+    for t in marked:
         ax.axvline(t, color="0.7", linestyle=":", linewidth=1)
-    ax.set_xlim(0, 0.1)
+    ax.set_xlim(0, max([0.1, *marked, *(float(np.max(t)) for t, _ in series.values() if len(t))]))
     ax.set_ylim(bottom=0)
     ax.set_xlabel("threshold t (px)")
     ax.set_ylabel("BadPix(t) (%)")
@@ -372,11 +417,12 @@ def badpix_series_figure(series: Mapping[str, tuple[np.ndarray, np.ndarray]], ti
 @plain_text
 def plot_badpix_series(series: Mapping[str, tuple[np.ndarray, np.ndarray]], path: str | Path, title: str, *,
                        markers: bool = False, colours: Mapping[str, str] | None = None,
-                       scenes: Mapping[str, int] | None = None) -> Path:
+                       scenes: Mapping[str, int] | None = None, marked: Sequence[float] = MARKED_THRESHOLDS) -> Path:
     """BadPix(t) (%) against t (px), one line per method (``series``: method -> (t, values)); dotted lines
-    mark 0.01, 0.03 and 0.07. ``colours``: method -> colour (default: plotting.method_colours in the
-    series' order); ``scenes``: method -> number of scenes averaged, added to its label."""
-    fig = badpix_series_figure(series, title, markers=markers, colours=colours, scenes=scenes)
+    mark the protocol's thresholds (``marked``, default 0.01, 0.03 and 0.07). ``colours``: method -> colour
+    (default: plotting.method_colours in the series' order); ``scenes``: method -> number of scenes averaged,
+    added to its label."""
+    fig = badpix_series_figure(series, title, markers=markers, colours=colours, scenes=scenes, marked=marked)
     return save_figure(fig, path, dpi=110)
 
 
@@ -416,9 +462,11 @@ def read_curves_csv(path: str | Path) -> list[Curve]:
 
 
 def draw_badpix_curves(curves: Sequence[Curve], out_dir: str | Path,
-                       colours: Mapping[str, str] | None = None) -> list[Path]:
+                       colours: Mapping[str, str] | None = None, marked: Sequence[float] = MARKED_THRESHOLDS
+                       ) -> list[Path]:
     """badpix_series.png (mean over scenes per method) in out_dir and <scene>/badpix_series.png per scene;
-    ``colours``: method -> colour (default: by first appearance in ``curves``)."""
+    ``colours``: method -> colour (default: by first appearance in ``curves``); ``marked``: the protocol's
+    thresholds (px), dotted."""
     out = Path(out_dir)
     written = []
     by_scene: dict[str, dict[str, tuple[np.ndarray, np.ndarray]]] = {}
@@ -431,9 +479,9 @@ def draw_badpix_curves(curves: Sequence[Curve], out_dir: str | Path,
     for scene, series in by_scene.items():
         written.append(plot_badpix_series(series, out / folders[scene] / "badpix_series.png",
                                           f"BadPix series, {scene} ({'/'.join(sorted(res_of[scene]))})",
-                                          colours=colours))
+                                          colours=colours, marked=marked))
     written.append(plot_mean_series(average_curves(curves), out / "badpix_series.png",
-                                    "BadPix series, mean over scenes", colours=colours))
+                                    "BadPix series, mean over scenes", colours=colours, marked=marked))
     return written
 
 
@@ -442,12 +490,7 @@ def curves_from_records(results: Any) -> dict[str, tuple[np.ndarray, np.ndarray]
     available without the maps, method -> (thresholds, values, number of scenes) as :func:`average_curves`
     gives them. Only scenes where the method has every threshold are averaged."""
     df = results.to_frame()
-    thresholds = {}
-    for metric_id in dict.fromkeys(df["metric"]):
-        m = METRICS.find(metric_id)  # the general BadPix(t) metrics, by their definition
-        sample = None if m is None or m.pixelwise is None else m.pixelwise.sample
-        if isinstance(sample, BadPixels) and m.category == "general" and m.bootstrap is not None:
-            thresholds[metric_id] = float(sample.threshold)
+    thresholds = {m: t for m in dict.fromkeys(df["metric"]) if (t := badpix_threshold(m)) is not None}
     df = df[df["metric"].isin(list(thresholds))].copy()
     if df.empty:
         return {}
@@ -485,10 +528,11 @@ class SceneFigureWriter:
     """
 
     def __init__(self, out_dir: str | Path, rules: ScoringRules = ScoringRules(),
-                 threshold: float = BADPIX_THRESHOLD, curves: bool = True, methods: Sequence[str] = ()) -> None:
+                 thresholds: Thresholds = Thresholds(), curves: bool = True, methods: Sequence[str] = ()) -> None:
         self.out = Path(out_dir)
         self.rules = rules
-        self.threshold = threshold
+        self.thresholds = thresholds
+        self.threshold = thresholds.primary
         self.curves_enabled = curves
         self._rows: dict[str, dict[str, Path]] = {}  # scene -> method label -> row PNG (arrival order)
         self._headers: dict[str, tuple[Path, tuple[float, float]]] = {}
@@ -534,30 +578,33 @@ class SceneFigureWriter:
         written.append(rows[label])
         written.append(stack_rows([header, *rows.values()], self.out / f"overview_{scene_name}.png"))
         if self.curves_enabled:
-            curve = scene_curve(label, scene, pred.disparity, self.rules)
+            curve = scene_curve(label, scene, pred.disparity, self.rules, self.thresholds.curve)
             if curve is not None:
                 self._curves[(label, scene.name)] = curve
                 written.append(write_curves_csv(self.curves, self.out / "badpix_series.csv"))
                 colours = method_colours(self._methods)
                 series = {c.method: (c.thresholds, c.values) for c in self.curves if c.scene == scene.name}
                 written.append(plot_badpix_series(series, scene_dir / "badpix_series.png",
-                                                  f"BadPix series, {scene.name} ({curve.resolution})", colours=colours))
+                                                  f"BadPix series, {scene.name} ({curve.resolution})", colours=colours,
+                                                  marked=self.thresholds.marked))
                 written.append(plot_mean_series(average_curves(self.curves), self.out / "badpix_series.png",
-                                                "BadPix series, mean over scenes", colours=colours))
+                                                "BadPix series, mean over scenes", colours=colours,
+                                                marked=self.thresholds.marked))
         self.written.update(written)
         return written
 
 
 def figures_from_maps(scenes: Sequence[LightField], maps: Mapping[str, str | Path], out_dir: str | Path,
-                      rules: ScoringRules = ScoringRules(), progress: bool = False) -> SceneFigureWriter:
+                      rules: ScoringRules = ScoringRules(), progress: bool = False,
+                      thresholds: Thresholds = Thresholds()) -> SceneFigureWriter:
     """Figures from saved maps: ``maps`` maps a method label to a submission folder
     (disp_maps/<scene>.pfm, as written by ``evaluate --save-maps`` or a published submission).
     Scenes without a map for a method are left out for that method. Returns the writer (its
     ``written`` files and ``curves``)."""
-    writer = SceneFigureWriter(out_dir, rules=rules)
+    writer = SceneFigureWriter(out_dir, rules=rules, thresholds=thresholds)
     for scene in scenes:
         for label, folder in maps.items():
-            if not disp_map_path(folder, scene.name).is_file():
+            if not find_disp_map(folder, scene.name).is_file():
                 continue
             disp, runtime = read_submission_map(folder, scene.name, max_shape=getattr(scene, "spatial_size", None))
             writer.add(label, scene, Prediction(disparity=disp, runtime_s=runtime))

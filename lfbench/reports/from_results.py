@@ -3,8 +3,9 @@
 
 Writes OUT/table_per_scene.* and OUT/table_average.* (the tables ``lfbench evaluate`` writes) and,
 with the paper's tables, OUT/table_per_scene_paper.* and OUT/table_average_paper.* with the paper's
-numbers in labelled columns/rows. The BadPix series come from saved maps (``maps``: per-scene
-overviews, exact curves and the toolkit's figure types), else from a saved curve CSV (``curves``,
+numbers in labelled columns/rows. The BadPix series come from saved maps (``maps``, default
+RESULTS_DIR/maps where the run saved them and its scenes are at hand: per-scene overviews, exact curves and the
+toolkit's figure types), else from a saved curve CSV (``curves``,
 default RESULTS_DIR/figures/badpix_series.csv), else from the BadPix thresholds the results hold.
 With ``html``, OUT/html/index.html (lfbench.reports.html).
 
@@ -15,6 +16,7 @@ the results' own folder nor hold another run's results: the report's set would r
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,7 +25,7 @@ import pandas as pd
 
 from lfbench.data.dataset import open_datasets
 from lfbench.data.scene import Benchmark
-from lfbench.reports.maps import load_scene_maps, map_folders
+from lfbench.reports.maps import MAPS_DIR, load_scene_maps, map_folders
 from lfbench.reports.paper import PaperTables
 from lfbench.reports.tables import TABLE_FORMATS
 from lfbench.reports.writers import (
@@ -44,6 +46,8 @@ from lfbench.utils.errors import DataError
 from lfbench.utils.outputs import check_within, read_manifest, staged_outputs
 
 __all__ = ["ReportOutcome", "report_from_results"]
+
+log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -79,6 +83,8 @@ def report_from_results(results_path: str | Path, out: str | Path, *,
         raise DataError("curve file not found", curves_path)
     if curves is None and curves_path.is_symlink():
         check_within(curves_path, results_dir, "the results folder")
+    if maps is None:  # the maps the run saved beside its results (evaluate --save-maps), where its scenes are
+        maps = _saved_maps(results_dir, results, data)
     figures = SceneFigures(files=True) if maps is not None else CurveFigures(curves_path)
     site = Site(data_root=data, maps=maps, paper=paper, paper_methods=paper_methods)
     writers: list[OutputWriter] = [tables, figures, *([ToolkitFigures(figure_formats)] if maps is not None else []),
@@ -94,6 +100,22 @@ def report_from_results(results_path: str | Path, out: str | Path, *,
     return ReportOutcome(tables=tables.tables, written=written, figures=out / FIGURES_DIR,
                          curves_source=f"saved maps in {maps}" if maps is not None else figures.source,
                          html_index=outputs.final(site.index) if html else None)
+
+
+def _saved_maps(results_dir: Path, results: Results, data: str | Path | Sequence[str | Path] | None) -> Path | None:
+    """RESULTS_DIR/maps when the run saved its maps there (a real folder, not a link) and the scenes' data roots
+    (``data``, else the roots the results record) are at hand to draw them on; else None (the series then come
+    from saved curves or the results' thresholds). DataError when a saved folder leads out of it."""
+    saved = results_dir / MAPS_DIR
+    if saved.is_symlink() or not saved.is_dir():
+        return None
+    for entry in sorted(saved.iterdir()):  # a folder leading out is refused, drawn or not
+        check_within(entry, saved, "the maps folder")
+    roots = Benchmark.root_list(data) or results.data_roots
+    if not roots or not all(Path(r).is_dir() for r in roots):
+        log.info("saved maps in %s are not drawn: the data root of their scenes is not at hand (give --data)", saved)
+        return None
+    return saved
 
 
 def _load_maps(run: RunOutputs, maps: Path, data: str | Path | Sequence[str | Path] | None,

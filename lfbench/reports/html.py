@@ -24,6 +24,7 @@ temporary folder and renamed into place when complete.
 from __future__ import annotations
 
 import math
+import re
 import shutil
 from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -33,11 +34,13 @@ from typing import Any
 from urllib.parse import quote
 
 import jinja2
+import markupsafe
 import numpy as np
 import pandas as pd
 
-from lfbench.data.dataset import open_datasets
-from lfbench.data.scene import Benchmark
+from lfbench.data.dataset import DATASETS, open_datasets
+from lfbench.data.disparity import EVALUATION_BORDER_PX
+from lfbench.data.scene import HIGHRES, Benchmark
 from lfbench.reports import figures as fig
 from lfbench.reports import toolkit_figures as tk
 from lfbench.reports.leaderboard import all_metric_ranks, metric_table, overall_ranks
@@ -169,7 +172,7 @@ def _metric_section(results: Results, metric: str, ci: Mapping, scene_pages: Map
                      "avg_rank": _cell(r[("average rank", "value")]), "reference": method in references})
     mean_res = "+".join(sorted({x for row in rows for x in str(row["mean_res"]).split("+") if x and x != "nan"}))
     return {"id": metric, "name": info.name, "unit": info.unit, "description": info.description,
-            "direction": "higher is better" if info.higher_is_better else "lower is better",
+            "direction": info.direction,
             "scenes": header, "rows": rows, "mean_res": mean_res}
 
 
@@ -327,7 +330,15 @@ def _environment() -> jinja2.Environment:
                              autoescape=jinja2.select_autoescape(["html"]), undefined=jinja2.StrictUndefined,
                              trim_blocks=True, lstrip_blocks=True)
     env.filters["href"] = lambda path: quote(str(path), safe="/=")  # a relative link to a file of the site
+    env.filters["breakable"] = breakable
     return env
+
+
+def breakable(text: Any, after: str = ",:") -> markupsafe.Markup:
+    """``text`` escaped for HTML, with a line-break opportunity (``<wbr>``) after each character of ``after``
+    not followed by a space (a method spec's commas and colon; a column id's underscores too): it wraps there in
+    a narrow column, never inside a number or a key=value."""
+    return markupsafe.Markup(re.sub(f"([{re.escape(after)}])(?! )", r"\1<wbr>", str(markupsafe.escape(str(text)))))
 
 
 def _meta_lines(results: Results) -> list[str]:
@@ -338,11 +349,25 @@ def _meta_lines(results: Results) -> list[str]:
         rule = ("toolkit rule (BadPix counts NaN as good)" if scoring.get("toolkit_nonfinite")
                 else "non-finite predictions count as bad pixels")
         highres = ", ".join(scoring.get("highres_scenes", [])) or "no scene"
-        lines.append(f"Scoring: {scoring.get('border_px', 15)} px border ignored; {rule}; "
+        lines.append(f"Scoring: {scoring.get('border_px', EVALUATION_BORDER_PX)} px border ignored; {rule}; "
                      f"high resolution where available for {highres}.")
     if meta.get("created"):
         lines.append(f"Created {meta['created']} with lfbench {meta.get('lfbench_version', '?')}.")
     return lines
+
+
+def _dataset_line(results: Results, border: int) -> str:
+    """What every page says first of the data: the dataset, its disparity range and the border ignored."""
+    name = results.meta.get("dataset")
+    lo_hi = results.disparity_range
+    if lo_hi is None and name:  # results written before the protocol was recorded: the dataset's own
+        found = DATASETS.find(name)
+        lo_hi = found.protocol.disparity_range if found is not None and not found.protocol_from_data() else None
+    parts = [f"Dataset: {name}" if name else "Dataset: not recorded"]
+    if lo_hi is not None:
+        parts.append(f"disparity range [{lo_hi[0]:g}, {lo_hi[1]:g}] px per view step")
+    parts.append(f"{border} px border ignored")
+    return "; ".join(parts) + "."
 
 
 def check_site_dir(out: str | Path) -> Path:
@@ -354,11 +379,13 @@ def check_site_dir(out: str | Path) -> Path:
     return out
 
 
-def build_site(inputs: SiteInputs, out: str | Path, *, threshold: float = fig.BADPIX_THRESHOLD,
+def build_site(inputs: SiteInputs, out: str | Path, *, thresholds: fig.Thresholds | None = None,
                pairwise_threshold: float = tk.PAIRWISE_THRESHOLD, border_px: int | None = None) -> Path:
     """Write the site into folder ``out`` (replacing an earlier site there as a whole); returns the
-    path of index.html. Pages and images are named after the methods and scenes, whose names the entry
-    point checked (lfbench.results.check_names: a run's before its work, a results file's when read)."""
+    path of index.html. ``thresholds``: the BadPix thresholds of the maps, captions and series (default: the
+    results' protocol's, :attr:`lfbench.results.Results.protocol_metrics`). Pages and images are named after
+    the methods and scenes, whose names the entry point checked (lfbench.results.check_names: a run's before
+    its work, a results file's when read)."""
     results = inputs.results
     if not results.records:
         raise DataError("the results hold no records; nothing to report")
@@ -367,7 +394,8 @@ def build_site(inputs: SiteInputs, out: str | Path, *, threshold: float = fig.BA
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = fresh_dir(out.parent, f".{out.name}.", ".tmp")
     try:
-        _write_site(inputs, tmp, threshold, pairwise_threshold, border)
+        thresholds = thresholds or fig.Thresholds.of_metrics(results.protocol_metrics)
+        _write_site(inputs, tmp, thresholds, pairwise_threshold, border)
         replace_dir(tmp, out)
     except OSError as exc:  # named where the file would have landed, not in the temporary folder
         shutil.rmtree(tmp, ignore_errors=True)
@@ -381,8 +409,10 @@ def build_site(inputs: SiteInputs, out: str | Path, *, threshold: float = fig.BA
     return out / "index.html"
 
 
-def _write_site(inputs: SiteInputs, root: Path, threshold: float, pair_threshold: float, border: int) -> None:
+def _write_site(inputs: SiteInputs, root: Path, thresholds: fig.Thresholds, pair_threshold: float,
+                border: int) -> None:
     results = inputs.results
+    threshold, marked = thresholds.primary, thresholds.marked
     env = _environment()
     assets = files("lfbench.reports").joinpath("site_assets")
     for name in ASSETS:
@@ -424,27 +454,28 @@ def _write_site(inputs: SiteInputs, root: Path, threshold: float, pair_threshold
         drawn[name]["legend"] = _legend(images, sm.disp_range)
         for label in (m for m in order if m not in references):  # an oracle's BadPix(t) is 0: no line
             if hasattr(scene, "has_gt"):
-                c = inputs.curves.get((label, name)) or fig.scene_curve(label, scene, sm.preds[label], rules)
+                c = inputs.curves.get((label, name)) or fig.scene_curve(label, scene, sm.preds[label], rules,
+                                                                          thresholds.curve)
                 if c is not None:
                     curves.append(c)
         if curves and any(c.scene == name for c in curves):
             series = {c.method: (c.thresholds, c.values) for c in curves if c.scene == name}
             res = "/".join(sorted({c.resolution for c in curves if c.scene == name}))
             path = root / "img" / fig.safe_name(name) / "badpix_series.png"
-            fig.plot_badpix_series(series, path, f"BadPix series, {name} ({res})", colours=colours)
+            fig.plot_badpix_series(series, path, f"BadPix series, {name} ({res})", colours=colours, marked=marked)
             drawn[name]["series"] = f"img/{fig.safe_name(name)}/badpix_series.png"
         del sm
     figures: dict[str, str | None] = {"series": None, "radar": None, "radar_metrics": None}
     if curves:
         fig.plot_mean_series(fig.average_curves(curves), root / "img" / "badpix_series.png",
-                             "BadPix series, mean over scenes", colours=colours)
+                             "BadPix series, mean over scenes", colours=colours, marked=marked)
         figures["series"] = "img/badpix_series.png"
     else:
         averaged = {m: c for m, c in fig.curves_from_records(results).items() if m not in references}
         if averaged:
             fig.plot_mean_series(averaged, root / "img" / "badpix_series.png",
                                  "BadPix at the thresholds in the results, mean over scenes", markers=True,
-                                 colours=colours)
+                                 colours=colours, marked=marked)
             figures["series"] = "img/badpix_series.png"
     radar = tk.radar_scores(results, methods=results.competitors)
     radar_ok = len(radar.index) >= 3
@@ -455,14 +486,16 @@ def _write_site(inputs: SiteInputs, root: Path, threshold: float, pair_threshold
 
     common = {"title": inputs.title, "methods": [{"label": m, "href": method_pages[m]} for m in methods],
               "scenes": [{"label": s, "href": scene_pages[s]} for s in scene_names],
-              "meta": _meta_lines(results) + list(inputs.notes)}
+              "meta": _meta_lines(results) + list(inputs.notes), "dataset": _dataset_line(results, border),
+              "marked": ", ".join(f"{t:g}" for t in marked)}
     index = env.get_template("index.html").render(
         **common, page="index", overview=overview, sections=sections, paper=paper_sections,
         paper_source=str(inputs.paper.source) if inputs.paper is not None else None, figures=figures,
         scene_cards=[{"label": s, "href": scene_pages[s], "thumb": drawn.get(s, {}).get("centre"),
                       "res": "/".join(sorted({r.resolution for r in results.records if r.scene == s}))}
                      for s in scene_names],
-        has_ci=bool(ci), threshold=threshold, tables=[_section_table(t) for t in inputs.sections])
+        has_ci=bool(ci), threshold=threshold, tables=[_section_table(t) for t in inputs.sections],
+        highres_scenes=sorted({r.scene for r in results.records if r.resolution == HIGHRES}))
     write_text(root / "index.html", index)
     for s in scene_names:
         write_text(root / scene_pages[s], env.get_template("scene.html").render(

@@ -32,9 +32,9 @@ def metric_ranks(results, metric: str, *, references: Collection[str] | None = N
     df = df[df["metric"] == metric][["method", "scene", "value", "resolution"]].copy()
     if df.empty:
         return df.assign(rank=pd.Series(dtype=float))
-    ascending = not describe_metric(metric).higher_is_better
-    finite = df["value"].where(np.isfinite(df["value"].astype(float)) & ~df["method"].isin(refs))
-    df["rank"] = finite.groupby(df["scene"]).rank(method="min", ascending=ascending)
+    badness = df["value"].astype(float).map(describe_metric(metric).badness)  # a signed metric by its magnitude
+    finite = badness.where(np.isfinite(badness) & ~df["method"].isin(refs))
+    df["rank"] = finite.groupby(df["scene"]).rank(method="min", ascending=True)
     return df.reset_index(drop=True)
 
 

@@ -16,9 +16,10 @@ from pathlib import Path
 
 import numpy as np
 
+from lfbench.data.disparity import EVALUATION_BORDER_PX
 from lfbench.data.pfm import read_pfm, write_pfm
 from lfbench.data.scene import LightField
-from lfbench.data.submission import check_inside, disp_map_path, read_submission_map, write_submission_map
+from lfbench.data.submission import check_inside, find_disp_map, read_submission_map, write_submission_map
 from lfbench.method.base import Prediction
 from lfbench.reports.figures import disparity_range
 from lfbench.scoring.prepare import SceneReference
@@ -88,7 +89,8 @@ class SceneMaps:
         return self.scene.name
 
 
-def load_scene_maps(scene: LightField, folders: Mapping[str, str | Path], border_px: int = 15) -> SceneMaps:
+def load_scene_maps(scene: LightField, folders: Mapping[str, str | Path],
+                    border_px: int = EVALUATION_BORDER_PX) -> SceneMaps:
     """The scene's ground truth, mask and centre view and the saved map of every method in ``folders``
     that has one for it (methods without are left out)."""
     reference = SceneReference(scene, ScoringRules(border_px=border_px))
@@ -99,7 +101,7 @@ def load_scene_maps(scene: LightField, folders: Mapping[str, str | Path], border
     shape = tuple(gt.shape) if gt is not None else tuple(centre.shape[:2])
     preds = {}
     for label, folder in folders.items():
-        if disp_map_path(folder, scene.name).is_file():
+        if find_disp_map(folder, scene.name).is_file():
             disp, _ = read_submission_map(folder, scene.name, max_shape=shape)
             preds[label], _ = reference.align(disp, f"{label} on {scene.name}")
     first = next(iter(preds.values()), None)
@@ -117,7 +119,7 @@ def saved_predictions(scenes: Sequence[LightField], folders: Mapping[str, str | 
         check_within(root, within, "the ablation folder")
     for scene in scenes if present else ():
         for label, root in present.items():
-            if not disp_map_path(root, scene.name).is_file():
+            if not find_disp_map(root, scene.name).is_file():
                 continue
             disp, runtime = read_submission_map(root, scene.name, max_shape=scene.spatial_size)
             unc_path = root / UNCERTAINTY_DIR / f"{scene.name}.pfm"

@@ -12,7 +12,7 @@ matplotlib is imported on first use: commands that draw nothing do not pay its s
 from __future__ import annotations
 
 import io
-import textwrap
+import re
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -48,8 +48,19 @@ def method_colours(labels: Sequence[str]) -> dict[str, str]:
 
 
 def legend_label(label: str, width: int = LEGEND_WIDTH) -> str:
-    """``label`` wrapped to lines of at most ``width`` characters (long words broken), for a legend."""
-    return "\n".join(textwrap.wrap(label, width, break_on_hyphens=False)) or label
+    """``label`` wrapped for a legend: lines of at most ``width`` characters, broken only after a comma or a
+    space (a spec's ``key=value`` or a number is never split: ``d_max=2.0`` stays whole, even where it alone is
+    longer than ``width``). Every character is kept (a break at a space drops nothing but that space)."""
+    lines: list[str] = []
+    current = ""
+    for token in re.findall(r"[^, ]*[, ]|[^, ]+$", label):  # each with the comma or space that ends it
+        if current and len((current + token).rstrip(" ")) > width:
+            lines.append(current)
+            current = token.lstrip(" ") if not token.isspace() else ""
+        else:
+            current += token
+    lines.append(current)
+    return "\n".join(line.rstrip(" ") for line in lines) or label
 
 
 def pyplot():

@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from lfbench.data.disparity import EVALUATION_BORDER_PX
 from lfbench.reports.maps import load_scene_maps
 from lfbench.reports.plotting import add_colorbar, as_gray, colormap, legend_label, method_colours, pyplot, save_formats
 from lfbench.scoring.metrics import METRICS, describe_metric, metric_order
@@ -300,7 +301,7 @@ def plot_radar(scores: pd.DataFrame, path: str | Path, *, title: str = "", highl
 
 
 def write_toolkit_figures(results: Any, scenes: Sequence[Any], maps: Mapping[str, str | Path], out_dir: str | Path,
-                          *, formats: Sequence[str] = ("png",), border_px: int = 15,
+                          *, formats: Sequence[str] = ("png",), border_px: int = EVALUATION_BORDER_PX,
                           threshold: float = PAIRWISE_THRESHOLD) -> list[Path]:
     """The toolkit's figures for papers into ``out_dir``: ``radar`` (from the results), and from the saved
     ``maps`` (method label -> submission folder) on ``scenes``: ``error_heatmaps`` and

@@ -44,6 +44,7 @@ from lfbench.reports.ci import format_ci_table
 from lfbench.reports.figures import (
     Curve,
     SceneFigureWriter,
+    Thresholds,
     curves_from_records,
     draw_badpix_curves,
     plot_mean_series,
@@ -92,6 +93,14 @@ class RunOutputs:
     scene_maps: Mapping[str, SceneMaps] = field(default_factory=dict)
     curves: dict[tuple[str, str], Curve] = field(default_factory=dict)
     progress: bool = False
+    metric_ids: Sequence[str] = ()
+
+    @property
+    def thresholds(self) -> Thresholds:
+        """The BadPix thresholds the figures show: those of the run's protocol (``metric_ids``, else the
+        results' :attr:`~lfbench.results.Results.protocol_metrics`)."""
+        ids = self.metric_ids or (self.results.protocol_metrics if self.results is not None else ())
+        return Thresholds.of_metrics(ids)
 
     @property
     def folder(self) -> Path:
@@ -238,7 +247,8 @@ class SceneFigures(OutputWriter):
 
     def start(self, run: RunOutputs) -> None:
         methods = run.results.methods if run.results is not None else ()  # colours in the results' order
-        self.writer = SceneFigureWriter(run.stage / self.folder, rules=run.rules, methods=methods)
+        self.writer = SceneFigureWriter(run.stage / self.folder, rules=run.rules, thresholds=run.thresholds,
+                                        methods=methods)
         if not self.files:
             (run.stage / self.folder).mkdir(parents=True, exist_ok=True)
 
@@ -264,11 +274,11 @@ class CurveFigures(OutputWriter):
         colours = method_colours(run.results.methods)
         if self.curves is not None and self.curves.is_file():
             self.source = str(self.curves)
-            return draw_badpix_curves(read_curves_csv(self.curves), out, colours)
+            return draw_badpix_curves(read_curves_csv(self.curves), out, colours, marked=run.thresholds.marked)
         self.source = "the BadPix thresholds in the results (no curves saved: run evaluate --figures for full curves)"
         return [plot_mean_series(curves_from_records(run.results), out / "badpix_series.png",
                                  "BadPix at the thresholds in the results, mean over scenes", markers=True,
-                                 colours=colours)]
+                                 colours=colours, marked=run.thresholds.marked)]
 
 
 class ToolkitFigures(OutputWriter):

@@ -90,12 +90,14 @@ def prepare_data(out: Path, seed: int, size: int, scenes: int, log: Log = _log.i
             got = stored.get("settings", {}) if isinstance(stored, dict) else {}
             raise DataError(f"holds demo data generated with {_describe(got)}, not {_describe(wanted)}; "
                             "choose another --out or remove this folder (data of two settings are never mixed)", out)
-        from lfbench.data.hci.scene import is_scene_folder
+        from lfbench.data.dataset import DATASETS
+        from lfbench.data.synth import SYNTH_LAYOUT
 
+        generated = DATASETS.get(SYNTH_LAYOUT)  # the adapter of the layout the demo data are written in
         scene_dirs = stored.get("scene_dirs")
         if not isinstance(scene_dirs, list) or not all(_inside(root, s) for s in scene_dirs):
             raise DataError("demo manifest: scene_dirs must list scene folders inside the data folder", manifest)
-        missing = [s for s in scene_dirs if not is_scene_folder(root / s)]
+        missing = [s for s in scene_dirs if not (root / s).is_dir() or not generated.matches(root / s)]
         if missing or not scene_dirs:
             raise DataError(f"demo data are incomplete (missing {', '.join(missing) or 'scene list'}); "
                             "remove this folder or choose another --out", out)
@@ -200,7 +202,8 @@ def run_demo(out: str | Path = "lfbench-demo", *, seed: int = DEFAULT_SEED, size
     tables, figures, every method's maps (OUT/maps) and, with ``html``, the HTML report (OUT/html), as one
     set (lfbench.runs.folder.evaluate_to_folder with the writers of lfbench.reports.writers).
     Returns a :class:`DemoOutcome`."""
-    from lfbench.data.hci import HCIDataset
+    from lfbench.data.dataset import DATASETS
+    from lfbench.data.synth import SYNTH_LAYOUT
     from lfbench.method.registry import create_from_spec
     from lfbench.reports.html import SITE_DIR
     from lfbench.reports.maps import MAPS_DIR
@@ -216,7 +219,7 @@ def run_demo(out: str | Path = "lfbench-demo", *, seed: int = DEFAULT_SEED, size
         recover(out)
         read_manifest(out)
     root, reused = prepare_data(out, seed, size, scenes, log)
-    scene_list = [s for s in HCIDataset.open(root) if s.has_gt()]
+    scene_list = [s for s in DATASETS.get(SYNTH_LAYOUT).open(root) if s.has_gt()]
     chosen, skipped = select_methods(requested, scene_list, log)
     writers = [*([SceneFigures()] if figures else []), Maps(), Tables(), *([Site()] if html else [])]
     results = evaluate_to_folder(chosen, scene_list, out, writers=writers, progress=progress,

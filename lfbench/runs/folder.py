@@ -27,7 +27,7 @@ from lfbench.method.base import Method, Prediction
 from lfbench.reports.writers import CIOptions, OutputWriter, PredictionSink, RunOutputs, Tables, drive_writers
 from lfbench.results import Results, check_names
 from lfbench.runs.runner import evaluate
-from lfbench.scoring.metrics import RUNTIME_METRICS, Metric, list_metrics
+from lfbench.scoring.metrics import GENERAL_METRICS, RUNTIME_METRICS, Metric
 from lfbench.scoring.rules import ScoringRules
 from lfbench.scoring.score import applicable_metrics
 from lfbench.utils.outputs import staged_outputs
@@ -43,10 +43,11 @@ def evaluate_to_folder(methods: Sequence[Method], scenes: Sequence[Scene], out: 
                        meta: Mapping[str, Any] | None = None, progress: bool = True, jobs: int = 1) -> Results:
     """Run every method on every scene, score and write the run into ``out``; returns the Results.
 
-    metrics: the metrics of every scene (default the general ones); all_metrics: also the region and
-    stratified metrics wherever the scene has their mask files, and the runtime metrics wherever the
-    method reports a runtime (runtime, runtime_log). more: further (methods, scenes) groups scored with
-    the same rules into the same results (e.g. stored maps on real scenes beside a synthetic run).
+    metrics: the metrics of every scene (default lfbench's own general ones; a plugin's only where given);
+    all_metrics: also the region and stratified metrics wherever the scene has their mask files, and the
+    runtime metrics wherever the method reports a runtime (runtime, runtime_log). more: further (methods,
+    scenes) groups scored with the same rules into the same results (e.g. stored maps on real scenes beside
+    a synthetic run).
     label: the name the records get instead of the method's label (one method only). writers: the
     outputs besides results.json and results.csv (lfbench.reports.writers; default the tables), each
     seeing every prediction, in order (the site last). meta: added to results.meta. jobs: worker
@@ -57,12 +58,15 @@ def evaluate_to_folder(methods: Sequence[Method], scenes: Sequence[Scene], out: 
     if label is not None and len(methods) != 1:
         raise ValueError("label= names the records of a single method")
     check_plan([(methods, scenes), *more], label)  # records and files that would collide: before any work
+    rules.check_border([*scenes, *(s for _, group in more for s in group)])
     with staged_outputs(out) as outputs:  # OUT checked and its staging folder made before any work
         scored = [*scenes, *(s for _, group in more for s in group)]
-        run = RunOutputs(stage=outputs.stage, rules=rules, scenes=scored, progress=progress)
-        chosen = metrics if metrics is not None else list_metrics("general")  # plugins' general metrics too
+        chosen = list(metrics) if metrics is not None else list(GENERAL_METRICS)  # a plugin's only when chosen
+        run = RunOutputs(stage=outputs.stage, rules=rules, scenes=scored, progress=progress,
+                         metric_ids=((meta or {}).get("protocol") or {}).get("metrics")
+                         or [m.id for m in chosen])  # the figures' BadPix thresholds: the protocol's
         if all_metrics:
-            chosen = functools.partial(_all_metrics, rules=rules)
+            chosen = functools.partial(_all_metrics, rules=rules, general=chosen)
 
         def score(sink: PredictionSink) -> list[Path]:
             def each_prediction(method: Method, scene: Scene, pred: Prediction) -> None:
@@ -99,7 +103,7 @@ def check_plan(groups: Sequence[tuple[Sequence[Method], Sequence[Scene]]], label
                                   "records would be duplicated")
 
 
-def _all_metrics(scene: Scene, rules: ScoringRules) -> list[Metric]:
-    """Everything the toolkit scores on ``scene``: the general metrics, the region / stratified ones whose
-    masks exist, and the runtime metrics (recorded where the method reports a runtime)."""
-    return [*applicable_metrics(scene, rules=rules), *RUNTIME_METRICS]
+def _all_metrics(scene: Scene, rules: ScoringRules, general: Sequence[Metric]) -> list[Metric]:
+    """Everything the toolkit scores on ``scene``: the run's ``general`` metrics, the region / stratified ones
+    whose masks exist, and the runtime metrics (recorded where the method reports a runtime)."""
+    return [*applicable_metrics(scene, rules=rules, general=general), *RUNTIME_METRICS]

@@ -242,8 +242,8 @@ def check(golden: list[GoldenRecord], new: Results, *, skip_absent_scenes: bool 
         if why:
             findings.append(Finding("nan", g.key, f"INVALID  {name}: new {why}"))
             continue
-        sign = -1.0 if metric is not None and metric.higher_is_better else 1.0
-        change = sign * (r.value - g.value)  # > 0 means worse
+        badness = (metric or Metric.undefined(g.metric)).badness  # a signed metric: its magnitude
+        change = badness(r.value) - badness(g.value)  # > 0 means worse
         detail = f"{name}: {g.value:.6g} -> {r.value:.6g} ({r.value - g.value:+.3g}, tolerance {g.tolerance:g})"
         if change > g.tolerance:
             findings.append(Finding("worse", g.key, f"WORSE    {detail}"))

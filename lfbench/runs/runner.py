@@ -71,6 +71,7 @@ def evaluate(methods: Sequence[Method], scenes: Sequence[Scene], *,
                 if on_prediction is not None:
                     on_prediction(method, scene, pred)
                 batch.append((i, method, pred))
+            release_views(scene)  # its predictions are made: one scene's views in memory at a time
             if batch:
                 scene_metrics = metrics(scene) if callable(metrics) else metrics
                 predictions = [(p.disparity, p.runtime_s, f"{m.label} on {scene.name}") for _, m, p in batch]
@@ -81,6 +82,14 @@ def evaluate(methods: Sequence[Method], scenes: Sequence[Scene], *,
     for i, j in sorted(scored):
         _record(results, *scored[i, j], rules)
     return results
+
+
+def release_views(scene: Scene) -> None:
+    """Let ``scene`` forget its loaded views (lfbench.data.scene.Scene.release_views; a light field held in memory
+    by its caller keeps them)."""
+    release = getattr(scene, "release_views", None)
+    if release is not None:
+        release()
 
 
 def _record(results: Results, method: Method, scene: Scene, pred: Prediction, score: SceneScore,

@@ -12,13 +12,15 @@ rules (:mod:`lfbench.scoring.rules`) need only this type.
 from __future__ import annotations
 
 import math
+import numbers
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from lfbench.scoring.pixelwise import Family, OnMaps, PixelMetric
-from lfbench.utils.registry import Registry
+from lfbench.scoring.pixelwise import Family, OnMaps, PixelMetric, plugin_failure
+from lfbench.utils.errors import LFBenchError, SpecError
+from lfbench.utils.registry import NameTaken, Registry
 
 __all__ = [
     "ANY_VALUE",
@@ -85,6 +87,9 @@ class Metric:
     in tables and reports: metrics with an order come first, by it (the paper's BadPix 0.07, 0.03,
     0.01, MSE x100, Q25), the others after them in the order they come
     (:func:`lfbench.scoring.metrics.metric_order`).
+    ``higher_is_better`` / ``signed``: the metric's direction (:attr:`direction`): lower values are better (the
+    default), higher ones, or, for a ``signed`` metric (a bias: mean signed error), values closer to 0; rankings,
+    the regression gate and ablation verdicts compare :meth:`badness` (the value, its negative, or its magnitude).
     Category 'runtime' (:data:`lfbench.scoring.general.RUNTIME_METRICS`): ``fn(runtime_s)`` of the runtime
     a method reports for a scene (no maps, no masks, no resolution of its own; see
     :func:`lfbench.scoring.score.score_scene`).
@@ -102,6 +107,7 @@ class Metric:
     vmax: float = 1.0
     cmap: str = "viridis"
     higher_is_better: bool = False
+    signed: bool = False
     category: str = "general"
     extra_masks: tuple[str, ...] = ()
     needs_scene: bool = False
@@ -123,6 +129,9 @@ class Metric:
         if math.isnan(low) or math.isnan(high) or not low < high:
             raise ValueError(f"metric {self.id!r}: value_range must be (low, high) with low < high, "
                              f"got {self.value_range}")
+        if self.signed and (self.higher_is_better or not low < 0 < high):
+            raise ValueError(f"metric {self.id!r}: a signed metric is best at 0 (not higher_is_better) and its "
+                             f"value_range holds values on both sides of 0, got {self.value_range}")
 
     @classmethod
     def undefined(cls, metric_id: str) -> Metric:
@@ -159,7 +168,30 @@ class Metric:
 
     @property
     def lower_is_better(self) -> bool:
-        return not self.higher_is_better
+        return not self.higher_is_better and not self.signed
+
+    @property
+    def direction(self) -> str:
+        """What is better, as pages and captions say it: 'lower is better', 'higher is better' or, for a
+        :attr:`signed` metric, 'closer to 0 is better'."""
+        if self.signed:
+            return "closer to 0 is better"
+        return "higher is better" if self.higher_is_better else "lower is better"
+
+    def badness(self, value: float) -> float:
+        """``value`` on a scale where lower is better (rankings, the regression gate, verdicts): the value, its
+        negative where higher is better, its magnitude for a :attr:`signed` metric (NaN stays NaN)."""
+        value = float(value)
+        if self.signed:
+            return abs(value)
+        return -value if self.higher_is_better else value
+
+    def worst_end(self, low: float, high: float) -> float:
+        """The end of an interval [low, high] of this metric's values that is worse (:meth:`badness`): ``high``
+        where lower is better, ``low`` where higher is better, the one farther from 0 for a signed metric."""
+        if not self.signed:
+            return low if self.higher_is_better else high
+        return low if abs(low) > abs(high) else high
 
     @property
     def required_masks(self) -> tuple[str, ...]:
@@ -183,7 +215,19 @@ class Metric:
                  toolkit: bool = False, **context) -> float:
         if self.is_runtime:
             raise TypeError(f"metric {self.id!r} is scored from a runtime (score_runtime), not from maps")
-        return self.fn(gt, pred, mask, toolkit=toolkit, **context)
+        fn = self.fn
+        if isinstance(fn, OnMaps) or str(getattr(fn, "__module__", "")).split(".")[0] == "lfbench":
+            return fn(gt, pred, mask, toolkit=toolkit, **context)
+        name = f"{self.id!r} ({getattr(fn, '__module__', '?')}.{getattr(fn, '__qualname__', type(fn).__name__)})"
+        try:  # a plugin's function of maps: one line naming it for whatever it raises or returns
+            value = fn(gt, pred, mask, toolkit=toolkit, **context)
+        except LFBenchError:
+            raise
+        except Exception as exc:  # noqa: BLE001 - whatever the plugin's code raised
+            raise plugin_failure(name, exc) from None
+        if isinstance(value, bool | np.bool_) or not isinstance(value, numbers.Real):
+            raise LFBenchError(f"metric plugin {name} returned a {type(value).__name__}, expected a number")
+        return float(value)
 
     def score_pixels(self, px, *, toolkit: bool = False) -> float:
         """The metric of the errors ``px`` (:class:`~lfbench.scoring.pixels.PixelErrors`) through
@@ -211,6 +255,7 @@ class MetricRegistry(Registry[Metric]):
         super().__init__("metric", Metric, group=group,
                          builtins={"hci": BUILTIN_METRICS} if group == METRICS_GROUP else None)
         self._families: list[tuple[str, Callable[[str], Metric | None]]] = []
+        self._refused: SpecError | None = None  # a plugin's id collision (name_taken)
 
     def register(self, metric: Metric) -> Metric:
         self.check(str(getattr(metric, "id", "?")), metric)
@@ -224,16 +269,47 @@ class MetricRegistry(Registry[Metric]):
             if name != obj.id:
                 raise ValueError(f"metric {obj.id!r} registered as {name!r}: the name must be the metric's id")
             aliases = aliases or ((obj.toolkit_id,) if obj.toolkit_id else ())
+            for key in (name, *aliases):
+                for pattern, make in self._families:
+                    if make(key) is not None:
+                        raise NameTaken(f"metric {key!r} is already defined by the family {pattern} "
+                                        f"({getattr(make, '__module__', '?')})")
         super().add(name, obj, entry=entry, aliases=aliases)
+
+    def name_taken(self, ep, exc: NameTaken) -> None:
+        """A metric plugin that registers an id another metric has is refused loudly (SpecError naming the
+        plugin and the metric it would shadow, raised by every later lookup too), never a silent replacement
+        of a number in every table."""
+        self._refused = SpecError(f"metric plugin {ep.name!r} ({ep.value}) refused: {exc}")
+        raise self._refused
+
+    def _load_entry_point(self, ep) -> None:
+        before = self._objects.get(ep.name)
+        super()._load_entry_point(ep)
+        if before is None or ep.name in self.builtins:
+            return
+        try:  # the generic loader skips an entry point whose name is taken: a Metric under it is a collision
+            obj = ep.load()
+        except Exception:  # noqa: BLE001 - recorded in load_errors by the generic loader
+            return
+        if isinstance(obj, Metric) and not self._same(before, obj):
+            self.name_taken(ep, NameTaken(f"metric {ep.name!r} is already registered by {self._source(ep.name)}"))
 
     def register_family(self, pattern: str, make: Callable[[str], Metric | None]) -> None:
         """A parametrised family: ``make(id)`` returns the metric for an id it understands, else None;
         ``pattern`` (e.g. 'badpix_<t>') is what the 'Available' list shows."""
         self._families.append((pattern, make))
 
+    @property
+    def family_patterns(self) -> list[str]:
+        """The families' patterns ('badpix_<t>', 'q<p>_x100'), as the 'Available' lists show them."""
+        return [p for p, _ in self._families]
+
     def find(self, metric_id: str) -> Metric | None:
         """The metric with this id or toolkit id (or from a family), or None. The first lookup loads every
         plugin of the group (lfbench's first: the order of the metrics does not depend on what is asked)."""
+        if self._refused is not None:
+            raise self._refused
         if not self._loaded:
             self.names()
         metric = super().find(str(metric_id))
@@ -248,7 +324,7 @@ class MetricRegistry(Registry[Metric]):
     def get(self, metric_id: str) -> Metric:
         metric = self.find(metric_id)
         if metric is None:
-            raise self.unknown(metric_id, [*self.registered(), *(p for p, _ in self._families)])
+            raise self.unknown(metric_id, [*self.registered(), *self.family_patterns])
         return metric
 
     def all(self, category: str | None = None) -> tuple[Metric, ...]:

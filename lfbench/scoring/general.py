@@ -31,6 +31,7 @@ import numpy as np
 from lfbench.scoring.base import ANY_VALUE, PERCENT, Metric
 from lfbench.scoring.pixels import PixelErrors
 from lfbench.scoring.pixelwise import Mean, OrderStatistic, PixelMetric, Proportion, Sample, kept
+from lfbench.scoring.policy import LFBENCH
 
 __all__ = [
     "BadPixels",
@@ -99,6 +100,12 @@ class BadPixels:
     threshold: float
 
     def __call__(self, px: PixelErrors, *, toolkit: bool = False) -> Sample:
+        if px.scorer is not LFBENCH:  # a protocol's own scorer (lfbench.scoring.policy)
+            with np.errstate(invalid="ignore"):
+                bad = px.err >= self.threshold if px.scorer.inclusive else px.err > self.threshold
+            if px.scorer.nan_good:
+                return Sample(bad)
+            return kept(bad | ~px.pred_finite, px.gt_finite)
         with np.errstate(invalid="ignore"):
             bad = px.err > self.threshold  # NaN compares False
         if toolkit:  # counted as good
@@ -136,6 +143,8 @@ def mse_x100(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = None, *
 def squared_error(px: PixelErrors, *, toolkit: bool = False) -> Sample:
     """MSE's sample: the squared error (px^2, |e|^2 = e^2 exactly) of the pixels with finite ground truth and
     prediction (one rule in both modes: no finite stand-in for a non-finite error exists)."""
+    if px.scorer.nan_good:  # every pixel, as computed: a NaN error makes the mean NaN (lfbench.scoring.policy)
+        return Sample(np.square(px.err), None)
     scored = px.finite
     return Sample(np.square(px.err), None) if scored.all() else Sample(np.square(px.err[scored]), scored)
 

@@ -16,7 +16,15 @@ from __future__ import annotations
 from collections.abc import Iterable
 from pathlib import Path
 
-from lfbench.scoring.base import METRICS_GROUP, NON_NEGATIVE, PERCENT, SCENE_AGGREGATES, Metric, MetricRegistry
+from lfbench.scoring.base import (
+    ANY_VALUE,
+    METRICS_GROUP,
+    NON_NEGATIVE,
+    PERCENT,
+    SCENE_AGGREGATES,
+    Metric,
+    MetricRegistry,
+)
 from lfbench.scoring.general import (
     GENERAL_METRICS,
     RUNTIME_METRICS,
@@ -30,7 +38,7 @@ from lfbench.scoring.general import (
     quantile_x100,
 )
 from lfbench.scoring.pixelwise import Mean, OrderStatistic, PixelMetric, Proportion, Sample
-from lfbench.utils.errors import DataError
+from lfbench.utils.errors import DataError, SpecError
 
 __all__ = [
     "bad_pix",
@@ -55,6 +63,7 @@ __all__ = [
     "RUNTIME_METRICS",
     "PERCENT",
     "NON_NEGATIVE",
+    "ANY_VALUE",
     "get_metric",
     "list_metrics",
     "describe_metric",
@@ -88,19 +97,30 @@ def list_metrics(category: str | None = None) -> tuple[Metric, ...]:
     return METRICS.all(category)
 
 
-def scored_metrics(ids: Iterable[str], source: str | Path | None = None) -> list[Metric]:
-    """The metrics a run scores: those of ``ids`` (a dataset protocol's), then every general metric a plugin
-    registered (an installed metric is scored by default, on every dataset), each once. ``source``: the file
-    that declared ``ids`` (a dataset's TOML file): an id that is not a general metric is a DataError naming it."""
-    chosen = []
+def scored_metrics(ids: Iterable[str], source: str | Path | None = None, extra: Iterable[str] = ()) -> list[Metric]:
+    """The metrics a run scores: exactly those of ``ids`` (a dataset protocol's), then those of ``extra`` (asked
+    for on the command line: ``lfbench evaluate --metrics``), each once, in that order. An installed metric
+    plugin is scored only where a protocol lists it or it is asked for. ``source``: the file that declared
+    ``ids`` (a dataset's TOML file): an id there that is not a general metric is a DataError naming it. An id
+    of ``extra`` that is not registered is a SpecError ``Unknown metric 'x'. Available: ...``; one that is not
+    a general metric (a region, stratified or runtime metric) a SpecError saying so."""
+    chosen: dict[str, Metric] = {}
     for metric_id in dict.fromkeys(ids):
         metric = METRICS.find(metric_id) if source is not None else get_metric(metric_id)
         if metric is None or metric.resolution != "scene" or metric.is_runtime:
             raise DataError(f"'protocol.metrics': {metric_id!r} is not a general metric (e.g. badpix_0.07, mse_x100, "
                             "q25_x100)", source)
-        chosen.append(metric)
-    own = {m.id for m in GENERAL_METRICS} | {m.id for m in chosen}
-    return chosen + [m for m in list_metrics("general") if m.id not in own]
+        chosen.setdefault(metric.id, metric)
+    general = [*(m.id for m in list_metrics("general")), *METRICS.family_patterns]
+    for metric_id in dict.fromkeys(extra):
+        metric = METRICS.find(metric_id)
+        if metric is None:
+            raise SpecError(f"--metrics: {METRICS.unknown(metric_id, general)}")
+        if metric.resolution != "scene" or metric.is_runtime:
+            raise SpecError(f"--metrics: {metric_id!r} is a {metric.category} metric (scored with --all-metrics "
+                            f"where the scene supports it); --metrics takes general metrics: {', '.join(general)}")
+        chosen.setdefault(metric.id, metric)
+    return list(chosen.values())
 
 
 def describe_metric(metric_id: str) -> Metric:

@@ -21,6 +21,8 @@ from typing import Any
 
 import numpy as np
 
+from lfbench.scoring.policy import LFBENCH, ScorerPolicy
+
 __all__ = ["ErrorsOnly", "PixelErrors", "PixelSet", "common_precision"]
 
 
@@ -97,6 +99,9 @@ class PixelErrors:
     """One prediction on a :class:`PixelSet`: ground truth and prediction at its pixels in their common
     precision, and what every pixel-wise metric computes from them, each computed once: ``err`` =
     |pred - gt|, ``gt_finite``, ``pred_finite``."""
+
+    #: how BadPix compares and what a non-finite value counts as (lfbench.scoring.policy; set from the rules)
+    scorer: ScorerPolicy = LFBENCH
 
     def __init__(self, pixels: PixelSet, pred: np.ndarray) -> None:
         self.pixels = pixels

@@ -24,8 +24,10 @@ import numpy as np
 
 from lfbench.scoring.pixels import PixelErrors
 from lfbench.scoring.resample import index_means, order_stat_replicates, weighted_quantile_replicates
+from lfbench.utils.errors import LFBenchError, exception_line
 
-__all__ = ["Family", "Mean", "OnMaps", "OrderStatistic", "PixelMetric", "Proportion", "Sample", "kept"]
+__all__ = ["Family", "Mean", "OnMaps", "OrderStatistic", "PixelMetric", "Proportion", "Sample", "kept",
+           "plugin_failure"]
 
 
 class Sample(NamedTuple):
@@ -53,6 +55,10 @@ class Family:
 
     def reduce(self, values: np.ndarray) -> float:
         raise NotImplementedError
+
+    def problem(self) -> str | None:
+        """Why this family cannot reduce any sample (a declared parameter out of its range), or None."""
+        return None
 
     def replicates(self, values: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
         """(n,) values of i.i.d. resamples of ``values`` (non-empty)."""
@@ -113,6 +119,12 @@ class OrderStatistic(Family):
 
     percentage: float = 25.0
 
+    def problem(self) -> str | None:
+        p = self.percentage
+        if isinstance(p, bool) or not isinstance(p, int | float) or not 0 <= p < 100:
+            return f"OrderStatistic({str(p)[:20]}): the percentage must be a number from 0 to below 100"
+        return None
+
     def reduce(self, values: np.ndarray) -> float:
         if values.size == 0:
             return float("nan")
@@ -149,7 +161,61 @@ class PixelMetric:
     of_errors: bool = True
 
     def __call__(self, px: PixelErrors, *, toolkit: bool = False) -> float:
-        return self.family.reduce(self.sample(px, toolkit=toolkit).values)
+        return self.family.reduce(self.draw(px, toolkit=toolkit).values)
+
+    def draw(self, px: PixelErrors, *, toolkit: bool = False) -> Sample:
+        """``sample(px, toolkit=...)``; a plugin's sample function (one outside lfbench) is guarded: its
+        family's parameters, any exception it raises (a bug, MemoryError) and what it returns (a
+        :class:`Sample` of a 1-D numeric ``values`` and a bool ``keep`` of one flag per pixel, as many True as
+        values) are checked, each problem one LFBenchError naming the function."""
+        problem = self.family.problem()
+        if problem:
+            raise LFBenchError(f"metric plugin {_describe(self.sample)}: {problem}")
+        if _own(self.sample):
+            return self.sample(px, toolkit=toolkit)
+        name = _describe(self.sample)
+        try:
+            sample = self.sample(px, toolkit=toolkit)
+        except LFBenchError:
+            raise
+        except Exception as exc:  # noqa: BLE001 - whatever the plugin's code raised: one line naming it
+            raise plugin_failure(name, exc) from None
+        problem = _sample_problem(sample, int(px.size))
+        if problem:
+            raise LFBenchError(f"metric plugin {name} returned {problem}")
+        return Sample(*sample)
+
+
+def plugin_failure(name: str, exc: BaseException) -> LFBenchError:
+    """One line for an exception a metric plugin's code raised."""
+    return LFBenchError(f"metric plugin {name} failed: {exception_line(exc)}")
+
+
+def _own(fn: Callable) -> bool:
+    """Whether ``fn`` is lfbench's own (not guarded: its exceptions are lfbench's bugs, with their traceback)."""
+    return str(getattr(fn, "__module__", "")).split(".")[0] == "lfbench"
+
+
+def _describe(fn: Callable) -> str:
+    name = getattr(fn, "__qualname__", None) or type(fn).__name__
+    return f"{getattr(fn, '__module__', '?')}.{name}"
+
+
+def _sample_problem(sample: Any, n: int) -> str | None:
+    """Why ``sample`` is not a :class:`Sample` of ``n`` pixels' errors (None when it is)."""
+    if not isinstance(sample, tuple) or len(sample) != 2:
+        return f"a {type(sample).__name__}, expected Sample(values, keep)"
+    values, keep = sample
+    if not isinstance(values, np.ndarray) or values.ndim != 1 or values.dtype.kind not in "biuf":
+        what = f"{values.dtype} {values.shape}" if isinstance(values, np.ndarray) else type(values).__name__
+        return f"values of {what}, expected a 1-D array of numbers"
+    if keep is None:
+        return None if values.size == n else f"{values.size} values for {n} pixels and no keep mask"
+    if not isinstance(keep, np.ndarray) or keep.dtype != bool or keep.shape != (n,):
+        what = f"{keep.dtype} {keep.shape}" if isinstance(keep, np.ndarray) else type(keep).__name__
+        return f"a keep mask of {what}, expected bool ({n},): one flag per scored pixel"
+    kept_count = int(np.count_nonzero(keep))
+    return None if kept_count == values.size else f"{values.size} values for {kept_count} kept pixels"
 
 
 @dataclass(frozen=True)

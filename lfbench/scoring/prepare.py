@@ -42,6 +42,7 @@ from lfbench.data.disparity import disparity_problem
 from lfbench.data.scene import LOWRES, LightField, read_png
 from lfbench.scoring.base import Metric
 from lfbench.scoring.pixels import PixelErrors, PixelSet
+from lfbench.scoring.policy import LFBENCH, scorer
 from lfbench.scoring.rules import ScoringRules, metric_resolution
 from lfbench.utils.errors import DataError
 
@@ -181,7 +182,10 @@ class Prepared:
         evaluation mask (and of the region mask ``mask_name``): :meth:`SceneReference.pixels`."""
         if mask_name not in self._errors:
             pixels = self.reference.pixels(self.resolution, mask_name)
-            self._errors[mask_name] = PixelErrors(pixels, pixels.values(self.aligned))
+            errors = PixelErrors(pixels, pixels.values(self.aligned))
+            if self.reference.rules.scorer != LFBENCH.name:
+                errors.scorer = scorer(self.reference.rules.scorer)
+            self._errors[mask_name] = errors
         return self._errors[mask_name]
 
 

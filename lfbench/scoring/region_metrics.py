@@ -27,11 +27,10 @@ the scene's :class:`~lfbench.scoring.prepare.SceneReference` (read once per scen
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import NamedTuple, Protocol
 
 import numpy as np
 
-from lfbench.data.hci.params import SceneParameters
 from lfbench.data.scene import Scene
 from lfbench.scoring.base import NON_NEGATIVE, PERCENT, Metric
 from lfbench.scoring.general import BadPixels, check_maps, percent_of, squared_error
@@ -40,6 +39,7 @@ from lfbench.scoring.pixelwise import Mean, PixelMetric, Proportion, Sample, kep
 from lfbench.scoring.prepare import SceneReference
 
 __all__ = [
+    "CameraParameters",
     "scharr_derivative",
     "bumpiness_map",
     "bumpiness_x100",
@@ -149,13 +149,26 @@ def bumpiness_x100(gt: np.ndarray, pred: np.ndarray, mask: np.ndarray | None = N
     Units: 100 x px / px^2 (Scharr response); 0 for any prediction that differs from gt by a
     constant or a plane; 100 * clip (5) for a very rough one."""
     gt, pred, mask = check_maps(gt, pred, mask)
-    bump = bumpiness_map(gt, pred, clip)
+    return _bump_mean(bumpiness_map(gt, pred, clip), mask, None if toolkit else _gt_bump_ok(gt), clip, toolkit)
+
+
+def _gt_bump_ok(gt: np.ndarray) -> np.ndarray | None:
+    """Bool (H, W), the pixels whose bumpiness no non-finite ground truth reaches (the Hessian's support); None when
+    the ground truth is finite everywhere (every pixel: the Hessian of zeros is zero)."""
+    finite = np.isfinite(gt)
+    if finite.all():
+        return None
+    with np.errstate(invalid="ignore"):
+        return np.isfinite(_hessian_norm(np.where(finite, 0.0, np.nan)))
+
+
+def _bump_mean(bump: np.ndarray, mask: np.ndarray, gt_ok: np.ndarray | None, clip: float, toolkit: bool) -> float:
+    """:func:`bumpiness_x100` of the bumpiness map ``bump`` (not modified) over ``mask``; ``gt_ok``: :func:`_gt_bump_ok`
+    (unused with ``toolkit``)."""
     if toolkit:
         scored = mask & np.isfinite(bump)
     else:  # non-finite from the prediction: the clip value; from the ground truth: not scored
-        with np.errstate(invalid="ignore"):
-            gt_ok = np.isfinite(_hessian_norm(np.where(np.isfinite(gt), 0.0, np.nan)))
-        scored = mask & gt_ok
+        scored = mask if gt_ok is None else mask & gt_ok
         bump = np.where(np.isfinite(bump), bump, clip)
     n = int(np.count_nonzero(scored))
     return float("nan") if n == 0 else 100.0 * float(np.sum(bump[scored])) / float(n)
@@ -189,10 +202,22 @@ def depth_normals(depth: np.ndarray, focal_length_mm: float, sensor_size_mm: flo
         return normal / np.linalg.norm(normal, axis=-1, keepdims=True)
 
 
-def toolkit_depth(disparity: np.ndarray, params: SceneParameters) -> np.ndarray:
+class CameraParameters(Protocol):
+    """What the surface-normal metrics read of a scene's camera (``Scene.params``; HCI's parameters.cfg,
+    lfbench.data.hci.SceneParameters, is one): lengths in mm and m as named, resolution in px."""
+
+    baseline_mm: float
+    focal_length_mm: float
+    sensor_size_mm: float
+    focus_distance_m: float
+    image_resolution_x_px: int
+    image_resolution_y_px: int
+
+
+def toolkit_depth(disparity: np.ndarray, params: CameraParameters) -> np.ndarray:
     """Depth (m) of a disparity map (px per view step) exactly as the toolkit's ``disp2depth``: float32
     arithmetic in its order, 1 / ((1000 s) d / q + 1 / F) with q = b f max(W, H) (b, f, s in mm,
-    F in m); the same formula as :meth:`SceneParameters.disparity_to_depth`, which works in float64."""
+    F in m); the same formula as HCI's ``SceneParameters.disparity_to_depth``, which works in float64."""
     q = np.float32(params.baseline_mm * params.focal_length_mm
                    * max(params.image_resolution_x_px, params.image_resolution_y_px))
     d = np.asarray(disparity, dtype=np.float32)
@@ -207,7 +232,7 @@ def angular_error_deg(normals_a: np.ndarray, normals_b: np.ndarray) -> np.ndarra
     return np.degrees(np.arccos(cos))
 
 
-def median_angular_error(gt: np.ndarray, pred: np.ndarray, params: SceneParameters, mask: np.ndarray | None = None,
+def median_angular_error(gt: np.ndarray, pred: np.ndarray, params: CameraParameters, mask: np.ndarray | None = None,
                          *, toolkit: bool = False) -> float:
     """MAE: median angle (degrees) between the surface normals of gt and pred over the mask.
 
@@ -218,7 +243,7 @@ def median_angular_error(gt: np.ndarray, pred: np.ndarray, params: SceneParamete
     return _median_angle(angular_error_deg(n_gt, disparity_normals(pred, params)), n_gt, pred, mask, toolkit)
 
 
-def disparity_normals(disparity: np.ndarray, params: SceneParameters) -> np.ndarray:
+def disparity_normals(disparity: np.ndarray, params: CameraParameters) -> np.ndarray:
     """Unit normals (H, W, 3) of a disparity map's surface: :func:`depth_normals` of :func:`toolkit_depth`."""
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
         return depth_normals(toolkit_depth(disparity, params), params.focal_length_mm, params.sensor_size_mm)
@@ -450,8 +475,19 @@ def _label_lut(labels: np.ndarray, lowest: int, highest: int | None) -> np.ndarr
 # Metrics with needs_scene get scene= (the scene's SceneReference, or a Scene) and resolution= from
 # score_scene (lfbench.scoring.score).
 
-def _bump_fn(gt, pred, mask=None, *, toolkit=False):
-    return bumpiness_x100(gt, pred, mask, toolkit=toolkit)
+def _bump_fn(gt, pred, mask=None, *, toolkit=False, scene: Scene | SceneReference | None = None,
+             resolution: str | None = None):
+    if scene is None:
+        return bumpiness_x100(gt, pred, mask, toolkit=toolkit)
+    reference = SceneReference.of(scene)
+    if gt is not reference.gt(resolution) or np.asarray(pred).flags.writeable:
+        return bumpiness_x100(gt, pred, mask, toolkit=toolkit)
+    # the scene's own gt and a prepared (read-only) prediction: the map once per prediction (the metrics of planes,
+    # smooth surfaces and slanted surfaces share it), which ground truth pixels it can score once per scene
+    gt, pred, mask = check_maps(gt, pred, mask)
+    bump = reference.per_prediction(("bump_map", resolution), pred, lambda: bumpiness_map(gt, pred))
+    gt_ok = None if toolkit else reference.memo(("bump_gt_ok", resolution, gt.dtype.str), lambda: _gt_bump_ok(gt))
+    return _bump_mean(bump, mask, gt_ok, BUMPINESS_CLIP, toolkit)
 
 
 def _mae_fn(gt, pred, mask=None, *, toolkit=False, scene: Scene | SceneReference, resolution: str):
@@ -493,7 +529,8 @@ def _slanted_fn(gt, pred, mask=None, *, toolkit=False, scene: Scene | SceneRefer
     union = np.zeros(gt.shape, dtype=bool)
     for name in _SLANTED_MASKS:
         union |= reference.mask(name, resolution, gt.shape)
-    return bumpiness_x100(gt, pred, union if mask is None else mask & union, toolkit=toolkit)
+    return _bump_fn(gt, pred, union if mask is None else mask & union, toolkit=toolkit, scene=scene,
+                    resolution=resolution)
 
 
 _BUMP_UNIT = "px/px^2 x 100"
@@ -539,11 +576,13 @@ REGION_METRICS: tuple[Metric, ...] = (
             plot=_PERCENT_PLOT),
     _region(id="bumpiness_planes", name="Bumpiness Planes", toolkit_id="bumpiness_planes_100_0050",
             description=_BUMP_DESC.format("planar regions (mask_planes)"),
-            unit=_BUMP_UNIT, fn=_bump_fn, mask_name="mask_planes", resolution="lowres", plot=_BUMP_PLOT),
+            unit=_BUMP_UNIT, fn=_bump_fn, mask_name="mask_planes", resolution="lowres", plot=_BUMP_PLOT,
+            needs_scene=True),
     _region(id="bumpiness_contin_surfaces", name="Bumpiness Contin. Surfaces",
             toolkit_id="bumpiness_contin_surfaces_100_0050",
             description=_BUMP_DESC.format("smooth non-planar regions (mask_smooth_surfaces)"),
-            unit=_BUMP_UNIT, fn=_bump_fn, mask_name="mask_smooth_surfaces", resolution="lowres", plot=_BUMP_PLOT),
+            unit=_BUMP_UNIT, fn=_bump_fn, mask_name="mask_smooth_surfaces", resolution="lowres",
+            plot=_BUMP_PLOT, needs_scene=True),
     _region(id="mae_planes", name="MAE Planes", toolkit_id="mae_planes",
             description="Median angle (degrees) between surface normals of gt and pred depth on planar regions "
                         "(mask_planes).",
@@ -604,7 +643,8 @@ STRATIFIED_METRICS: dict[str, tuple[Metric, ...]] = {
         _strat(id="pyramids_bumpiness_parallel", name="Pyramids: Bump. Parallel",
                toolkit_id="bumpiness_parallel_100_0050",
                description=_BUMP_DESC.format("the fronto-parallel plane (mask_plane)"),
-               unit=_BUMP_UNIT, fn=_bump_fn, mask_name="mask_plane", resolution="lowres", plot=_BUMP_PLOT),
+               unit=_BUMP_UNIT, fn=_bump_fn, mask_name="mask_plane", resolution="lowres", plot=_BUMP_PLOT,
+               needs_scene=True),
     ),
     "stripes": (
         _stripes(id="stripes_low_texture", name="Low Texture", toolkit_id="low_texture_0070",

@@ -18,14 +18,17 @@ a scene with them, :func:`lfbench.scoring.score.score_scene`. This module needs 
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
 from lfbench.data.dataset import DatasetProtocol
-from lfbench.data.hci import HCI_BORDER_PX, HCI_HIGHRES_SCENES
+from lfbench.data.disparity import EVALUATION_BORDER_PX
+from lfbench.data.hci import HCI_HIGHRES_SCENES
 from lfbench.data.scene import HIGHRES, LOWRES, Scene
 from lfbench.scoring.base import Metric
+from lfbench.scoring.policy import SCORERS
+from lfbench.utils.errors import DataError
 
 __all__ = ["BENCHMARK_HIGHRES_SCENES", "ScoringRules", "metric_resolution"]
 
@@ -40,16 +43,18 @@ BENCHMARK_HIGHRES_SCENES = HCI_HIGHRES_SCENES
 class ScoringRules:
     """How a scene is scored. Defaults are the benchmark's."""
 
-    border_px: int = HCI_BORDER_PX
+    border_px: int = EVALUATION_BORDER_PX
     highres_scenes: frozenset[str] = BENCHMARK_HIGHRES_SCENES
     toolkit: bool = False  # reproduce the toolkit's non-finite handling exactly
     allow_highres: bool = True  # False: score everything at low resolution
+    scorer: str = "lfbench"  # BadPix's comparison and the non-finite policy (lfbench.scoring.policy)
 
     def to_meta(self) -> dict[str, Any]:
         """The rules as a results file records them (``meta["scoring"]``); ``allow_highres`` is not
         recorded: every number carries its resolution."""
-        return {"border_px": self.border_px, "toolkit_nonfinite": self.toolkit,
+        meta = {"border_px": self.border_px, "toolkit_nonfinite": self.toolkit,
                 "highres_scenes": sorted(self.highres_scenes)}
+        return meta if self.scorer == "lfbench" else {**meta, "scorer": self.scorer}
 
     @classmethod
     def of_protocol(cls, protocol: DatasetProtocol, *, toolkit: bool = False,
@@ -57,7 +62,7 @@ class ScoringRules:
         """The rules of a dataset's scoring protocol (lfbench.data.dataset.DatasetProtocol): its border and
         its high-resolution scenes (scored at high resolution only where the protocol has that resolution)."""
         return cls(border_px=protocol.border_px, highres_scenes=protocol.highres_scenes, toolkit=toolkit,
-                   allow_highres=allow_highres and HIGHRES in protocol.resolutions)
+                   allow_highres=allow_highres and HIGHRES in protocol.resolutions, scorer=protocol.scorer)
 
     @classmethod
     def from_meta(cls, meta: Mapping[str, Any], **overrides: Any) -> ScoringRules:
@@ -85,7 +90,23 @@ class ScoringRules:
             if not isinstance(scoring["toolkit_nonfinite"], bool):
                 raise ValueError("'scoring.toolkit_nonfinite' must be true or false")
             recorded["toolkit"] = scoring["toolkit_nonfinite"]
+        if "scorer" in scoring:
+            if scoring["scorer"] not in SCORERS:
+                raise ValueError(f"'scoring.scorer' must be one of {', '.join(SCORERS)}")
+            recorded["scorer"] = scoring["scorer"]
         return cls(**{**recorded, **overrides})
+
+    def check_border(self, scenes: Iterable[Scene]) -> None:
+        """DataError naming the first scene of ``scenes`` whose views the border leaves no pixel of (2 x border
+        >= its height or width at low resolution; high resolution scales both): refused before any scoring,
+        never a table of empty values."""
+        for scene in scenes:
+            if not isinstance(scene, Scene):
+                continue
+            h, w = scene.spatial_size
+            if 2 * self.border_px >= min(h, w):
+                raise DataError(f"the scoring border of {self.border_px} px (the dataset's protocol) leaves no pixel "
+                                f"of this scene's {w}x{h} px views to score", scene.path)
 
     def general_resolution(self, scene: Scene) -> str:
         """'highres' for the benchmark's high-resolution scenes when their gt exists, else 'lowres'.

@@ -20,7 +20,6 @@ import numpy as np
 from lfbench.data.scene import HIGHRES, LOWRES, Scene
 from lfbench.scoring.base import Metric
 from lfbench.scoring.general import GENERAL_METRICS, nonfinite_count
-from lfbench.scoring.metrics import list_metrics
 from lfbench.scoring.prepare import Prepared, SceneReference
 from lfbench.scoring.region_metrics import scene_metrics
 from lfbench.scoring.rules import ScoringRules, metric_resolution
@@ -40,13 +39,14 @@ class SceneScore:
     notes: list[str] = field(default_factory=list)
 
 
-def applicable_metrics(scene: Scene, rules: ScoringRules = ScoringRules()) -> list[Metric]:
-    """The general metrics (every registered one: a plugin's too) plus the region / stratified metrics whose
-    mask files exist for ``scene`` (at a resolution :func:`lfbench.scoring.rules.metric_resolution` can score
-    them at), so that ``score_scene(scene, pred, applicable_metrics(scene))`` scores everything the scene
-    supports."""
+def applicable_metrics(scene: Scene, rules: ScoringRules = ScoringRules(),
+                       general: Sequence[Metric] = GENERAL_METRICS) -> list[Metric]:
+    """The ``general`` metrics (default lfbench's own; a run passes its protocol's,
+    :func:`lfbench.scoring.metrics.scored_metrics`) plus the region / stratified metrics whose mask files exist
+    for ``scene`` (at a resolution :func:`lfbench.scoring.rules.metric_resolution` can score them at), so that
+    ``score_scene(scene, pred, applicable_metrics(scene))`` scores everything the scene supports."""
     regional = [m for m in scene_metrics(scene) if metric_resolution(scene, m, rules) is not None]
-    return [*list_metrics("general"), *regional]
+    return [*general, *regional]
 
 
 def score_scene(scene: Scene, pred: np.ndarray, metrics: Sequence[Metric] = GENERAL_METRICS,

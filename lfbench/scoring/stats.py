@@ -46,7 +46,6 @@ from typing import NamedTuple
 
 import numpy as np
 import pandas as pd
-import scipy.stats
 from tqdm import tqdm
 
 from lfbench.data.scene import Scene
@@ -134,7 +133,7 @@ def _kind_of(metric: str | Metric) -> Metric:
 def _sample(errors: np.ndarray, metric: Metric, toolkit: bool) -> tuple[Sample, Family]:
     """The metric's own sample of the per-pixel ``errors`` (:func:`scored_errors`), and its family."""
     definition: PixelMetric = metric.pixelwise
-    return definition.sample(ErrorsOnly(errors), toolkit=toolkit), definition.family
+    return definition.draw(ErrorsOnly(errors), toolkit=toolkit), definition.family
 
 
 # --------------------------------------------------------------------------- per-pixel errors
@@ -333,7 +332,7 @@ def _loss(errors: np.ndarray, measure: str) -> tuple[np.ndarray, str, str, Famil
         raise SpecError(f"measure {measure!r} is not a mean of per-pixel losses: use abs, mse_x100 or badpix_<t>")
     e = e if family.loss_dtype is None else e.astype(family.loss_dtype)
     with np.errstate(invalid="ignore", over="ignore"):
-        values, keep = metric.pixelwise.sample(ErrorsOnly(e), toolkit=False)
+        values, keep = metric.pixelwise.draw(ErrorsOnly(e), toolkit=False)
         loss = np.full(e.shape, np.inf)
         loss[slice(None) if keep is None else keep] = family.scale * values
     return loss, metric.id, metric.unit, family
@@ -387,6 +386,8 @@ def paired_pixel_test(gt: np.ndarray, pred_a: np.ndarray, pred_b: np.ndarray, ma
         probs = np.array([worse, d.size - worse - better, better], dtype=np.float64) / d.size
         counts = rng.multinomial(d.size, probs, size=n)
         reps = 100.0 * (counts[:, 0] - counts[:, 2]) / d.size
+        import scipy.stats  # on first use, as below
+
         p = 1.0 if worse + better == 0 else float(scipy.stats.binomtest(worse, worse + better, 0.5).pvalue)
         test = (f"exact McNemar (two-sided binomial) on {worse + better} discordant pixels "
                 f"({worse} bad only in a, {better} bad only in b); paired bootstrap CI over {d.size} pixels")
@@ -431,6 +432,8 @@ def paired_scene_test(values_a: Sequence[float] | np.ndarray, values_b: Sequence
     if np.all(d == 0):
         p_w = 1.0
     else:
+        import scipy.stats  # on first use: importing it costs 1.4 s CPU, more than scoring one submission
+
         p_w = float(scipy.stats.wilcoxon(d).pvalue)
     exact = "exact" if d.size <= _EXACT_FLIPS_MAX else f"{n} random"
     return PairedTest(float(d.mean()), ci.low, ci.high, float(p), int(d.size), measure,

@@ -27,7 +27,6 @@ from pathlib import Path
 
 import numpy as np
 
-from lfbench.data.hci.scene import INVALID_AREA_FILE
 from lfbench.data.scene import GRAY_WEIGHTS, Scene, read_png
 from lfbench.training.augment import apply_augment, draw_augment
 from lfbench.training.config import AugmentConfig, DataConfig
@@ -52,15 +51,12 @@ class SceneData:
 
 
 def read_views_uint8(scene: Scene) -> np.ndarray:
-    """All views of a scene of any layout (PNG views) as uint8 RGB (H, W, N, 3), view k = angular row k // U,
-    column k % U (HCI: input_Cam{k:03d}.png; UrbanLF-Syn: <row+1>_<col+1>.png)."""
+    """All views of a scene of any storage as uint8 RGB (H, W, N, 3), view k = angular row k // U, column k % U,
+    read through the scene's adapter (:meth:`lfbench.data.scene.Scene.views_uint8`)."""
     v, u = scene.angular_size
-    h, w = scene.spatial_size
-    out = np.empty((h, w, v * u, 3), dtype=np.uint8)
-    for k in range(v * u):  # one file per view: reading is per file by nature
-        path = scene.view_file(k // u, k % u)
-        out[:, :, k] = read_png(path, "view image", "RGB", size=(h, w))
-    return out
+    views = scene.views_uint8()  # (V, U, H, W, 3)
+    h, w = views.shape[2:4]
+    return np.ascontiguousarray(np.moveaxis(views.reshape(v * u, h, w, 3), 0, 2))
 
 
 def read_invalid_area(path: Path) -> np.ndarray:
@@ -74,8 +70,9 @@ def read_invalid_area(path: Path) -> np.ndarray:
 def load_scene_data(scene: Scene, invalid_area: Path | None = None) -> SceneData:
     """Read a training scene: views, low-res ground truth and the pixels patches must avoid.
 
-    Blocked pixels: False in ``valid_mask.png``, alpha > 0 in
-    ``<invalid_area>/<scene>/input_Cam040_invalid_ver2.png``, and non-finite ground truth.
+    Blocked pixels: False in the scene's valid mask, alpha > 0 in ``<invalid_area>/<scene>/<file>`` (the file
+    its layout names: ``scene.invalid_area_file``, HCI's ``input_Cam040_invalid_ver2.png``), and non-finite
+    ground truth.
     """
     gt = scene.gt_disparity()
     if gt is None:
@@ -85,8 +82,8 @@ def load_scene_data(scene: Scene, invalid_area: Path | None = None) -> SceneData
     valid = scene.valid_mask()  # refused unless the scene's size
     if valid is not None:
         blocked |= ~valid
-    if invalid_area is not None:
-        path = invalid_area / scene.name / INVALID_AREA_FILE
+    if invalid_area is not None and scene.invalid_area_file is not None:
+        path = invalid_area / scene.name / scene.invalid_area_file
         if path.is_file():
             mask = read_invalid_area(path)
             if mask.shape != gt.shape:
@@ -259,5 +256,6 @@ def load_validation_scene(scene: Scene, max_size: int = 0) -> ValidationScene:
     v, u, h, w = views.shape
     ch, cw = validation_size((h, w), max_size)
     y0, x0 = (h - ch) // 2, (w - cw) // 2
-    crop = np.ascontiguousarray(views[:, :, y0:y0 + ch, x0:x0 + cw].reshape(v * u, ch, cw))
+    crop = np.array(views[:, :, y0:y0 + ch, x0:x0 + cw].reshape(v * u, ch, cw))  # a copy: the scene's views go
+    scene.release_views()
     return ValidationScene(name=scene.name, views=crop, gt=np.asarray(gt[y0:y0 + ch, x0:x0 + cw], dtype=np.float32))

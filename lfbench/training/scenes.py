@@ -7,16 +7,14 @@ from __future__ import annotations
 import logging
 import os
 import shutil
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from lfbench.data.dataset import open_dataset
-from lfbench.data.hci import SPLITS, HCIDataset
+from lfbench.data.dataset import DATASETS, open_dataset
 from lfbench.data.scene import Benchmark, Scene, check_scene_names
 from lfbench.data.synth import write_benchmark
 from lfbench.data.synth_urbanlf import write_urbanlf
-from lfbench.data.urbanlf import UrbanLFSyn
 from lfbench.training.config import SyntheticSpec, TrainConfig, expand_path
 from lfbench.training.validate import check_validation_area
 from lfbench.utils.atomic import fresh_dir
@@ -70,24 +68,24 @@ def _open_roots(cfg: TrainConfig) -> list[Benchmark]:
 
 
 def _open_synthetic(data_dir: Path, specs: Sequence[SyntheticSpec]) -> list[Benchmark]:
-    """The generated sets among ``specs`` under data_dir (HCI-layout sets through the HCI discovery of
-    data_dir, UrbanLF-Syn-layout sets through the urbanlf-syn adapter), only those generated already."""
+    """The generated sets among ``specs`` under data_dir, only those generated already: data_dir opened by the
+    adapter of each layout (lfbench.data.dataset.DATASETS), its scenes of those sets' categories."""
     there = [s for s in specs if (data_dir / s.category).is_dir()]
     out = []
-    hci = {s.category for s in there if s.layout == "hci"}
-    if hci:
-        found = HCIDataset.open(data_dir)
-        out.append(replace(found, scenes=tuple(s for s in found.scenes if s.category in hci)))
-    for spec in there:
-        if spec.layout == "urbanlf-syn":
-            out.append(UrbanLFSyn.open(data_dir / spec.category))
+    for layout in dict.fromkeys(s.layout for s in there):
+        categories = {s.category for s in there if s.layout == layout}
+        found = DATASETS.get(layout).open(data_dir)
+        out.append(replace(found, scenes=tuple(s for s in found.scenes if s.category in categories)))
     return out
 
 
-def _combine(benches: Sequence[Benchmark], root: Path, hci: bool = False) -> Benchmark:
-    """One benchmark of the scenes of ``benches``; its splits: those of every part (HCI's train /
-    validation / test where an HCI root is among them, or ``hci``: HCI-layout sets are planned)."""
-    splits: dict[str, tuple[str, ...]] = dict(SPLITS) if hci or not benches else {}
+def _combine(benches: Sequence[Benchmark], root: Path, planned: Sequence[str] = ()) -> Benchmark:
+    """One benchmark of the scenes of ``benches``; its splits: those of every part and of the adapters of the
+    ``planned`` layouts (sets not generated yet: HCI's train / validation / test for HCI-layout sets)."""
+    splits: dict[str, tuple[str, ...]] = {}
+    for layout in planned:
+        for name, cats in DATASETS.get(layout).splits.items():
+            splits[name] = tuple(dict.fromkeys((*splits.get(name, ()), *cats)))
     for b in benches:
         for name, cats in b.splits.items():
             splits[name] = tuple(dict.fromkeys((*splits.get(name, ()), *cats)))
@@ -127,14 +125,17 @@ class PlannedScene:
         return True
 
 
-def check_data(cfg: TrainConfig, data_dir: Path) -> None:
+def check_data(cfg: TrainConfig, data_dir: Path, renew: Collection[str] = ()) -> None:
     """The config's data checked before anything is generated or written: the roots hold scenes, every
     data.train / data.validation name selects scenes of them or of the synthetic sets in use, the
-    validation border leaves pixels to score, data.invalid_area is a folder (DataError / SpecError)."""
+    validation border leaves pixels to score, data.invalid_area is a folder (DataError / SpecError).
+    ``renew``: categories whose folder under data_dir is replaced before training (a stale link of an ablation
+    cell, re-pointed): checked as planned, never read."""
     in_use = cfg.data.synthetic_in_use()
-    to_write = [spec for spec in in_use if not (data_dir / spec.category).is_dir()]
-    bench = _combine([*_open_roots(cfg), *_open_synthetic(data_dir, in_use)], data_dir,  # generated before: a rerun
-                     hci=any(spec.layout == "hci" for spec in to_write))
+    to_write = [spec for spec in in_use if spec.category in renew or not (data_dir / spec.category).is_dir()]
+    there = [spec for spec in in_use if spec not in to_write]
+    bench = _combine([*_open_roots(cfg), *_open_synthetic(data_dir, there)], data_dir,  # generated before: a rerun
+                     planned=[spec.layout for spec in to_write])
     planned = [PlannedScene(name, spec.category, data_dir / spec.category / name, spec.shape)
                for spec in to_write for name in spec.scene_names()]
     try:

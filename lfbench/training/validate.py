@@ -12,9 +12,12 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from lfbench.data.disparity import EVALUATION_BORDER_PX
 from lfbench.data.scene import LOWRES, Scene
 from lfbench.method.trainable import contract_problem, plugin_failure
-from lfbench.scoring.general import bad_pix_of, mse_x100_of
+from lfbench.scoring.base import Metric
+from lfbench.scoring.general import bad_pix_metric
+from lfbench.scoring.metrics import get_metric
 from lfbench.scoring.pixels import PixelErrors
 from lfbench.scoring.prepare import SceneReference
 from lfbench.scoring.rules import ScoringRules
@@ -54,19 +57,27 @@ def predict_disparity(model: torch.nn.Module, views: np.ndarray, device: torch.d
     return out[0][0].float().cpu().numpy()
 
 
+def validation_metrics(threshold: float) -> dict[str, Metric]:
+    """The metrics validation logs, by their key in metrics.jsonl: ``badpix`` (BadPix at ``threshold`` px, the
+    registry's metric of that threshold: lfbench.scoring.general.bad_pix_metric) and ``mse_x100``
+    (lfbench.scoring.metrics), scored as the scoring engine scores them (Metric.score_pixels)."""
+    return {"badpix": bad_pix_metric(threshold), "mse_x100": get_metric("mse_x100")}
+
+
 def validate(model: torch.nn.Module, scenes: Sequence[ValidationScene], device: torch.device,
-             border: int = 15, threshold: float = 0.07) -> dict:
+             border: int = EVALUATION_BORDER_PX, threshold: float = 0.07) -> dict:
     """``{"badpix": %, "mse_x100": ..., "pixels": n, "scenes": {name: {...}}}``; badpix at ``threshold`` px."""
     per_scene: dict[str, dict[str, float]] = {}
     gts, preds = [], []
     rules = ScoringRules(border_px=border)
+    metrics = validation_metrics(threshold)
     for s in scenes:
         pred = predict_disparity(model, s.views, device, s.name)
         p = SceneReference.of_ground_truth(s.gt, rules, s.name).prepare(pred, LOWRES, f"validation on {s.name}")
         px = p.errors()  # the prediction's errors inside the border, as every score computes them
-        per_scene[s.name] = {"badpix": bad_pix_of(px, threshold), "mse_x100": mse_x100_of(px)}
+        per_scene[s.name] = {key: metric.score_pixels(px) for key, metric in metrics.items()}
         gts.append(px.gt[px.gt_finite])
         preds.append(px.pred[px.gt_finite])
     pooled = PixelErrors.of_maps(np.concatenate(gts), np.concatenate(preds))
-    return {"badpix": bad_pix_of(pooled, threshold), "mse_x100": mse_x100_of(pooled), "threshold": threshold,
+    return {**{key: metric.score_pixels(pooled) for key, metric in metrics.items()}, "threshold": threshold,
             "pixels": pooled.size, "scenes": per_scene}

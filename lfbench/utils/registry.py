@@ -35,6 +35,10 @@ from lfbench.utils.errors import SpecError
 T = TypeVar("T")
 
 
+class NameTaken(ValueError):
+    """A name registered a second time for another object (:meth:`Registry.add`)."""
+
+
 @dataclass(frozen=True)
 class Lazy:
     """A registered object not imported yet: ``target`` is ``"module"`` or ``"module:attribute"``."""
@@ -113,7 +117,7 @@ class Registry(Generic[T]):
         for key in (name, *aliases):
             owner = self._aliases.get(key, key)
             if owner in self._objects and not self._same(self._objects[owner], obj):
-                raise ValueError(f"{self.kind} {key!r} is already registered by {self._source(owner)}")
+                raise NameTaken(f"{self.kind} {key!r} is already registered by {self._source(owner)}")
         if entry is None and self.make is not None and not isinstance(obj, Lazy):
             entry = self.make(name, obj)
         self._objects[name] = obj
@@ -230,6 +234,9 @@ class Registry(Generic[T]):
             return
         try:
             obj = self.load(ep) if self.load is not None else ep.load()
+        except NameTaken as exc:
+            self.name_taken(ep, exc)
+            return
         except Exception as exc:  # noqa: BLE001 - a broken plugin must not break the others
             self.load_errors[ep.name] = f"{type(exc).__name__}: {exc}"  # shown by `lfbench methods`
             return
@@ -239,8 +246,15 @@ class Registry(Generic[T]):
             return
         try:
             self.add(ep.name, obj)
+        except NameTaken as exc:
+            self.name_taken(ep, exc)
         except (TypeError, ValueError) as exc:
             self.load_errors[ep.name] = str(exc)
 
+    def name_taken(self, ep: metadata.EntryPoint, exc: NameTaken) -> None:
+        """A plugin (entry point ``ep``) registered a name another entry has: recorded in :attr:`load_errors`
+        (the plugin is left out); a registry where one name must mean one thing raises instead."""
+        self.load_errors[ep.name] = str(exc)
 
-__all__ = ["Registry", "Lazy", "describe"]
+
+__all__ = ["Lazy", "NameTaken", "Registry", "describe"]

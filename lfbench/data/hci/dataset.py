@@ -14,21 +14,22 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from lfbench.data.dataset import Dataset, DatasetProtocol
-from lfbench.data.hci.scene import discover, is_scene_folder
+from lfbench.data.dataset import DEFAULT_METRICS, Dataset, DatasetProtocol
+from lfbench.data.disparity import EVALUATION_BORDER_PX
+from lfbench.data.hci.scene import SPLITS, discover, is_scene_folder
 from lfbench.data.pattern import matches_at_depth
 from lfbench.data.scene import HIGHRES, LOWRES, Benchmark
 
 __all__ = ["HCIDataset", "HCI_PROTOCOL", "HCI_HIGHRES_SCENES", "HCI_BORDER_PX"]
 
 #: The benchmark's evaluation border: px left out at every side at low resolution (x10 at high resolution).
-HCI_BORDER_PX = 15
+HCI_BORDER_PX = EVALUATION_BORDER_PX
 
 #: The scenes the benchmark scores at high resolution where their high-resolution ground truth exists.
 HCI_HIGHRES_SCENES = frozenset({"backgammon", "dots", "stripes"})
 
 HCI_PROTOCOL = DatasetProtocol(
-    border_px=HCI_BORDER_PX, metrics=("badpix_0.01", "badpix_0.03", "badpix_0.07", "mse_x100", "q25_x100"),
+    border_px=HCI_BORDER_PX, metrics=(*DEFAULT_METRICS, "q25_x100"),
     disparity_range=(-4.0, 4.0), disparity_interval=None, resolutions=(LOWRES, HIGHRES),
     highres_scenes=HCI_HIGHRES_SCENES, spatial_size=(512, 512), angular_size=(9, 9),
     reference_view="centre view input_Cam040.png")
@@ -41,6 +42,7 @@ class HCIDataset(Dataset):
     summary = "HCI 4D Light Field Benchmark: input_CamNNN.png views, parameters.cfg, PFM ground truth"
     layout = "ROOT/<category>/<scene>/parameters.cfg with input_Cam000.png .. and gt_disp_lowres.pfm"
     protocol = HCI_PROTOCOL
+    splits = SPLITS
 
     @classmethod
     def matches(cls, root: Path) -> bool:

@@ -14,10 +14,10 @@ import numpy as np
 
 from lfbench.data.hci.params import SceneParameters, read_parameters
 from lfbench.data.pfm import read_pfm
-from lfbench.data.scene import LOWRES, Benchmark, Scene, read_mask
+from lfbench.data.scene import LOWRES, Benchmark, PNGScene, read_mask
 from lfbench.utils.errors import DataError
 
-__all__ = ["CATEGORIES", "SPLITS", "PARAMETERS_FILE", "INVALID_AREA_FILE", "HCIScene", "discover", "is_scene_folder",
+__all__ = ["CATEGORIES", "SPLITS", "PARAMETERS_FILE", "HCIScene", "discover", "is_scene_folder",
            "view_file_name", "gt_file_name", "depth_file_name", "mask_file_name"]
 
 CATEGORIES = ("stratified", "training", "test", "additional")
@@ -28,8 +28,6 @@ SPLITS: dict[str, tuple[str, ...]] = {
     "test": ("test",),
 }
 PARAMETERS_FILE = "parameters.cfg"
-#: SubFocal's training masks of the areas to leave out, one per scene (``<folder>/<scene>/<file>``).
-INVALID_AREA_FILE = "input_Cam040_invalid_ver2.png"
 
 
 def view_file_name(k: int) -> str:
@@ -60,11 +58,15 @@ def is_scene_folder(folder: Path) -> bool:
     """Whether ``folder`` is an HCI scene folder (it holds ``parameters.cfg``)."""
     return (folder / PARAMETERS_FILE).is_file()
 
+#: SubFocal's training masks of the areas to leave out, one per scene (``<data.invalid_area>/<scene>/<file>``).
+INVALID_AREA_FILE = "input_Cam040_invalid_ver2.png"
 
-class HCIScene(Scene):
+
+class HCIScene(PNGScene):
     """An HCI scene folder, loaded lazily: nothing is read until asked for but ``parameters.cfg``."""
 
     size_said = "parameters.cfg says"
+    invalid_area_file = INVALID_AREA_FILE  # SubFocal's training masks of the areas to leave out
 
     def __init__(self, path: str | Path, category: str | None = None) -> None:
         self.path = Path(path)
@@ -90,9 +92,9 @@ class HCIScene(Scene):
     def view_path(self, k: int) -> Path:
         return self.path / view_file_name(k)
 
-    def _check_views(self) -> None:
+    def check_views(self) -> None:
         v, u = self.angular_size
-        missing = [k for k in range(v * u) if not self.view_path(k).is_file()]
+        missing = [k for k in range(v * u) if not os.path.lexists(self.view_path(k))]  # a FIFO: refused when read
         if missing:
             shown = ", ".join(self.view_path(k).name for k in missing[:3])
             more = f" and {len(missing) - 3} more" if len(missing) > 3 else ""
@@ -101,16 +103,15 @@ class HCIScene(Scene):
     def view_file(self, row: int, col: int) -> Path:
         return self.view_path(row * self.angular_size[1] + col)
 
-    def _views_ready(self) -> None:
-        self._check_views()
-
     def has_gt(self, resolution: str = LOWRES) -> bool:
-        return (self.path / gt_file_name(resolution)).is_file()
+        """Whether the ground-truth file is there: anything under its name counts (a folder, FIFO or broken link
+        there is an error when read, never a scene left out of the mean)."""
+        return os.path.lexists(self.path / gt_file_name(resolution))
 
     def gt_disparity(self, resolution: str = LOWRES) -> np.ndarray | None:
         """Ground-truth disparity (H, W) float32 at ``resolution``, or None if the file is absent."""
         path = self.path / gt_file_name(resolution)
-        if not path.is_file():
+        if not os.path.lexists(path):
             return None
         h, w = self.spatial_size
         scale = 1 if resolution == LOWRES else self.params.highres_scale

@@ -1,0 +1,178 @@
+"""A dataset plugin of a layout lfbench does not know (tests/npy7_plugin.py: 7x7 views stored as one .npy per
+scene, its own ground truth and protocol), installed through the ``lfbench.datasets`` entry-point group, goes
+through ``datasets``, ``check-dataset``, ``evaluate``, ``train`` and ``ablate`` (timed at its own 7x7 views) with
+nothing but the public adapter contract (issue 38)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from helpers import run_cli, shifted_views, write_dist_info
+from npy7_plugin import ANGULAR, NPY7_PROTOCOL, Npy7Scene, write_npy7_scene
+
+SIZE = (24, 32)  # (H, W)
+DISPARITIES = {"train": (1, -1, 1), "val": (-1,)}  # px per view step, integer: the views are exact shifts
+
+
+@pytest.fixture
+def npy7(tmp_path, monkeypatch) -> Path:
+    """The plugin installed as a distribution with an ``lfbench.datasets`` entry point, and a data root of it."""
+    import lfbench.data.dataset as dataset
+
+    site = tmp_path / "site"
+    write_dist_info(site, "lfbench-npy7-test", "[lfbench.datasets]\nnpy7 = npy7_plugin:Npy7Dataset\n")
+    monkeypatch.syspath_prepend(str(site))
+    reg = dataset.DATASETS
+    for attr in ("_objects", "_entries", "_aliases", "load_errors"):
+        monkeypatch.setattr(reg, attr, dict(getattr(reg, attr)))
+    monkeypatch.setattr(reg, "_loaded", False)
+    root = tmp_path / "npy7"
+    rng = np.random.default_rng(0)
+    h, w = SIZE
+    for category, disparities in DISPARITIES.items():
+        for i, d in enumerate(disparities):
+            centre = rng.integers(0, 256, size=(h, w, 3), dtype=np.uint8)
+            write_npy7_scene(root, f"{category}{i}", category, shifted_views(centre, d, ANGULAR),
+                             np.full((h, w), float(d), np.float32))
+    return root
+
+
+def test_the_plugin_is_listed_detected_and_its_views_are_read_through_the_adapter(npy7, capsys):
+    from lfbench.data.dataset import open_dataset
+    from lfbench.training.data import load_scene_data
+
+    rc, out, err = run_cli(capsys, "datasets")
+    assert rc == 0, err
+    assert "npy7" in out and "4 px border" in out
+    dataset, bench = open_dataset(npy7)
+    assert dataset.name == "npy7" and sorted(bench.names) == ["train0", "train1", "train2", "val0"]
+    scene = bench.select(["train0"])[0]
+    stored = np.load(scene.path)  # (7, 7, H, W, 3) uint8
+    data = load_scene_data(scene)  # what training keeps: view k = row k // 7, column k % 7
+    assert data.angular == (7, 7) and data.rgb.shape == (*SIZE, 49, 3)
+    np.testing.assert_array_equal(data.rgb[:, :, 7 * 2 + 5], stored[2, 5])
+    np.testing.assert_array_equal(scene.center_view(), stored[3, 3] / np.float32(255.0))
+    gray = scene.gray_views()
+    assert gray.shape == (7, 7, *SIZE)
+    scene.release_views()
+    assert "_views" not in scene.__dict__ and "_gray" not in scene.__dict__
+
+
+def test_check_dataset_and_evaluate_score_it_by_its_protocol(npy7, tmp_path, capsys):
+    rc, out, err = run_cli(capsys, "check-dataset", npy7)
+    assert rc == 0, err + out
+    rc, out, err = run_cli(capsys, "evaluate", "--data", npy7, "--method", "planesweep", "--out", tmp_path / "ev",
+                           "--scenes", "val")
+    assert rc == 0, err
+    results = json.loads((tmp_path / "ev" / "results.json").read_text())
+    assert results["meta"]["dataset"] == "npy7"
+    scored = {r["metric"]: r["value"] for r in results["records"] if r["scene"] == "val0"}
+    assert set(scored) == set(NPY7_PROTOCOL.metrics)  # the protocol's metrics, no other
+    # an exact integer shift of a random texture: the plane sweep finds d = -1 on every pixel inside the 4 px border
+    assert scored["badpix_0.07"] == 0.0 and 0.0 <= scored["mse_x100"] < 0.01
+
+
+TRAIN = """
+seed = 3
+[data]
+roots = ["{root}"]
+train = ["train"]
+validation = ["val"]
+patch = 16
+strides = [1]
+stride_weights = [1]
+texture = 0.0
+[augment]
+enabled = false
+[model]
+width = 2
+angular = 7
+d_min = -2.0
+d_max = 2.0
+interval = 1.0
+[training]
+batch_size = 1
+device = "cpu"
+threads = 1
+checkpoint_every = 2
+log_every = 1
+prefetch = 0
+[validation]
+every = 2
+border = 4
+max_size = 0
+[[stages]]
+name = "l1"
+loss = "l1"
+lr = 1e-3
+steps = 2
+"""
+
+
+@pytest.mark.slow
+def test_train_on_it_then_evaluate_the_weights_on_its_7x7_views(npy7, tmp_path, capsys):
+    config = tmp_path / "train.toml"
+    config.write_text(TRAIN.format(root=npy7))
+    rc, out, err = run_cli(capsys, "train", config, "--out", tmp_path / "run")
+    assert rc == 0, err
+    weights = tmp_path / "run" / "final.pt"
+    rc, out, err = run_cli(capsys, "evaluate", "--data", npy7, "--method", f"subfocal:weights={weights}",
+                           "--scenes", "val", "--out", tmp_path / "ev")
+    assert rc == 0, err
+    records = json.loads((tmp_path / "ev" / "results.json").read_text())["records"]
+    assert {r["scene"] for r in records} == {"val0"} and {r["metric"] for r in records} == set(NPY7_PROTOCOL.metrics)
+    assert all(np.isfinite(r["value"]) for r in records)
+
+
+ABLATION = """title = "npy7"
+table = "none"
+base = "train.toml"
+[[grid]]
+width = [2]
+[budget]
+threads = 1
+[evaluation]
+data = "{root}"
+scenes = ["val"]
+time_size = 16
+time_repeats = 1
+time_warmup = 0
+threads = 1
+device = "cpu"
+"""
+
+
+def _ablation(tmp_path: Path, root: Path, angular: int) -> Path:
+    """An ablation of one cell whose network takes ``angular`` x ``angular`` views, scored on the plugin's scenes."""
+    (tmp_path / "train.toml").write_text(TRAIN.format(root=root).replace("angular = 7", f"angular = {angular}"))
+    spec = tmp_path / "ablate.toml"
+    spec.write_text(ABLATION.format(root=root))
+    return spec
+
+
+@pytest.mark.slow
+def test_ablate_trains_scores_and_times_cells_at_its_angular_size(npy7, tmp_path, capsys):
+    spec = _ablation(tmp_path, npy7, ANGULAR)
+    rc, out, err = run_cli(capsys, "ablate", spec, "--out", tmp_path / "abl")
+    assert rc == 0, err
+    timing = json.loads(next((tmp_path / "abl" / "cells").glob("*/timing.json")).read_text())
+    assert timing["time_angular"] == [7, 7] and timing["key"]["angular"] == [7, 7] and timing["test_s"] > 0
+
+
+def test_ablate_refuses_a_network_that_cannot_take_the_scenes_before_training(npy7, tmp_path, capsys):
+    spec = _ablation(tmp_path, npy7, 9)  # a 9x9 network, 7x7 evaluation scenes
+    rc, out, err = run_cli(capsys, "ablate", spec, "--out", tmp_path / "abl")
+    assert rc == 2 and "takes 9x9 views, the evaluation scenes have 7x7" in err, err
+    assert not list((tmp_path / "abl").glob("cells/*/checkpoint.pt")) and not (tmp_path / "abl" / "data").exists()
+
+
+def test_a_scene_pickles_as_its_file(npy7):
+    import pickle
+
+    scene = Npy7Scene(next(npy7.glob("val/*.views.npy")), "val")
+    scene.gray_views()
+    again = pickle.loads(pickle.dumps(scene))
+    assert "_views" not in again.__dict__ and again.spatial_size == SIZE and again.name == "val0"
