@@ -268,6 +268,7 @@ _META_TYPES: dict[str, tuple[type, str]] = {
     "dataset": (str, "a dataset name (a string; see `lfbench datasets`)"),
     "data_roots": (list, "a list of folder names"), "references": (list, "a list of method labels"),
     "protocol": (dict, "an object (metrics, disparity_range)"),
+    "synthetic": (bool, "true or false (scored on data written by lfbench synth)"),
 }
 
 

@@ -299,6 +299,23 @@ def test_no_receptive_radius_whole_images_only():
         t.infer(net, torch.rand(1, 9, 16, 16), tile=8)
 
 
+def test_a_tile_is_refused_in_one_line_before_any_inference(tmp_path, capsys):
+    """``oaccnet:tile=N``: the channel attention pools over the whole image, so no tile is exact; predict
+    refuses the option with one line and exit 2, and writes nothing."""
+    from helpers import assert_one_error_line, run_cli
+
+    from lfbench.training.checkpoint import export_weights
+
+    torch.manual_seed(0)
+    export_weights(tmp_path / "o.pt", get_trainable("oaccnet").build(angular=3, d_min=-1.0, d_max=1.0),
+                   method="oaccnet")
+    np.save(tmp_path / "v.npy", np.random.default_rng(0).random((16, 16, 9), dtype=np.float32))
+    rc, _, err = run_cli(capsys, "predict", "--method", f"oaccnet:weights={tmp_path / 'o.pt'},tile=8",
+                         "--input", str(tmp_path / "v.npy"), "--out", str(tmp_path / "p.npy"))
+    assert_one_error_line(rc, err, "tile=8", "whole images only")
+    assert not (tmp_path / "p.npy").exists()
+
+
 def test_bf16_inference_is_close_to_fp32():
     from lfbench.utils.hardware import bf16_unavailable
 

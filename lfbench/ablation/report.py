@@ -50,6 +50,7 @@ from lfbench.ablation.cell import load_scenes
 from lfbench.ablation.facts import axis_text, axis_value, cell_info, network_of, same_value
 from lfbench.ablation.significance import ALPHA, ordering_metric, seeds_table, significance_table
 from lfbench.ablation.spec import NO_TABLE, AblationSpec
+from lfbench.data.provenance import SYNTHETIC_CAPTION
 from lfbench.reports.html import SiteInputs, SiteSection
 from lfbench.reports.maps import saved_predictions
 from lfbench.reports.paper import PaperTables, find_paper_dir, load_paper
@@ -129,7 +130,7 @@ def cell_frame(spec: AblationSpec, results: Results, markers: Sequence[dict[str,
                metrics: Sequence[str] | None = None) -> pd.DataFrame:
     """One row per cell (index: cell id): grid values (``grid:<axis>``), the mean of each of ``metrics``
     (default :func:`ablation_metrics`) over the evaluation scenes, scenes, and what was measured of it:
-    train_s, own_train_s, test_s, time_size, device, threads."""
+    train_s, own_train_s, test_s, time_size, time_angular ([V, U] views), device, threads."""
     df = results.to_frame()
     metrics = ablation_metrics(results) if metrics is None else metrics
     by_id = {m.get("id"): m for m in markers}
@@ -142,7 +143,7 @@ def cell_frame(spec: AblationSpec, results: Results, markers: Sequence[dict[str,
             vals = sel[sel["metric"] == metric]["value"]
             row[metric] = float(vals.mean()) if len(vals) else np.nan
         row["scenes"] = int(sel["scene"].nunique()) if len(sel) else 0
-        for key in ("train_s", "own_train_s", "test_s", "time_size", "device", "threads"):
+        for key in ("train_s", "own_train_s", "test_s", "time_size", "time_angular", "device", "threads"):
             row[key] = m.get(key, np.nan)
         rows.append(row)
     return pd.DataFrame(rows).set_index("cell") if rows else pd.DataFrame()
@@ -160,7 +161,9 @@ def time_label(frame: pd.DataFrame) -> str:
     where = str(device)
     if device == "cpu" and pd.notna(threads):
         where += f", {int(threads)} thread{'s' if int(threads) != 1 else ''}"
-    return f"ours (9x9x{int(size)}x{int(size)}, {where})"
+    angular = frame["time_angular"].iloc[0] if "time_angular" in frame else None
+    v, u = angular if isinstance(angular, list | tuple) and len(angular) == 2 else (9, 9)  # a marker before 0.x: 9x9
+    return f"ours ({int(u)}x{int(v)}x{int(size)}x{int(size)}, {where})"
 
 
 # --------------------------------------------------------------------------- the tables
@@ -339,11 +342,12 @@ def caption_lines(spec: AblationSpec, what: str | None = None) -> list[str]:
     scored = f"scored on {' and '.join(where)}"
     if spec.cells:
         ours = (f"ours: {spec.budget_label()}; {scored} (mean over scenes); train time = wall time of "
-                "`lfbench train` (incl. the shared stage 1 when there is one); test time = one whole "
-                f"9x9x{ev.time_size}x{ev.time_size} light field")
+                "`lfbench train` (incl. the shared stage 1 when there is one); test time = one whole light field "
+                f"of the evaluation scenes' angular size, {ev.time_size}x{ev.time_size} px")
     else:
         ours = f"ours: the methods listed, {scored}"
-    return [spec.title if what is None else f"{spec.title}: {what}", ours]
+    synthetic = [SYNTHETIC_CAPTION] if ev.is_synthetic else []
+    return [spec.title if what is None else f"{spec.title}: {what}", *synthetic, ours]
 
 
 def paper_line(paper: PaperTables | None) -> str:

@@ -436,6 +436,7 @@ def run_ablation(spec: AblationSpec, out: str | Path, *, jobs: int = 1, progress
     dataset = evaluation_dataset(spec.evaluation)  # the dataset of the data root, when there is one
     combined = Results(meta={**({"dataset": dataset.name} if dataset is not None else {}),
                              **scoring_of(spec.evaluation).meta(),
+                             **({"synthetic": True} if spec.evaluation.is_synthetic else {}),
                              "ablation": {"title": spec.title, "spec": str(spec.source), "table": spec.table,
                                           "budget": spec.budget_label(), "shared_stage1": spec.shared_stage1,
                                           "cells": markers}})

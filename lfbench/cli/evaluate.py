@@ -78,6 +78,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from lfbench.data.dataset import open_datasets
+    from lfbench.data.provenance import is_synthetic_root
     from lfbench.method.registry import create_from_spec
     from lfbench.reports import writers as w
     from lfbench.reports.html import SITE_DIR, check_site_dir
@@ -117,7 +118,8 @@ def run(args: argparse.Namespace) -> int:
                *([w.UncertaintyRatings()] if args.uncertainty else []), *([w.Site()] if args.html else [])]
     meta = {"data_root": str(args.data[0]), "dataset": dataset.name,
             "protocol": protocol_meta(protocol.metrics, protocol.disparity_range),  # what the pages show
-            "methods": {m.label: m.provenance() for m in methods}}
+            "methods": {m.label: m.provenance() for m in methods},
+            **({"synthetic": True} if is_synthetic_root(args.data) else {})}  # the captions say so
     if len(args.data) > 1:  # readers take every root from here (Results.data_roots); data_root: the first
         meta["data_roots"] = [str(r) for r in args.data]
     results = evaluate_to_folder(methods, scenes, args.out, rules=scoring.rules, metrics=list(scoring.metrics),

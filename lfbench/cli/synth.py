@@ -7,7 +7,8 @@ parameters.cfg, gt_disp_lowres.pfm, gt_depth_lowres.pfm and evaluation masks (<m
 of WxH px (default 640x480), 5_5_disparity.npy and 5_5_depth.npy, disparities within UrbanLF-Syn's released
 [-0.47, 1.55] px. --disparity-range LOW HIGH maps a scene's disparities into [LOW, HIGH] px (the same layout at
 other depths; hci default: the generator's own, about [-2.1, 2.3]). The same seed, size, angular resolution
-and range always give the same files. An existing scene folder is an error unless --force.
+and range always give the same files. An existing scene folder is an error unless --force. DIR gets a file
+SYNTHETIC, by which every table scored on DIR says that its data is synthetic (lfbench.data.provenance).
 """
 
 from __future__ import annotations
@@ -70,6 +71,7 @@ def _numbers(text: str) -> list[int]:
 def run(args: argparse.Namespace) -> int:
     import time
 
+    from lfbench.data.provenance import mark_synthetic
     from lfbench.data.synth import write_benchmark
     from lfbench.utils.errors import SpecError
     from lfbench.utils.hardware import available_cores
@@ -84,6 +86,7 @@ def run(args: argparse.Namespace) -> int:
         paths = write_urbanlf(args.out, seed=args.seed, width=width, height=height, scenes=args.scenes,
                               split=args.category or "val", force=args.force, numbers=args.numbers,
                               **({} if args.disparity_range is None else {"disparity_range": args.disparity_range}))
+        mark_synthetic(args.out, "lfbench synth --layout urbanlf-syn")
         for path in paths:
             print(path)
         print(f"wrote {len(paths)} UrbanLF-Syn sample(s) of {width}x{height} px, 9x9 views "
@@ -99,6 +102,7 @@ def run(args: argparse.Namespace) -> int:
                             angular=args.angular, force=args.force, progress=not args.no_progress,
                             workers=available_cores() if args.workers is None else args.workers,
                             disparity_range=args.disparity_range)
+    mark_synthetic(args.out, "lfbench synth --layout hci")
     for path in paths:
         print(path)
     print(f"wrote {len(paths)} scene(s) of {args.size}x{args.size} px, {args.angular}x{args.angular} views "

@@ -191,8 +191,20 @@ class Tables(OutputWriter):
         written = []
         for name, table in self.tables.items():
             caption = captions.get(name) or (self.paper_caption if name.endswith("_paper") else self.caption)
+            caption = with_synthetic_line(caption, run.results)
             written += write_table(table, run.stage, f"table_{name}", caption, formats=self.formats)
         return written
+
+
+def with_synthetic_line(caption: Sequence[str], results: Results) -> list[str]:
+    """``caption`` with :data:`~lfbench.data.provenance.SYNTHETIC_CAPTION` under its first line when the results
+    were scored on synthetic data (``meta.synthetic``) and it does not say so yet."""
+    from lfbench.data.provenance import SYNTHETIC_CAPTION
+
+    caption = list(caption)
+    if results.meta.get("synthetic") is True and SYNTHETIC_CAPTION not in caption:
+        caption.insert(min(1, len(caption)), SYNTHETIC_CAPTION)
+    return caption
 
 
 def paper_scene_sections(results: Results, paper: PaperTables | None) -> list[SiteSection]:
@@ -209,7 +221,7 @@ def paper_scene_sections(results: Results, paper: PaperTables | None) -> list[Si
                        f"'{RUN_RUNTIME_COLUMN}' (at the data's resolution); rows 'NAME (paper)': the paper's file "
                        "as published"]
             out.append(SiteSection(id=decl.id, title=f"{decl.id}: ours beside the paper", table=table,
-                                   caption=caption))
+                                   caption=with_synthetic_line(caption, results)))
     return out
 
 
