@@ -65,3 +65,15 @@ def test_the_code_calls_newer_torch_apis_only_behind_a_check():
     assert [p.relative_to(ROOT).as_posix() for p in users] == ["lfbench/utils/hardware.py"]
     text = (ROOT / "lfbench" / "utils" / "hardware.py").read_text(encoding="utf-8")
     assert text.count("if _new_precision_api():") == 2
+
+
+def test_the_plugin_skeleton_is_package_data():
+    """`lfbench new-plugin` reads lfbench/method/plugin_skeleton/: every file there must be installed."""
+    import fnmatch
+
+    globs = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["package-data"]["lfbench"]
+    files = [p.relative_to(ROOT / "lfbench").as_posix()
+             for p in (ROOT / "lfbench" / "method" / "plugin_skeleton").rglob("*") if p.is_file()]
+    assert len(files) == 5
+    assert all(any(fnmatch.fnmatchcase(f, g) and "/" not in f[len(g.rsplit("/", 1)[0]) + 1:] for g in globs)
+               for f in files)
