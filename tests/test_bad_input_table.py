@@ -224,7 +224,7 @@ CASES: list[tuple[str, Callable[[Path], list], tuple[str, ...], tuple[str, ...]]
     ("check-dataset-bad-toml", lambda t: ["check-dataset", _file(t, "d/lfbench-dataset.toml",
                                                                  '[views]\npattern = "v{k}.png"\nangular = 3\n'
                                                                  'reverse_rows = 1\n').parent],
-     ("lfbench-dataset.toml", "'views.reverse_rows' must be true or false"), ()),
+     ("lfbench-dataset.toml", "views.reverse_rows: expected bool, got int"), ()),
     ("new-plugin-bad-name", lambda t: ["new-plugin", "Bad Name", "--out", t / "p"], ("plugin name 'Bad Name'",),
      ("p",)),
     ("new-plugin-taken", lambda t: ["new-plugin", "subfocal", "--out", t / "p"], ("registered already",), ("p",)),

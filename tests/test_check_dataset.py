@@ -130,7 +130,7 @@ def test_cli_names_a_negated_ground_truth_and_a_negative_scale_fixes_it(scene, t
 def test_a_toml_transpose_needs_a_square_grid(tmp_path, capsys):
     (tmp_path / SPEC_FILE).write_text('[views]\npattern = "v{v}_{u}.png"\nangular = [3, 5]\ntranspose = true\n')
     rc, _, err = run_cli(capsys, "check-dataset", str(tmp_path), "--no-progress")
-    assert_one_error_line(rc, err, SPEC_FILE, "'views.transpose' needs a square grid of views, got 3x5")
+    assert_one_error_line(rc, err, SPEC_FILE, "views.transpose: needs a square grid of views, got 3x5")
 
 
 def test_cli_a_border_wider_than_the_scene_is_undecided_and_says_why(scene, tmp_path, capsys):

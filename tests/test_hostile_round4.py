@@ -550,14 +550,14 @@ def test_toml_view_patterns_hold_only_bare_fields(tmp_path, capsys, pattern, sho
     for command in (["evaluate", "--data", root, "--method", "constant", "--out", tmp_path / "out", "--no-progress"],
                     ["check-dataset", root, "--no-progress"]):
         rc, _, err = run_cli(capsys, *command)
-        assert_one_error_line(rc, err, str(root / SPEC_FILE), "'views.pattern' may hold only", shown[:40])
+        assert_one_error_line(rc, err, str(root / SPEC_FILE), "views.pattern: may hold only", shown[:40])
 
 
 @pytest.mark.parametrize("pattern", ["v{k}}.png", "v{{k}.png", "v{k.png"])
 def test_toml_view_patterns_with_unbalanced_braces_are_one_line(tmp_path, capsys, pattern):
     root, _ = _toml(tmp_path, pattern=pattern)
     rc, _, err = run_cli(capsys, "check-dataset", root, "--no-progress")
-    assert_one_error_line(rc, err, str(root / SPEC_FILE), "'views.pattern'")
+    assert_one_error_line(rc, err, str(root / SPEC_FILE), "views.pattern: has unbalanced braces")
 
 
 class _Raising:

@@ -11,6 +11,8 @@ import pytest
 
 from lfbench.ablation import reference as ablation_reference
 from lfbench.ablation.spec import SpecFile
+from lfbench.data import dataset_file
+from lfbench.data.dataset_file import DatasetFile
 from lfbench.reports import reference_doc
 from lfbench.reports.reference import Reference
 from lfbench.training import reference as training_reference
@@ -20,7 +22,8 @@ from lfbench.utils.options import option_fields
 REPO = Path(__file__).resolve().parents[1]
 DOCS = [(training_reference, REPO / "docs" / "training-config.md", TrainConfig),
         (ablation_reference, REPO / "docs" / "ablation-spec.md", SpecFile),
-        (reference_doc, REPO / "docs" / "paper-reference.md", Reference)]
+        (reference_doc, REPO / "docs" / "paper-reference.md", Reference),
+        (dataset_file, REPO / "docs" / "dataset-toml.md", DatasetFile)]
 
 
 def _keys(cls: type) -> set[str]:
@@ -35,7 +38,7 @@ def _keys(cls: type) -> set[str]:
 
 
 @pytest.mark.parametrize(("module", "path", "declared"), DOCS, ids=["training-config", "ablation-spec",
-                                                                              "paper-reference"])
+                                                                              "paper-reference", "dataset-toml"])
 def test_the_committed_reference_is_what_the_declarations_generate(module, path, declared):
     text = path.read_text(encoding="utf-8")
     assert module.COMMAND in text.splitlines()[0]  # the header names the command that regenerates it

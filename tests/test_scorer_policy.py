@@ -75,7 +75,7 @@ def test_a_toml_dataset_chooses_its_scorer(tmp_path, capsys):
     (root / "lfbench-dataset.toml").write_text((root / "lfbench-dataset.toml").read_text().replace(
         "paper-author", "strict"))
     rc, _, err = run_cli(capsys, "check-dataset", root, "--no-progress")
-    assert_one_error_line(rc, err, "lfbench-dataset.toml", "'protocol.scorer' must be")
+    assert_one_error_line(rc, err, "lfbench-dataset.toml", "protocol.scorer: expected one of 'lfbench', 'paper-author'")
 
 
 def test_urbanlf_scores_ties_as_the_paper_author_and_hci_as_lfbench(tmp_path):

@@ -229,7 +229,7 @@ def coerce(value: Any, kind: Any) -> Any:
     if origin is typing.Literal:
         if value in typing.get_args(kind) and not isinstance(value, bool):
             return value
-        raise TypeMismatch(type_name(kind), repr(value) if isinstance(value, str) else _value_name(value))
+        raise TypeMismatch(type_name(kind), repr(value[:40]) if isinstance(value, str) else _value_name(value))
     if origin is tuple:
         items = typing.get_args(kind)
         if not isinstance(value, (list, tuple)):
