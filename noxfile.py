@@ -31,7 +31,8 @@ def lint(session: nox.Session) -> None:
     """ruff over the package, the methods, tests, scripts and the example plugin."""
     if not isinstance(session.virtualenv, nox.virtualenv.PassthroughEnv):
         session.install("ruff")
-    session.run("ruff", "check", "lfbench", "methods", "tests", "benchmarks", "results", "examples", "noxfile.py")
+    session.run("ruff", "check", "lfbench", "methods", "tests", "benchmarks", "tools", "results", "examples",
+                "noxfile.py")
 
 
 @nox.session
@@ -60,19 +61,20 @@ def mutation(session: nox.Session) -> None:
     """Mutation testing of the scoring core and the regression gate with mutmut (configured in pyproject.toml,
     [tool.mutmut]); long (~35 min on 2 cores), so not a default session. Starts from scratch, re-checks in
     fresh processes the mutants of code that runs at import, writes the survivors to results/mutation/
-    (README.md there) and fails if one has no reason. ``nox -s mutation -- --max-children 2`` passes
-    options to ``mutmut run``."""
+    (README.md there) with the scripts of tools/mutation/ and fails if one has no reason.
+    ``nox -s mutation -- --max-children 2`` passes options to ``mutmut run``."""
     if not isinstance(session.virtualenv, nox.virtualenv.PassthroughEnv):
         session.install("-e", ".[test,mutation]")
     shutil.rmtree(ROOT / "mutants", ignore_errors=True)  # cached verdicts would hide changed tests
-    out = ROOT / "results" / "mutation"
+    out = ROOT / "results" / "mutation"  # what the run produces
+    tools = ROOT / "tools" / "mutation"  # the scripts that produce it
     session.run("mutmut", "run", *(session.posargs or ["--max-children", "1"]))
-    session.run("python", str(out / "recheck_import_time.py"), "--out", str(out / "recheck_import_time.json"))
+    session.run("python", str(tools / "recheck_import_time.py"), "--out", str(out / "recheck_import_time.json"))
     with open(out / "mutmut_results.txt", "w", encoding="utf-8") as f:
         session.run("mutmut", "results", stdout=f, stderr=None)
     with open(out / "survivors.txt", "w", encoding="utf-8") as f:
-        session.run("python", str(out / "survivors.py"), "--recheck", str(out / "recheck_import_time.json"),
+        session.run("python", str(tools / "survivors.py"), "--recheck", str(out / "recheck_import_time.json"),
                     stdout=f, stderr=None)
     # fails when a survivor has no reason: a test is missing, or classify.py must say why it is equivalent
-    session.run("python", str(out / "classify.py"), "--recheck", str(out / "recheck_import_time.json"),
+    session.run("python", str(tools / "classify.py"), "--recheck", str(out / "recheck_import_time.json"),
                 "--out", str(out / "survivors_classified.md"))

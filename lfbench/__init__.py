@@ -10,8 +10,8 @@ The public API, importable from ``lfbench`` itself:
   :func:`q25_x100`, :func:`bad_pix_curve`; every metric's definition by id: :func:`get_metric`,
   :func:`list_metrics`;
 - data: :func:`open_dataset` (any dataset layout: the scenes of a data root), :class:`Scene` (the contract of
-  a dataset's scenes), :class:`HCIScene` (one HCI scene folder), :class:`Benchmark`, :class:`ArrayLightField`,
-  :func:`read_pfm`, :func:`write_pfm`;
+  a dataset's scenes, whatever its layout: a dataset's adapter is the one place that knows it), :class:`Benchmark`,
+  :class:`ArrayLightField`, :func:`read_pfm`, :func:`write_pfm`;
 - errors: :class:`LFBenchError`, :class:`DataError`, :class:`SpecError`.
 
 Where things are: ``lfbench.data`` (scenes, PFM, parameters, submissions, synthetic scenes),
@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING, Any  # noqa: E402
 _PUBLIC = {
     "read_pfm": "lfbench.data.pfm", "write_pfm": "lfbench.data.pfm",
     "ArrayLightField": "lfbench.data.scene", "Benchmark": "lfbench.data.scene", "Scene": "lfbench.data.scene",
-    "HCIScene": "lfbench.data.hci", "open_dataset": "lfbench.data.dataset",
+    "open_dataset": "lfbench.data.dataset",
     "Method": "lfbench.method.base", "Prediction": "lfbench.method.base", "Range": "lfbench.method.params",
     "create": "lfbench.method.registry", "create_from_spec": "lfbench.method.registry",
     "list_methods": "lfbench.method.registry", "register_method": "lfbench.method.registry",
@@ -47,7 +47,7 @@ __all__ = [
     "Method", "Prediction", "create", "create_from_spec", "list_methods", "register_method",
     "Trainable", "register_trainable", "get_trainable", "Range",
     "bad_pix", "bad_pix_curve", "mse_x100", "q25_x100", "get_metric", "list_metrics",
-    "open_dataset", "Scene", "HCIScene", "Benchmark", "ArrayLightField", "read_pfm", "write_pfm",
+    "open_dataset", "Scene", "Benchmark", "ArrayLightField", "read_pfm", "write_pfm",
     "LFBenchError", "DataError", "SpecError",
 ]
 
@@ -70,7 +70,6 @@ def __dir__() -> list[str]:
 
 if TYPE_CHECKING:  # what type checkers and IDEs see
     from lfbench.data.dataset import open_dataset
-    from lfbench.data.hci import HCIScene
     from lfbench.data.pfm import read_pfm, write_pfm
     from lfbench.data.scene import ArrayLightField, Benchmark, Scene
     from lfbench.method.base import Method, Prediction

@@ -321,3 +321,18 @@ def test_the_metrics_bench_scores_every_pair_of_its_synthetic_hci_scenes(monkeyp
     first = [out for name, out in calls if name == "scene_00"]
     mse = [o.values["mse_x100"] for o in first]
     assert mse[0] < mse[1] < mse[2]
+
+
+def test_suite_out_keeps_the_run_named_after_the_date_and_the_machine(tmp_path: Path, capsys):
+    """`lfbench bench suite --out DIR` writes the records and the table as DIR/<date>-<host>[-quick].json and
+    .md (what benchmarks/suite.py did before it was folded into the command)."""
+    import platform
+
+    code = main(["bench", "suite", "--quick", "--skip", "peak", "inference", "volume", "train",
+                 "--out", str(tmp_path / "kept")])
+    assert code == 0
+    files = sorted(p.name for p in (tmp_path / "kept").iterdir())
+    stem = files[0].removesuffix(".json")
+    assert files == [f"{stem}.json", f"{stem}.md"] and stem.endswith(f"-{platform.node() or 'host'}-quick")
+    records = json.loads((tmp_path / "kept" / f"{stem}.json").read_text(encoding="utf-8"))
+    assert [r["bench"] for r in records] == ["metrics"]

@@ -357,14 +357,14 @@ def _file_name_literals(path: Path, suffixes: tuple[str, ...] = ()) -> list[tupl
 def test_hci_file_names_live_in_the_hci_adapter_only():
     """Issue 30.1: the generic data code (the scene contract, the dataset seam, the pattern layouts) names no
     HCI file; HCI's view names, parameters.cfg and PFM ground truth are lfbench/data/hci/'s, for reading and
-    for writing (the synthetic generator and the metrics bench write their HCI scenes through
-    lfbench.data.hci.write, the scoring benchmarks through lfbench.data.hci.scene's names): no module of lfbench
-    or benchmarks/ outside lfbench/data/hci/ names one of its files in code."""
+    for writing (the synthetic generator and the metrics bench write their scenes through the adapter's
+    writer, lfbench.data.dataset.Dataset.write_scene; the scoring benchmarks through lfbench.data.hci.scene's
+    names): no module of lfbench or benchmarks/ outside lfbench/data/hci/ names one of its files in code."""
     import lfbench
     import lfbench.data as data
 
     folder = Path(data.__file__).parent
-    generic = ["scene.py", "dataset.py", "pattern.py", "generic.py", "urbanlf.py"]
+    generic = ["scene.py", "dataset.py", "pattern.py", "generic.py", "urbanlf.py", "camera.py", "synth.py"]
     for name in generic:
         text = (folder / name).read_text(encoding="utf-8")
         for hci_only in ("input_Cam", "parameters.cfg", "gt_disp_", "SceneParameters"):
@@ -382,9 +382,24 @@ def test_hci_file_names_live_in_the_hci_adapter_only():
     assert _file_name_literals(folder / "urbanlf.py", (".png", ".npy"))
 
 
+def test_no_module_outside_the_hci_adapter_imports_it():
+    """Issue 38: an adapter is the only place that knows a layout. No module of lfbench outside lfbench/data/hci/
+    imports it: the default scoring rules read HCI's high-resolution scenes from its protocol, the generator and
+    the metrics bench write and open their scenes through the dataset registry (DATASETS)."""
+    import lfbench
+
+    package = Path(lfbench.__file__).parent
+    found = [f"{path.relative_to(package)}:{n}" for path in sorted(package.rglob("*.py"))
+             if package / "data" / "hci" not in path.parents
+             for n, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1)
+             if "import" in line and "data.hci" in line]
+    assert found == []
+
+
 def test_a_scene_written_by_the_hci_writer_reads_back_exactly(tmp_path: Path):
     """lfbench.data.hci.write and the HCI reader agree on every file: a generated scene written by the writer
     opens through the HCI adapter with the generated views (as quantized), ground truth, masks and parameters."""
+    from lfbench.data.hci.params import SceneParameters
     from lfbench.data.hci.write import write_hci_scene
 
     sc = generate_scene(5, size=24, angular=3, name="round", category="training")
@@ -398,7 +413,7 @@ def test_a_scene_written_by_the_hci_writer_reads_back_exactly(tmp_path: Path):
     np.testing.assert_array_equal(scene.rgb_views(), views.astype(np.float32) / np.float32(255.0))
     gt = scene.gt_disparity()
     assert gt.dtype == np.float32 and np.array_equal(gt, sc.disparity)
-    assert scene.params == sc.params
+    assert scene.params == SceneParameters.of(sc.params)
     assert sorted(scene.mask_names()) == sorted(sc.masks)
     for name, mask in sc.masks.items():
         np.testing.assert_array_equal(scene.mask(name), mask)

@@ -22,6 +22,7 @@ Examples:
   lfbench bench train --width 150 16 --batch 2
   lfbench bench train --width 16 --batch 4 --path reference fast --rounds 2   # the training speed-up
   lfbench bench suite --quick --json quick.json
+  lfbench bench suite --out benchmarks/results   # kept as benchmarks/results/<date>-<host>.json and .md
   lfbench bench inference --device cuda --interval 0.5 0.1 --precision fp32 bf16
   lfbench bench inference --model tinycnn:layers=3 --channels 4 8 --size 128   # a plugin's network
   lfbench bench inference --size 256 --repeat 50 --mean --precision fp32 --interval 0.1 --d-min -0.5 \\
@@ -191,6 +192,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     _inference_options(s, 512)
     s.add_argument("--quick", action="store_true", help="64x64 scene, tiny training and metric cases (seconds)")
     s.add_argument("--skip", nargs="+", default=[], choices=["peak", "inference", "volume", "train", "metrics"])
+    s.add_argument("--out", type=Path, metavar="DIR",
+                   help="keep the run: the records and the table in DIR as <date>-<host>[-quick].json and .md, so "
+                        "that runs on several machines sit side by side (--json / --table name a file instead)")
     add_flag(s, TRAIN_BATCH)
     add_flag(s, TRAIN_STEPS)
     _common(s)
@@ -415,6 +419,18 @@ def _networks(args: argparse.Namespace) -> tuple[list[str], str | None]:
     raise SpecError(f"--ratio-to {asked}: not one of the networks timed ({', '.join(models)})")
 
 
+def _stamped_outputs(args: argparse.Namespace) -> None:
+    """``suite --out DIR``: ``--json`` and ``--table``, where not given, as ``DIR/<YYYYmmdd-HHMM>-<host>[-quick]``
+    ``.json`` and ``.md`` (named after the date and the machine, so that runs on several machines sit side by
+    side)."""
+    import platform
+    import time
+
+    stem = f"{time.strftime('%Y%m%d-%H%M')}-{platform.node() or 'host'}{'-quick' if args.quick else ''}"
+    args.json = args.json or args.out / f"{stem}.json"
+    args.table = args.table or args.out / f"{stem}.md"
+
+
 def run(args: argparse.Namespace) -> int:
     from lfbench.runs.bench import attach_peaks, attach_ratios, run_isolated, table, write_json
 
@@ -426,6 +442,8 @@ def run(args: argparse.Namespace) -> int:
         from lfbench.utils.hardware import resolve_device
 
         args.device = str(resolve_device(args.device))  # SpecError (exit 2) before any case
+    if getattr(args, "out", None) is not None:
+        _stamped_outputs(args)
     from lfbench.utils.outputs import check_output_file
 
     for name in ("json", "table"):  # before any case (a link: the file it leads to)

@@ -129,6 +129,15 @@ class Dataset:
         raise NotImplementedError
 
     @classmethod
+    def write_scene(cls, folder: Path, scene: Any) -> Path:
+        """Write a generated scene as one scene folder ``folder`` of this layout and return it; how ``lfbench synth``
+        writes the layout (lfbench.data.synth.write_benchmark). ``scene``: a lfbench.data.synth.SyntheticScene or an
+        object with its ``params`` (lfbench.data.camera.Camera), ``views`` ((V, U, H, W, 3) RGB in [0, 1], or
+        None), ``disparity`` ((H, W) px per view step), ``depth`` ((H, W) m, or None) and ``masks`` (name -> (H, W)
+        bool). NotImplementedError for a dataset lfbench does not write."""
+        raise NotImplementedError(f"dataset {cls.name!r} has no writer of generated scenes")
+
+    @classmethod
     def protocol_for(cls, root: Path) -> DatasetProtocol:
         """The protocol of the data under ``root``: :attr:`protocol`, unless the data declares its own (the
         generic TOML adapter reads it from the root)."""

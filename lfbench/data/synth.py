@@ -1,5 +1,6 @@
-"""Synthetic light fields with exact ground truth (the embedded default benchmark), written in the HCI layout
-by :mod:`lfbench.data.hci.write` (:func:`write_scene`, :func:`write_benchmark`).
+"""Synthetic light fields with exact ground truth (the embedded default benchmark), written in the layout
+:data:`SYNTH_LAYOUT` (HCI's) by that dataset adapter's writer (:meth:`lfbench.data.dataset.Dataset.write_scene`;
+:func:`write_scene`, :func:`write_benchmark`).
 
 Geometry is the benchmark's (docs/benchmark-rules.md, Geometry): a surface point with disparity
 d (px per view step) seen at centre-view pixel p = (x, y) appears in view (u, v) at ``p - s d`` with
@@ -41,9 +42,9 @@ from typing import Any
 import numpy as np
 from scipy import ndimage
 
-from lfbench.data.hci.params import MAX_CAMS, SceneParameters
-from lfbench.data.hci.write import write_hci_scene
-from lfbench.data.scene import ArrayLightField, rgb_to_gray
+from lfbench.data.camera import MAX_CAMS, Camera
+from lfbench.data.dataset import DATASETS
+from lfbench.data.scene import MAX_VIEW_PIXELS, ArrayLightField, rgb_to_gray
 from lfbench.utils.atomic import check_replaceable, fresh_dir, replace_dir
 from lfbench.utils.errors import DataError, SpecError
 from lfbench.utils.flags import SCENE_COUNT, SEED, Flag
@@ -679,11 +680,11 @@ def evaluation_masks(layers: Sequence[Layer], layer_id: np.ndarray, disparity: n
 
 
 def scene_parameters(size: int, angular: int, disparity: np.ndarray, name: str, category: str,
-                     seed: int) -> SceneParameters:
+                     seed: int) -> Camera:
     """A camera consistent with the HCI scenes: f = 100 mm, sensor 35 mm, focus at 7 m, and a baseline
     scaled so that b f N / s (the disparity factor) equals the 512 px HCI cameras' at any size N."""
     lo, hi = float(np.min(disparity)), float(np.max(disparity))
-    return SceneParameters(
+    return Camera(
         focal_length_mm=100.0, image_resolution_x_px=size, image_resolution_y_px=size, sensor_size_mm=35.0,
         num_cams_x=angular, num_cams_y=angular, baseline_mm=100.0 * 512.0 / size, focus_distance_m=7.0,
         disp_min=math.floor(lo * 10) / 10, disp_max=math.ceil(hi * 10) / 10, depth_map_scale=10.0,
@@ -711,7 +712,7 @@ class SyntheticScene:
     depth: np.ndarray
     layer_id: np.ndarray
     masks: dict[str, np.ndarray]
-    params: SceneParameters
+    params: Camera
     layers: list[Layer] = field(repr=False)
     _visibility: np.ndarray | None = field(default=None, init=False, repr=False, compare=False)
 
@@ -772,8 +773,6 @@ def require(param: Param, value: Any) -> Any:
 
 def check_args(size: int, angular: int = 9) -> None:
     """SpecError for sizes outside the bounds, before anything is allocated."""
-    from lfbench.data.hci.params import MAX_VIEW_PIXELS
-
     require(SYNTH_SIZE, size)
     require(ANGULAR, angular)
     if angular % 2 == 0:
@@ -842,12 +841,12 @@ def quantize(views: np.ndarray) -> np.ndarray:
     return np.round(np.clip(views, 0.0, 1.0) * 255.0).astype(np.uint8)
 
 
-def write_scene(scene: SyntheticScene, folder: str | Path) -> Path:
-    """Write ``scene`` in the HCI layout into ``folder`` (created), each file atomically: its views quantized
-    (:func:`quantize`), parameters, ground-truth disparity and depth, and masks, as
-    :func:`lfbench.data.hci.write.write_hci_scene` names them."""
-    return write_hci_scene(folder, scene.params, views=quantize(scene.views), disparity=scene.disparity,
-                           depth=scene.depth, masks=scene.masks)
+def write_scene(scene: SyntheticScene, folder: str | Path, layout: str = SYNTH_LAYOUT) -> Path:
+    """Write ``scene`` into ``folder`` (created) in the layout of dataset adapter ``layout`` (default
+    :data:`SYNTH_LAYOUT`), by that adapter's writer (:meth:`lfbench.data.dataset.Dataset.write_scene`; HCI's writes
+    each file atomically: its views quantized by :func:`quantize`, parameters, ground-truth disparity and depth,
+    and masks)."""
+    return DATASETS.get(layout).write_scene(Path(folder), scene)
 
 
 def scene_name(seed: int, index: int) -> str:

@@ -9,7 +9,7 @@ and read as the numbers of a reference (by default the default reference: the de
 which says which of its methods are shown unless asked otherwise (:attr:`PaperTables.default_methods`).
 
 Resolution: the benchmark (and so the paper) scores backgammon, dots and stripes at high
-resolution (lfbench.scoring.rules.BENCHMARK_HIGHRES_SCENES), the other scenes at 512x512; the columns
+resolution (lfbench.scoring.rules.benchmark_highres_scenes), the other scenes at 512x512; the columns
 added here say so.
 """
 
@@ -25,7 +25,7 @@ import numpy as np
 import pandas as pd
 
 from lfbench.reports.reference import Reference, default_reference
-from lfbench.scoring.rules import BENCHMARK_HIGHRES_SCENES
+from lfbench.scoring.rules import benchmark_highres_scenes
 from lfbench.utils.errors import DataError, SpecError
 from lfbench.utils.readfile import read_csv
 
@@ -158,7 +158,7 @@ def _declared_file(reference: Reference | None, table_id: str, default: str) -> 
 
 def paper_resolution(scene: str) -> str:
     """How the benchmark (and so the paper) scored ``scene``: 'highres' or 'lowres'."""
-    return "highres" if scene in BENCHMARK_HIGHRES_SCENES else "lowres"
+    return "highres" if scene in benchmark_highres_scenes() else "lowres"
 
 
 def paper_column(method: str) -> str:

@@ -28,8 +28,6 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from lfbench.data.disparity import EVALUATION_BORDER_PX
-from lfbench.reports.maps import load_scene_maps
 from lfbench.reports.plotting import add_colorbar, as_gray, colormap, legend_label, method_colours, pyplot, save_formats
 from lfbench.scoring.metrics import METRICS, describe_metric, metric_order
 from lfbench.utils.errors import SpecError
@@ -41,7 +39,7 @@ __all__ = [
     "absolute_error", "bad_fraction_map", "heatmap_image", "median_error_map", "pairwise_classes",
     "pairwise_difference", "pairwise_image", "pairwise_shares", "plot_error_heatmaps", "plot_pairwise",
     "plot_radar", "radar_figure", "radar_metric_ids", "radar_radii", "radar_scores", "save_formats",
-    "toolkit_figures_from_scene_maps", "write_toolkit_figures",
+    "toolkit_figures_from_scene_maps",
 ]
 
 PAIRWISE_LIMIT = 0.1  # px, colour range of the pairwise maps (the toolkit's)
@@ -300,21 +298,13 @@ def plot_radar(scores: pd.DataFrame, path: str | Path, *, title: str = "", highl
                         path, formats)
 
 
-def write_toolkit_figures(results: Any, scenes: Sequence[Any], maps: Mapping[str, str | Path], out_dir: str | Path,
-                          *, formats: Sequence[str] = ("png",), border_px: int = EVALUATION_BORDER_PX,
-                          threshold: float = PAIRWISE_THRESHOLD) -> list[Path]:
-    """The toolkit's figures for papers into ``out_dir``: ``radar`` (from the results), and from the saved
-    ``maps`` (method label -> submission folder) on ``scenes``: ``error_heatmaps`` and
-    ``pairwise_<A>_vs_<B>`` for every pair of methods but the references (oracles), each in ``formats``."""
-    return toolkit_figures_from_scene_maps(results, (load_scene_maps(scene, maps, border_px) for scene in scenes),
-                                           out_dir, formats=formats, threshold=threshold)
-
-
 def toolkit_figures_from_scene_maps(results: Any, scene_maps: Iterable[Any], out_dir: str | Path, *,
                                     formats: Sequence[str] = ("png",),
                                     threshold: float = PAIRWISE_THRESHOLD) -> list[Path]:
-    """:func:`write_toolkit_figures` from maps already loaded (lfbench.reports.maps.SceneMaps, one per
-    scene). Reference methods (the oracle, ``results.references``) are compared with nothing."""
+    """The toolkit's figures for papers into ``out_dir``: ``radar`` (from the results), and from the maps
+    already loaded (lfbench.reports.maps.SceneMaps, one per scene): ``error_heatmaps`` and
+    ``pairwise_<A>_vs_<B>`` for every pair of methods, each in ``formats``. Reference methods (the oracle,
+    ``results.references``) are compared with nothing."""
     out = Path(out_dir)
     written: list[Path] = []
     scores = radar_scores(results, methods=results.competitors)

@@ -377,22 +377,24 @@ def bench_train(batch: int = 2, patch: int = 32, steps: int = 2, channels_last: 
 
 
 def _write_synthetic_scene(folder: Path, size: int, seed: int):
-    """An HCI-layout scene folder (lfbench.data.hci.write) with its parameters and a smooth random ground-truth
-    disparity (size x size px), returned."""
+    """A scene folder in the generator's layout (lfbench.data.synth.SYNTH_LAYOUT, written by its adapter) with
+    its camera and a smooth random ground-truth disparity (size x size px) and no views, returned."""
+    import types
+
     import numpy as np
 
-    from lfbench.data.hci.params import SceneParameters
-    from lfbench.data.hci.write import write_hci_scene
+    from lfbench.data.camera import Camera
+    from lfbench.data.synth import write_scene
 
-    params = SceneParameters(focal_length_mm=100.0, image_resolution_x_px=size, image_resolution_y_px=size,
-                             sensor_size_mm=35.0, num_cams_x=9, num_cams_y=9, baseline_mm=90.0,
-                             focus_distance_m=8.0, disp_min=-2.0, disp_max=2.0, name=folder.name,
-                             category="synthetic")
+    params = Camera(focal_length_mm=100.0, image_resolution_x_px=size, image_resolution_y_px=size,
+                    sensor_size_mm=35.0, num_cams_x=9, num_cams_y=9, baseline_mm=90.0,
+                    focus_distance_m=8.0, disp_min=-2.0, disp_max=2.0, name=folder.name,
+                    category="synthetic")
     rng = np.random.default_rng(seed)
     y, x = np.mgrid[0:size, 0:size] / size
     gt = (1.5 * np.sin(2 * np.pi * (x * rng.uniform(0.5, 2) + rng.uniform())) * np.cos(2 * np.pi * y)).astype(
         np.float32)
-    write_hci_scene(folder, params, disparity=gt)
+    write_scene(types.SimpleNamespace(params=params, views=None, disparity=gt, depth=None, masks={}), folder)
     return gt
 
 
@@ -402,7 +404,8 @@ def bench_metrics(scenes: int = 12, methods: int = 5, size: int = 512, repeat: i
     size x size scenes (HCI layout in a temporary folder; reading the ground truth is part of the time)."""
     import numpy as np
 
-    from lfbench.data.hci import HCIScene
+    from lfbench.data.dataset import DATASETS
+    from lfbench.data.synth import SYNTH_LAYOUT
     from lfbench.scoring.metrics import GENERAL_METRICS
     from lfbench.scoring.score import score_scene
 
@@ -418,8 +421,9 @@ def bench_metrics(scenes: int = 12, methods: int = 5, size: int = 512, repeat: i
         baseline = current_rss_gb()
 
         def run() -> None:
+            opened = {scene.name: scene for scene in DATASETS.get(SYNTH_LAYOUT).open(Path(tmp))}
             for folder, per_scene in zip(folders, preds, strict=True):
-                scene = HCIScene(folder)
+                scene = opened[folder.name]
                 for pred in per_scene:
                     score_scene(scene, pred, GENERAL_METRICS)
 

@@ -1,7 +1,7 @@
 """The benchmark's scoring rules: which resolution each number is scored at, the border, the non-finite rule.
 
 Rules (the official toolkit's; docs/benchmark-rules.md, General metrics): a 15 px border is ignored
-(scaled with resolution); backgammon, dots and stripes (:data:`BENCHMARK_HIGHRES_SCENES`) are scored at
+(scaled with resolution); backgammon, dots and stripes (:func:`benchmark_highres_scenes`) are scored at
 high resolution when ``gt_disp_highres.pfm`` exists (the 512x512 prediction upsampled x10 by nearest
 neighbour exactly as ``scipy.ndimage.zoom(order=0)``, border 150 px), otherwise at low resolution; the
 resolution is recorded beside every number. Region and stratified metrics
@@ -18,25 +18,32 @@ a scene with them, :func:`lfbench.scoring.score.score_scene`. This module needs 
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
-from lfbench.data.dataset import DatasetProtocol
+from lfbench.data.dataset import DATASETS, DatasetProtocol
 from lfbench.data.disparity import EVALUATION_BORDER_PX
-from lfbench.data.hci import HCI_HIGHRES_SCENES
 from lfbench.data.scene import HIGHRES, LOWRES, Scene
 from lfbench.scoring.base import Metric
 from lfbench.scoring.policy import SCORERS
 from lfbench.utils.errors import DataError
 
-__all__ = ["BENCHMARK_HIGHRES_SCENES", "ScoringRules", "metric_resolution"]
+__all__ = ["BENCHMARK_DATASET", "ScoringRules", "benchmark_highres_scenes", "metric_resolution"]
 
-#: The scenes the HCI benchmark scores at high resolution (where their high-resolution ground truth exists):
-#: the default of :attr:`ScoringRules.highres_scenes`, and how the paper's numbers were scored. Declared by
-#: the HCI dataset adapter (lfbench.data.hci); other datasets feed theirs through their protocol
-#: (:meth:`lfbench.data.dataset.DatasetProtocol.scoring_rules`).
-BENCHMARK_HIGHRES_SCENES = HCI_HIGHRES_SCENES
+#: The dataset adapter (lfbench.data.dataset.DATASETS) of the benchmark whose rules are the defaults: the HCI 4D
+#: Light Field Benchmark, how the paper's numbers were scored.
+BENCHMARK_DATASET = "hci"
+
+
+@functools.cache
+def benchmark_highres_scenes() -> frozenset[str]:
+    """The scenes the benchmark scores at high resolution (where their high-resolution ground truth exists):
+    the default of :attr:`ScoringRules.highres_scenes`, as the protocol of the benchmark's adapter
+    (:data:`BENCHMARK_DATASET`) declares them; other datasets feed theirs through their protocol
+    (:meth:`ScoringRules.of_protocol`)."""
+    return DATASETS.get(BENCHMARK_DATASET).protocol.highres_scenes
 
 
 @dataclass(frozen=True)
@@ -44,7 +51,7 @@ class ScoringRules:
     """How a scene is scored. Defaults are the benchmark's."""
 
     border_px: int = EVALUATION_BORDER_PX
-    highres_scenes: frozenset[str] = BENCHMARK_HIGHRES_SCENES
+    highres_scenes: frozenset[str] = field(default_factory=benchmark_highres_scenes)
     toolkit: bool = False  # reproduce the toolkit's non-finite handling exactly
     allow_highres: bool = True  # False: score everything at low resolution
     scorer: str = "lfbench"  # BadPix's comparison and the non-finite policy (lfbench.scoring.policy)

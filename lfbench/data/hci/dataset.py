@@ -13,6 +13,7 @@ defaults, so HCI declares no interval of its own).
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 from lfbench.data.dataset import DEFAULT_METRICS, Dataset, DatasetProtocol
 from lfbench.data.disparity import EVALUATION_BORDER_PX
@@ -51,3 +52,9 @@ class HCIDataset(Dataset):
     @classmethod
     def open(cls, root: Path) -> Benchmark:
         return discover(root)
+
+    @classmethod
+    def write_scene(cls, folder: Path, scene: Any) -> Path:
+        from lfbench.data.hci.write import write_generated_scene
+
+        return write_generated_scene(folder, scene)

@@ -1,13 +1,15 @@
-"""parameters.cfg of an HCI scene: camera geometry and the depth <-> disparity conversion."""
+"""parameters.cfg of an HCI scene: its camera (lfbench.data.camera.Camera: geometry and the depth <-> disparity
+conversion) read and written in HCI's format."""
 
 from __future__ import annotations
 
 import configparser
-from dataclasses import dataclass, field
+from dataclasses import dataclass, fields
 from pathlib import Path
 
 import numpy as np
 
+from lfbench.data.camera import MAX_CAMS, Camera
 from lfbench.data.scene import MAX_RESOLUTION_PX, MAX_VIEW_PIXELS
 from lfbench.utils.errors import DataError
 from lfbench.utils.readfile import read_text
@@ -26,7 +28,6 @@ REQUIRED_KEYS: tuple[tuple[str, str, type], ...] = (
 
 
 # Bounds checked before anything is allocated from these numbers (a 1 kB file must not ask for 100 GB).
-MAX_CAMS = 33  # per side; HCI has 9x9
 MAX_DEPTH_MAP_SCALE = 16  # side ratio of the high-resolution ground truth (HCI: 10)
 MAX_PARAMETERS_BYTES = 1024**2  # the file itself (HCI's: under 1 kB)
 _POSITIVE = {"focal_length_mm", "sensor_size_mm", "focus_distance_m"}
@@ -49,53 +50,15 @@ def _checked(section: str, key: str, number: float, kind: type, path: Path) -> i
 
 
 @dataclass(frozen=True)
-class SceneParameters:
-    """Camera and meta data of one scene (units in the names: mm, m, px)."""
+class SceneParameters(Camera):
+    """A scene's camera and meta data (lfbench.data.camera.Camera) as parameters.cfg holds them."""
 
-    focal_length_mm: float
-    image_resolution_x_px: int
-    image_resolution_y_px: int
-    sensor_size_mm: float
-    num_cams_x: int
-    num_cams_y: int
-    baseline_mm: float
-    focus_distance_m: float
-    disp_min: float | None = None
-    disp_max: float | None = None
-    depth_map_scale: float = 10.0
-    name: str | None = None
-    category: str | None = None
-    extra: dict[str, dict[str, str]] = field(default_factory=dict, compare=False, repr=False)
-
-    @property
-    def highres_scale(self) -> int:
-        """Side ratio of the high-resolution ground truth to the views (depth_map_scale, 10 in HCI)."""
-        return int(round(self.depth_map_scale))
-
-    @property
-    def angular_size(self) -> tuple[int, int]:
-        """(rows V, columns U) of the camera grid."""
-        return self.num_cams_y, self.num_cams_x
-
-    @property
-    def spatial_size(self) -> tuple[int, int]:
-        """(H, W) in px."""
-        return self.image_resolution_y_px, self.image_resolution_x_px
-
-    def _disparity_factor_m(self) -> float:
-        """b * f * N / s with b in m, so that d = factor * (1/Z - 1/F) for Z, F in m."""
-        n = max(self.image_resolution_x_px, self.image_resolution_y_px)
-        return (self.baseline_mm / 1000.0) * self.focal_length_mm * n / self.sensor_size_mm
-
-    def depth_to_disparity(self, depth_m: np.ndarray) -> np.ndarray:
-        """Depth in m (along the optical axis) -> disparity in px per view step."""
-        q = self._disparity_factor_m()
-        return q * (1.0 / np.asarray(depth_m, dtype=np.float64) - 1.0 / self.focus_distance_m)
-
-    def disparity_to_depth(self, disparity: np.ndarray) -> np.ndarray:
-        """Disparity in px per view step -> depth in m."""
-        q = self._disparity_factor_m()
-        return 1.0 / (np.asarray(disparity, dtype=np.float64) / q + 1.0 / self.focus_distance_m)
+    @classmethod
+    def of(cls, camera: Camera) -> SceneParameters:
+        """``camera`` as parameters.cfg's (the same values)."""
+        if isinstance(camera, cls):
+            return camera
+        return cls(**{f.name: getattr(camera, f.name) for f in fields(Camera)})
 
     def to_cfg(self) -> str:
         """The parameters as parameters.cfg text (HCI layout)."""

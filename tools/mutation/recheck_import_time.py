@@ -7,7 +7,7 @@ mutants "survive" whatever the tests check. This script finds those functions (i
 package with mutmut's call recording on), then runs each of their surviving mutants in a fresh Python
 process that imports the mutated package with the mutant switched on, against the scoring tests.
 
-    python results/mutation/recheck_import_time.py --out results/mutation/recheck_import_time.json
+    python tools/mutation/recheck_import_time.py --out results/mutation/recheck_import_time.json
 
 Run after `mutmut run` (from the repository root; `nox -s mutation` does both).
 """

@@ -7,7 +7,7 @@ others are listed by mutant name below, each with why the change cannot alter a 
 record or a gate decision. A survivor with no reason is printed as UNEXPLAINED and the exit code is 1:
 either a test is missing or the reason must be written here.
 
-    python results/mutation/classify.py --recheck results/mutation/recheck_import_time.json \\
+    python tools/mutation/classify.py --recheck results/mutation/recheck_import_time.json \\
         --out results/mutation/survivors_classified.md
 """
 
@@ -293,7 +293,7 @@ def main() -> int:
         reason = row.rsplit(" | ", 1)[1].rstrip(" |")
         counts[reason] = counts.get(reason, 0) + 1
     summary = "\n".join(f"- {n}: {reason}" for reason, n in sorted(counts.items(), key=lambda kv: -kv[1]))
-    text = (f"# Surviving mutants and why ({len(rows)})\n\nWritten by `python results/mutation/classify.py` "
+    text = (f"# Surviving mutants and why ({len(rows)})\n\nWritten by `python tools/mutation/classify.py` "
             f"(see README.md).\n\n{summary}\n\n| mutant | change | reason |\n| --- | --- | --- |\n"
             + "\n".join(rows) + "\n")
     args.out.write_text(text, encoding="utf-8")

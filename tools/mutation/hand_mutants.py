@@ -7,8 +7,8 @@ mutation is killed when the tests fail. ``--tests`` chooses the test files: ``ne
 named per mutation, default) or ``old`` (the files that covered scoring before them: the survivors
 the issue reported). Writes a JSON report.
 
-    python results/mutation/hand_mutants.py --tests new --out results/mutation/hand_mutants_new.json
-    python results/mutation/hand_mutants.py --tests old --out results/mutation/hand_mutants_old.json
+    python tools/mutation/hand_mutants.py --tests new --out results/mutation/hand_mutants_new.json
+    python tools/mutation/hand_mutants.py --tests old --out results/mutation/hand_mutants_old.json
 """
 
 from __future__ import annotations

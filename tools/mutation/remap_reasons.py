@@ -11,7 +11,7 @@ the same number. It prints the mapping and the names it cannot find (code that i
 their survivors are classified afresh by the next ``nox -s mutation``); ``--write`` rewrites the names in
 classify.py. Issue 21's move of the scoring code was carried over with
 
-    python results/mutation/remap_reasons.py --old b93fa51 --rename _prepare=check_maps \\
+    python tools/mutation/remap_reasons.py --old b93fa51 --rename _prepare=check_maps \\
         --rename _percentage=percent_of --rename _bad_pix_metric=bad_pix_metric \\
         --rename _badpix_family=badpix_family --rename "scene: Scene,=scene: Scene | SceneReference," --write
 """

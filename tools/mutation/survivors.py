@@ -6,7 +6,7 @@ the original of every mutated function as ``x_<name>__mutmut_orig`` and mutant N
 With ``--recheck`` (the report of recheck_import_time.py), mutants killed there in a fresh process are left
 out and those it re-ran and saw survive are marked.
 
-    python results/mutation/survivors.py --recheck results/mutation/recheck_import_time.json \
+    python tools/mutation/survivors.py --recheck results/mutation/recheck_import_time.json \
         > results/mutation/survivors.txt
 """
 
