@@ -111,7 +111,9 @@ def test_no_copy_of_the_paper_tables_ships_with_lfbench():
     shipped = [p for top in ("lfbench", "methods") for p in (ROOT / top).rglob("table*.csv")]
     assert shipped == []
     package_data = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["package-data"]
-    assert package_data["lfbench"] == ["py.typed", "reports/site_assets/*"]  # the HTML report's templates
+    # the HTML report's templates and new-plugin's skeleton
+    assert package_data["lfbench"] == ["py.typed", "reports/site_assets/*", "method/plugin_skeleton/*.tmpl",
+                                       "method/plugin_skeleton/package/*.tmpl"]
     assert not [p for p in (ROOT / "lfbench" / "reports" / "site_assets").iterdir() if p.suffix == ".csv"]
 
 

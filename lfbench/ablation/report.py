@@ -324,8 +324,8 @@ def baseline_verdicts(spec: AblationSpec, results: Results) -> tuple[pd.DataFram
     lines = summary_lines(table, labels, groups)
     what = "every cell against the baselines ([[methods]])" + (
         f", mean over seeds {', '.join(str(x) for x in spec.seeds)}" if spec.seeds else "")
-    title, ours = caption_lines(spec, what)
-    return table, [title, *lines, baselines_caption(seeds=bool(spec.seeds)), ours], lines
+    title, *ours = caption_lines(spec, what)  # the title, then (synthetic data: a line saying so) what ours is
+    return table, [title, *lines, baselines_caption(seeds=bool(spec.seeds)), *ours], lines
 
 
 # --------------------------------------------------------------------------- captions
