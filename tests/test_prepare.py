@@ -271,8 +271,8 @@ def test_metric_order_and_labels_come_from_the_metrics():
 
 
 # lfbench/scoring from the bottom up: a module may import only those before it (and data, utils)
-SCORING_LAYERS = ("policy", "pixels", "resample", "pixelwise", "base", "general", "rules", "prepare", "region_metrics",
-                  "metrics", "builtin", "protocol", "score", "stats", "uncertainty")
+SCORING_LAYERS = ("filters", "policy", "pixels", "resample", "pixelwise", "base", "general", "rules", "prepare",
+                  "region_metrics", "metrics", "builtin", "protocol", "score", "stats", "uncertainty")
 
 
 def _lfbench_imports(path: Path) -> list[tuple[str, list[str]]]:
@@ -295,3 +295,4 @@ def test_scoring_imports_run_one_way():
             top = module.split(".")[1] if "." in module else ""
             assert top in ("data", "utils") or module in allowed, f"scoring/{name}.py imports {module}"
             assert not [n for n in names if n.startswith("_")], f"scoring/{name}.py imports private {names}"
+

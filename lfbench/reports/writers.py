@@ -34,7 +34,7 @@ from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import SimpleNamespace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import pandas as pd
 
@@ -50,7 +50,6 @@ from lfbench.reports.figures import (
     plot_mean_series,
     read_curves_csv,
 )
-from lfbench.reports.html import SITE_DIR, SiteInputs, SiteSection, build_site, site_inputs
 from lfbench.reports.maps import MAPS_DIR, MapSaver, SceneMaps
 from lfbench.reports.paper import PaperTables, average_with_paper, per_scene_with_paper
 from lfbench.reports.paper_scenes import RUN_RUNTIME_COLUMN, scene_table_with_paper, scene_tables
@@ -63,6 +62,9 @@ from lfbench.scoring.rules import ScoringRules
 from lfbench.scoring.stats import ErrorCollector, ci_records
 from lfbench.scoring.uncertainty import UncertaintyCollector
 from lfbench.utils.atomic import write_text
+
+if TYPE_CHECKING:  # the site's module (jinja2 and its page helpers) is imported by the writer that draws a site
+    from lfbench.reports.html import SiteInputs, SiteSection
 
 __all__ = ["FIGURES_DIR", "BootstrapCIs", "CIOptions", "CurveFigures", "Maps", "OutputWriter", "PredictionSink",
            "RunOutputs", "SceneFigures", "Site", "Tables", "ToolkitFigures", "UncertaintyRatings", "drive_writers",
@@ -200,6 +202,8 @@ def paper_scene_sections(results: Results, paper: PaperTables | None) -> list[Si
     sections: the report's table_<id>_paper files and tables on the site's index page."""
     if paper is None:
         return []
+    from lfbench.reports.html import SiteSection
+
     out = []
     for decl in scene_tables(paper, results.meta):
         table = scene_table_with_paper(results, paper, decl)
@@ -369,6 +373,8 @@ class Site(OutputWriter):
         self.index: Path | None = None
 
     def inputs(self, run: RunOutputs) -> SiteInputs:
+        from lfbench.reports.html import site_inputs
+
         staged = run.stage / "results.json"  # the results as this set commits them (names checked), else as given
         results = Results.read(run.stage, names_checked=True) if staged.is_file() else run.results
         paper = self.paper if self.paper is not None and self.paper.shows("table1", results.meta) else None
@@ -380,5 +386,7 @@ class Site(OutputWriter):
         return inputs
 
     def write(self, run: RunOutputs) -> list[Path]:
+        from lfbench.reports.html import SITE_DIR, build_site
+
         self.index = build_site(self.inputs(run), run.stage / SITE_DIR)
         return [self.index]

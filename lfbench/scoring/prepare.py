@@ -41,6 +41,7 @@ import numpy as np
 from lfbench.data.disparity import disparity_problem
 from lfbench.data.scene import LOWRES, LightField, read_png
 from lfbench.scoring.base import Metric
+from lfbench.scoring.filters import zoom_index
 from lfbench.scoring.pixels import PixelErrors, PixelSet
 from lfbench.scoring.policy import LFBENCH, scorer
 from lfbench.scoring.rules import ScoringRules, metric_resolution
@@ -99,11 +100,10 @@ def upsample_index(shape: tuple[int, int], factor: int) -> tuple[np.ndarray, np.
     """(rows, cols), intp: the low-resolution row of each of the ``h factor`` output rows and the column of
     each of the ``w factor`` output columns of :func:`upsample_nearest` on an (h, w) map, so that
     ``pred[rows][:, cols]`` is ``upsample_nearest(pred, factor)`` bit for bit. Order-0 zoom maps each axis
-    on its own; the index is the toolkit's zoom applied to the row and column numbers themselves."""
+    on its own; the index is the toolkit's zoom applied to the row and column numbers themselves, computed
+    as scipy computes it (:func:`lfbench.scoring.filters.zoom_index`; scoring does not import scipy)."""
     h, w = shape
-    rows = upsample_nearest(np.repeat(np.arange(h, dtype=np.float64)[:, None], 2, axis=1), factor)[:, 0]
-    cols = upsample_nearest(np.repeat(np.arange(w, dtype=np.float64)[None, :], 2, axis=0), factor)[0]
-    return rows.astype(np.intp), cols.astype(np.intp)
+    return zoom_index(h, factor), zoom_index(w, factor)
 
 
 def read_label_mask(path: str | Path) -> np.ndarray:

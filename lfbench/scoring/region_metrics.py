@@ -33,6 +33,7 @@ import numpy as np
 
 from lfbench.data.scene import Scene
 from lfbench.scoring.base import NON_NEGATIVE, PERCENT, Metric
+from lfbench.scoring.filters import correlate1d3, correlate3x3
 from lfbench.scoring.general import BadPixels, check_maps, percent_of, squared_error
 from lfbench.scoring.pixels import PixelErrors
 from lfbench.scoring.pixelwise import Mean, PixelMetric, Proportion, Sample, kept
@@ -96,12 +97,11 @@ def scharr_derivative(image: np.ndarray, axis: int, mode: str = "reflect", zero_
     and ``scharr_v`` (axis 1), computed as it did (``scipy.ndimage.convolve`` with the 3x3 kernel,
     which skips the kernel's zero weights: an infinite value gives +-inf or NaN only where it has
     a non-zero weight, never inf * 0). ``zero_border`` sets the outermost 1 px ring to 0, as the
-    scikit-image of the toolkit's era did (only pixels within 2 px of the edge are affected).
+    scikit-image of the toolkit's era did (only pixels within 2 px of the edge are affected). The convolution
+    is scipy's, computed in numpy (lfbench.scoring.filters: importing scipy.ndimage costs more than scoring).
     """
-    from scipy import ndimage  # scipy comes when a region metric is computed, not when one is looked up
-
     kernel = _SCHARR_H if axis == 0 else _SCHARR_H.T
-    out = ndimage.convolve(np.asarray(image, dtype=np.float64), kernel, mode=mode)
+    out = correlate3x3(image, kernel[::-1, ::-1], mode=mode)  # a convolution: the flipped kernel correlated
     if zero_border:
         out[0, :] = out[-1, :] = 0.0
         out[:, 0] = out[:, -1] = 0.0
@@ -111,11 +111,10 @@ def scharr_derivative(image: np.ndarray, axis: int, mode: str = "reflect", zero_
 def _scharr_separable(image: np.ndarray, axis: int) -> np.ndarray:
     """Scharr derivative with periodic borders as two 1-D passes (every weight multiplies, so a
     non-finite value spreads NaN over its 3x3 neighbourhood, like the toolkit's
-    ``scipy.signal.convolve2d`` used for surface normals)."""
-    from scipy import ndimage
-
-    out = ndimage.correlate1d(np.asarray(image, dtype=np.float64), _DIFF, axis=axis, mode="wrap")
-    return ndimage.correlate1d(out, _SMOOTH, axis=1 - axis, mode="wrap")
+    ``scipy.signal.convolve2d`` used for surface normals); scipy.ndimage.correlate1d's passes
+    (lfbench.scoring.filters)."""
+    out = correlate1d3(image, _DIFF, axis=axis, mode="wrap")
+    return correlate1d3(out, _SMOOTH, axis=1 - axis, mode="wrap")
 
 
 def _hessian_norm(diff: np.ndarray) -> np.ndarray:
