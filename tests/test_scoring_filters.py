@@ -1,5 +1,7 @@
-"""lfbench.scoring.filters computes scipy.ndimage's zoom index and 3-tap / 3x3 correlations as scipy does: the
-same values on maps with NaN, infinities and signed zeros (a NaN's sign bit aside), for every boundary mode."""
+"""Scoring's own numpy for what it once called a library for: lfbench.scoring.filters computes scipy.ndimage's zoom
+index and 3-tap / 3x3 correlations as scipy does (the same values on maps with NaN, infinities and signed zeros, a
+NaN's sign bit aside, for every boundary mode); the surface normals are np.cross and np.linalg.norm's bits, and
+the label values present are those a count finds."""
 
 from __future__ import annotations
 
@@ -8,7 +10,7 @@ import pytest
 from scipy import ndimage
 
 from lfbench.scoring.filters import correlate1d3, correlate3x3, zoom_index
-from lfbench.scoring.region_metrics import _DIFF, _SCHARR_H, _SMOOTH
+from lfbench.scoring.region_metrics import _DIFF, _SCHARR_H, _SMOOTH, _present, _scharr_separable, depth_normals
 
 MODES = ["reflect", "mirror", "nearest", "wrap", "constant"]
 
@@ -67,3 +69,38 @@ def test_unknown_mode_and_shapes_are_refused():
     with pytest.raises(ValueError, match="nothing to index"):
         zoom_index(0, 10)
 
+
+def _stacked_normals(depth: np.ndarray, focal_length_mm: float, sensor_size_mm: float) -> np.ndarray:
+    """depth_normals as it was written: stacked tangents, np.cross and np.linalg.norm."""
+    z = np.asarray(depth, dtype=np.float64)
+    h, w = z.shape
+    k = 0.5 * sensor_size_mm / focal_length_mm
+    points = (k * (np.arange(w) / (w - 1.0))[None, :] * z, k * (np.arange(h) / (h - 1.0))[:, None] * z, z)
+    d_row = np.stack([_scharr_separable(c, axis=0) for c in points], axis=-1)
+    d_col = np.stack([_scharr_separable(c, axis=1) for c in points], axis=-1)
+    normal = np.cross(d_row, d_col)
+    return normal / np.linalg.norm(normal, axis=-1, keepdims=True)
+
+
+@pytest.mark.parametrize("shape", [(3, 3), (37, 53), (128, 96)])
+def test_depth_normals_are_numpys_cross_and_norm_bit_for_bit(shape):
+    rng = np.random.default_rng(3)
+    depth = rng.uniform(0.5, 20, shape) * 10.0 ** rng.integers(-3, 3, shape)
+    for value, share in ((np.nan, 50), (np.inf, 80), (0.0, 80)):
+        depth.ravel()[rng.integers(0, depth.size, max(1, depth.size // share))] = value
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        expected = _stacked_normals(depth, 100.0, 35.0)
+        got = depth_normals(depth, 100.0, 35.0)
+    nan = np.isnan(expected)
+    assert got.shape == expected.shape and np.array_equal(np.isnan(got), nan)
+    assert np.array_equal(got[~nan].view(np.uint64), expected[~nan].view(np.uint64))
+
+
+@pytest.mark.parametrize(("dtype", "top"), [(np.uint8, 0), (np.uint8, 9), (np.uint8, 31), (np.uint8, 32),
+                                             (np.uint16, 300), (np.int32, 5), (np.int32, 300)])
+def test_present_labels_are_the_counted_ones(dtype, top):
+    rng = np.random.default_rng(top)
+    labels = rng.choice(np.array([0, top // 2, top], dtype=dtype), size=(61, 47))
+    expected = np.bincount(labels.ravel().astype(np.intp)) > 0
+    assert np.array_equal(_present(labels), expected)
+    assert np.array_equal(_present(labels, chunk=100), expected)

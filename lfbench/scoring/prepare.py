@@ -383,8 +383,18 @@ class SceneReference:
             gt = self.gt(resolution)
             mask = self.scored_mask(resolution, mask_name)
             upsample = self.upsample_index(resolution) if self.scale(resolution) > 1 else None
-            self._pixels[key] = PixelSet(mask, gt, upsample=upsample, low_width=self.spatial_size[1])
+            self._pixels[key] = PixelSet(mask, gt, upsample=upsample, low_width=self.spatial_size[1],
+                                         box=self._border_box(resolution) if mask_name is None else None)
         return self._pixels[key]
+
+    def _border_box(self, resolution: str) -> tuple[int, int, int, int] | None:
+        """The evaluation mask at ``resolution`` as the rectangle (top, bottom, left, right) it is when the scene
+        has no valid mask (:func:`border_mask`), else None."""
+        if self.valid_mask(resolution) is not None:
+            return None
+        h, w = self.shape(resolution)
+        border = self.rules.border_px * self.scale(resolution)
+        return (border, h - border, border, w - border) if 0 <= 2 * border <= min(h, w) else None
 
     def memo(self, key: Any, compute: Callable[[], Any]) -> Any:
         """What a metric keeps of this scene (method-independent): ``compute()`` the first time ``key`` is asked
