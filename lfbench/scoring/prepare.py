@@ -188,6 +188,11 @@ class Prepared:
             self._errors[mask_name] = errors
         return self._errors[mask_name]
 
+    def release(self, mask_name: str | None = None) -> None:
+        """Drop the errors gathered at the pixels of ``mask_name`` (:meth:`errors` gathers them again if asked):
+        a scorer done with a region frees its prediction values, errors and flags before the next region's."""
+        self._errors.pop(mask_name, None)
+
 
 class SceneReference:
     """What scoring needs of one scene, whatever the method: computed on first use, then kept.
