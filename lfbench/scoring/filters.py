@@ -68,8 +68,8 @@ def correlate1d3(image: np.ndarray, weights: np.ndarray, axis: int, mode: str = 
     w0, w1, w2 = (float(v) for v in np.asarray(weights, dtype=np.float64).reshape(3))
     padded = _padded(image, mode, axis)
     n = image.shape[axis]
-    left = padded.take(np.arange(0, n), axis=axis)
-    right = padded.take(np.arange(2, n + 2), axis=axis)
+    before = (slice(None),) * (axis % image.ndim)
+    left, right = padded[(*before, slice(0, n))], padded[(*before, slice(2, n + 2))]  # views of the padded map
     if abs(w2 - w0) <= _EPS:
         out = image * w1
         out += (left + right) * w0
