@@ -40,7 +40,6 @@ import pandas as pd
 
 from lfbench.data.scene import LightField
 from lfbench.method.base import Prediction
-from lfbench.reports.ci import format_ci_table
 from lfbench.reports.figures import (
     Curve,
     SceneFigureWriter,
@@ -56,15 +55,14 @@ from lfbench.reports.paper_scenes import RUN_RUNTIME_COLUMN, scene_table_with_pa
 from lfbench.reports.plotting import method_colours
 from lfbench.reports.tables import TABLE_FORMATS, average_table, per_scene_table, write_table
 from lfbench.reports.toolkit_figures import toolkit_figures_from_scene_maps
-from lfbench.reports.uncertainty import write_uncertainty_report
 from lfbench.results import Results
 from lfbench.scoring.rules import ScoringRules
-from lfbench.scoring.stats import ErrorCollector, ci_records
-from lfbench.scoring.uncertainty import UncertaintyCollector
 from lfbench.utils.atomic import write_text
 
-if TYPE_CHECKING:  # the site's module (jinja2 and its page helpers) is imported by the writer that draws a site
+if TYPE_CHECKING:  # the site's, the intervals' and the uncertainty's modules: imported by the writers that use them
     from lfbench.reports.html import SiteInputs, SiteSection
+    from lfbench.scoring.stats import ErrorCollector
+    from lfbench.scoring.uncertainty import UncertaintyCollector
 
 __all__ = ["FIGURES_DIR", "BootstrapCIs", "CIOptions", "CurveFigures", "Maps", "OutputWriter", "PredictionSink",
            "RunOutputs", "SceneFigures", "Site", "Tables", "ToolkitFigures", "UncertaintyRatings", "drive_writers",
@@ -320,12 +318,17 @@ class BootstrapCIs(OutputWriter):
         self.collector: ErrorCollector | None = None
 
     def start(self, run: RunOutputs) -> None:
+        from lfbench.scoring.stats import ErrorCollector
+
         self.collector = ErrorCollector(run.rules)
 
     def on_prediction(self, label: str, scene: LightField, pred: Prediction) -> None:
         self.collector(_named(label), scene, pred)
 
     def write(self, run: RunOutputs) -> list[Path]:
+        from lfbench.reports.ci import format_ci_table
+        from lfbench.scoring.stats import ci_records
+
         o = self.options
         long = ci_records(run.results, self.collector.errors, n=o.resamples, seed=o.seed, block=o.block,
                           progress=run.progress)
@@ -341,12 +344,16 @@ class UncertaintyRatings(OutputWriter):
         self.collector: UncertaintyCollector | None = None
 
     def start(self, run: RunOutputs) -> None:
+        from lfbench.scoring.uncertainty import UncertaintyCollector
+
         self.collector = UncertaintyCollector(run.rules)
 
     def on_prediction(self, label: str, scene: LightField, pred: Prediction) -> None:
         self.collector(_named(label), scene, pred)
 
     def write(self, run: RunOutputs) -> list[Path]:
+        from lfbench.reports.uncertainty import write_uncertainty_report
+
         written = write_uncertainty_report(self.collector, run.stage)
         for name in sorted(self.collector.without):
             log.info("note: %s predicts no uncertainty map; not rated", name)
