@@ -462,20 +462,23 @@ def _first_labels(labels: np.ndarray, highest: int) -> np.ndarray:
     return lut
 
 
-#: up to this many label values, :func:`_present` compares the labels with each value (a pass in the labels' own
-#: type, ~1 ms per 26 M uint8) rather than counting them (a copy in the index type, ~4 ms per M)
+#: label values below this are found by one OR of 1 << label (a pass in 32-bit words, ~15 ms per 26 M uint8)
+#: rather than counted (a copy in the index type, ~4 ms per M)
 _FEW_LABELS = 32
 
 
 def _present(labels: np.ndarray, chunk: int = 1 << 20) -> np.ndarray:
-    """Bool by label value 0..max: whether it occurs in ``labels`` (non-negative integers). Few values (the masks'
-    labels: 0..16): one comparison per value; else counted a chunk at a time, so that no copy of a
-    high-resolution mask in the index type is made."""
+    """Bool by label value 0..max: whether it occurs in ``labels`` (non-negative integers), a chunk at a time, so
+    that no copy of a high-resolution mask in the index type is made. Few values (the masks' labels: 0..16): the
+    bits 1 << label ORed together; else counted."""
     flat = labels.ravel()
     present = np.zeros(int(flat.max()) + 1 if flat.size else 1, bool)
     if present.size <= _FEW_LABELS:
-        for value in range(present.size):
-            present[value] = bool(np.any(flat == value))
+        word = np.uint32(0)
+        for start in range(0, flat.size, chunk):  # labels 0..31 (max checked): exact in uint32, whatever their type
+            bits = np.left_shift(np.uint32(1), flat[start:start + chunk], dtype=np.uint32, casting="unsafe")
+            word |= np.bitwise_or.reduce(bits)
+        present[:] = [bool((int(word) >> value) & 1) for value in range(present.size)]
         return present
     for start in range(0, flat.size, chunk):
         counts = np.bincount(flat[start:start + chunk])
