@@ -271,8 +271,8 @@ def test_metric_order_and_labels_come_from_the_metrics():
 
 
 # lfbench/scoring from the bottom up: a module may import only those before it (and data, utils)
-SCORING_LAYERS = ("policy", "pixels", "resample", "pixelwise", "base", "general", "rules", "prepare", "region_metrics",
-                  "metrics", "builtin", "protocol", "score", "stats", "uncertainty")
+SCORING_LAYERS = ("filters", "policy", "pixels", "resample", "pixelwise", "base", "general", "rules", "prepare",
+                  "region_metrics", "metrics", "builtin", "protocol", "score", "stats", "uncertainty")
 
 
 def _lfbench_imports(path: Path) -> list[tuple[str, list[str]]]:
@@ -295,3 +295,32 @@ def test_scoring_imports_run_one_way():
             top = module.split(".")[1] if "." in module else ""
             assert top in ("data", "utils") or module in allowed, f"scoring/{name}.py imports {module}"
             assert not [n for n in names if n.startswith("_")], f"scoring/{name}.py imports private {names}"
+
+
+@pytest.mark.parametrize("factor", [1, 3, 10])
+@pytest.mark.parametrize("border", [0, 2, 5])
+def test_a_border_rectangle_reads_the_pixels_its_mask_selects(factor, border):
+    """Issue 39.7: the evaluation pixels of a scene without a valid mask are sliced as a rectangle (no mask pass),
+    the same pixels in the same order as through the mask, upsampled or not, in order-run columns or not."""
+    from lfbench.scoring.pixels import PixelSet
+    from lfbench.scoring.prepare import border_mask, upsample_index
+
+    rng = np.random.default_rng(factor + border)
+    low = rng.standard_normal((10, 12)).astype(F32)
+    shape = (10 * factor, 12 * factor)
+    gt = rng.standard_normal(shape).astype(F32)
+    b = border * factor
+    upsample = upsample_index((10, 12), factor) if factor > 1 else None
+    pred = low if factor > 1 else rng.standard_normal(shape).astype(F32)
+    masked = PixelSet(border_mask(shape, b), gt, upsample=upsample, low_width=12)
+    boxed = PixelSet(border_mask(shape, b), gt, upsample=upsample, low_width=12,
+                     box=(b, shape[0] - b, b, shape[1] - b))
+    full = ndimage.zoom(low, factor, order=0) if factor > 1 else pred  # the toolkit's upsampling
+    assert np.array_equal(boxed.gt, gt[border_mask(shape, b)]) and np.array_equal(boxed.gt, masked.gt)
+    assert np.array_equal(masked.values(pred, rows_per_block=7), full[border_mask(shape, b)])
+    assert np.array_equal(boxed.values(pred, rows_per_block=7), full[border_mask(shape, b)])
+    if upsample is not None:  # the same through take as through repeat
+        boxed.__dict__["_column_runs"] = (0, None)
+        assert np.array_equal(boxed.values(pred), masked.values(pred))
+    with pytest.raises(ValueError, match="not a rectangle"):
+        PixelSet(None, gt, box=(0, shape[0] + 1, 0, 1))

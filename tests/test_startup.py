@@ -64,6 +64,31 @@ def test_light_commands_import_neither_torch_nor_plugin_commands(command, tmp_pa
         assert not [m for m in modules if m.split(".")[0] == "scipy"], modules
 
 
+def test_scoring_every_metric_imports_neither_scipy_nor_the_site(tmp_path):
+    """Issue 39.7: importing scipy.ndimage cost more CPU time than scoring a low-resolution scene, and the HTML
+    report's module (jinja2) came with every evaluate; scoring computes the upsampling index and the Scharr
+    filters itself (lfbench.scoring.filters), and the site's module comes with --html."""
+    import numpy as np
+    from helpers import write_scene, write_submission
+
+    mask = np.zeros((40, 40), dtype=bool)
+    mask[5:30, 8:33] = True
+    write_scene(tmp_path / "data", "boxes", size=40, views=False,  # MAE and bumpiness: the Scharr filters
+                masks={"mask_planes_lowres": mask, "mask_smooth_surfaces_lowres": ~mask})
+    write_scene(tmp_path / "data", "stripes", "stratified", size=40, views=False,  # the upsampling index
+                gt_highres=np.ones((400, 400), np.float32))
+    maps = {name: np.full((40, 40), 1.5, np.float32) for name in ("boxes", "stripes")}
+    sub = write_submission(tmp_path / "sub", maps)
+    code, modules = _imports("evaluate", "--data", str(tmp_path / "data"), "--method", f"published:path={sub}",
+                             "--all-metrics", "--out", str(tmp_path / "out"), "--no-progress", cwd=tmp_path)
+    assert code == 0
+    assert "lfbench.scoring.region_metrics" in modules and "lfbench.scoring.filters" in modules  # scored them
+    assert not [m for m in modules if m.split(".")[0] == "scipy"], modules
+    assert "lfbench.reports.html" not in modules
+    records = (tmp_path / "out" / "results.csv").read_text()
+    assert "mae_planes" in records and "bumpiness_planes" in records and ",highres" in records
+
+
 def test_a_command_that_needs_torch_still_gets_it(tmp_path):
     """The light start-up does not hide a network from the commands that run one."""
     code, modules = _imports("info", "subfocal", cwd=tmp_path)

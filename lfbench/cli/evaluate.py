@@ -81,7 +81,6 @@ def run(args: argparse.Namespace) -> int:
     from lfbench.data.provenance import is_synthetic_root
     from lfbench.method.registry import create_from_spec
     from lfbench.reports import writers as w
-    from lfbench.reports.html import SITE_DIR, check_site_dir
     from lfbench.reports.tables import per_scene_table, render
     from lfbench.results import protocol_meta
     from lfbench.runs.folder import evaluate_to_folder
@@ -105,7 +104,9 @@ def run(args: argparse.Namespace) -> int:
         if not all(label.strip() for label in args.label):
             raise SpecError("--label: a label must not be empty")
         methods = [m.with_label(label) for m, label in zip(methods, args.label, strict=True)]
-    if args.html:
+    if args.html:  # the site's module (jinja2) only for a run that draws one
+        from lfbench.reports.html import SITE_DIR, check_site_dir
+
         check_site_dir(args.out / SITE_DIR)
     scenes = bench.select([s for s in args.scenes.split(",") if s.strip()])
     scenes = [s for s in scenes if s.has_gt()]

@@ -34,13 +34,12 @@ from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import SimpleNamespace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import pandas as pd
 
 from lfbench.data.scene import LightField
 from lfbench.method.base import Prediction
-from lfbench.reports.ci import format_ci_table
 from lfbench.reports.figures import (
     Curve,
     SceneFigureWriter,
@@ -50,19 +49,20 @@ from lfbench.reports.figures import (
     plot_mean_series,
     read_curves_csv,
 )
-from lfbench.reports.html import SITE_DIR, SiteInputs, SiteSection, build_site, site_inputs
 from lfbench.reports.maps import MAPS_DIR, MapSaver, SceneMaps
 from lfbench.reports.paper import PaperTables, average_with_paper, per_scene_with_paper
 from lfbench.reports.paper_scenes import RUN_RUNTIME_COLUMN, scene_table_with_paper, scene_tables
 from lfbench.reports.plotting import method_colours
 from lfbench.reports.tables import TABLE_FORMATS, average_table, per_scene_table, write_table
 from lfbench.reports.toolkit_figures import toolkit_figures_from_scene_maps
-from lfbench.reports.uncertainty import write_uncertainty_report
 from lfbench.results import Results
 from lfbench.scoring.rules import ScoringRules
-from lfbench.scoring.stats import ErrorCollector, ci_records
-from lfbench.scoring.uncertainty import UncertaintyCollector
 from lfbench.utils.atomic import write_text
+
+if TYPE_CHECKING:  # the site's, the intervals' and the uncertainty's modules: imported by the writers that use them
+    from lfbench.reports.html import SiteInputs, SiteSection
+    from lfbench.scoring.stats import ErrorCollector
+    from lfbench.scoring.uncertainty import UncertaintyCollector
 
 __all__ = ["FIGURES_DIR", "BootstrapCIs", "CIOptions", "CurveFigures", "Maps", "OutputWriter", "PredictionSink",
            "RunOutputs", "SceneFigures", "Site", "Tables", "ToolkitFigures", "UncertaintyRatings", "drive_writers",
@@ -212,6 +212,8 @@ def paper_scene_sections(results: Results, paper: PaperTables | None) -> list[Si
     sections: the report's table_<id>_paper files and tables on the site's index page."""
     if paper is None:
         return []
+    from lfbench.reports.html import SiteSection
+
     out = []
     for decl in scene_tables(paper, results.meta):
         table = scene_table_with_paper(results, paper, decl)
@@ -328,12 +330,17 @@ class BootstrapCIs(OutputWriter):
         self.collector: ErrorCollector | None = None
 
     def start(self, run: RunOutputs) -> None:
+        from lfbench.scoring.stats import ErrorCollector
+
         self.collector = ErrorCollector(run.rules)
 
     def on_prediction(self, label: str, scene: LightField, pred: Prediction) -> None:
         self.collector(_named(label), scene, pred)
 
     def write(self, run: RunOutputs) -> list[Path]:
+        from lfbench.reports.ci import format_ci_table
+        from lfbench.scoring.stats import ci_records
+
         o = self.options
         long = ci_records(run.results, self.collector.errors, n=o.resamples, seed=o.seed, block=o.block,
                           progress=run.progress)
@@ -349,12 +356,16 @@ class UncertaintyRatings(OutputWriter):
         self.collector: UncertaintyCollector | None = None
 
     def start(self, run: RunOutputs) -> None:
+        from lfbench.scoring.uncertainty import UncertaintyCollector
+
         self.collector = UncertaintyCollector(run.rules)
 
     def on_prediction(self, label: str, scene: LightField, pred: Prediction) -> None:
         self.collector(_named(label), scene, pred)
 
     def write(self, run: RunOutputs) -> list[Path]:
+        from lfbench.reports.uncertainty import write_uncertainty_report
+
         written = write_uncertainty_report(self.collector, run.stage)
         for name in sorted(self.collector.without):
             log.info("note: %s predicts no uncertainty map; not rated", name)
@@ -381,6 +392,8 @@ class Site(OutputWriter):
         self.index: Path | None = None
 
     def inputs(self, run: RunOutputs) -> SiteInputs:
+        from lfbench.reports.html import site_inputs
+
         staged = run.stage / "results.json"  # the results as this set commits them (names checked), else as given
         results = Results.read(run.stage, names_checked=True) if staged.is_file() else run.results
         paper = self.paper if self.paper is not None and self.paper.shows("table1", results.meta) else None
@@ -392,5 +405,7 @@ class Site(OutputWriter):
         return inputs
 
     def write(self, run: RunOutputs) -> list[Path]:
+        from lfbench.reports.html import SITE_DIR, build_site
+
         self.index = build_site(self.inputs(run), run.stage / SITE_DIR)
         return [self.index]

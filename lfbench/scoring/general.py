@@ -110,8 +110,9 @@ class BadPixels:
             bad = px.err > self.threshold  # NaN compares False
         if toolkit:  # counted as good
             return Sample(bad)
-        bad |= ~px.pred_finite
-        return kept(bad, px.gt_finite)
+        if not px.pred_all_finite:
+            bad |= ~px.pred_finite
+        return Sample(bad) if px.gt_all_finite else kept(bad, px.gt_finite)
 
 
 def bad_pix_of(px: PixelErrors, threshold: float = 0.07, *, toolkit: bool = False) -> float:
@@ -145,6 +146,8 @@ def squared_error(px: PixelErrors, *, toolkit: bool = False) -> Sample:
     prediction (one rule in both modes: no finite stand-in for a non-finite error exists)."""
     if px.scorer.nan_good:  # every pixel, as computed: a NaN error makes the mean NaN (lfbench.scoring.policy)
         return Sample(np.square(px.err), None)
+    if px.gt_all_finite and px.pred_all_finite:
+        return Sample(np.square(px.err), None)
     scored = px.finite
     return Sample(np.square(px.err), None) if scored.all() else Sample(np.square(px.err[scored]), scored)
 
@@ -171,7 +174,8 @@ def abs_error_x100(px: PixelErrors, *, toolkit: bool = False) -> Sample:
         diffs = px.err * 100
     if toolkit:
         return kept(diffs, np.isfinite(diffs) & px.pred_finite)
-    return kept(diffs if px.pred_finite.all() else np.where(px.pred_finite, diffs, np.inf), px.gt_finite)
+    diffs = diffs if px.pred_all_finite else np.where(px.pred_finite, diffs, np.inf)
+    return Sample(diffs) if px.gt_all_finite else kept(diffs, px.gt_finite)
 
 
 def quantile_x100_of(px: PixelErrors, percentage: float = 25, *, toolkit: bool = False) -> float:

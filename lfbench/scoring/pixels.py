@@ -44,22 +44,36 @@ class PixelSet:
     low-resolution row of each of the H rows and column of each of the W columns (the toolkit's upsampling,
     lfbench.scoring.prepare.upsample_index) when predictions come at low resolution, else None.
     ``low_width``: the width of the low-resolution map (the scene's; W when the maps are at it).
-    :meth:`memo` keeps further method-independent arrays of the set (e.g. a metric's per-pixel reference values).
+    ``box``: (top, bottom, left, right) when ``mask`` is exactly the rectangle [top:bottom, left:right] (the
+    evaluation mask of a scene without a valid mask: all but the border), so that its pixels are sliced, not
+    selected by the mask (the same pixels in the same order). :meth:`memo` keeps further method-independent
+    arrays of the set (e.g. a metric's per-pixel reference values).
     """
 
     def __init__(self, mask: np.ndarray | None, gt_map: np.ndarray, *,
-                 upsample: tuple[np.ndarray, np.ndarray] | None = None, low_width: int | None = None) -> None:
+                 upsample: tuple[np.ndarray, np.ndarray] | None = None, low_width: int | None = None,
+                 box: tuple[int, int, int, int] | None = None) -> None:
         self.mask = mask
         self.gt_map = gt_map
         self.shape: tuple[int, ...] = tuple(gt_map.shape)
         self.upsample = upsample
         self.low_width = int(self.shape[-1] if low_width is None else low_width)
+        if box is not None and not (0 <= box[0] <= box[1] <= self.shape[0] and 0 <= box[2] <= box[3] <= self.shape[1]):
+            raise ValueError(f"box {box} is not a rectangle of the {self.shape} map")
+        self.box = box
         self._memo: dict[Any, Any] = {}
+
+    def _selected(self, arr: np.ndarray) -> np.ndarray:
+        """``arr`` (a map of ``shape``) at the pixels, in raster order."""
+        if self.box is not None:
+            top, bottom, left, right = self.box
+            return arr[top:bottom, left:right].ravel()
+        return arr.ravel() if self.mask is None else arr[self.mask]
 
     @functools.cached_property
     def gt(self) -> np.ndarray:
         """The ground truth at the pixels (1-D, the map's dtype, read-only)."""
-        return _read_only(self.gt_map.ravel() if self.mask is None else self.gt_map[self.mask])
+        return _read_only(self._selected(self.gt_map))
 
     def per_row(self, values: np.ndarray) -> np.ndarray:
         """``values`` (one per row of the map) at each pixel: the value of its row (raster order is row by row)."""
@@ -83,16 +97,36 @@ class PixelSet:
         ``shape``."""
         pred = np.asarray(pred)
         if self.upsample is None:
-            return pred.ravel() if self.mask is None else pred[self.mask]
+            return self._selected(pred)
         rows, cols = self.upsample
-        mask = np.ones(self.shape, bool) if self.mask is None else self.mask
+        top, bottom, left, right = self.box if self.box is not None else (0, self.shape[0], 0, self.shape[1])
+        sliced = self.mask is None or self.box is not None  # a rectangle of pixels: no mask to apply
+        first, repeats = self._column_runs
+        if repeats is not None and first + repeats.size > pred.shape[-1]:
+            repeats = None
         out = np.empty(self.size, dtype=pred.dtype)
         at = 0
-        for r in range(0, self.shape[0], rows_per_block):
-            block = pred.take(rows[r:r + rows_per_block], axis=0).take(cols, axis=1)[mask[r:r + rows_per_block]]
+        for r in range(top, bottom, rows_per_block):
+            block = pred.take(rows[r:min(r + rows_per_block, bottom)], axis=0)
+            if repeats is None:
+                block = block.take(cols[left:right], axis=1)
+            else:
+                block = np.repeat(block[:, first:first + repeats.size], repeats, axis=1)
+            block = block.ravel() if sliced else block[self.mask[r:r + rows_per_block]]
             out[at:at + block.size] = block
             at += block.size
         return out
+
+    @functools.cached_property
+    def _column_runs(self) -> tuple[int, np.ndarray | None]:
+        """(the first low-resolution column, how many times each column from it repeats) in the upsampling's
+        columns of the set (those of its box) when they run in order: then ``np.repeat`` takes them, a fifth
+        faster than ``take``, the same values. (0, None) when they do not."""
+        cols = self.upsample[1] if self.box is None else self.upsample[1][self.box[2]:self.box[3]]
+        if cols.size == 0 or (cols.size > 1 and bool(np.any(cols[1:] < cols[:-1]))):
+            return 0, None
+        first = int(cols[0])
+        return first, np.bincount(cols - first)
 
 
 class PixelErrors:
@@ -157,6 +191,16 @@ class PixelErrors:
     def finite(self) -> np.ndarray:
         """Both finite."""
         return self.gt_finite & self.pred_finite
+
+    @functools.cached_property
+    def gt_all_finite(self) -> bool:
+        """Whether every ground truth value is finite (then no metric leaves a pixel out for it: one test for all)."""
+        return bool(self.gt_finite.all())
+
+    @functools.cached_property
+    def pred_all_finite(self) -> bool:
+        """Whether every prediction is finite (then no metric's non-finite rule changes a pixel: one test for all)."""
+        return bool(self.pred_finite.all())
 
 
 class ErrorsOnly(PixelErrors):

@@ -41,6 +41,7 @@ import numpy as np
 from lfbench.data.disparity import disparity_problem
 from lfbench.data.scene import LOWRES, LightField, read_png
 from lfbench.scoring.base import Metric
+from lfbench.scoring.filters import zoom_index
 from lfbench.scoring.pixels import PixelErrors, PixelSet
 from lfbench.scoring.policy import LFBENCH, scorer
 from lfbench.scoring.rules import ScoringRules, metric_resolution
@@ -99,11 +100,10 @@ def upsample_index(shape: tuple[int, int], factor: int) -> tuple[np.ndarray, np.
     """(rows, cols), intp: the low-resolution row of each of the ``h factor`` output rows and the column of
     each of the ``w factor`` output columns of :func:`upsample_nearest` on an (h, w) map, so that
     ``pred[rows][:, cols]`` is ``upsample_nearest(pred, factor)`` bit for bit. Order-0 zoom maps each axis
-    on its own; the index is the toolkit's zoom applied to the row and column numbers themselves."""
+    on its own; the index is the toolkit's zoom applied to the row and column numbers themselves, computed
+    as scipy computes it (:func:`lfbench.scoring.filters.zoom_index`; scoring does not import scipy)."""
     h, w = shape
-    rows = upsample_nearest(np.repeat(np.arange(h, dtype=np.float64)[:, None], 2, axis=1), factor)[:, 0]
-    cols = upsample_nearest(np.repeat(np.arange(w, dtype=np.float64)[None, :], 2, axis=0), factor)[0]
-    return rows.astype(np.intp), cols.astype(np.intp)
+    return zoom_index(h, factor), zoom_index(w, factor)
 
 
 def read_label_mask(path: str | Path) -> np.ndarray:
@@ -187,6 +187,11 @@ class Prepared:
                 errors.scorer = scorer(self.reference.rules.scorer)
             self._errors[mask_name] = errors
         return self._errors[mask_name]
+
+    def release(self, mask_name: str | None = None) -> None:
+        """Drop the errors gathered at the pixels of ``mask_name`` (:meth:`errors` gathers them again if asked):
+        a scorer done with a region frees its prediction values, errors and flags before the next region's."""
+        self._errors.pop(mask_name, None)
 
 
 class SceneReference:
@@ -383,8 +388,18 @@ class SceneReference:
             gt = self.gt(resolution)
             mask = self.scored_mask(resolution, mask_name)
             upsample = self.upsample_index(resolution) if self.scale(resolution) > 1 else None
-            self._pixels[key] = PixelSet(mask, gt, upsample=upsample, low_width=self.spatial_size[1])
+            self._pixels[key] = PixelSet(mask, gt, upsample=upsample, low_width=self.spatial_size[1],
+                                         box=self._border_box(resolution) if mask_name is None else None)
         return self._pixels[key]
+
+    def _border_box(self, resolution: str) -> tuple[int, int, int, int] | None:
+        """The evaluation mask at ``resolution`` as the rectangle (top, bottom, left, right) it is when the scene
+        has no valid mask (:func:`border_mask`), else None."""
+        if self.valid_mask(resolution) is not None:
+            return None
+        h, w = self.shape(resolution)
+        border = self.rules.border_px * self.scale(resolution)
+        return (border, h - border, border, w - border) if 0 <= 2 * border <= min(h, w) else None
 
     def memo(self, key: Any, compute: Callable[[], Any]) -> Any:
         """What a metric keeps of this scene (method-independent): ``compute()`` the first time ``key`` is asked

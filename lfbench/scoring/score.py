@@ -72,7 +72,10 @@ def score_scene(scene: Scene, pred: np.ndarray, metrics: Sequence[Metric] = GENE
     resolution: dict[str, str] = {}
     prepared: dict[str, Prepared] = {}  # the prediction at each resolution a metric asks for
     nonfinite = nonfinite_count(pred, reference.evaluation_mask(LOWRES))
-    for metric in metrics:
+    # the errors of each region are dropped after the last metric that reads them: one region's in memory at a time
+    last_use = {(reference.metric_resolution(m), m.mask_name): k for k, m in enumerate(metrics)
+                if m.pixelwise is not None and not m.is_runtime}
+    for k, metric in enumerate(metrics):
         if metric.is_runtime:
             continue
         res = reference.metric_resolution(metric)
@@ -87,6 +90,8 @@ def score_scene(scene: Scene, pred: np.ndarray, metrics: Sequence[Metric] = GENE
             continue
         if metric.pixelwise is not None:  # pixel-wise: from the errors at its pixels, gathered once per region
             values[metric.id] = metric.score_pixels(p.errors(metric.mask_name), toolkit=rules.toolkit)
+            if last_use.get((res, metric.mask_name)) == k:  # no later metric reads them: their memory is the next's
+                p.release(metric.mask_name)
         else:
             context = {"scene": reference, "resolution": res} if metric.needs_scene else {}
             values[metric.id] = metric(p.gt, p.pred, reference.scored_mask(res, metric.mask_name),
