@@ -429,6 +429,16 @@ def test_signflip_p_monte_carlo_counts_ties_over_every_chunk():
     assert _signflip_p(x, 250000, np.random.default_rng(0)) == 1.0
 
 
+def test_signflip_p_monte_carlo_flips_every_unit():
+    """18 units: 16 of 0.01 and the pair 5, -5 (observed |sum| 0.16). A flip is at least as extreme exactly when the
+    pair gets the same sign (|sum| >= 9.84; probability 1/2) or every sign stays as observed or is reversed
+    (2 / 2^18), so p = 1/2 + 2^-17; a draw that never flips the last units (fewer random bits than units) gives
+    about 1 / (1 + n). Kills: bytes per draw that give fewer than 18 bits."""
+    x = np.array([0.01] * 16 + [5.0, -5.0])
+    n = 2000
+    assert abs(_signflip_p(x, n, np.random.default_rng(0)) - (0.5 + 2.0 ** -17)) < 4.5 * math.sqrt(0.25 / n)
+
+
 @pytest.mark.parametrize("block", [None, 0, 1])
 def test_block_of_one_pixel_or_none_is_no_tiling(block):
     """block None, 0 or 1: i.i.d. pixels (no groups) in both tilings. Kills: `<= 1` -> `< 1` / `<= 2`, `or` ->
