@@ -217,38 +217,32 @@ def _matches(dataset: type[Dataset], root: Path, failed: list[str]) -> bool:
     return False
 
 
-def _open(dataset: type[Dataset], root: Path) -> Benchmark:
-    """``dataset.open(root)``; a plugin's adapter that raises (not a one-line LFBenchError) is one DataError naming
-    it and the root."""
+def _call_adapter(dataset: type[Dataset], root: Path, method: str, expected: type) -> Any:
+    """``dataset.<method>(root)``; a plugin's adapter that raises (not a one-line LFBenchError) or returns another
+    type than ``expected`` is one DataError naming it, the method and the root."""
     plugin = _plugin(dataset)
     if plugin is None:
-        return dataset.open(root)
+        return getattr(dataset, method)(root)
     try:
-        bench = dataset.open(root)
+        value = getattr(dataset, method)(root)
     except LFBenchError:
         raise
     except Exception as exc:  # noqa: BLE001 - whatever the plugin's code raised: one line
-        raise DataError(_failure(f"dataset adapter {plugin}: open()", exc), root) from None
-    if not isinstance(bench, Benchmark):
-        raise DataError(f"dataset adapter {plugin}: open() returned a {type(bench).__name__}, expected a Benchmark",
-                        root)
-    return bench
+        raise DataError(_failure(f"dataset adapter {plugin}: {method}()", exc), root) from None
+    if not isinstance(value, expected):
+        raise DataError(f"dataset adapter {plugin}: {method}() returned a {type(value).__name__}, expected a "
+                        f"{expected.__name__}", root)
+    return value
+
+
+def _open(dataset: type[Dataset], root: Path) -> Benchmark:
+    """The scenes of ``root`` (:func:`_call_adapter` of ``open``)."""
+    return _call_adapter(dataset, root, "open", Benchmark)
 
 
 def _protocol(dataset: type[Dataset], root: Path) -> DatasetProtocol:
-    plugin = _plugin(dataset)
-    if plugin is None:
-        return dataset.protocol_for(root)
-    try:
-        protocol = dataset.protocol_for(root)
-    except LFBenchError:
-        raise
-    except Exception as exc:  # noqa: BLE001 - whatever the plugin's code raised: one line
-        raise DataError(_failure(f"dataset adapter {plugin}: protocol_for()", exc), root) from None
-    if not isinstance(protocol, DatasetProtocol):
-        raise DataError(f"dataset adapter {plugin}: protocol_for() returned a {type(protocol).__name__}, expected a "
-                        "DatasetProtocol", root)
-    return protocol
+    """The protocol of ``root`` (:func:`_call_adapter` of ``protocol_for``)."""
+    return _call_adapter(dataset, root, "protocol_for", DatasetProtocol)
 
 
 def open_dataset(root: str | Path, name: str | None = None) -> tuple[type[Dataset], Benchmark]:
