@@ -149,3 +149,80 @@ def test_the_committed_flag_reference_is_what_the_declarations_generate(capsys):
     for flag in FLAGS:
         assert f"| `{flag.flag} {flag.metavar}` |" in text
     assert "docs/command-line.md" in (REPO / "README.md").read_text(encoding="utf-8")
+
+
+# --------------------------------------------------------------------------- one declaration: sections
+
+def _all_cli_flags() -> dict[str, list[argparse.Action]]:
+    """Every command's (and every bench's) flags that were added from a declaration, by flag."""
+    parser = build_parser()
+    found: dict[str, list[argparse.Action]] = {}
+    for _, sub in argtypes._parsers(parser):
+        for action in sub._actions:
+            declared = getattr(action, "declared", None)
+            if declared is not None:
+                found.setdefault(declared.flag, []).append(declared)
+    return found
+
+
+def test_every_declared_flag_is_an_option_of_a_section():
+    """A command-line flag is not a second kind of declaration: each one lfbench's parsers add (shared, a
+    command's own, a cluster option) is an option of a section, with the same type, default, bounds, help and
+    metavar as there (a network's bench options are added when --model names it: BenchOption)."""
+    from lfbench.ablation.executor import ClusterOptions
+    from lfbench.cli.bench import BenchFlags
+    from lfbench.cli.evaluate import EvaluateFlags
+    from lfbench.cli.synth import SynthWorkers
+    from lfbench.data.synth import SynthFlags
+    from lfbench.utils.flags import SharedFlags, section_flags
+    from lfbench.utils.options import option_fields
+
+    sections = (SharedFlags, ClusterOptions, BenchFlags, EvaluateFlags, SynthWorkers, SynthFlags)
+    declared = {}
+    for cls in sections:
+        for f, opt, kind in option_fields(cls):
+            declared.setdefault(f.name, []).append((kind, f.default, opt))
+        assert set(section_flags(cls)) == {f.name for f, _, _ in option_fields(cls)}
+    seen = _all_cli_flags()
+    assert {"--jobs", "--gpus-per-job", "--partition", "--size", "--ci-block", "--workers", "--angular"} <= set(seen)
+    for name, flags in seen.items():
+        for flag in flags:
+            assert flag.name in declared, name
+            assert any(kind == flag.kind and default == flag.default and opt.help == flag.help
+                       and (opt.bounds.text() or None) == (flag.range.text() if flag.range else None)
+                       and opt.metavar == flag.metavar
+                       for kind, default, opt in declared[flag.name]), name
+
+
+@pytest.mark.parametrize(("given", "message"), [
+    ({"gpus_per_job": -1}, "--gpus-per-job: must be >= 0, got -1"),
+    ({"timeout_min": 0}, "--timeout-min: must be >= 1, got 0"),
+    ({"cpus_per_job": True}, "--cpus-per-job: expected int, got bool"),
+    ({"partition": 3}, "--partition: expected str, got int"),
+    ({"max_parallel": 2.0}, "--max-parallel: expected int, got float"),
+])
+def test_cluster_options_from_python_are_checked_by_their_declaration(given, message):
+    from lfbench.ablation.executor import ClusterOptions
+
+    with pytest.raises(SpecError) as err:
+        ClusterOptions("pool", **given)
+    assert str(err.value) == message
+    assert ClusterOptions("pool", **{k: 1 if k != "partition" else "gpu" for k in given})  # in bounds: accepted
+
+
+def test_ablate_reads_the_cluster_flags_into_the_section_they_declare(capsys):
+    """What ``lfbench ablate --gpus-per-job`` etc. parse is what ClusterOptions receives, by the same names; a
+    value out of the declared bounds is one usage line (exit 2) before any work."""
+    from lfbench.ablation.executor import ClusterOptions
+    from lfbench.utils.flags import section_flags
+
+    args = build_parser().parse_args(["ablate", "spec.toml", "--executor", "slurm", "--gpus-per-job", "2",
+                                      "--cpus-per-job", "3", "--timeout-min", "7", "--partition", "p100",
+                                      "--max-parallel", "4"])
+    options = ClusterOptions(**{name: getattr(args, name) for name in section_flags(ClusterOptions)})
+    assert options == ClusterOptions("slurm", gpus_per_job=2, cpus_per_job=3, timeout_min=7, partition="p100",
+                                     max_parallel=4)
+    with pytest.raises(SystemExit) as exit_:
+        build_parser().parse_args(["ablate", "spec.toml", "--timeout-min", "0"])
+    assert exit_.value.code == 2
+    assert "argument --timeout-min: must be >= 1, got 0" in capsys.readouterr().err

@@ -29,8 +29,7 @@ from pathlib import Path
 from typing import ClassVar, TypeVar
 
 from lfbench.utils.errors import SpecError
-from lfbench.utils.flags import Flag
-from lfbench.utils.options import Range
+from lfbench.utils.options import check_options, option
 from lfbench.utils.registry import Lazy, Registry
 
 _log = logging.getLogger(__name__)
@@ -77,32 +76,24 @@ def init_worker(threads: int, gpu_queue=None) -> None:
 
 # --------------------------------------------------------------------------- the interface
 
-#: The numbers of :class:`ClusterOptions`, declared once: ``lfbench ablate`` adds them as flags, and
-#: ClusterOptions (public API) checks a value given from Python by the same declaration.
-CLUSTER_FLAGS = (Flag("gpus_per_job", int, 0, "GPUs of each cell's job (--executor)", Range(0), "N"),
-                 Flag("cpus_per_job", int, 0, "CPUs of each cell's job (--executor; 0: the spec's threads per cell)",
-                      Range(0), "N"),
-                 Flag("timeout_min", int, 24 * 60, "time limit of each job in minutes", Range(1), "MIN"),
-                 Flag("max_parallel", int, 0, "SLURM jobs running at once (0: no limit)", Range(0), "N"))
-_GPUS, _CPUS, _TIMEOUT, _PARALLEL = (f.default for f in CLUSTER_FLAGS)
-
-
 @dataclass(frozen=True)
 class ClusterOptions:
     """How the cells run (``lfbench ablate --executor NAME ...``): the executor's name (one of
-    :data:`EXECUTORS`) and the resources of each job of an executor that submits jobs."""
+    :data:`EXECUTORS`) and the resources of each job of an executor that submits jobs. Declared once:
+    ``lfbench ablate`` adds every option but the executor as a flag (``--gpus-per-job N``, ...:
+    lfbench.utils.flags.section_flags), and a value given from Python is checked by the same declaration."""
 
-    executor: str = "local"
-    gpus_per_job: int = _GPUS
-    cpus_per_job: int = _CPUS  # 0: the spec's threads per cell
-    timeout_min: int = _TIMEOUT
-    partition: str | None = None
-    max_parallel: int = _PARALLEL  # slurm array parallelism (0: no limit)
+    executor: str = option("local", help="where the cells run: one of the registered executors")
+    gpus_per_job: int = option(0, help="GPUs of each cell's job (--executor)", low=0, metavar="N")
+    cpus_per_job: int = option(0, help="CPUs of each cell's job (--executor; 0: the spec's threads per cell)", low=0,
+                               metavar="N")
+    timeout_min: int = option(24 * 60, help="time limit of each job in minutes", low=1, metavar="MIN")
+    partition: str | None = option(None, help="SLURM partition (--executor slurm)", metavar="NAME")
+    max_parallel: int = option(0, help="SLURM jobs running at once (0: no limit)", low=0, metavar="N")
 
     def __post_init__(self) -> None:
         EXECUTORS.get(self.executor)  # SpecError: Unknown executor 'x'. Available: ...
-        for flag in CLUSTER_FLAGS:
-            flag.require(getattr(self, flag.name))
+        check_options(self, lambda name: "--" + name.replace("_", "-"))
 
 
 class Executor(ABC):

@@ -26,10 +26,10 @@ import argparse
 import dataclasses
 from pathlib import Path
 
-from lfbench.ablation.executor import CLUSTER_FLAGS, EXECUTORS, ClusterOptions
+from lfbench.ablation.executor import EXECUTORS, ClusterOptions
 from lfbench.cli.argtypes import add_flag
 from lfbench.utils.errors import SpecError
-from lfbench.utils.flags import JOBS
+from lfbench.utils.flags import JOBS, section_flags
 from lfbench.utils.tomlfile import toml_text
 
 HELP = ("train and score a grid of network variants (SubFocal's Tables IV, V, beta sweep, I/II beside the paper's "
@@ -59,9 +59,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--executor", choices=EXECUTORS.names(), default=None,
                    help="where the cells run: " + "; ".join(f"{name}: {EXECUTORS.get(name).help}"
                                                             for name in EXECUTORS.names()))
-    for flag in CLUSTER_FLAGS:
-        add_flag(p, flag)
-    p.add_argument("--partition", default=None, help="SLURM partition (--executor slurm)")
+    for name, flag in section_flags(ClusterOptions).items():
+        if name != "executor":  # its choices are the registry's (above)
+            add_flag(p, flag)
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 
@@ -95,8 +95,7 @@ def run(args: argparse.Namespace) -> int:
 
         cluster = None
         if args.executor is not None:
-            cluster = ClusterOptions(args.executor, partition=args.partition,
-                                     **{f.name: getattr(args, f.name) for f in CLUSTER_FLAGS})
+            cluster = ClusterOptions(**{name: getattr(args, name) for name in section_flags(ClusterOptions)})
         run_ablation(spec, out, jobs=args.jobs, progress=progress, paper=args.paper, cluster=cluster, html=args.html,
                      maps=args.maps)
     if args.html:

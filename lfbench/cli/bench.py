@@ -49,12 +49,13 @@ from __future__ import annotations
 
 import argparse
 import itertools
+from dataclasses import dataclass
 from pathlib import Path
 
 from lfbench.cli.argtypes import add_flag, flag_type
 from lfbench.method.trainable import DEFAULT_TRAINABLE
-from lfbench.utils.flags import DEVICE, MAX_MEMORY, POSITIVE, REPEAT, SCENE_COUNT, THREADS, TIMEOUT, Flag
-from lfbench.utils.options import Range
+from lfbench.utils.flags import DEVICE, MAX_MEMORY, REPEAT, SCENE_COUNT, THREADS, TIMEOUT, section_flags
+from lfbench.utils.options import option
 
 HELP = "speed and memory benchmarks (inference, cost volume, training, metrics, conv peak)"
 
@@ -64,20 +65,33 @@ MAX_SIZE = 4096  # px per side of a timed light field (as lfbench synth)
 MAX_BATCH = 4096  # as a training config's batch_size
 MAX_PATCH = 1024  # px, as a training config's patch
 MAX_COUNT = 10**6  # steps, repeats, rounds, scenes, methods
-SIZE = Flag("size", int, 512, "image size in px (a size x size scene, 81 views)", Range(8, MAX_SIZE), "S")
-TILE = Flag("tile", int, 0, "core tile size in px (0 = the network's choice: SubFocal's from --max-memory)",
-            Range(0, MAX_SIZE), "PX")
-BATCH = Flag("batch", int, 2, "patches per training step", Range(1, MAX_BATCH), "N")
-TRAIN_BATCH = Flag("train_batch", int, 2, "patches per step of the training cases", Range(1, MAX_BATCH), "N")
-PATCH = Flag("patch", int, 32, "patch size in px", Range(8, MAX_PATCH), "PX")
-STEPS = Flag("steps", int, 2, "timed training steps", Range(1, MAX_COUNT), "N")
-TRAIN_STEPS = Flag("train_steps", int, 2, "timed steps of the training cases", Range(1, MAX_COUNT), "N")
-WARMUP = Flag("warmup", int, 1, "untimed steps first (one-time costs: kernel setup, caches, the heap growing to its "
-              "size)", Range(0, MAX_COUNT), "N")
-ROUNDS = Flag("rounds", int, 1, "run the cases this many times, interleaved (before/after under the same load)",
-              Range(1, MAX_COUNT), "N")
-METHODS = Flag("methods", int, 5, "methods scored on each scene", Range(1, 1000), "N")
-INTERVAL = Flag("interval", float, 0.5, "disparity step of the cost volume in px", POSITIVE, "PX")
+
+
+@dataclass(frozen=True, kw_only=True)
+class BenchFlags:
+    """The flags of the benches (each bench adds those it uses), declared once."""
+
+    size: int = option(512, help="image size in px (a size x size scene, 81 views)", low=8, high=MAX_SIZE, metavar="S")
+    tile: int = option(0, help="core tile size in px (0 = the network's choice: SubFocal's from --max-memory)",
+                       low=0, high=MAX_SIZE, metavar="PX")
+    batch: int = option(2, help="patches per training step", low=1, high=MAX_BATCH, metavar="N")
+    train_batch: int = option(2, help="patches per step of the training cases", low=1, high=MAX_BATCH, metavar="N")
+    patch: int = option(32, help="patch size in px", low=8, high=MAX_PATCH, metavar="PX")
+    steps: int = option(2, help="timed training steps", low=1, high=MAX_COUNT, metavar="N")
+    train_steps: int = option(2, help="timed steps of the training cases", low=1, high=MAX_COUNT, metavar="N")
+    warmup: int = option(1, help="untimed steps first (one-time costs: kernel setup, caches, the heap growing to "
+                         "its size)", low=0, high=MAX_COUNT, metavar="N")
+    rounds: int = option(1, help="run the cases this many times, interleaved (before/after under the same load)",
+                         low=1, high=MAX_COUNT, metavar="N")
+    methods: int = option(5, help="methods scored on each scene", low=1, high=1000, metavar="N")
+    interval: float = option(0.5, help="disparity step of the cost volume in px", low=0, high=1e12, low_open=True,
+                             metavar="PX")
+
+
+_BENCH = section_flags(BenchFlags)
+SIZE, TILE, BATCH, TRAIN_BATCH, PATCH, STEPS, TRAIN_STEPS, WARMUP, ROUNDS, METHODS, INTERVAL = (
+    _BENCH[name] for name in ("size", "tile", "batch", "train_batch", "patch", "steps", "train_steps", "warmup",
+                              "rounds", "methods", "interval"))
 _NETWORK_BENCHES = ("inference", "train", "suite")  # the benches whose parsers take the network's own flags
 
 

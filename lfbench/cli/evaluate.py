@@ -7,21 +7,30 @@ tables as markdown/LaTeX/CSV, and prints the per-scene table.
 from __future__ import annotations
 
 import argparse
+from dataclasses import dataclass
 from pathlib import Path
 
 from lfbench.cli.argtypes import add_flag
-from lfbench.utils.flags import DEVICE, JOBS, Flag
-from lfbench.utils.options import Range
+from lfbench.utils.flags import DEVICE, JOBS, section_flags
+from lfbench.utils.options import option
 
 HELP = "score methods on a dataset's scenes (results.json, results.csv, tables)"
 
-CI_BLOCK = Flag("ci_block", int, 16, "tile size of the block bootstrap in px (1 = independent pixels; errors of "
-                "neighbours correlate)", Range(1, 4096), "PX")
-CI_RESAMPLES = Flag("ci_resamples", int, 1000, "bootstrap resamples", Range(1, 10**6), "N")
-METRIC_IDS = Flag("metrics", str, "", "comma-separated ids of general metrics scored besides the dataset protocol's "
-                  "(e.g. a metric plugin's, badpix_0.05, q50_x100); the protocol's are "
-                  "always scored, an installed metric only where the protocol lists it or it is named here", None,
-                  "IDS")
+
+@dataclass(frozen=True, kw_only=True)
+class EvaluateFlags:
+    """The flags only ``lfbench evaluate`` takes that carry a value, declared once."""
+
+    ci_block: int = option(16, help="tile size of the block bootstrap in px (1 = independent pixels; errors of "
+                           "neighbours correlate)", low=1, high=4096, metavar="PX")
+    ci_resamples: int = option(1000, help="bootstrap resamples", low=1, high=10**6, metavar="N")
+    metrics: str = option("", help="comma-separated ids of general metrics scored besides the dataset protocol's "
+                          "(e.g. a metric plugin's, badpix_0.05, q50_x100); the protocol's are always scored, an "
+                          "installed metric only where the protocol lists it or it is named here", metavar="IDS")
+
+
+_EVALUATE = section_flags(EvaluateFlags)
+CI_BLOCK, CI_RESAMPLES, METRIC_IDS = (_EVALUATE[name] for name in ("ci_block", "ci_resamples", "metrics"))
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

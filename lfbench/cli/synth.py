@@ -14,16 +14,25 @@ SYNTHETIC, by which every table scored on DIR says that its data is synthetic (l
 from __future__ import annotations
 
 import argparse
+from dataclasses import dataclass
 from pathlib import Path
 
 from lfbench.cli.argtypes import add_flag
-from lfbench.utils.flags import MAX_JOBS, SCENE_COUNT, SEED, Flag
-from lfbench.utils.options import Range
+from lfbench.utils.flags import MAX_JOBS, SCENE_COUNT, SEED, section_flags
+from lfbench.utils.options import option
 
 HELP = "generate synthetic scenes (HCI or UrbanLF-Syn layout) with exact ground truth"
 
-WORKERS = Flag("workers", int | None, None, "scenes generated at a time in separate processes (default: the "
-               "available cores)", Range(1, MAX_JOBS), "N")
+
+@dataclass(frozen=True, kw_only=True)
+class SynthWorkers:
+    """``lfbench synth --workers``, declared once."""
+
+    workers: int | None = option(None, help="scenes generated at a time in separate processes (default: the "
+                                 "available cores)", low=1, high=MAX_JOBS, metavar="N")
+
+
+WORKERS = section_flags(SynthWorkers)["workers"]
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

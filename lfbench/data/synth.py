@@ -47,8 +47,8 @@ from lfbench.data.dataset import DATASETS
 from lfbench.data.scene import MAX_VIEW_PIXELS, ArrayLightField, rgb_to_gray
 from lfbench.utils.atomic import check_replaceable, fresh_dir, replace_dir
 from lfbench.utils.errors import DataError, SpecError
-from lfbench.utils.flags import SCENE_COUNT, SEED, Flag
-from lfbench.utils.options import Param, Range
+from lfbench.utils.flags import SCENE_COUNT, SEED, section_flags
+from lfbench.utils.options import Param, option
 
 GENERATOR_VERSION = "1"
 SUPERSAMPLE = 2  # samples per pixel along each axis
@@ -758,8 +758,16 @@ SYNTH_LAYOUT = "hci"
 #: The side and the angular resolution of generated views, declared once: ``lfbench demo --size`` and ``lfbench
 #: synth --angular`` read and check them at parse time, :func:`check_args` from Python (the seed and the number
 #: of scenes are the shared flags lfbench.utils.flags.SEED and SCENE_COUNT).
-SYNTH_SIZE = Flag("size", int, 128, "scene width and height in px", Range(16, MAX_SYNTH_SIZE), "S")
-ANGULAR = Flag("angular", int, 9, "A x A views, odd (3: the centre view and its neighbours)", Range(3, MAX_CAMS), "A")
+@dataclass(frozen=True, kw_only=True)
+class SynthFlags:
+    """The sizes of generated views, as ``lfbench synth`` and ``lfbench demo`` take them."""
+
+    size: int = option(128, help="scene width and height in px", low=16, high=MAX_SYNTH_SIZE, metavar="S")
+    angular: int = option(9, help="A x A views, odd (3: the centre view and its neighbours)", low=3, high=MAX_CAMS,
+                          metavar="A")
+
+
+SYNTH_SIZE, ANGULAR = section_flags(SynthFlags).values()
 
 
 def require(param: Param, value: Any) -> Any:

@@ -36,7 +36,8 @@ from typing import Any
 from lfbench.utils.errors import SpecError
 from lfbench.utils.markdown import markdown_cell, markdown_table
 
-__all__ = ["Option", "option", "option_fields", "is_section", "Table", "parse_section", "plain_dict", "coerce",
+__all__ = ["Option", "option", "option_fields", "is_section", "Table", "parse_section", "check_options", "plain_dict",
+           "coerce",
            "check", "from_text", "Bounds", "Range", "Param", "BadValue", "TypeMismatch", "type_name", "option_paths",
            "reference_markdown"]
 
@@ -102,6 +103,7 @@ class Option:
     default_from: Callable[[dict[str, Any], int | None], Any] | None = None  # default from the options before it
     default_text: str | None = None  # the default as the reference shows it, when not the value itself
     free_text: str = ""  # what the keys of a free table (dict[str, Any]) are, for the reference
+    metavar: str | None = None  # the value's name where the option is also a command-line flag (``--jobs N``)
 
 
 def option(default: Any = dataclasses.MISSING, *, help: str, factory: Callable[[], Any] | None = None,
@@ -485,6 +487,23 @@ def _read(t: Table, f: dataclasses.Field, opt: Option, kind: Any, values: dict[s
         if problem:
             t.fail(key, problem)
     return value
+
+
+def check_options(section: Any, name: Callable[[str], str] = str) -> None:
+    """The options of a section built from Python (not parsed from a table) checked as :func:`parse_section`
+    checks them: type, bounds, length and ``check``; SpecError ``<name(key)>: <problem>`` at the first that
+    does not fit (e.g. ``--jobs: must be in [1, 256], got 0`` with the flags' names)."""
+    for f, opt, kind in option_fields(type(section)):
+        value = getattr(section, f.name)
+        try:
+            check(value, kind, opt.bounds)
+            problem = opt.check(value) if opt.check is not None else None
+            if problem is None and isinstance(value, (tuple, list, dict)) and len(value) < opt.min_length:
+                problem = f"needs at least {opt.min_length} entr{'y' if opt.min_length == 1 else 'ies'}"
+        except BadValue as exc:
+            problem = str(exc)
+        if problem:
+            raise SpecError(f"{name(f.name)}: {problem}")
 
 
 def parse_section(cls: type, table: Table, index: int | None = None) -> Any:
