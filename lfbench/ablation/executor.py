@@ -256,12 +256,9 @@ class ProcessPool(Executor):
             InProcess(self.options, log=self.log).map(fn, items, labels=labels, threads=threads, on_done=on_done,
                                                       on_start=on_start)
             return
-        if isinstance(items, Sequence):
-            order = sorted(range(len(items)), key=lambda k: cost(items[k]), reverse=True) if cost is not None \
-                else range(len(items))
-            waiting = iter([(labels(items[k]) if callable(labels) else labels[k], items[k]) for k in order])
-        else:
-            waiting = labelled(items, labels)
+        waiting = labelled(items, labels)
+        if isinstance(items, Sequence) and cost is not None:  # the longest first (a stable sort: ties in order)
+            waiting = iter(sorted(waiting, key=lambda pair: cost(pair[1]), reverse=True))
         ahead = next(waiting, None)  # the first item before any worker starts (none: no pool at all)
         if ahead is None:
             return
