@@ -83,7 +83,7 @@ def run(work: Path, rounds: int, before: Path | None) -> dict:
     from scoring_scale import floor, retain_freed_memory
 
     logging.getLogger("lfbench").setLevel(logging.ERROR)
-    retain_freed_memory()  # as scoring does (lfbench.runs.pool)
+    retain_freed_memory()  # as scoring does (lfbench.runs.runner.score_task)
     root, subs = build(work)
     rows = []
     evaluate_process(root, subs / "m000", work / "warm")  # page cache

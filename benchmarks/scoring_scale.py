@@ -137,7 +137,7 @@ def whole_process(root: Path, subs: Path, out: Path) -> dict[str, float]:
 
 def run(work: Path, quick: bool) -> dict:
     logging.getLogger("lfbench").setLevel(logging.ERROR)  # the generated NaN pixels are noted per scene
-    retain_freed_memory()  # as scoring does (lfbench.runs.pool): the floor and the scorer get memory alike
+    retain_freed_memory()  # as scoring does (lfbench.runs.runner.score_task): the floor and the scorer get memory alike
     size, scale = (32, 4) if quick else (512, 10)
     counts = (1, 2) if quick else (1, 10, 100)
     work.mkdir(parents=True, exist_ok=True)

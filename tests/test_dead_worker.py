@@ -1,7 +1,7 @@
-"""A scoring worker that dies (issue 31, class 6): SIGKILL one ``evaluate --jobs 2`` worker (the pool's test
-hook makes a worker kill itself on the scene named by LFBENCH_TEST_KILL_SCORING_WORKER, as the out-of-memory
-killer would) -> one line naming that scene, exit 1 (README), the previous output set kept, and the next run
-works. It was a BrokenProcessPool traceback."""
+"""A scoring worker that dies (issue 31, class 6): SIGKILL one ``evaluate --jobs 2`` worker (the pool's test hook
+makes a worker kill itself on the item labelled by LFBENCH_TEST_KILL_WORKER, a scene's name here, as the
+out-of-memory killer would) -> one line naming that scene, exit 1 (README), the previous output set kept, and the
+next run works. It was a BrokenProcessPool traceback."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import json
 import pytest
 from helpers import run_cli, write_scene
 
-from lfbench.runs.pool import KILL_WORKER_ENV
+from lfbench.ablation.executor import KILL_WORKER_ENV
 
 
 @pytest.fixture(scope="module")

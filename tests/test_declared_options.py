@@ -81,14 +81,17 @@ def test_jobs_is_shared_by_evaluate_and_ablate_with_one_ceiling():
 
 
 def test_a_library_call_checks_jobs_by_the_same_declaration():
-    """run_ablation and the scoring pool are public API: their guard is the flag's own check."""
-    from lfbench.runs.pool import ScoringPool
+    """run_ablation and the scoring (evaluate, score_scenes) are public API: their guard is the flag's own check."""
+    from lfbench.runs.runner import evaluate, score_scenes
+
+    calls = (lambda jobs: score_scenes([], jobs=jobs, on_done=print), lambda jobs: evaluate([], [], jobs=jobs))
 
     for bad, problem in ((0, "must be in [1, 256], got 0"), (MAX_JOBS + 1, "got 257"), (True, "expected int, got bool"),
                          (2.0, "expected int, got float")):
-        with pytest.raises(SpecError) as exc:
-            ScoringPool(bad)
-        assert str(exc.value).startswith("--jobs: ") and str(exc.value).endswith(problem)
+        for call in calls:
+            with pytest.raises(SpecError) as exc:
+                call(bad)
+            assert str(exc.value).startswith("--jobs: ") and str(exc.value).endswith(problem)
 
 
 def test_a_parameter_and_a_toml_key_are_worded_alike():

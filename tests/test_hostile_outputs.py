@@ -106,12 +106,12 @@ def test_stale_temporaries_are_cleaned_by_the_next_run(tmp_path, capsys, data):
 
 
 def test_output_paths_are_checked_before_the_work(tmp_path, capsys, data, monkeypatch):
-    import lfbench.runs.pool as pool  # where the runner scores each scene's predictions
+    import lfbench.runs.runner as scoring  # where the runner scores each scene's predictions
 
     def no_work(*a, **k):
         raise AssertionError("scored before checking the output folder")
 
-    monkeypatch.setattr(pool, "score_predictions", no_work)
+    monkeypatch.setattr(scoring, "score_predictions", no_work)
     (tmp_path / "file").write_text("x")
     rc, _, err = evaluate(capsys, data, tmp_path / "file")
     assert_one_error_line(rc, err, "file", "output folder is a file")

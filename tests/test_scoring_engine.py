@@ -18,8 +18,7 @@ from scipy import ndimage
 from lfbench.data.hci import HCIDataset
 from lfbench.data.scene import HIGHRES
 from lfbench.method.registry import create_from_spec
-from lfbench.runs.pool import ScoringPool
-from lfbench.runs.runner import evaluate
+from lfbench.runs.runner import ScoringTask, evaluate, score_scenes
 from lfbench.scoring.metrics import GENERAL_METRICS, Metric, get_metric
 from lfbench.scoring.pixels import PixelErrors
 from lfbench.scoring.prepare import SceneReference, upsample_index
@@ -246,21 +245,22 @@ def test_worker_errors_name_the_file(layout, tmp_path):
     root, scenes = layout
     bad = [(np.zeros((5, 5), np.float32), None, "mine.pfm")]
     for jobs in (1, 2):
-        with ScoringPool(jobs) as pool, pytest.raises(DataError, match="mine.pfm"):
-            pool.submit(scenes[0], bad, list(GENERAL_METRICS), ScoringRules()).result()
+        with pytest.raises(DataError, match="mine.pfm"):
+            score_scenes([ScoringTask(0, scenes[0], bad, GENERAL_METRICS, ScoringRules())], jobs=jobs, on_done=print)
 
 
 def test_jobs_need_registered_metrics_and_a_positive_count(layout):
     root, scenes = layout
     odd = Metric(id="my_metric", name="mine", description="", unit="", fn=lambda gt, pred, mask=None, **k: 0.0)
-    with ScoringPool(2) as pool, pytest.raises(SpecError, match="my_metric"):
-        pool.submit(scenes[0], [(scenes[0].gt_disparity(), None, "m")], [odd], ScoringRules())
-    with ScoringPool(1) as pool:  # in this process any metric scores
-        assert pool.submit(scenes[0], [(scenes[0].gt_disparity(), None, "m")], [odd],
-                           ScoringRules()).result()[0].values == {"my_metric": 0.0}
+    task = ScoringTask(0, scenes[0], [(scenes[0].gt_disparity(), None, "m")], (odd,), ScoringRules())
+    with pytest.raises(SpecError, match="my_metric"):
+        score_scenes([task], jobs=2, on_done=print)
+    done = []
+    score_scenes([task], jobs=1, on_done=done.append)  # in this process any metric scores
+    assert [(index, scores[0].values) for index, scores in done] == [(0, {"my_metric": 0.0})]
     for jobs in (0, -1, 1.5, True):
         with pytest.raises(SpecError, match="jobs"):
-            ScoringPool(jobs)
+            score_scenes([task], jobs=jobs, on_done=print)
 
 
 def test_cli_jobs_option(layout, tmp_path):

@@ -24,7 +24,7 @@ from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
-from lfbench.ablation.executor import EXECUTORS, ClusterOptions, Executor
+from lfbench.ablation.executor import EXECUTORS, WORKER_DIED, ClusterOptions, Executor, labelled
 from lfbench.ablation.scheduler import RETRIES_ENV, SchedulerError, SchedulerLimits, bounded_submission, squeue_states
 from lfbench.utils.errors import LFBenchError, SpecError
 from lfbench.utils.subprocesses import SAFE_PATH, safe_path_environ
@@ -107,11 +107,14 @@ class Submitit(Executor):
                              cpus_per_task=options.cpus_per_job or threads)
         return ex
 
-    def map(self, fn, items, *, labels, threads, on_done, on_start=None, cost=None) -> None:
+    def map(self, fn, items, *, labels, threads, on_done, on_start=None, cost=None, died=WORKER_DIED) -> None:
         """Run ``fn(item)`` for each item as one job and wait for all; ``on_done`` sees each result as it comes.
         A job that fails, or ends without a result (cancelled, timed out, killed), is reported after the other
         jobs finish: one LFBenchError naming each such job by its label and its log (re-running the command
-        resumes them). A job the scheduler requeues is waited for."""
+        resumes them). A job the scheduler requeues is waited for. Every item is submitted at once (an
+        iterable's items are all pulled first)."""
+        pairs = list(labelled(items, labels))
+        labels, items = [label for label, _ in pairs], [item for _, item in pairs]
         if not items:
             return
         if self.folder is None:

@@ -94,6 +94,8 @@ def run(args: argparse.Namespace) -> int:
         width, height = args.size or (640, 480)
         paths = write_urbanlf(args.out, seed=args.seed, width=width, height=height, scenes=args.scenes,
                               split=args.category or "val", force=args.force, numbers=args.numbers,
+                              workers=available_cores() if args.workers is None else args.workers,
+                              progress=not args.no_progress,
                               **({} if args.disparity_range is None else {"disparity_range": args.disparity_range}))
         mark_synthetic(args.out, "lfbench synth --layout urbanlf-syn")
         for path in paths:

@@ -35,7 +35,7 @@ import os
 import shutil
 import stat
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -714,6 +714,9 @@ class SyntheticScene:
     masks: dict[str, np.ndarray]
     params: Camera
     layers: list[Layer] = field(repr=False)
+    #: where the views lie in the square frame the scene was rendered in: (y0, x0, side) of a crop (:meth:`crop`;
+    #: side 0: the views are the frame)
+    window: tuple[int, int, int] = (0, 0, 0)
     _visibility: np.ndarray | None = field(default=None, init=False, repr=False, compare=False)
 
     def visibility(self) -> np.ndarray:
@@ -721,11 +724,30 @@ class SyntheticScene:
         nearer layer, inside the image); traced through the same z-buffer as the renderer."""
         if self._visibility is None:
             v, u, h, w = self.views.shape[:4]
-            yy, xx = np.mgrid[0:h, 0:w]
+            y0, x0, side = self.window
+            yy, xx = np.mgrid[y0:y0 + h, x0:x0 + w]
             vis = _visibility(self.layers, xx.ravel().astype(np.float64), yy.ravel().astype(np.float64),
-                              self.layer_id.ravel(), self.disparity.ravel().astype(np.float64), u, max(h, w))
+                              self.layer_id.ravel(), self.disparity.ravel().astype(np.float64), u, side or max(h, w))
             self._visibility = vis.reshape(v, u, h, w)
         return self._visibility
+
+    def crop(self, width: int, height: int) -> SyntheticScene:
+        """The centre ``height`` x ``width`` px of this (square) scene: the same window of every view, so the
+        disparity between views is unchanged and the ground truth stays exact. Its camera has the window's
+        resolution and the same pixel pitch (the sensor spans the larger side, which a crop to the frame's side
+        along one axis keeps). The scene itself when the window is the whole frame."""
+        side = self.disparity.shape[0]
+        if (width, height) == (side, side):
+            return self
+        if not (0 < width <= side and 0 < height <= side and max(width, height) == side):
+            raise SpecError(f"cannot crop a {side} px square scene to {width}x{height} px: one side must be {side}")
+        y0, x0 = (side - height) // 2, (side - width) // 2
+        win = (slice(y0, y0 + height), slice(x0, x0 + width))
+        return replace(self, views=self.views[:, :, win[0], win[1]], disparity=self.disparity[win],
+                       depth=self.depth[win], layer_id=self.layer_id[win],
+                       masks={name: mask[win] for name, mask in self.masks.items()},
+                       params=replace(self.params, image_resolution_x_px=width, image_resolution_y_px=height),
+                       window=(y0, x0, side))
 
     def gray_views(self) -> np.ndarray:
         """(V, U, H, W) float32 gray (the benchmark's weights)."""
@@ -867,21 +889,52 @@ def scene_seed(seed: int, index: int) -> int:
     return int(np.random.SeedSequence([int(seed), int(index)]).generate_state(1, np.uint32)[0])
 
 
-def _write_scene(target: Path, seed: int, size: int, angular: int, category: str,
+def _write_scene(target: Path, seed: int, size: int | tuple[int, int], angular: int, layout: str,
                  disparity_range: tuple[float, float] | None = None) -> Path:
-    """Generate one scene and write it as ``target`` (written beside it, renamed into place when complete;
-    an existing ``target`` is swapped out only after the new one is whole)."""
-    scene = generate_scene(seed, size=size, angular=angular, name=target.name, category=category,
-                           disparity_range=disparity_range)
+    """Generate one scene (its category: the folder above ``target``; ``size``: S or (W, H), generated square
+    at max(W, H) and cropped to the centre, :meth:`SyntheticScene.crop`) and write it as ``target`` in the
+    layout of dataset adapter ``layout`` (written beside it, renamed into place when complete; an existing
+    ``target`` is swapped out only after the new one is whole)."""
+    width, height = size if isinstance(size, tuple | list) else (size, size)
+    scene = generate_scene(seed, size=max(width, height), angular=angular, name=target.name,
+                           category=target.parent.name, disparity_range=disparity_range).crop(width, height)
     target.parent.mkdir(parents=True, exist_ok=True)
     tmp = fresh_dir(target.parent, f".{target.name}.", ".tmp")
     try:
-        write_scene(scene, tmp)
+        write_scene(scene, tmp, layout)
         replace_dir(tmp, target)  # an existing target only with force
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
     return target
+
+
+def _write_one(job: tuple) -> Path:
+    """One scene of :func:`write_scenes` (a pool item)."""
+    return _write_scene(*job)
+
+
+def write_scenes(targets: Sequence[Path], seeds: Sequence[int], *, size: int | tuple[int, int], angular: int,
+                 layout: str = SYNTH_LAYOUT, disparity_range: tuple[float, float] | None = None, workers: int = 1,
+                 progress: bool = False) -> list[Path]:
+    """Generate scene k from ``seeds[k]`` and write it as ``targets[k]`` (its category: the folder above) in the
+    layout of dataset adapter ``layout`` (its :meth:`lfbench.data.dataset.Dataset.write_scene`), the views S x S
+    px (``size`` S) or W x H px (``size`` (W, H): rendered square at max(W, H), the centre cropped), and return
+    ``targets``. ``workers`` > 1 writes that many scenes at a time in worker processes (lfbench's one pool,
+    lfbench.ablation.executor.ProcessPool, spawned, without torch); each scene depends only on its own seed,
+    so the files are the same for any number."""
+    from tqdm import tqdm
+
+    from lfbench.ablation.executor import ClusterOptions, ProcessPool
+
+    jobs = [(Path(t), seed, size, angular, layout, disparity_range) for t, seed in zip(targets, seeds, strict=True)]
+    bar = tqdm(total=len(jobs), desc="synth", unit="scene", disable=not progress)
+    try:
+        ProcessPool(ClusterOptions("pool"), jobs=min(int(workers), max(len(jobs), 1))).map(
+            _write_one, jobs, labels=[str(job[0]) for job in jobs], threads=None, on_done=lambda _: bar.update())
+    finally:
+        bar.close()
+    return [job[0] for job in jobs]
 
 
 def write_benchmark(out: str | Path, seed: int = 0, size: int = 128, scenes: int = 4,
@@ -894,9 +947,9 @@ def write_benchmark(out: str | Path, seed: int = 0, size: int = 128, scenes: int
     folder beside its destination and renamed into place when complete, so an interrupted run
     leaves no half-written scene. An existing scene folder is an error unless ``force``; all
     destinations are checked before anything is generated. ``workers`` > 1 generates that many scenes
-    at a time in separate processes; each scene depends only on its own seed, so the files are the same.
-    ``disparity_range``: (min, max) px the disparities are mapped into (:func:`generate_scene`; None: the
-    generator's own).
+    at a time in separate processes (:func:`write_scenes`); each scene depends only on its own seed, so the
+    files are the same. ``disparity_range``: (min, max) px the disparities are mapped into
+    (:func:`generate_scene`; None: the generator's own).
     """
     check_args(size, angular)
     disparity_map(disparity_range)  # SpecError for an impossible range, before anything is written
@@ -917,29 +970,5 @@ def write_benchmark(out: str | Path, seed: int = 0, size: int = 128, scenes: int
             raise DataError("scene folder already exists (use --force to overwrite)", t)
         if os.path.lexists(t) and not stat.S_ISDIR(os.lstat(t).st_mode):  # --force replaces scene folders only
             check_replaceable(t)  # a device, FIFO or socket is refused; a file or link is replaced
-    jobs = [(targets[i], scene_seed(seed, i), size, angular, cats[i], disparity_range) for i in range(scenes)]
-    from tqdm import tqdm
-
-    bar = tqdm(total=scenes, desc="synth", unit="scene", disable=not progress)
-    try:
-        if min(int(workers), scenes) <= 1:
-            for job in jobs:
-                _write_scene(*job)
-                bar.update()
-            return targets
-        import concurrent.futures as cf
-        import multiprocessing
-
-        # spawn: the caller may hold threads (torch, a prefetcher) that a forked child would inherit locked
-        with cf.ProcessPoolExecutor(min(int(workers), scenes), mp_context=multiprocessing.get_context("spawn")) as pool:
-            futures = [pool.submit(_write_scene, *job) for job in jobs]
-            try:
-                for fut in cf.as_completed(futures):
-                    fut.result()
-                    bar.update()
-            except BaseException:
-                pool.shutdown(wait=True, cancel_futures=True)
-                raise
-        return targets
-    finally:
-        bar.close()
+    return write_scenes(targets, [scene_seed(seed, i) for i in range(scenes)], size=size, angular=angular,
+                        disparity_range=disparity_range, workers=workers, progress=progress)

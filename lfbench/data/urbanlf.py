@@ -14,18 +14,25 @@ BadPix and NaN in MSE), 640x480 views, disparity searched in [-0.5, 1.6] px at a
 released range is [-0.47, 1.55]; the grid is the SubFocal paper's for Table III).
 
 Every scene is checked when it is opened as :class:`lfbench.data.pattern.PatternScene` checks a scene.
+:meth:`UrbanLFSyn.write_scene` writes a generated scene in this layout (``lfbench synth --layout urbanlf-syn``,
+lfbench.data.synth_urbanlf).
 """
 
 from __future__ import annotations
 
+import io
 import os
 from pathlib import Path
+from typing import Any
+
+import numpy as np
 
 from lfbench.data.dataset import DEFAULT_METRICS, Dataset, DatasetProtocol
 from lfbench.data.disparity import EVALUATION_BORDER_PX
 from lfbench.data.pattern import PatternScene, ViewLayout, find_scene_dirs, matches_at_depth
-from lfbench.data.scene import Benchmark, check_scene_names
-from lfbench.utils.errors import DataError
+from lfbench.data.scene import Benchmark, check_scene_names, png_bytes
+from lfbench.utils.atomic import write_bytes
+from lfbench.utils.errors import DataError, SpecError
 
 __all__ = ["URBANLF_DISPARITY_RANGE", "URBANLF_LAYOUT", "URBANLF_PROTOCOL", "URBANLF_SPLITS", "UrbanLFScene",
            "UrbanLFSyn", "view_name", "gt_name"]
@@ -72,6 +79,13 @@ class UrbanLFScene(PatternScene):
         return self.path, self.category
 
 
+def npy_bytes(array: np.ndarray) -> bytes:
+    """``array`` as the bytes of a float32 ``.npy`` file (the released ground truth's type)."""
+    buf = io.BytesIO()
+    np.save(buf, np.ascontiguousarray(array, dtype=np.float32), allow_pickle=False)
+    return buf.getvalue()
+
+
 def _is_sample(folder: Path) -> bool:
     """Whether ``folder`` holds a centre view: anything under its name (a FIFO or a broken link there is refused
     when the sample is opened, never a sample left out)."""
@@ -97,3 +111,25 @@ class UrbanLFSyn(Dataset):
         if not scenes:
             raise DataError("no UrbanLF-Syn samples found (expected <root>/<split>/ImageN/5_5.png)", root)
         return Benchmark(root=root, scenes=tuple(check_scene_names(scenes)), splits={})  # type: ignore[arg-type]
+
+    @classmethod
+    def write_scene(cls, folder: Path, scene: Any) -> Path:
+        """Write a generated scene of 9x9 views as the sample folder ``folder`` (created): views ``u_v.png``
+        quantized to 8 bits (lfbench.data.synth.quantize), the centre view's ``5_5_disparity.npy`` and (depth not
+        None) ``5_5_depth.npy``, float32; the other views' disparity files of the released data are not written
+        (lfbench scores the centre view). Each file is written atomically."""
+        from lfbench.data.synth import quantize
+
+        if scene.views is None or tuple(scene.views.shape[:2]) != (ANGULAR, ANGULAR):
+            shape = None if scene.views is None else tuple(scene.views.shape[:2])
+            raise SpecError(f"the UrbanLF-Syn layout has {ANGULAR}x{ANGULAR} views, got {shape}")
+        folder = Path(folder)
+        folder.mkdir(parents=True, exist_ok=True)
+        views = quantize(scene.views)
+        for r in range(ANGULAR):
+            for c in range(ANGULAR):
+                write_bytes(folder / view_name(r + 1, c + 1), png_bytes(views[r, c]))
+        write_bytes(folder / gt_name(), npy_bytes(scene.disparity))
+        if scene.depth is not None:
+            write_bytes(folder / depth_name(), npy_bytes(scene.depth))
+        return folder

@@ -48,11 +48,11 @@ def evaluate_to_folder(methods: Sequence[Method], scenes: Sequence[Scene], out: 
     runtime metrics wherever the method reports a runtime (runtime, runtime_log). more: further (methods,
     scenes) groups scored with the same rules into the same results (e.g. stored maps on real scenes beside
     a synthetic run).
-    label: the name the records get instead of the method's label (one method only). writers: the
-    outputs besides results.json and results.csv (lfbench.reports.writers; default the tables), each
-    seeing every prediction, in order (the site last). meta: added to results.meta. jobs: worker
-    processes that score (lfbench.runs.pool; the results are the same for any number). ``results.files``
-    lists every file and folder written.
+    label: the name the records get instead of the method's label (one method only). writers: the outputs besides
+    results.json and results.csv (lfbench.reports.writers; default the tables), each seeing every prediction, in
+    order (the site last). meta: added to results.meta. jobs: worker processes that score
+    (lfbench.runs.runner.score_scenes; the results are the same for any number). ``results.files`` lists every
+    file and folder written.
     """
     out = Path(out)
     if label is not None and len(methods) != 1:

@@ -28,7 +28,7 @@ def _write_set(spec: SyntheticSpec, tmp: Path) -> None:
     if spec.layout == "urbanlf-syn":
         first = spec.first_index()
         write_urbanlf(tmp, seed=spec.seed, width=w, height=h, scenes=spec.scenes, split=spec.category,
-                      numbers=range(first, first + spec.scenes))
+                      numbers=range(first, first + spec.scenes), workers=available_cores())
     else:
         write_benchmark(tmp, seed=spec.seed, size=spec.size, scenes=spec.scenes, category=spec.category,
                         workers=available_cores())
