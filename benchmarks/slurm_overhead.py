@@ -12,7 +12,7 @@ table from the JSON):
 - ``requeue_to_restart_s``: ``scontrol requeue`` of a running job -> it runs again without intervention
   (SLURM keeps a requeued batch job pending for a while);
 - ``job_s``: one job that does nothing (``int("0")``) through lfbench's own submit-and-wait
-  (lfbench.ablation.executor.executor_for(...).map: submitit, the job's Python start and imports, the result file,
+  (lfbench.utils.executor.executor_for(...).map: submitit, the job's Python start and imports, the result file,
   squeue polling), ``--repeats`` times per executor, slurm and local, each on the idle node;
 - ``ablate``: wall seconds of ``lfbench ablate`` on the grid with ``--jobs 1``, ``--jobs 2``, ``--executor local``
   and ``--executor slurm`` (each in a fresh output folder, synthetic data generation and the test-time job
@@ -83,7 +83,7 @@ def requeue_to_restart(cluster, tmp: Path, timeout_s: float = 600) -> float:
 
 def noop_jobs(cluster, executor: str, folder: Path, repeats: int) -> list[float]:
     """Seconds of ``repeats`` one-job runs of ``int("0")`` through the executor's map, each on the idle node."""
-    from lfbench.ablation.executor import ClusterOptions, executor_for
+    from lfbench.utils.executor import ClusterOptions, executor_for
 
     options = ClusterOptions(executor, cpus_per_job=1, timeout_min=10)
     out = []

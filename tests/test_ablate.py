@@ -462,7 +462,7 @@ def test_submitit_local_executor_and_merged_cells_runs_give_the_jobs_1_results(t
     process gives."""
     import dataclasses
 
-    from lfbench.ablation.executor import ClusterOptions
+    from lfbench.utils.executor import ClusterOptions
 
     pytest.importorskip("submitit", reason="the cluster path needs submitit (pip install -e '.[cluster]')")
     spec = load_spec(write_spec(tmp_path, TWO_CELLS))
@@ -491,7 +491,8 @@ def test_each_worker_gets_its_own_gpu_round_robin(monkeypatch, tmp_path):
     import queue
     import sys
 
-    from lfbench.ablation import executor, jobs
+    from lfbench.ablation import jobs
+    from lfbench.utils import executor
 
     assert executor.worker_gpus(3, ["0", "1"]) == ["0", "1", "0"]
     assert executor.worker_gpus(2, []) == [None, None]  # no CUDA: every worker on the CPU
@@ -547,8 +548,9 @@ def test_ctrl_c_during_a_parallel_ablation_starts_no_further_cells(tmp_path, mon
     checkpoint) must find no other cell already handed over."""
     from concurrent.futures import Future
 
-    from lfbench.ablation import executor, runner
+    from lfbench.ablation import runner
     from lfbench.ablation.cell import CellTask
+    from lfbench.utils import executor
 
     class Pool:  # records what is handed over; every call "finishes" at once
         submitted: list[str] = []

@@ -10,7 +10,7 @@ import json
 import pytest
 from helpers import run_cli, write_scene
 
-from lfbench.ablation.executor import KILL_WORKER_ENV
+from lfbench.utils.executor import KILL_WORKER_ENV
 
 
 @pytest.fixture(scope="module")

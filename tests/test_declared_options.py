@@ -172,11 +172,11 @@ def test_every_declared_flag_is_an_option_of_a_section():
     """A command-line flag is not a second kind of declaration: each one lfbench's parsers add (shared, a
     command's own, a cluster option) is an option of a section, with the same type, default, bounds, help and
     metavar as there (a network's bench options are added when --model names it: BenchOption)."""
-    from lfbench.ablation.executor import ClusterOptions
     from lfbench.cli.bench import BenchFlags
     from lfbench.cli.evaluate import EvaluateFlags
     from lfbench.cli.synth import SynthWorkers
     from lfbench.data.synth import SynthFlags
+    from lfbench.utils.executor import ClusterOptions
     from lfbench.utils.flags import SharedFlags, section_flags
     from lfbench.utils.options import option_fields
 
@@ -205,7 +205,7 @@ def test_every_declared_flag_is_an_option_of_a_section():
     ({"max_parallel": 2.0}, "--max-parallel: expected int, got float"),
 ])
 def test_cluster_options_from_python_are_checked_by_their_declaration(given, message):
-    from lfbench.ablation.executor import ClusterOptions
+    from lfbench.utils.executor import ClusterOptions
 
     with pytest.raises(SpecError) as err:
         ClusterOptions("pool", **given)
@@ -216,7 +216,7 @@ def test_cluster_options_from_python_are_checked_by_their_declaration(given, mes
 def test_ablate_reads_the_cluster_flags_into_the_section_they_declare(capsys):
     """What ``lfbench ablate --gpus-per-job`` etc. parse is what ClusterOptions receives, by the same names; a
     value out of the declared bounds is one usage line (exit 2) before any work."""
-    from lfbench.ablation.executor import ClusterOptions
+    from lfbench.utils.executor import ClusterOptions
     from lfbench.utils.flags import section_flags
 
     args = build_parser().parse_args(["ablate", "spec.toml", "--executor", "slurm", "--gpus-per-job", "2",

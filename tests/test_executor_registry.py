@@ -1,5 +1,5 @@
 """Where ablation cells run is one interface in one registry (issue 29.4): an executor added to
-lfbench.ablation.executor.EXECUTORS is a choice of ``lfbench ablate --executor`` and runs the cells and the
+lfbench.utils.executor.EXECUTORS is a choice of ``lfbench ablate --executor`` and runs the cells and the
 test timings, with no change to the runner or the command line."""
 
 from __future__ import annotations
@@ -8,11 +8,12 @@ import argparse
 
 import pytest
 
-from lfbench.ablation import executor, runner
+from lfbench.ablation import runner
 from lfbench.ablation.cell import CellTask
-from lfbench.ablation.executor import EXECUTORS, ClusterOptions
 from lfbench.cli import ablate
+from lfbench.utils import executor
 from lfbench.utils.errors import SpecError
+from lfbench.utils.executor import EXECUTORS, ClusterOptions
 
 
 class Recording(executor.Executor):

@@ -1,4 +1,4 @@
-"""Issue 38, one executor for every pool: lfbench.ablation.executor.ProcessPool runs the ablation's cells,
+"""Issue 38, one executor for every pool: lfbench.utils.executor.ProcessPool runs the ablation's cells,
 ``evaluate --jobs N``'s scoring and ``synth --workers N``'s scenes. A generator of items is pulled lazily (at most
 one ahead of the running jobs); any worker that dies is one line naming its item (here an ablation cell's); the
 scoring and synth workers never import torch; UrbanLF-Syn scenes, now written through the adapter's write_scene
@@ -18,7 +18,7 @@ import pytest
 from helpers import write_scene
 from PIL import Image
 
-from lfbench.ablation.executor import KILL_WORKER_ENV, ClusterOptions, ProcessPool, executor_for
+from lfbench.utils.executor import KILL_WORKER_ENV, ClusterOptions, ProcessPool, executor_for
 
 # --------------------------------------------------------------------------- a generator is pulled lazily
 

@@ -13,8 +13,9 @@ from types import SimpleNamespace
 
 import pytest
 
-from lfbench.ablation import executor, jobs
+from lfbench.ablation import jobs
 from lfbench.ablation.scheduler import RETRIES_ENV, TIMEOUT_ENV, SchedulerError, SchedulerLimits
+from lfbench.utils import executor
 from lfbench.utils.errors import SpecError
 
 pytest.importorskip("submitit", reason="the cluster path needs submitit (pip install -e '.[cluster]')")

@@ -50,7 +50,7 @@ def test_safe_path_environ_restores_the_environment(monkeypatch):
 def test_ablation_jobs_do_not_import_from_the_current_folder(decoy_cwd):
     """submitit's local executor (the --executor path): a job unpickles its function, importing lfbench."""
     pytest.importorskip("submitit", reason="the cluster path needs submitit (pip install -e '.[cluster]')")
-    from lfbench.ablation.executor import ClusterOptions, executor_for
+    from lfbench.utils.executor import ClusterOptions, executor_for
     from lfbench.utils.names import file_name
 
     done: list = []

@@ -1,7 +1,7 @@
 """Ablation cells as jobs through submitit: ``local`` (subprocesses of this machine) and ``slurm`` (one job
 array on a cluster, tested against a real one-node SLURM cluster in tests/test_slurm.py), the two
-:class:`~lfbench.ablation.executor.Executor` s registered lazily in
-:data:`lfbench.ablation.executor.EXECUTORS`.
+:class:`~lfbench.utils.executor.Executor` s registered lazily in
+:data:`lfbench.utils.executor.EXECUTORS`.
 
 Each job runs :func:`run_job`; a cell's own error reaches the submitting command as one line. On a cluster,
 SIGTERM or the time limit's SIGUSR2 stops a cell at a checkpoint and ends its job without a result; the
@@ -24,9 +24,9 @@ from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
-from lfbench.ablation.executor import EXECUTORS, WORKER_DIED, ClusterOptions, Executor, labelled
 from lfbench.ablation.scheduler import RETRIES_ENV, SchedulerError, SchedulerLimits, bounded_submission, squeue_states
 from lfbench.utils.errors import LFBenchError, SpecError
+from lfbench.utils.executor import EXECUTORS, WORKER_DIED, ClusterOptions, Executor, labelled
 from lfbench.utils.subprocesses import SAFE_PATH, safe_path_environ
 
 __all__ = ["SLURM_COMMANDS", "Submitit", "Slurm", "make_executor", "run_job"]

@@ -52,7 +52,6 @@ from lfbench.ablation.cell import (
     scoring_kwargs,
     scoring_of,
 )
-from lfbench.ablation.executor import ClusterOptions, Executor, executor_for
 from lfbench.ablation.report import check_maps, report_writers, run_writers
 from lfbench.ablation.spec import AblationSpec, Cell, SyntheticEval, sha256_of
 from lfbench.method.registry import create_from_spec
@@ -62,6 +61,7 @@ from lfbench.runs.folder import evaluate_to_folder
 from lfbench.training.scenes import check_data
 from lfbench.utils.atomic import fresh_dir, write_text
 from lfbench.utils.errors import DataError, SpecError
+from lfbench.utils.executor import ClusterOptions, Executor, executor_for
 from lfbench.utils.flags import JOBS
 from lfbench.utils.hardware import available_cores
 from lfbench.utils.jsonfile import json_text, read_json
@@ -277,7 +277,7 @@ def _cost_estimate(task: CellTask) -> float:
 
 
 def run_cells(tasks: list[CellTask], executor: Executor, progress: bool | None, log: Log) -> list[dict[str, Any]]:
-    """Run the unfinished cells through ``executor`` (lfbench.ablation.executor: in this process, ``--jobs``
+    """Run the unfinished cells through ``executor`` (lfbench.utils.executor: in this process, ``--jobs``
     worker processes each with its own GPU, or one submitit job per cell); returns every cell's marker."""
     from tqdm import tqdm
 
@@ -403,7 +403,7 @@ def run_ablation(spec: AblationSpec, out: str | Path, *, jobs: int = 1, progress
     """Run (or resume) every cell and extra method of ``spec`` into ``out``; write the combined results,
     tables and figures (and, with ``html``, the HTML report) as one set. ``paper``: the paper's tables
     folder (None: lfbench.reports.paper.find_paper_dir). ``cluster``: run the cells as submitit jobs (see
-    lfbench.ablation.executor). OUT/results.json is merged under a file lock: runs of different cells
+    lfbench.utils.executor). OUT/results.json is merged under a file lock: runs of different cells
     (``--cells``, several processes or machines) add up. ``maps``: whose saved maps the error-map figures and
     the site draw (lfbench.ablation.report.MAP_CHOICES: all, best, none)."""
     JOBS.require(jobs)  # a call from Python; the command line has checked it as it parsed it

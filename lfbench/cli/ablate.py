@@ -15,7 +15,7 @@ stage 1 is trained once under a file lock, and OUT/results.json is merged under 
 processes on one OUT (e.g. different --cells) add up. ``--executor slurm`` submits one job per cell
 through submitit (``--gpus-per-job``, ``--partition``, ...; ``--executor local``: the same path as local
 processes); re-running the command resumes unfinished cells. The executors (``--executor``'s choices) are
-those of lfbench.ablation.executor.EXECUTORS.
+those of lfbench.utils.executor.EXECUTORS.
 The paper's tables come from --paper DIR, else $LFBENCH_PAPER_DIR, else $LFBENCH_HCI_ROOT/../paper;
 without them the tables have no paper columns.
 """
@@ -26,9 +26,9 @@ import argparse
 import dataclasses
 from pathlib import Path
 
-from lfbench.ablation.executor import EXECUTORS, ClusterOptions
 from lfbench.cli.argtypes import add_flag
 from lfbench.utils.errors import SpecError
+from lfbench.utils.executor import EXECUTORS, ClusterOptions
 from lfbench.utils.flags import JOBS, section_flags
 from lfbench.utils.tomlfile import toml_text
 

@@ -921,11 +921,11 @@ def write_scenes(targets: Sequence[Path], seeds: Sequence[int], *, size: int | t
     layout of dataset adapter ``layout`` (its :meth:`lfbench.data.dataset.Dataset.write_scene`), the views S x S
     px (``size`` S) or W x H px (``size`` (W, H): rendered square at max(W, H), the centre cropped), and return
     ``targets``. ``workers`` > 1 writes that many scenes at a time in worker processes (lfbench's one pool,
-    lfbench.ablation.executor.ProcessPool, spawned, without torch); each scene depends only on its own seed,
+    lfbench.utils.executor.ProcessPool, spawned, without torch); each scene depends only on its own seed,
     so the files are the same for any number."""
     from tqdm import tqdm
 
-    from lfbench.ablation.executor import ClusterOptions, ProcessPool
+    from lfbench.utils.executor import ClusterOptions, ProcessPool
 
     jobs = [(Path(t), seed, size, angular, layout, disparity_range) for t, seed in zip(targets, seeds, strict=True)]
     bar = tqdm(total=len(jobs), desc="synth", unit="scene", disable=not progress)

@@ -6,7 +6,7 @@ Scoring, scene by scene, in this process or in worker processes (``lfbench evalu
 (:func:`lfbench.scoring.score.score_predictions`): the scene's reference (ground truth, masks, scored pixels) is
 made once for all of them in the process that scores it and dropped after, so memory holds a few scenes, not
 every method's. With ``jobs`` > 1 the tasks run in lfbench's one process pool
-(lfbench.ablation.executor.ProcessPool: ``jobs`` spawned workers that never import torch, the next scene's
+(lfbench.utils.executor.ProcessPool: ``jobs`` spawned workers that never import torch, the next scene's
 predictions made while they score); a worker reopens the scene from its folder (lfbench.data.scene.Scene
 pickles as its folder) and looks its metrics up by id (a task pickles its metrics as their ids), so that
 neither the scene's loaded views nor a metric's function cross the process boundary. Light fields without a
@@ -27,7 +27,6 @@ from dataclasses import dataclass
 import numpy as np
 from tqdm import tqdm
 
-from lfbench.ablation.executor import ClusterOptions, ProcessPool
 from lfbench.data.scene import Scene
 from lfbench.method.base import Method, Prediction
 from lfbench.results import Record, Results, RunInfo
@@ -35,6 +34,7 @@ from lfbench.scoring.metrics import GENERAL_METRICS, METRICS, Metric, get_metric
 from lfbench.scoring.rules import ScoringRules
 from lfbench.scoring.score import SceneScore, score_predictions
 from lfbench.utils.errors import DataError, SpecError
+from lfbench.utils.executor import ClusterOptions, ProcessPool
 from lfbench.utils.flags import JOBS
 from lfbench.utils.malloc import retain_freed_memory
 
@@ -133,7 +133,7 @@ def score_task(task: ScoringTask) -> tuple[int, list[SceneScore]]:
     return task.index, score_predictions(task.scene, task.predictions, task.metrics, task.rules)
 
 
-#: The one line of a scoring worker that died (lfbench.ablation.executor.ProcessPool: ``names`` its scene).
+#: The one line of a scoring worker that died (lfbench.utils.executor.ProcessPool: ``names`` its scene).
 SCORING_WORKER_DIED = ("a scoring worker process died (killed, or out of memory) while scoring scene {names}: "
                        "nothing of this run was written; run the command again (--jobs 1 scores in this process)")
 
@@ -142,7 +142,7 @@ def score_scenes(tasks: Iterable[ScoringTask], *, jobs: int = 1,
                  on_done: Callable[[tuple[int, list[SceneScore]]], None]) -> None:
     """Score each task (:func:`score_task`), each result to ``on_done`` as it comes (in order with ``jobs`` 1).
     ``tasks`` is pulled as the scoring goes: with ``jobs`` > 1, at most ``jobs`` scenes are scored in worker
-    processes while the next one is made (lfbench.ablation.executor.ProcessPool, ``threads=None``: the workers
+    processes while the next one is made (lfbench.utils.executor.ProcessPool, ``threads=None``: the workers
     never import torch); a task whose scene is held in memory (not a :class:`Scene`) is scored here. SpecError
     for jobs out of range (the flag's check) and, with jobs > 1, for a metric a worker cannot look up (not the
     registered metric of its id); RunFailed naming the scene of a worker that died."""

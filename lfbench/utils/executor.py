@@ -1,6 +1,6 @@
-"""Where ablation cells run: one :class:`Executor` interface (``map`` a function over items, each result
-to a callback as it comes) with its implementations in one registry, :data:`EXECUTORS`, from which
-``lfbench ablate --executor`` takes its choices:
+"""Where lfbench's work runs (the ablation's cells, the scoring of scenes, generated scenes): one
+:class:`Executor` interface (``map`` a function over items, each result to a callback as it comes) with its
+implementations in one registry, :data:`EXECUTORS`, from which ``lfbench ablate --executor`` takes its choices:
 
 - ``inline``: one item after the other in this process;
 - ``pool``: ``--jobs N`` worker processes on this machine, each with its own GPU (round-robin over the
