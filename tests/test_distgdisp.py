@@ -300,6 +300,26 @@ def test_network_equals_the_authors_computation_on_the_macpi(angular, d_min, d_m
     torch.testing.assert_close(trained.detach(), expected_train, atol=1e-4, rtol=1e-4)  # batch statistics: other sums
 
 
+@pytest.mark.parametrize("block_values", [1, 3 * 15 * 25 * 4, 10**9])  # one row, 3 rows, the whole image
+def test_the_cost_volume_made_a_block_of_rows_at_a_time_is_the_one_product_per_disparity(monkeypatch, block_values):
+    """Inference builds the DSAFE cost volume a few rows at a time (the stacked views stay in the cache); each
+    sample of a batch and each block must be the rows of the autograd path's one product per disparity."""
+    import lfbench_methods.distgdisp.network as network
+
+    net = _small(5, -2, 1).eval()
+    feats = torch.rand(2 * 25, 4, 13, 15, generator=torch.Generator().manual_seed(5))
+    net.build_costvolume.DSAFE = torch.nn.Conv2d(4, 6, 5, stride=5, bias=False)
+    with torch.enable_grad():
+        expected = net.build_costvolume(feats.requires_grad_()).detach()
+    feats = feats.detach()
+    monkeypatch.setattr(network, "STACK_BLOCK_VALUES", block_values)
+    with torch.no_grad():
+        blocks = net.build_costvolume(feats)
+    assert blocks.shape == expected.shape == (2, 6, 4, 13, 15)
+    torch.testing.assert_close(blocks, expected, atol=1e-6, rtol=1e-6)
+    assert not torch.equal(blocks[0], blocks[1])  # the two samples are not one repeated
+
+
 def test_exact_tiles_equal_the_whole_image():
     net = _small(5, -1, 1).eval()
     trainable = get_trainable("distgdisp")

@@ -43,6 +43,8 @@ from torch import nn
 NEG_SLOPE = 0.1  # LeakyReLU
 SPATIAL_RES_BLOCKS = 8  # SpaResB in init_feature
 AGG_RES_BLOCKS = 2  # ResB3D in aggregation
+#: values of the stacked shifted views multiplied at a time in inference (8 MB in fp32: a cache's worth)
+STACK_BLOCK_VALUES = 1 << 21
 #: 3x3 convolutions of the feature extractor in a row (2 + 2 per residual block + 2): its radius in px.
 FEATURE_RADIUS = 2 + 2 * SPATIAL_RES_BLOCKS + 2
 #: 3x3x3 convolutions of the aggregation in a row (2 + 2 per residual block + 2).
@@ -153,19 +155,31 @@ class BuildCostVolume(nn.Module):
         disps = range(self.d_lo, self.d_hi + 1)
         grad = torch.is_grad_enabled() and (feats.requires_grad or self.DSAFE.weight.requires_grad)
         cout = self.DSAFE.out_channels
-        out = None if grad else feats.new_empty((len(disps), b, h, w, cout))  # out[i] contiguous
-        slabs = []
+        if grad:  # autograd: one product per disparity
+            slabs = [self._shifted(x, d, 0, h, w, pad) @ self.kernel(d).t() for d in disps]
+            return torch.stack(slabs, dim=0).permute(1, 4, 0, 2, 3)
+        out = feats.new_empty((len(disps), b, h, w, cout))  # out[i] contiguous
+        # A block of rows at a time: the stacked views of a block (~STACK_BLOCK_VALUES values) stay in the cache
+        # for their product instead of going to memory and back (340 MB per disparity at 256 x 256 px); each
+        # output pixel is the same product of the same row, so the values are those of one product per disparity.
+        rows = max(1, STACK_BLOCK_VALUES // max(1, w * n * f))
         for i, d in enumerate(disps):
-            views = [x[:, pad - d * (u - c):pad - d * (u - c) + h, pad - d * (v - c):pad - d * (v - c) + w, u * a + v]
-                     for u in range(a) for v in range(a)]
-            stacked = torch.stack(views, dim=3).reshape(b, h, w, n * f)  # (B, H, W, N * F)
-            if out is None:
-                slabs.append(stacked @ self.kernel(d).t())
-            else:
-                torch.mm(stacked.reshape(-1, n * f), self.kernel(d).t().to(stacked.dtype), out=out[i].view(-1, cout))
-        if out is None:
-            out = torch.stack(slabs, dim=0)
+            kernel = self.kernel(d).t().to(feats.dtype)
+            for k in range(b):
+                for top in range(0, h, rows):
+                    bottom = min(h, top + rows)
+                    stacked = self._shifted(x[k:k + 1], d, top, bottom, w, pad)
+                    torch.mm(stacked.reshape(-1, n * f), kernel, out=out[i, k, top:bottom].view(-1, cout))
         return out.permute(1, 4, 0, 2, 3)  # (B, C, D, H, W); channels-last-3d memory for B = 1
+
+    def _shifted(self, x: torch.Tensor, d: int, top: int, bottom: int, w: int, pad: int) -> torch.Tensor:
+        """Rows ``top:bottom`` of every view shifted by disparity ``d``, stacked: (B, rows, W, N * F) from the
+        padded (B, H + 2P, W + 2P, N, F) features ``x``."""
+        a = self.angular
+        c = (a - 1) // 2
+        views = [x[:, pad - d * (u - c) + top:pad - d * (u - c) + bottom, pad - d * (v - c):pad - d * (v - c) + w,
+                   u * a + v] for u in range(a) for v in range(a)]
+        return torch.stack(views, dim=3).reshape(x.shape[0], bottom - top, w, -1)
 
 
 class Regression(nn.Module):
