@@ -1,8 +1,9 @@
 """Tests for the survivors of issue 39's second mutation round (results/mutation/issue39/README.md, passes 8 on):
-the view grid's orientation check (lfbench.data.orientation) and the rest of the statistics (lfbench.scoring.stats).
-Every expected value comes from an independent computation: a plain-NumPy warp written from the docstring's
-geometry (bilinear sampling loop by loop, not torch's grid_sample), hand-built light fields, scipy.stats, exact
-enumerations. Each test names the class of mutants it kills."""
+the view grid's orientation check (lfbench.data.orientation), all of the statistics (lfbench.scoring.stats) and the
+dataset seam and its adapters (lfbench.data.dataset, generic, urbanlf). Every expected value comes from an
+independent computation: a plain-NumPy warp written from the docstring's geometry (bilinear sampling loop by loop,
+not torch's grid_sample), hand-built light fields, scipy.stats, exact enumerations, laws and lines worked out by
+hand. Each test names the class of mutants it kills."""
 
 from __future__ import annotations
 
@@ -756,3 +757,270 @@ def test_ci_records_progress_bar_goes_to_stderr_only_when_asked(monkeypatch):
     stats.ci_records(results, errors, n=5, average=False, progress=True)
     common = {"desc": "bootstrap", "unit": "number", "file": sys.stderr, "leave": False}
     assert seen == [{**common, "disable": True}, {**common, "disable": None}]
+
+
+# --------------------------------------------------------------------------- the dataset seam and its adapters
+
+
+def _protocol(**changes):
+    from lfbench.data.dataset import DatasetProtocol
+
+    base = dict(border_px=4, metrics=("mse_x100",), disparity_range=(-1.0, 2.0))
+    return DatasetProtocol(**{**base, **changes})
+
+
+def test_a_protocol_refuses_what_no_dataset_can_mean_word_for_word():
+    """Kills DatasetProtocol.__post_init__'s class: ``<=`` for ``<`` in the range (an empty range refused),
+    the interval's bounds (0 and above max - min refused, max - min itself allowed, NaN refused), a negative
+    border, a scorer not known; each message word for word."""
+    with pytest.raises(ValueError, match=r"^disparity range must be \(min, max\) with min < max, got \(1\.0, 1\.0\)$"):
+        _protocol(disparity_range=(1.0, 1.0))
+    with pytest.raises(ValueError, match=r"^disparity range must be .* got \(2\.0, 1\.0\)$"):
+        _protocol(disparity_range=(2.0, 1.0))
+    assert _protocol(disparity_interval=3.0).disparity_interval == 3.0
+    for step in (0.0, -0.1, 3.5, NAN):
+        with pytest.raises(ValueError, match=rf"^disparity interval must be > 0 and at most max - min = 3 px, "
+                                             rf"got {step}$"):
+            _protocol(disparity_interval=step)
+    assert _protocol(border_px=0).border_px == 0
+    with pytest.raises(ValueError, match=r"^border must be >= 0 px, got -1$"):
+        _protocol(border_px=-1)
+    assert _protocol(scorer="paper-author").scorer == "paper-author"
+    with pytest.raises(ValueError, match=r"^scorer must be 'lfbench' or 'paper-author', got 'toolkit'$"):
+        _protocol(scorer="toolkit")
+
+
+def test_a_protocol_describes_itself_line_by_line():
+    """Kills describe()'s class: sizes W x H from (H, W) and views U x V from (V, U) (a non-square grid), 'any'
+    where unset, the metrics and resolutions joined by ', ', the range and interval as %g, the high-resolution
+    scenes sorted, and the scorer's line only for another scorer than lfbench's; every line written out by
+    hand."""
+    full = _protocol(border_px=15, metrics=("badpix_0.07", "mse_x100"), disparity_range=(-0.5, 1.6),
+                     disparity_interval=0.1, resolutions=("lowres", "highres"), highres_scenes=frozenset({"b", "a"}),
+                     spatial_size=(480, 640), angular_size=(9, 7), reference_view="centre view 5_5.png",
+                     scorer="paper-author")
+    assert full.describe() == [
+        "views: 7x9, 640x480 px (W x H); scored: centre view 5_5.png, 15 px border",
+        "metrics: badpix_0.07, mse_x100",
+        "resolutions: lowres, highres",
+        "disparity range: [-0.5, 1.6] px per view step, interval 0.1 px",
+        "high-resolution scenes: a, b",
+        "scorer: paper-author (BadPix |error| >= t, NaN good in BadPix and NaN in MSE; lfbench.scoring.policy)"]
+    assert _protocol().describe() == [
+        "views: any, any; scored: centre view, 4 px border",
+        "metrics: mse_x100",
+        "resolutions: lowres",
+        "disparity range: [-1, 2] px per view step, each method's own interval"]
+
+
+def test_which_adapters_read_their_protocol_from_the_data():
+    """Kills ``is`` for ``is not`` in protocol_from_data: the TOML adapter reads it, UrbanLF-Syn and a plain
+    adapter do not."""
+    from lfbench.data.dataset import Dataset
+    from lfbench.data.generic import GenericDataset
+    from lfbench.data.urbanlf import UrbanLFSyn
+
+    class Plain(Dataset):
+        name = "plain"
+
+    assert GenericDataset.protocol_from_data() is True
+    assert UrbanLFSyn.protocol_from_data() is False and Plain.protocol_from_data() is False
+
+
+def _toml_root(tmp_path, *, category: str | None = "cat"):
+    """ROOT/lfbench-dataset.toml and one 3x3 scene of 8x6 px views ROOT/[cat/]street/v1.png .. v9.png, gt.npy."""
+    from PIL import Image
+
+    from lfbench.data.generic import SPEC_FILE
+
+    root = tmp_path / "root"
+    root.mkdir()
+    (root / SPEC_FILE).write_text('[views]\npattern = "v{k}.png"\nangular = 3\nfirst = 1\n'
+                                  '[ground_truth]\nfile = "gt.npy"\n[protocol]\nborder = 1\n', encoding="utf-8")
+    scene = root / category / "street" if category else root / "street"
+    scene.mkdir(parents=True)
+    for k in range(1, 10):
+        Image.new("RGB", (8, 6)).save(scene / f"v{k}.png")
+    np.save(scene / "gt.npy", np.zeros((6, 8), np.float32))
+    return root
+
+
+def test_the_toml_adapter_opens_scenes_with_their_category_and_root(tmp_path):
+    """Kills GenericDataset.open's class: the scene's category (its folder's parent under the root), the
+    benchmark's root and its empty splits, and the refusal of a root without scenes (words, the root named)."""
+    from lfbench.data.generic import GenericDataset
+
+    root = _toml_root(tmp_path)
+    assert GenericDataset.matches(root) and not GenericDataset.matches(tmp_path)
+    bench = GenericDataset.open(root)
+    assert bench.root == root and dict(bench.splits) == {}
+    assert [(s.name, s.category) for s in bench.scenes] == [("street", "cat")]
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    (empty / "lfbench-dataset.toml").write_text((root / "lfbench-dataset.toml").read_text(encoding="utf-8"),
+                                                encoding="utf-8")
+    with pytest.raises(DataError) as info:
+        GenericDataset.open(empty)
+    assert str(info.value) == f"{empty}: no scene folders holding v5.png (the centre view lfbench-dataset.toml names)"
+
+
+def test_read_dataset_spec_maps_every_key_to_the_layout_and_protocol(tmp_path):
+    """Kills read_dataset_spec's class: each key of lfbench-dataset.toml carried to its field of the ViewLayout or
+    the DatasetProtocol (rows / columns of the grid, first, the ground truth's file / format / scale / offset,
+    the three orientation keys, border, metrics, range, interval, scorer, the source file, the reference view
+    named by the centre's file), every value set away from its default."""
+    from lfbench.data.generic import read_dataset_spec
+
+    path = tmp_path / "lfbench-dataset.toml"
+    path.write_text('[views]\npattern = "view_{v}_{u}.png"\nangular = [3, 5]\nfirst = 1\nreverse_rows = true\n'
+                    'reverse_columns = true\n'
+                    '[ground_truth]\nfile = "gt.pfm"\nformat = "pfm"\nscale = -2.0\noffset = 0.5\n'
+                    '[protocol]\nborder = 2\nmetrics = ["badpix_0.03", "mse_x100"]\ndisparity_range = [-2.0, 3.0]\n'
+                    'disparity_interval = 0.5\nscorer = "paper-author"\n', encoding="utf-8")
+    layout, protocol = read_dataset_spec(path)
+    assert (layout.pattern, layout.angular, layout.first) == ("view_{v}_{u}.png", (3, 5), 1)
+    assert (layout.gt_file, layout.gt_format, layout.gt_scale, layout.gt_offset) == ("gt.pfm", "pfm", -2.0, 0.5)
+    assert (layout.transpose, layout.reverse_rows, layout.reverse_cols) == (False, True, True)
+    assert (protocol.border_px, protocol.metrics, protocol.disparity_range) == (2, ("badpix_0.03", "mse_x100"),
+                                                                               (-2.0, 3.0))
+    assert (protocol.disparity_interval, protocol.scorer, protocol.angular_size) == (0.5, "paper-author", (3, 5))
+    assert protocol.source == path
+    # the centre (row 1, column 2, 0-based) read with both axes reversed and counted from 1: view_2_3.png
+    assert protocol.reference_view == "centre view view_2_3.png"
+    square = tmp_path / "square.toml"
+    square.write_text('[views]\npattern = "v_{v}_{u}.png"\nangular = 3\ntranspose = true\n', encoding="utf-8")
+    layout, protocol = read_dataset_spec(square)
+    assert (layout.angular, layout.first, layout.transpose, layout.reverse_rows, layout.reverse_cols) == (
+        (3, 3), 0, True, False, False)
+    assert (layout.gt_file, layout.gt_scale, layout.gt_offset) == (None, 1.0, 0.0)
+    assert (protocol.border_px, protocol.disparity_range, protocol.disparity_interval, protocol.scorer) == (
+        15, (-4.0, 4.0), None, "lfbench")
+    assert protocol.reference_view == "centre view v_1_1.png"
+
+
+@pytest.mark.parametrize("text, said", [
+    ('[veiws]\npattern = "v{k}.png"\n', "unknown key(s): veiws (accepted: ground_truth, protocol, views)"),
+    ('[views]\npattern = "v{k}.png"\nangular = 0\n', "views.angular: must be in [1, 33], got 0"),
+    ('[views]\npattern = "v{k}.png"\nangular = 3\ncolour = 1\n',
+     "[views] unknown key(s): colour (accepted: angular, first, pattern, reverse_columns, reverse_rows, transpose)"),
+    ("[views\n", "invalid TOML: Expected ']' at the end of a table declaration (at line 1, column 7)"),
+    (b"\xff\xfe", "dataset description is not UTF-8 text"),
+    ('[views]\npattern = "v{k}.png"\nangular = 3\n[protocol]\nborder = -1\n',
+     "protocol.border: must be in [0, 1024], got -1"),
+    ('[views]\nangular = 3\n', "views.pattern: is required"),
+], ids=["section", "value", "key", "syntax", "utf8", "protocol", "required"])
+def test_a_bad_dataset_file_is_one_line_naming_the_file_once(tmp_path, text, said):
+    """Kills read_dataset_spec's refusal class: the file named once, in front (the prefix the key's error carries
+    removed, not a suffix), the key's path from the top table (no name of its own), the file's label in a read
+    error, a misspelt section named before a missing one; each line word for word."""
+    from lfbench.data.generic import read_dataset_spec
+
+    path = tmp_path / "lfbench-dataset.toml"
+    if isinstance(text, bytes):
+        path.write_bytes(text)
+    else:
+        path.write_text(text, encoding="utf-8")
+    with pytest.raises(DataError) as info:
+        read_dataset_spec(path)
+    assert str(info.value) == f"{path}: {said}"
+
+
+def test_urbanlf_names_and_layout():
+    """Kills urbanlf's names: ``u_v.png`` is angular row u, column v counted from 1 (the centre 5_5.png), the
+    disparity and depth files of a view, the centre's by default."""
+    from lfbench.data import urbanlf
+
+    assert urbanlf.view_name(2, 7) == "2_7.png"
+    assert urbanlf.gt_name() == "5_5_disparity.npy" and urbanlf.gt_name(1, 9) == "1_9_disparity.npy"
+    assert urbanlf.depth_name() == "5_5_depth.npy" and urbanlf.depth_name(3, 4) == "3_4_depth.npy"
+    layout = urbanlf.URBANLF_LAYOUT
+    assert layout.view_name(1, 6) == "2_7.png" and layout.view_name(*layout.centre) == "5_5.png"
+
+
+def test_urbanlf_opens_samples_of_each_split_and_refuses_a_root_without(tmp_path):
+    """Kills UrbanLFSyn's and UrbanLFScene's class: a sample is a folder holding 5_5.png (a broken link there
+    counts), its category the split, its reopen arguments, detection at any depth, the refusal's words."""
+    import io
+
+    from PIL import Image
+
+    from lfbench.data.urbanlf import UrbanLFScene, UrbanLFSyn
+
+    png = io.BytesIO()
+    Image.new("RGB", (4, 3)).save(png, format="PNG")
+    root = tmp_path / "urban"
+    for split, image in (("train", "Image1"), ("val", "Image7")):
+        folder = root / split / image
+        folder.mkdir(parents=True)
+        for r in range(1, 10):
+            for c in range(1, 10):
+                (folder / f"{r}_{c}.png").write_bytes(png.getvalue())
+    linked = tmp_path / "linked" / "test" / "Image9"
+    linked.mkdir(parents=True)
+    (linked / "5_5.png").symlink_to(tmp_path / "nowhere.png")  # a broken link: a sample (refused when opened)
+    assert UrbanLFSyn.matches(tmp_path / "linked") and UrbanLFSyn.matches(linked)
+    assert UrbanLFSyn.matches(root) and UrbanLFSyn.matches(root / "train")
+    assert UrbanLFSyn.matches(root / "val" / "Image7")
+    bench = UrbanLFSyn.open(root)
+    assert bench.root == root and dict(bench.splits) == {}
+    got = sorted((s.name, s.category) for s in bench.scenes)
+    assert got == [("Image1", "train"), ("Image7", "val")]
+    scene = next(s for s in bench.scenes if s.name == "Image1")
+    assert isinstance(scene, UrbanLFScene) and scene.reopen_args() == (root / "train" / "Image1", "train")
+    assert UrbanLFScene(root / "train" / "Image1").category == "other"
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    assert not UrbanLFSyn.matches(empty)
+    with pytest.raises(DataError) as info:
+        UrbanLFSyn.open(empty)
+    assert str(info.value) == f"{empty}: no UrbanLF-Syn samples found (expected <root>/<split>/ImageN/5_5.png)"
+
+
+def _method_info(d_min=-4.0, d_max=4.0, interval=None, weights=None):
+    """What method_range_params reads of a registered method: its parameters' defaults, its class (with an
+    optional range_from_weights) and its name."""
+    params = {"d_min": types.SimpleNamespace(default=d_min), "d_max": types.SimpleNamespace(default=d_max)}
+    if interval is not None:
+        params["interval"] = types.SimpleNamespace(default=interval)
+    cls = types.SimpleNamespace() if weights is None else types.SimpleNamespace(range_from_weights=weights)
+    return types.SimpleNamespace(params=params, method_class=cls, name="sweep")
+
+
+def test_method_range_params_by_hand(caplog):
+    """Kills method_range_params' class, each expected grid worked out by hand from its docstring: no range for a
+    method without d_min / d_max or a spec that sets either; the range where it differs from the method's
+    defaults; with an interval the top raised to the first grid point at or above the maximum (ceil of the
+    steps, rounded to 9 digits first: 80.00000000000001 steps are 80); the dataset's interval where the spec
+    sets none and it differs; a spec's interval kept; a zero step leaves the maximum; weights that fix the grid
+    get nothing (logged)."""
+    from lfbench.data.dataset import method_range_params
+
+    urban = method_range_params((-0.5, 1.6))
+    no_range = types.SimpleNamespace(params={"interval": types.SimpleNamespace(default=0.1)}, method_class=None,
+                                     name="x")
+    assert urban(no_range, {}) == {}
+    assert urban(_method_info(), {"d_min": -1.0}) == {} and urban(_method_info(), {"d_max": 1.0}) == {}
+    assert method_range_params((-4, 4))(_method_info(), {}) == {}
+    assert urban(_method_info(), {}) == {"d_min": -0.5, "d_max": 1.6}
+    assert urban(_method_info(interval=0.25), {}) == {"d_min": -0.5, "d_max": 1.75}  # 8.4 steps: 9
+    assert urban(_method_info(interval=0.25), {"interval": 0.5}) == {"d_min": -0.5, "d_max": 2.0}  # 4.2: 5
+    assert urban(_method_info(interval=0.25), {"interval": 0.0}) == {"d_min": -0.5, "d_max": 1.6}
+    assert urban(_method_info(interval=0.7), {}) == {"d_min": -0.5, "d_max": 1.6}  # 3 steps exactly
+    grid = method_range_params((-0.5, 1.6), 0.1)
+    assert grid(_method_info(interval=0.25), {}) == {"d_min": -0.5, "d_max": 1.6, "interval": 0.1}
+    assert grid(_method_info(interval=0.25), {"interval": 0.25}) == {"d_min": -0.5, "d_max": 1.75}
+    assert method_range_params((-0.5, 1.6), 0.25)(_method_info(interval=0.25), {}) == {"d_min": -0.5,
+                                                                                        "d_max": 1.75}
+    assert method_range_params((-4, 4), 0.1)(_method_info(interval=0.25), {}) == {"interval": 0.1}  # 80 steps
+    assert method_range_params((-0.5, 1.75))(_method_info(-0.5, 1.75, interval=0.25), {}) == {}
+    # the steps rounded to 9 digits before the ceiling (4.0000000004 steps are 4), the top to 9 digits
+    assert method_range_params((0.0, 1.0000000001))(_method_info(interval=0.25), {}) == {"d_min": 0.0, "d_max": 1.0}
+    assert method_range_params((2e-10, 1.0))(_method_info(interval=0.25), {}) == {"d_min": 2e-10, "d_max": 1.0}
+    assert urban(_method_info(weights=lambda info, params: False), {}) == {"d_min": -0.5, "d_max": 1.6}
+    asked = []
+    fixed = _method_info(weights=lambda info, params: asked.append((info.name, params)) or True)
+    with caplog.at_level("INFO", logger="lfbench.data.dataset"):
+        assert urban(fixed, {"weights": "w.pt"}) == {}
+    assert asked == [("sweep", {"weights": "w.pt"})]
+    assert caplog.messages == ["sweep: searches the disparity grid its weights were trained on (the dataset's "
+                               "[-0.5, 1.6] px is not laid over weights)"]
