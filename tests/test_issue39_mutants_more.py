@@ -1024,3 +1024,255 @@ def test_method_range_params_by_hand(caplog):
     assert asked == [("sweep", {"weights": "w.pt"})]
     assert caplog.messages == ["sweep: searches the disparity grid its weights were trained on (the dataset's "
                                "[-0.5, 1.6] px is not laid over weights)"]
+
+
+# --------------------------------------------------------------------------- detection and the plugin guards
+
+
+class _Registry:
+    """The few calls detection makes of DATASETS, over adapters given here (no entry point, no CLI)."""
+
+    def __init__(self, *adapters):
+        self.adapters = {a.name: a for a in adapters}
+
+    def names(self):
+        return list(self.adapters)
+
+    def get(self, name):
+        if name not in self.adapters:
+            raise SpecError(f"unknown dataset {name!r}")
+        return self.adapters[name]
+
+
+def _adapter(name, *, matches=True, opened=None, protocol=None, module="plugin_mod"):
+    """A dataset adapter class named ``name`` defined in ``module`` (a plugin's unless it is lfbench's): matches()
+    returns ``matches`` (or raises it), open() returns ``opened`` (or raises it), protocol_for() ``protocol``."""
+    from lfbench.data.dataset import Dataset
+
+    def act(value):
+        if isinstance(value, BaseException):
+            raise value
+        return value
+
+    cls = type(name.title().replace("-", ""), (Dataset,), {
+        "name": name, "layout": f"{name} layout", "__module__": module,
+        "matches": classmethod(lambda c, root: act(matches)),
+        "open": classmethod(lambda c, root: act(opened)),
+        "protocol": protocol if protocol is not None else _protocol(),
+    })
+    if protocol is not None:
+        cls.protocol_for = classmethod(lambda c, root: act(protocol))
+    return cls
+
+
+@pytest.fixture
+def datasets(monkeypatch):
+    from lfbench.data import dataset as seam
+
+    def install(*adapters):
+        monkeypatch.setattr(seam, "DATASETS", _Registry(*adapters))
+        return seam
+
+    return install
+
+
+def test_a_plugin_is_named_with_its_module_and_class():
+    """Kills _plugin's class: lfbench's own adapters (module lfbench or lfbench.*) are not guarded, any other is
+    named ``'name' (module.Class)``."""
+    from lfbench.data.dataset import _plugin
+
+    assert _plugin(_adapter("own", module="lfbench.data.fake")) is None
+    assert _plugin(_adapter("top", module="lfbench")) is None
+    assert _plugin(_adapter("near", module="lfbenchx.data")) == "'near' (lfbenchx.data.Near)"
+    assert _plugin(_adapter("my-set")) == "'my-set' (plugin_mod.MySet)"
+
+
+def test_detection_by_hand(datasets, tmp_path, caplog):
+    """Kills detect_dataset's and _matches' class: a missing root, no layout (the names listed, 'none installed',
+    the first failing plugin's line), several layouts, one layout with a failing plugin left out (logged), a
+    plugin's matches() counted only when it returns True, an LFBenchError's and another exception's line."""
+    from lfbench.utils.errors import LFBenchError
+
+    missing = tmp_path / "missing"
+    seam = datasets(_adapter("a", matches=False), _adapter("b", matches=False))
+    with pytest.raises(DataError) as info:
+        seam.detect_dataset(missing)
+    assert str(info.value) == f"{missing}: data root not found"
+    with pytest.raises(DataError) as info:
+        seam.detect_dataset(tmp_path)
+    assert str(info.value) == (f"{tmp_path}: no scenes found: no known dataset layout (a, b; see `lfbench datasets`)")
+    seam = datasets()
+    with pytest.raises(DataError, match=r"no known dataset layout \(none installed; see `lfbench datasets`\)$"):
+        seam.detect_dataset(tmp_path)
+    seam = datasets(_adapter("a", matches=False), _adapter("bad", matches=RuntimeError("boom\nsecond line")),
+                    _adapter("worse", matches=LFBenchError("not readable")))
+    with pytest.raises(DataError) as info:
+        seam.detect_dataset(tmp_path)
+    assert str(info.value).endswith("(a, bad, worse; see `lfbench datasets`); adapter 'bad' (plugin_mod.Bad): "
+                                    "matches() failed: RuntimeError: boom")
+    good = _adapter("good")
+    seam = datasets(_adapter("bad", matches=RuntimeError("boom")), good, _adapter("truthy", matches=1),
+                    _adapter("worse", matches=LFBenchError("not readable")))
+    with caplog.at_level("WARNING", logger="lfbench.data.dataset"):
+        assert seam.detect_dataset(tmp_path) is good
+    assert caplog.messages == [
+        "dataset adapter 'bad' (plugin_mod.Bad): matches() failed: RuntimeError: boom; left out of the detection",
+        "dataset adapter 'worse' (plugin_mod.Worse): not readable; left out of the detection"]
+    seam = datasets(_adapter("a"), _adapter("b"), _adapter("c", matches=False))
+    with pytest.raises(DataError) as info:
+        seam.detect_dataset(tmp_path)
+    assert str(info.value) == (f"{tmp_path}: the layout matches several datasets (a, b): choose one with "
+                               "--dataset NAME")
+    own = _adapter("own", matches=RuntimeError("a bug of lfbench's"), module="lfbench.data.fake")
+    with pytest.raises(RuntimeError, match="a bug of lfbench's"):  # lfbench's own adapter keeps its traceback
+        datasets(own).detect_dataset(tmp_path)
+    assert datasets(_adapter("a", matches=False), good)._detected(tmp_path) is good
+    assert datasets(_adapter("a", matches=False))._detected(tmp_path) is None
+
+
+def test_a_named_dataset_by_hand(datasets, tmp_path):
+    """Kills dataset_of's class: detection without a name; an unknown name (the registry's line, no path); a
+    missing root; a root not laid out as the named dataset (its layout said); a named plugin whose matches()
+    fails (its line)."""
+    a, b = _adapter("a"), _adapter("b", matches=False)
+    seam = datasets(a, b, _adapter("bad", matches=ValueError("no")))
+    assert seam.dataset_of(tmp_path) is a and seam.dataset_of(tmp_path, "a") is a
+    with pytest.raises(DataError) as info:
+        seam.dataset_of(tmp_path, "zzz")
+    assert str(info.value) == "unknown dataset 'zzz'"
+    with pytest.raises(DataError) as info:
+        seam.dataset_of(tmp_path / "missing", "a")
+    assert str(info.value) == f"{tmp_path / 'missing'}: data root not found"
+    with pytest.raises(DataError) as info:
+        seam.dataset_of(tmp_path, "b")
+    assert str(info.value) == f"{tmp_path}: not laid out as dataset 'b' (b layout)"
+    with pytest.raises(DataError) as info:
+        seam.dataset_of(tmp_path, "bad")
+    assert str(info.value) == f"{tmp_path}: dataset adapter 'bad' (plugin_mod.Bad): matches() failed: ValueError: no"
+
+
+def test_a_plugins_open_and_protocol_are_guarded(datasets, tmp_path):
+    """Kills _call_adapter's, _open's, _protocol's and open_dataset's class: what a plugin returns is checked
+    against the type expected (its type named), what it raises is one line naming it, the method and the root
+    (an LFBenchError passes as it is), lfbench's own adapter is called unguarded."""
+    from lfbench.data.scene import Benchmark
+    from lfbench.utils.errors import LFBenchError
+
+    bench = Benchmark(root=tmp_path, scenes=())
+    plugin = _adapter("p", opened=bench)
+    assert datasets(plugin).open_dataset(tmp_path) == (plugin, bench)
+    assert datasets(plugin).open_dataset(tmp_path, "p") == (plugin, bench)
+    for opened, said in ((ValueError("bad file\nmore"), "open() failed: ValueError: bad file"),
+                         ("a text", "open() returned a str, expected a Benchmark")):
+        with pytest.raises(DataError) as info:
+            datasets(_adapter("p", opened=opened)).open_dataset(tmp_path)
+        assert str(info.value) == f"{tmp_path}: dataset adapter 'p' (plugin_mod.P): {said}"
+    with pytest.raises(LFBenchError, match="^its own line$"):
+        datasets(_adapter("p", opened=LFBenchError("its own line"))).open_dataset(tmp_path)
+    with pytest.raises(KeyError):
+        datasets(_adapter("own", opened=KeyError("x"), module="lfbench.data.fake")).open_dataset(tmp_path)
+    seam = datasets(_adapter("p", opened=bench, protocol={"border": 1}))
+    with pytest.raises(DataError) as info:
+        seam.open_datasets([tmp_path])
+    assert str(info.value) == (f"{tmp_path}: dataset adapter 'p' (plugin_mod.P): protocol_for() returned a dict, "
+                               "expected a DatasetProtocol")
+    with pytest.raises(NotImplementedError, match="^dataset 'p' has no writer of generated scenes$"):
+        plugin.write_scene(tmp_path, None)
+
+
+def test_several_roots_by_hand(datasets, tmp_path):
+    """Kills open_datasets' class: no root, a root given twice (resolved), a root of another dataset (both
+    named), another protocol, the check called with the protocol before any scene is opened, the scenes of
+    every root in order in the first root's benchmark with the others listed."""
+    from lfbench.data.scene import Benchmark
+
+    one, two, three = (tmp_path / n for n in ("one", "two", "three"))
+    for root in (one, two, three):
+        root.mkdir()
+    events = []
+
+    class Adapter(_adapter("a")):
+        @classmethod
+        def matches(cls, root):
+            return root.name != "three"
+
+        @classmethod
+        def open(cls, root):
+            events.append(("open", root.name))
+            return Benchmark(root=root, scenes=(f"{root.name}-1", f"{root.name}-2"), splits={"x": ("y",)})
+
+    seam = datasets(Adapter, _adapter("other", matches=False))
+    with pytest.raises(DataError, match="^no data root given$"):
+        seam.open_datasets([])
+    with pytest.raises(DataError) as info:
+        seam.open_datasets([one, tmp_path / "two" / ".." / "one"])
+    assert str(info.value) == f"{tmp_path / 'two' / '..' / 'one'}: data root given twice (also as {one})"
+    dataset, protocol, bench = seam.open_datasets([one, two], check=lambda p: events.append(("check", p)))
+    assert dataset is Adapter and protocol == Adapter.protocol
+    assert events == [("check", Adapter.protocol), ("open", "one"), ("open", "two")]
+    assert bench.root == one and bench.scenes == ("one-1", "one-2", "two-1", "two-2") and bench.others == (two,)
+    assert dict(bench.splits) == {"x": ("y",)}
+
+    class Third(_adapter("third")):
+        @classmethod
+        def matches(cls, root):
+            return root.name == "three"
+
+    seam = datasets(Adapter, Third)
+    with pytest.raises(DataError) as info:
+        seam.open_datasets([one, three])
+    assert str(info.value) == (f"{three}: is dataset 'third', {one} is 'a': one results file holds one dataset's "
+                               "numbers (their protocols differ); evaluate each into its own --out")
+    with pytest.raises(DataError) as info:
+        seam.open_datasets([one, three], "a")
+    assert str(info.value) == f"{three}: not laid out as dataset 'a' (a layout)"
+
+    class Declared(Adapter):
+        @classmethod
+        def protocol_for(cls, root):
+            return _protocol(border_px=7 if root.name == "two" else 4)
+
+    seam = datasets(Declared)
+    with pytest.raises(DataError) as info:
+        seam.open_datasets([one, two])
+    assert str(info.value) == (f"{two}: scored by another protocol than {one} (one results file holds one "
+                               "dataset's numbers): evaluate it on its own")
+    assert seam.open_datasets([one])[1] == _protocol()
+
+
+def test_a_name_decides_where_detection_cannot_and_every_adapter_gets_the_root(datasets, tmp_path):
+    """Kills the name dropped on its way to dataset_of (open_dataset, open_datasets' first root, ``name and``
+    for ``name or`` on the later roots) and the root dropped on its way to lfbench's own adapters: a root that
+    two layouts match is opened by the one named, or, after a first root detected as one dataset, as that one."""
+    from lfbench.data.scene import Benchmark
+
+    one, two = tmp_path / "one", tmp_path / "two"
+    one.mkdir()
+    two.mkdir()
+    seen = []
+
+    class Own(_adapter("own")):
+        __module__ = "lfbench.data.fake"  # lfbench's own adapter: called unguarded
+
+        @classmethod
+        def matches(cls, root):
+            seen.append(root)
+            return root in (one, two)
+
+        @classmethod
+        def open(cls, root):
+            return Benchmark(root=root, scenes=(root.name,))
+
+    class Also(_adapter("also")):
+        @classmethod
+        def matches(cls, root):
+            return root == two
+
+    seam = datasets(Own, Also)
+    with pytest.raises(DataError, match="matches several datasets"):
+        seam.detect_dataset(two)
+    assert seam.open_dataset(two, "own")[0] is Own and seam.open_dataset(two, "own")[1].root == two
+    assert seam.open_datasets([two], "own")[2].scenes == ("two",)
+    assert seam.open_datasets([one, two])[2].scenes == ("one", "two")  # two: 'own', as the first root
+    assert set(seen) == {one, two}
+    assert seam._plugin(Own) is None
