@@ -258,10 +258,10 @@ def test_a_network_s_train_bench_options_are_declared_flags(capsys):
     import argparse
 
     from lfbench.cli.bench import add_arguments
-    from lfbench.method.trainable import get_trainable
+    from lfbench.method.trainable import bench_options, get_trainable
     from lfbench.utils.options import Param
 
-    path = {o.name: o for o in get_trainable("subfocal").train_bench_options}["path"]
+    path = {o.name: o for o in bench_options(get_trainable("subfocal").train_bench_options)}["path"]
     assert isinstance(path, Param) and path.choices == ("fast", "reference") and path.default == ("fast",)
     parser = argparse.ArgumentParser(prog="lfbench bench")
     add_arguments(parser)

@@ -9,7 +9,7 @@ import argparse
 import dataclasses
 import math
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Literal
 
 import pytest
 import torch
@@ -229,3 +229,24 @@ def test_ablate_reads_the_cluster_flags_into_the_section_they_declare(capsys):
         build_parser().parse_args(["ablate", "spec.toml", "--timeout-min", "0"])
     assert exit_.value.code == 2
     assert "argument --timeout-min: must be >= 1, got 0" in capsys.readouterr().err
+
+
+def test_a_network_s_train_bench_options_are_a_section_of_declared_options():
+    """A network's ``lfbench bench train`` options are declared as every option is (a section; issue 38): the
+    flags made from it take one or more of the Literal's choices, default to the declared values (None: unset)
+    and refuse another value in the one wording."""
+    from lfbench.method.trainable import bench_options
+    from lfbench.utils.options import option
+
+    @dataclasses.dataclass(frozen=True, kw_only=True)
+    class Variants:
+        mode: tuple[Literal["a", "b"], ...] = option(("a",), help="the mode(s)")
+        kernel: tuple[Literal["x", "y", "z"] | None, ...] = option((None,), help="the kernel(s)", metavar="K")
+
+    mode, kernel = bench_options(Variants)
+    assert (mode.name, mode.choices, mode.default, mode.metavar, mode.help) == ("mode", ("a", "b"), ("a",), "{a,b}",
+                                                                                "the mode(s)")
+    assert (kernel.choices, kernel.default, kernel.metavar) == (("x", "y", "z"), (None,), "K")
+    assert kernel.parse("y") == "y"
+    assert kernel.problem("w") == "expected one of 'x', 'y', 'z', got 'w'"
+    assert bench_options(None) == ()

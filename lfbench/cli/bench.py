@@ -53,7 +53,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from lfbench.cli.argtypes import add_flag, flag_type
-from lfbench.method.trainable import DEFAULT_TRAINABLE
+from lfbench.method.trainable import DEFAULT_TRAINABLE, bench_options
 from lfbench.utils.flags import DEVICE, MAX_MEMORY, REPEAT, SCENE_COUNT, THREADS, TIMEOUT, section_flags
 from lfbench.utils.options import option
 
@@ -149,7 +149,7 @@ def _add_network_flags(p: argparse.ArgumentParser, bench: str, model: str) -> No
         group.add_argument(flag, dest=f"net_{key}", nargs="+", type=flag_type(param), metavar=key.upper(),
                            help=f"{param.help or key} (default: {default})")
     if bench == "train":
-        for option in trainable.train_bench_options:
+        for option in bench_options(trainable.train_bench_options):
             if option.flag not in taken:
                 add_flag(group, option, default=None, nargs="+", dest=f"opt_{option.name}")
 
@@ -344,7 +344,7 @@ def _cases(args: argparse.Namespace) -> list[tuple[str, dict]]:
                     cases.append(("volume", {"model": model, "size": args.size, "interval": interval,
                                              "precision": precision, "method": method, "repeat": args.repeat, **th}))
     elif which == "train":
-        chosen = {o.name: getattr(args, f"opt_{o.name}", None) for o in trainable.train_bench_options}
+        chosen = {o.name: getattr(args, f"opt_{o.name}", None) for o in bench_options(trainable.train_bench_options)}
         variants = trainable.train_variants(chosen)
         nets = _sweep(args, trainable, model_params, trainable.train_bench_defaults)
         cases = [("train", {"model": model, **net, "batch": args.batch, "patch": args.patch, "steps": args.steps,

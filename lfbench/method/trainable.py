@@ -50,16 +50,17 @@ import inspect
 import itertools
 import math
 import numbers
+import types
 import typing
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, ClassVar, Literal, Protocol
+from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 
 from lfbench.data.disparity import disparity_problem
 from lfbench.method.checkpoint import read_weights
 from lfbench.method.params import Param, docstring_help, signature_params, values_problem
 from lfbench.utils.errors import DataError, PluginError
-from lfbench.utils.flags import Flag
+from lfbench.utils.flags import Flag, section_flags
 from lfbench.utils.registry import Lazy, Registry
 
 if TYPE_CHECKING:  # torch is imported where a network is built, not by `lfbench methods`
@@ -112,20 +113,34 @@ class StageOptions(Protocol):
 @dataclasses.dataclass(frozen=True)
 class BenchOption(Flag):
     """An option a network adds to ``lfbench bench train`` (``--NAME V [V ...]``; each value is a variant the
-    bench times), declared as every flag is: its type is a ``Literal`` of its choices (read and checked by the
-    one declared-option check: ``expected one of 'fast', 'reference', got 'x'``); ``default``: the values timed
-    when it is not given (None: unset). E.g. SubFocal's training ``path`` (fast or reference); make one with
-    :meth:`of`."""
-
-    @classmethod
-    def of(cls, name: str, choices: tuple[str, ...], help: str, default: tuple[str | None, ...] = (None,)
-           ) -> BenchOption:
-        """The option ``--name`` taking one or more of ``choices``."""
-        return cls(name, Literal[tuple(choices)], tuple(default), help, None, "{" + ",".join(choices) + "}")
+    bench times), as a flag: made by :func:`bench_options` from the network's section of them
+    (:attr:`Trainable.train_bench_options`, declared with :func:`~lfbench.utils.options.option` as every option
+    is). Its ``kind`` is the ``Literal`` of its choices (read and checked by the one declared-option check:
+    ``expected one of 'fast', 'reference', got 'x'``); ``default``: the values timed when it is not given
+    (None: unset)."""
 
     @property
     def choices(self) -> tuple[str, ...]:
         return typing.get_args(self.kind)
+
+
+def bench_options(section: type | None) -> tuple[BenchOption, ...]:
+    """The options of a network's training-bench section as flags that take one or more values: each field is
+    declared ``name: tuple[Literal["a", "b"] | None, ...] = option(("a",), help=...)`` (the values timed by
+    default; a None among them: unset, the network's own choice); the flag's type is the ``Literal``, its
+    metavar the choices. ``()`` for a network without such options."""
+    if section is None:
+        return ()
+    out = []
+    for name, flag in section_flags(section).items():
+        element = typing.get_args(flag.kind)[0] if typing.get_origin(flag.kind) is tuple else flag.kind
+        union = typing.get_origin(element) in (typing.Union, types.UnionType)
+        members = typing.get_args(element) if union else (element,)
+        literal = next(m for m in members if m is not type(None))
+        choices = typing.get_args(literal)
+        out.append(BenchOption(name, literal, tuple(flag.default), flag.help, None,
+                               flag.metavar or "{" + ",".join(choices) + "}"))
+    return tuple(out)
 
 
 class Trainable:
@@ -154,8 +169,9 @@ class Trainable:
     defaults: ClassVar[dict[str, Any]] = {}
     #: Extra ``lfbench bench`` cases: name -> function(**params) returning a record dict with "bench".
     benches: ClassVar[dict[str, Callable[..., dict]]] = {}
-    #: Options this network adds to ``lfbench bench train`` (see :meth:`prepare_training`).
-    train_bench_options: ClassVar[tuple[BenchOption, ...]] = ()
+    #: Options this network adds to ``lfbench bench train`` (see :meth:`prepare_training`): a section of
+    #: options (a frozen dataclass whose fields are declared with ``option()``; :func:`bench_options`).
+    train_bench_options: ClassVar[type | None] = None
     #: Network parameter values ``lfbench bench train`` times when none are given (e.g. SubFocal's widths).
     train_bench_defaults: ClassVar[dict[str, tuple[Any, ...]]] = {}
 
@@ -388,8 +404,9 @@ class Trainable:
         """The training variants ``lfbench bench train`` times for the values of the network's options
         (:attr:`train_bench_options`; an option not given has its default values). Default: every
         combination, unset (None) values left out."""
-        names = [o.name for o in self.train_bench_options]
-        values = [chosen.get(n) or list(o.default) for n, o in zip(names, self.train_bench_options, strict=True)]
+        options = bench_options(self.train_bench_options)
+        names = [o.name for o in options]
+        values = [chosen.get(n) or list(o.default) for n, o in zip(names, options, strict=True)]
         return [{n: v for n, v in zip(names, combo, strict=True) if v is not None}
                 for combo in itertools.product(*values)]
 
@@ -649,7 +666,8 @@ def get_trainable(name: str) -> Trainable:
     return TRAINABLES.get(name)
 
 
-__all__ = ["Trainable", "StageOptions", "BenchOption", "network_from_state", "check_state_dict", "network_bytes",
+__all__ = ["Trainable", "StageOptions", "BenchOption", "bench_options", "network_from_state", "check_state_dict",
+           "network_bytes",
            "check_network_size", "contract_problem", "construct", "ConstructorError", "plugin_failure",
            "flops_problem", "plugin_source", "network_summary", "FLOPS_CONTRACT", "to_channels_last",
            "tiled_forward", "crop_margin", "MAX_NETWORK_BYTES",

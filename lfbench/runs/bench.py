@@ -52,7 +52,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from lfbench.method.trainable import DEFAULT_TRAINABLE
+from lfbench.method.trainable import DEFAULT_TRAINABLE, bench_options
 from lfbench.utils.errors import LFBenchError, SpecError
 from lfbench.utils.jsonfile import json_text
 from lfbench.utils.markdown import markdown_cell
@@ -318,7 +318,7 @@ def bench_train(batch: int = 2, patch: int = 32, steps: int = 2, channels_last: 
 
     set_threads(threads)
     dev = case_device(device)
-    options = {o.name: o for o in get_trainable(model).train_bench_options}
+    options = {o.name: o for o in bench_options(get_trainable(model).train_bench_options)}
     variant = {k: params.pop(k) for k in list(params) if k in options}
     for key, value in variant.items():  # as the flag checks it (BenchOption is a declared Flag)
         if problem := options[key].problem(value):

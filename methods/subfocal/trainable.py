@@ -6,12 +6,14 @@ Light at import (no torch): the network module is imported when a network is bui
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal
 
 from lfbench_methods.subfocal.bench import bench_peak, bench_volume
 
-from lfbench.method.trainable import BenchOption, Trainable, register_trainable
+from lfbench.method.trainable import Trainable, register_trainable
+from lfbench.utils.options import option
 
 if TYPE_CHECKING:
     import torch
@@ -23,6 +25,19 @@ TRAINING_PATHS = ("fast", "reference")
 WEIGHT_GRADS = ("auto", "gemm", "native")
 
 
+@dataclass(frozen=True, kw_only=True)
+class SubFocalTrainBench:
+    """SubFocal's options of ``lfbench bench train`` (``--path``, ``--weight-grad``: one or more values each, a
+    variant per combination)."""
+
+    path: tuple[Literal[TRAINING_PATHS], ...] = option(  # type: ignore[valid-type]
+        ("fast",), help="training path(s): fast (what lfbench train runs) and/or reference (the original ops: the "
+        "'before' of the training speed-up)")
+    weight_grad: tuple[Literal[WEIGHT_GRADS] | None, ...] = option(  # type: ignore[valid-type]
+        (None,), help="fast path: convolution weight gradients as matrix products where they pay (auto, the "
+        "default), on every layer they apply to (gemm), or PyTorch's own (native)")
+
+
 @register_trainable("subfocal")
 class SubFocalTrainable(Trainable):
     """SubFocal (Chao et al., TCI 2023): forward -> (disparity, softmax probability over the disparity grid)."""
@@ -31,13 +46,7 @@ class SubFocalTrainable(Trainable):
     distribution = True
     axes = ("interval", "interpolation", "width", "attention", "d_min", "d_max")
     benches = {"peak": bench_peak, "volume": bench_volume}
-    train_bench_options = (
-        BenchOption.of("path", TRAINING_PATHS, "training path(s): fast (what lfbench train runs) and/or reference "
-                    "(the original ops: the 'before' of the training speed-up)", default=("fast",)),
-        BenchOption.of("weight_grad", WEIGHT_GRADS, "fast path: convolution weight gradients as matrix products "
-                    "where they pay (auto, the default), on every layer they apply to (gemm), or PyTorch's own "
-                    "(native)"),
-    )
+    train_bench_options = SubFocalTrainBench
     train_bench_defaults = {"width": (150, 16)}  # the paper's width and the small one lfbench trains on a CPU
 
     def check(self, params: dict[str, Any]) -> None:
