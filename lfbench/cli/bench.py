@@ -54,7 +54,7 @@ from pathlib import Path
 
 from lfbench.cli.argtypes import add_flag, flag_type
 from lfbench.method.trainable import DEFAULT_TRAINABLE, bench_options
-from lfbench.utils.flags import DEVICE, MAX_MEMORY, REPEAT, SCENE_COUNT, THREADS, TIMEOUT, section_flags
+from lfbench.utils.flags import DEVICE, MAX_MEMORY, REPEAT, SCENE_COUNT, THREADS, TIMEOUT, flag_name, section_flags
 from lfbench.utils.options import option
 
 HELP = "speed and memory benchmarks (inference, cost volume, training, metrics, conv peak)"
@@ -140,7 +140,7 @@ def _add_network_flags(p: argparse.ArgumentParser, bench: str, model: str) -> No
     taken = {s for action in p._actions for s in action.option_strings}
     group = p.add_argument_group(f"parameters of the network {name!r} (several values: one case each)")
     for key, param in trainable.parameters().items():
-        flag = "--" + key.replace("_", "-")
+        flag = flag_name(key)
         if flag in taken:
             continue
 

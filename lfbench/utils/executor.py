@@ -39,6 +39,7 @@ from pathlib import Path
 from typing import Any, ClassVar, TypeVar
 
 from lfbench.utils.errors import RunFailed, SpecError
+from lfbench.utils.flags import flag_name
 from lfbench.utils.options import check_options, option
 from lfbench.utils.registry import Lazy, Registry
 
@@ -156,7 +157,7 @@ class ClusterOptions:
 
     def __post_init__(self) -> None:
         EXECUTORS.get(self.executor)  # SpecError: Unknown executor 'x'. Available: ...
-        check_options(self, lambda name: "--" + name.replace("_", "-"))
+        check_options(self, flag_name)
 
 
 class Executor(ABC):

@@ -16,13 +16,18 @@ from typing import Any
 from lfbench.utils.errors import SpecError
 from lfbench.utils.options import BadValue, Bounds, Param, option, option_fields
 
-__all__ = ["Flag", "FLAGS", "SharedFlags", "section_flags", "POSITIVE", "JOBS", "SEED", "SCENE_COUNT", "DEVICE",
-           "REPEAT", "THREADS", "TIMEOUT", "MAX_MEMORY", "MAX_JOBS"]
+__all__ = ["Flag", "FLAGS", "flag_name", "SharedFlags", "section_flags", "POSITIVE", "JOBS", "SEED", "SCENE_COUNT",
+           "DEVICE", "REPEAT", "THREADS", "TIMEOUT", "MAX_MEMORY", "MAX_JOBS"]
 
 #: The most worker processes of ``evaluate --jobs`` and ``ablate --jobs``. Every worker imports numpy (and torch,
 #: for ablation cells) and holds a scene or a training run: a few hundred MB each, so 256 workers already ask for
 #: tens of GB; no pool of lfbench shares anything that grows with more (cores are divided among the workers).
 MAX_JOBS = 256
+
+
+def flag_name(name: str) -> str:
+    """The command-line spelling of an option's name: ``gpus_per_job`` -> ``--gpus-per-job``."""
+    return "--" + name.replace("_", "-")
 
 
 @dataclass(frozen=True)
@@ -33,7 +38,7 @@ class Flag(Param):
 
     @property
     def flag(self) -> str:
-        return "--" + self.name.replace("_", "-")
+        return flag_name(self.name)
 
     def require(self, value: Any) -> Any:
         """``value`` given from Python (a library call's guard), checked as the flag is: SpecError ``--jobs:

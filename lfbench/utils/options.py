@@ -478,32 +478,35 @@ def _read(t: Table, f: dataclasses.Field, opt: Option, kind: Any, values: dict[s
             value = check(raw, kind, opt.bounds)
         except BadValue as exc:
             t.fail(key, str(exc))
+    try:
+        return _finish(value, opt)
+    except BadValue as exc:
+        t.fail(key, str(exc))
+
+
+def _finish(value: Any, opt: Option) -> Any:
+    """A typed, bounds-checked value of ``opt``: its length checked (``min_length``), converted (``convert``) and
+    checked (``check``); BadValue with the problem otherwise."""
     if isinstance(value, (tuple, list, dict)) and len(value) < opt.min_length:
-        t.fail(key, f"needs at least {opt.min_length} entr{'y' if opt.min_length == 1 else 'ies'}")
+        raise BadValue(f"needs at least {opt.min_length} entr{'y' if opt.min_length == 1 else 'ies'}")
     if opt.convert is not None:
         value = opt.convert(value)
-    if opt.check is not None:
-        problem = opt.check(value)
-        if problem:
-            t.fail(key, problem)
+    problem = opt.check(value) if opt.check is not None else None
+    if problem:
+        raise BadValue(problem)
     return value
 
 
 def check_options(section: Any, name: Callable[[str], str] = str) -> None:
     """The options of a section built from Python (not parsed from a table) checked as :func:`parse_section`
-    checks them: type, bounds, length and ``check``; SpecError ``<name(key)>: <problem>`` at the first that
-    does not fit (e.g. ``--jobs: must be in [1, 256], got 0`` with the flags' names)."""
+    checks them (type, bounds, then :func:`_finish`: length and ``check``); SpecError ``<name(key)>: <problem>``
+    at the first that does not fit (e.g. ``--jobs: must be in [1, 256], got 0`` with the flags' names)."""
     for f, opt, kind in option_fields(type(section)):
         value = getattr(section, f.name)
         try:
-            check(value, kind, opt.bounds)
-            problem = opt.check(value) if opt.check is not None else None
-            if problem is None and isinstance(value, (tuple, list, dict)) and len(value) < opt.min_length:
-                problem = f"needs at least {opt.min_length} entr{'y' if opt.min_length == 1 else 'ies'}"
+            _finish(check(value, kind, opt.bounds), opt)
         except BadValue as exc:
-            problem = str(exc)
-        if problem:
-            raise SpecError(f"{name(f.name)}: {problem}")
+            raise SpecError(f"{name(f.name)}: {exc}") from None
 
 
 def parse_section(cls: type, table: Table, index: int | None = None) -> Any:
