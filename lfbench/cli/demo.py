@@ -38,7 +38,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import time
 
-    from lfbench.reports.tables import average_table, render
+    from lfbench.reports.tables import average_rows, render
     from lfbench.runs.demo import run_demo, split_specs
 
     specs = [s for text in (args.methods or []) for s in split_specs(text)] or None
@@ -47,7 +47,7 @@ def run(args: argparse.Namespace) -> int:
                        figures=not args.no_figures, html=not args.no_html, progress=not args.no_progress)
     print(f"lfbench demo: {len(outcome.results.scenes)} synthetic scene(s), {len(outcome.methods)} method(s), "
           f"{time.perf_counter() - start:.1f} s\n")
-    print(render(average_table(outcome.results), "markdown"), end="")
+    print(render(average_rows(outcome.results), "markdown"), end="")
     out = args.out
     print(f"\nresults: {outcome.files['results.json']} and {outcome.files['results.csv']}")
     print(f"tables:  {out / 'table_per_scene.md'}, {out / 'table_average.md'} (also .tex, .csv)")

@@ -90,7 +90,7 @@ def run(args: argparse.Namespace) -> int:
     from lfbench.data.provenance import is_synthetic_root
     from lfbench.method.registry import create_from_spec
     from lfbench.reports import writers as w
-    from lfbench.reports.tables import per_scene_table, render
+    from lfbench.reports.tables import per_scene_rows, render
     from lfbench.results import protocol_meta
     from lfbench.runs.folder import evaluate_to_folder
     from lfbench.scoring.protocol import protocol_scoring
@@ -137,7 +137,7 @@ def run(args: argparse.Namespace) -> int:
                                  meta=meta, progress=not args.no_progress, jobs=args.jobs)
     if args.out / "table_uncertainty.md" in results.files:
         print((args.out / "table_uncertainty.md").read_text(encoding="utf-8"))
-    print(render(per_scene_table(results), "markdown"), end="")
+    print(render(per_scene_rows(results), "markdown"), end="")
     print(f"\nwrote {args.out / 'results.json'} and {args.out / 'results.csv'}")
     if args.html:
         print(f"HTML report: {args.out / SITE_DIR / 'index.html'}")

@@ -19,15 +19,17 @@ import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import pandas as pd
 
 from lfbench.reports.reference import Reference, default_reference
 from lfbench.scoring.rules import benchmark_highres_scenes
 from lfbench.utils.errors import DataError, SpecError
 from lfbench.utils.readfile import read_csv
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 PAPER_DIR_ENV, HCI_ROOT_ENV = "LFBENCH_PAPER_DIR", "LFBENCH_HCI_ROOT"
 PER_SCENE_FILE, AVERAGE_FILE = "table1_per_scene.csv", "table2_average.csv"
@@ -113,6 +115,8 @@ class PaperTables:
 
 
 def _read_csv(path: Path, columns: Sequence[str] | None) -> pd.DataFrame:
+    import pandas as pd
+
     df = read_csv(path, "paper table")
     if columns is None:
         return df
@@ -192,6 +196,8 @@ def average_with_paper(table: pd.DataFrame, paper: PaperTables, scenes: Sequence
     'NAME (paper, Table II, 12 scenes)' (the published averages) and, when the paper reports some of
     ``scenes`` (ours) but not all 12, 'NAME (paper, N of our scenes)': the mean of its Table I over
     those N scenes, the row to compare with a method scored on the same scenes (see 'scenes')."""
+    import pandas as pd
+
     if table.empty:
         return table
     names = paper.methods_shown(methods)

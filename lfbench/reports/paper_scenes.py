@@ -15,14 +15,17 @@ from __future__ import annotations
 import logging
 from collections.abc import Mapping
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
 
 from lfbench.reports.paper import PaperTables, paper_column
 from lfbench.reports.reference import PaperTable
 from lfbench.results import Results
 from lfbench.utils.errors import DataError
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 __all__ = ["RUN_RUNTIME_COLUMN", "SCENES_COLUMN", "scene_tables", "scene_table_with_paper"]
 
@@ -42,6 +45,8 @@ def scene_tables(paper: PaperTables, meta: Mapping[str, object]) -> list[PaperTa
 
 def _paper_frame(paper: PaperTables, table: PaperTable) -> pd.DataFrame:
     """The paper's CSV of ``table`` with its declared columns checked (DataError naming the file)."""
+    import pandas as pd
+
     path = Path(paper.source) / table.file
     stem = Path(table.file).stem
     if stem not in paper.extra:
@@ -64,6 +69,8 @@ def scene_table_with_paper(results: Results, paper: PaperTables, table: PaperTab
     """Ours and the paper's rows of the per-scene table ``table`` (see the module docstring); columns: the
     paper's scene columns, the metric's mean (named by the metric id), ``scenes``, the paper's extra
     columns and :data:`RUN_RUNTIME_COLUMN`. Empty when the results hold none of the declared scenes."""
+    import pandas as pd
+
     paper_df = _paper_frame(paper, table)
     metric = table.scene_metric
     df = results.to_frame()

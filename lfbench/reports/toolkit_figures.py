@@ -23,16 +23,18 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import pandas as pd
 
 from lfbench.reports.plotting import add_colorbar, as_gray, colormap, legend_label, method_colours, pyplot, save_formats
 from lfbench.scoring.metrics import METRICS, describe_metric, metric_order
 from lfbench.utils.errors import SpecError
 from lfbench.utils.figure_text import plain_text
 from lfbench.utils.names import FileNames, file_names
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 __all__ = [
     "A_BETTER", "B_BETTER", "HEATMAP_CMAP", "OUTSIDE", "PAIRWISE_LIMIT", "PAIRWISE_THRESHOLD", "TIE",

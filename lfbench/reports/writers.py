@@ -36,8 +36,6 @@ from pathlib import Path
 from types import SimpleNamespace
 from typing import TYPE_CHECKING, Any
 
-import pandas as pd
-
 from lfbench.data.scene import LightField
 from lfbench.method.base import Prediction
 from lfbench.reports.figures import (
@@ -53,13 +51,15 @@ from lfbench.reports.maps import MAPS_DIR, MapSaver, SceneMaps
 from lfbench.reports.paper import PaperTables, average_with_paper, per_scene_with_paper
 from lfbench.reports.paper_scenes import RUN_RUNTIME_COLUMN, scene_table_with_paper, scene_tables
 from lfbench.reports.plotting import method_colours
-from lfbench.reports.tables import TABLE_FORMATS, average_table, per_scene_table, write_table
+from lfbench.reports.tables import TABLE_FORMATS, Table, average_rows, per_scene_rows, write_table
 from lfbench.reports.toolkit_figures import toolkit_figures_from_scene_maps
 from lfbench.results import Results
 from lfbench.scoring.rules import ScoringRules
 from lfbench.utils.atomic import write_text
 
 if TYPE_CHECKING:  # the site's, the intervals' and the uncertainty's modules: imported by the writers that use them
+    import pandas as pd
+
     from lfbench.reports.html import SiteInputs, SiteSection
     from lfbench.scoring.stats import ErrorCollector
     from lfbench.scoring.uncertainty import UncertaintyCollector
@@ -174,15 +174,16 @@ class Tables(OutputWriter):
         self.formats, self.caption = formats, list(caption)
         self.paper, self.paper_caption = paper, list(paper_caption)
         self.paper_methods = [paper.resolve_method(m) for m in paper_methods] if paper is not None else []
-        self.tables: dict[str, pd.DataFrame] = {}
+        self.tables: dict[str, Table | pd.DataFrame] = {}
 
     def write(self, run: RunOutputs) -> list[Path]:
-        per_scene, average = per_scene_table(run.results), average_table(run.results)
+        per_scene, average = per_scene_rows(run.results), average_rows(run.results)  # no pandas without a paper
         self.tables = {"per_scene": per_scene, "average": average}
         meta = run.results.meta
         if self.paper is not None and not per_scene.empty and self.paper.shows("table1", meta):
-            self.tables["per_scene_paper"] = per_scene_with_paper(per_scene, self.paper, self.paper_methods)
-            self.tables["average_paper"] = average_with_paper(average, self.paper, run.results.scenes,
+            self.tables["per_scene_paper"] = per_scene_with_paper(per_scene.to_frame(), self.paper,
+                                                                  self.paper_methods)
+            self.tables["average_paper"] = average_with_paper(average.to_frame(), self.paper, run.results.scenes,
                                                               self.paper_methods)
         captions = {}
         for section in paper_scene_sections(run.results, self.paper):  # e.g. Table III beside UrbanLF-Syn results
