@@ -158,23 +158,6 @@ def test_group_mean_by_hand():
     assert math.isnan(group_mean([float("nan")]))
 
 
-def test_written_tables_need_no_pandas():
-    """The tables of a run (Table I, II, all formats) are made without pandas: evaluate scoring one submission
-    does not import it (a fresh interpreter, so no earlier import hides it)."""
-    import subprocess
-    import sys
-
-    code = ("import sys\n"
-            "from lfbench.results import Record, Results, RunInfo\n"
-            "from lfbench.reports.tables import average_rows, per_scene_rows, render\n"
-            "r = Results([Record('m', 's', 'badpix_0.07', 1.5, 'lowres')], [RunInfo('m', 's', 2.0)])\n"
-            "out = [render(t(r), f) for t in (per_scene_rows, average_rows) for f in ('markdown', 'latex', 'csv')]\n"
-            "import lfbench.reports.writers\n"
-            "print('pandas' in sys.modules, out[5])\n")
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    assert done.stdout == "False method,badpix_0.07,scenes,runtime_s\nm,1.5,1,2\n\n"
-
-
 def test_table_csv_quotes_and_empty_fields():
     """CSV as pandas writes it: a field with a comma or a quote quoted, NaN an empty field, ints as ints."""
     table = Table(index=("method",), columns=("v", "scenes"), rows=(('a,"b"', float("nan"), 3), ("c", 0.1234567, 1)),
