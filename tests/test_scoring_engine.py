@@ -173,6 +173,28 @@ def test_errors_are_computed_once_per_region():
     assert q.errors().pixels is px.pixels and q.errors() is not px
 
 
+@pytest.mark.parametrize("gt_bad, pred_bad, gt_ok, pred_ok", [
+    (None, None, True, True),  # all finite: one read of the errors decides both
+    (np.nan, None, False, True), (np.inf, None, False, True), (-np.inf, None, False, True),
+    (None, np.nan, True, False), (None, np.inf, True, False),
+    (np.inf, np.inf, False, False),  # inf - inf is NaN
+    (3e38, -3e38, True, True),  # both finite, the float32 error overflows to inf: decided on the maps
+])
+def test_all_finite_flags_by_hand(gt_bad, pred_bad, gt_ok, pred_ok):
+    """Whether every ground truth value / prediction is finite, from one read of the errors when they all are,
+    else from the maps: a finite pair whose difference overflows float32 is still finite."""
+    gt, pred = np.zeros(20, np.float32), np.full(20, 0.5, np.float32)
+    if gt_bad is not None:
+        gt[7] = gt_bad
+    if pred_bad is not None:
+        pred[7] = pred_bad
+    px = PixelErrors.of_maps(gt, pred)
+    assert (px.gt_all_finite, px.pred_all_finite) == (gt_ok, pred_ok)
+    assert px.errors_all_finite == (gt_ok and pred_ok and gt_bad is None)
+    empty = PixelErrors.of_maps(np.zeros(0, np.float32), np.zeros(0, np.float32))
+    assert empty.gt_all_finite and empty.pred_all_finite
+
+
 # --------------------------------------------------------------------------- one reference for every method
 
 

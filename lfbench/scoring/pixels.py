@@ -193,14 +193,24 @@ class PixelErrors:
         return self.gt_finite & self.pred_finite
 
     @functools.cached_property
+    def errors_all_finite(self) -> bool:
+        """Whether every error |pred - gt| is finite: then every ground truth value and prediction is (an infinite
+        or NaN one gives a non-finite error), found by one read of :attr:`err` (its maximum is NaN or infinite
+        if any error is), which the metrics compute anyway."""
+        if self.size == 0:
+            return True
+        with np.errstate(invalid="ignore"):
+            return bool(np.isfinite(self.err.max()))
+
+    @functools.cached_property
     def gt_all_finite(self) -> bool:
         """Whether every ground truth value is finite (then no metric leaves a pixel out for it: one test for all)."""
-        return bool(self.gt_finite.all())
+        return self.errors_all_finite or bool(self.gt_finite.all())
 
     @functools.cached_property
     def pred_all_finite(self) -> bool:
         """Whether every prediction is finite (then no metric's non-finite rule changes a pixel: one test for all)."""
-        return bool(self.pred_finite.all())
+        return self.errors_all_finite or bool(self.pred_finite.all())
 
 
 class ErrorsOnly(PixelErrors):
