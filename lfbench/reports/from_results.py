@@ -27,7 +27,7 @@ from lfbench.data.dataset import open_datasets
 from lfbench.data.scene import Benchmark
 from lfbench.reports.maps import MAPS_DIR, load_scene_maps, map_folders
 from lfbench.reports.paper import PaperTables
-from lfbench.reports.tables import TABLE_FORMATS
+from lfbench.reports.tables import TABLE_FORMATS, Table
 from lfbench.reports.writers import (
     FIGURES_DIR,
     CurveFigures,
@@ -55,7 +55,7 @@ class ReportOutcome:
     """What a report wrote: the tables by name, every file, where the BadPix series came from, the
     figure folder and the HTML index (or None)."""
 
-    tables: dict[str, pd.DataFrame]
+    tables: dict[str, Table | pd.DataFrame]  # our Table I and II as Tables, the tables beside a paper as frames
     written: list[Path] = field(default_factory=list)
     curves_source: str = ""
     figures: Path | None = None
