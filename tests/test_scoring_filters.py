@@ -41,7 +41,7 @@ def test_correlate3x3_is_scipys_convolve_of_the_flipped_kernel(shape, mode):
             _same(correlate3x3(x, kernel, mode), ndimage.correlate(x, kernel, mode=mode))
 
 
-@pytest.mark.parametrize("shape", [(1, 5), (3, 3), (7, 9), (64, 48)])
+@pytest.mark.parametrize("shape", [(1, 5), (2, 2), (5, 1), (3, 3), (7, 9), (64, 48)])
 @pytest.mark.parametrize("mode", MODES)
 @pytest.mark.parametrize("weights", [_DIFF, _SMOOTH, np.array([0.3, -1.2, 2.5])], ids=["anti", "sym", "general"])
 def test_correlate1d3_is_scipys_correlate1d(shape, mode, weights):
@@ -104,3 +104,25 @@ def test_present_labels_are_the_counted_ones(dtype, top):
     expected = np.bincount(labels.ravel().astype(np.intp)) > 0
     assert np.array_equal(_present(labels), expected)
     assert np.array_equal(_present(labels, chunk=100), expected)
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_angular_error_is_numpys_sum_of_products_bit_for_bit(dtype):
+    """The angle between normal maps: the dot product added one component at a time gives np.sum(a * b, axis=-1)'s
+    bits (numpy adds three products in order), NaN where either normal is NaN or an infinity meets a zero."""
+    from lfbench.scoring.region_metrics import angular_error_deg
+
+    rng = np.random.default_rng(4)
+    a, b = (rng.standard_normal((37, 53, 3)).astype(dtype) for _ in range(2))
+    a /= np.linalg.norm(a, axis=-1, keepdims=True)
+    b /= np.linalg.norm(b, axis=-1, keepdims=True)
+    a[1, 2] = np.nan
+    b[3, 4, 1] = np.inf
+    a[3, 4, 1] = 0.0
+    a[5, 6] = -0.0
+    with np.errstate(invalid="ignore"):
+        expected = np.degrees(np.arccos(np.clip(np.sum(a * b, axis=-1), -1.0, 1.0)))
+        got = angular_error_deg(a, b)
+    nan = np.isnan(expected)
+    assert got.dtype == expected.dtype and np.array_equal(np.isnan(got), nan) and nan[1, 2] and nan[3, 4]
+    assert np.array_equal(got[~nan].view(np.uint8), expected[~nan].view(np.uint8))

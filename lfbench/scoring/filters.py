@@ -60,24 +60,55 @@ def correlate3x3(image: np.ndarray, weights: np.ndarray, mode: str = "reflect") 
     return out
 
 
+def _outside(lines: np.ndarray, mode: str) -> tuple[np.ndarray, np.ndarray]:
+    """The neighbours before the first and after the last of ``lines`` (the axis first, length n >= 1) that
+    ``mode`` puts there, as scipy.ndimage pads: each of one line's shape."""
+    if mode not in _PAD_MODES:
+        raise ValueError(f"unknown boundary mode {mode!r}: {', '.join(_PAD_MODES)}")
+    n = lines.shape[0]
+    if mode == "constant":
+        zero = np.zeros(lines.shape[1:], dtype=lines.dtype)
+        return zero, zero
+    if mode == "wrap":
+        return lines[n - 1], lines[0]
+    if mode == "mirror" and n > 1:
+        return lines[1], lines[n - 2]
+    return lines[0], lines[n - 1]  # reflect and nearest repeat the end line (so does mirror of one line)
+
+
+def _neighbours(lines: np.ndarray, mode: str, op: np.ufunc) -> np.ndarray:
+    """``op(left, right)`` of every line (the axis first) and its neighbours before and after it, computed
+    line by line into one array (no padded copy of the map)."""
+    before, after = _outside(lines, mode)
+    n = lines.shape[0]
+    out = np.empty_like(lines)
+    op(before, lines[1] if n > 1 else after, out=out[0])
+    if n > 1:
+        op(lines[:-2], lines[2:], out=out[1:-1])
+        op(lines[n - 2], after, out=out[n - 1])
+    return out
+
+
 def correlate1d3(image: np.ndarray, weights: np.ndarray, axis: int, mode: str = "reflect") -> np.ndarray:
     """``scipy.ndimage.correlate1d(image, weights, axis=axis, mode=mode)`` with 3 weights (w0, w1, w2), float64.
     As scipy: a symmetric kernel is x w1 + (left + right) w0, an antisymmetric one x w1 + (left - right) w0,
-    any other (right w2 + left w0) + x w1 (left / right: the neighbours before / after along ``axis``)."""
+    any other (right w2 + left w0) + x w1 (left / right: the neighbours before / after along ``axis``, the
+    boundary's from ``mode``). Computed from views of the map, line by line at its two ends: no padded copy."""
     image = np.asarray(image, dtype=np.float64)
     w0, w1, w2 = (float(v) for v in np.asarray(weights, dtype=np.float64).reshape(3))
-    padded = _padded(image, mode, axis)
-    n = image.shape[axis]
-    before = (slice(None),) * (axis % image.ndim)
-    left, right = padded[(*before, slice(0, n))], padded[(*before, slice(2, n + 2))]  # views of the padded map
-    if abs(w2 - w0) <= _EPS:
+    lines = np.moveaxis(image, axis, 0)  # a view: the lines along ``axis`` first
+    if abs(w2 - w0) <= _EPS or abs(w2 + w0) <= _EPS:
+        pair = _neighbours(lines, mode, np.add if abs(w2 - w0) <= _EPS else np.subtract)
+        pair *= w0
         out = image * w1
-        out += (left + right) * w0
-    elif abs(w2 + w0) <= _EPS:
-        out = image * w1
-        out += (left - right) * w0
-    else:
-        out = right * w2
-        out += left * w0
-        out += image * w1
+        np.moveaxis(out, axis, 0)[...] += pair
+        return out
+    before, after = _outside(lines, mode)
+    out = np.empty_like(image)
+    moved = np.moveaxis(out, axis, 0)
+    np.multiply(lines[1:], w2, out=moved[:-1])  # right w2
+    np.multiply(after, w2, out=moved[-1])
+    moved[1:] += lines[:-1] * w0  # + left w0
+    moved[0] += before * w0
+    out += image * w1
     return out
