@@ -336,7 +336,8 @@ def _backgammon_sample(px: PixelErrors, column: int, nearer_foreground: bool, to
     half = _halfway_of(px, column)
     with np.errstate(invalid="ignore"):
         bad = px.pred > half if nearer_foreground else px.pred < half
-    return _bad_sample(bad, np.isfinite(half), px, toolkit)
+    finite = px.pixels.memo(("halfway finite", column, px.gt.dtype.str), lambda: np.isfinite(half))  # per pixel set
+    return _bad_sample(bad, finite, px, toolkit)
 
 
 def _backgammon_of(px: PixelErrors, column: int, nearer_foreground: bool, toolkit: bool) -> float:
