@@ -1,5 +1,10 @@
-"""Check from a dataset's own ground truth that lfbench reads its view grid and disparity sign the way the data
-was made: every view of the centre's row, column and diagonals is warped onto the centre view by the
+"""Check a dataset's adapter, then from the dataset's own ground truth that lfbench reads its view grid and
+disparity sign the way the data was made.
+
+First the adapter's contract (lfbench.data.adapter_check: its name, summary and protocol, its scenes' angular
+and spatial sizes, views, ground truth, and that each scene pickles back as a ``--jobs`` worker rebuilds it):
+one line per broken promise on stderr, exit 2; when it holds, one line saying so (``--adapter-only`` stops
+there). Then every view of the centre's row, column and diagonals is warped onto the centre view by the
 ground-truth disparity under each of the 8 readings of the grid (lfbench.data.orientation), and the reading
 with the least photometric error is the data's. One line per scene with ground truth, then a summary. Exit 0
 when no scene contradicts lfbench's reading, 1 when one does (the line says what to change), 2 on bad input
@@ -10,9 +15,11 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 from pathlib import Path
 
-HELP = "check from the ground truth that lfbench reads a dataset's view grid and disparity sign as it was made"
+HELP = ("check a dataset adapter's contract, then from the ground truth that lfbench reads the view grid and disparity "
+        "sign as the data was made")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -20,12 +27,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--dataset", metavar="NAME", help="read ROOT as this dataset instead of detecting its layout")
     p.add_argument("--scenes", default="", help="comma-separated scene, category or split names (default: all)")
     p.add_argument("--details", action="store_true", help="the error of every reading under each scene")
+    p.add_argument("--adapter-only", action="store_true",
+                   help="check only the dataset adapter's contract (no ground truth needed)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
 def run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
+    from lfbench.data.adapter_check import check_adapter
     from lfbench.data.dataset import open_datasets
     from lfbench.data.orientation import AS_READ, check_orientation, has_centre_view
     from lfbench.utils.errors import DataError
@@ -33,6 +43,15 @@ def run(args: argparse.Namespace) -> int:
     dataset, protocol, bench = open_datasets([args.data], args.dataset)
     border = protocol.border_px
     scenes = bench.select([s for s in args.scenes.split(",") if s.strip()])
+    adapter = check_adapter(dataset, args.data, protocol, scenes, progress=lambda it: tqdm(
+        it, desc="adapter", unit="scene", total=len(scenes), disable=args.no_progress, leave=False))
+    for problem in adapter.problems:
+        print(f"lfbench check-dataset: error: {DataError(problem)}", file=sys.stderr)  # DataError: one visible line
+    if not adapter.holds:
+        return 2
+    print(adapter.summary())
+    if args.adapter_only:
+        return 0
     with_gt = [s for s in scenes if s.has_gt()]
     if not with_gt:
         raise DataError(f"none of the selected scenes has ground truth to check against ({dataset.name})", args.data)
