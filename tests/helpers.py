@@ -197,6 +197,21 @@ def isolate_registries(monkeypatch) -> None:
         monkeypatch.setattr(reg, "_loaded", False)
 
 
+def install_dataset_plugin(site: Path, monkeypatch, dist: str, entry_points: Mapping[str, str]) -> None:
+    """A dataset adapter plugin installed as pip would (no pip): a distribution ``dist`` under ``site`` (put on
+    sys.path) whose ``lfbench.datasets`` entry points are ``entry_points`` (name -> ``module:Class``), and the
+    datasets registry isolated so that it loads them (and forgets them afterwards: ``monkeypatch``)."""
+    import lfbench.data.dataset as dataset
+
+    lines = "".join(f"{name} = {target}\n" for name, target in entry_points.items())
+    write_dist_info(site, dist, f"[lfbench.datasets]\n{lines}")
+    monkeypatch.syspath_prepend(str(site))
+    reg = dataset.DATASETS
+    for attr in ("_objects", "_entries", "_aliases", "load_errors"):
+        monkeypatch.setattr(reg, attr, dict(getattr(reg, attr)))
+    monkeypatch.setattr(reg, "_loaded", False)
+
+
 def install_fake_plugin(site: Path, monkeypatch) -> dict[str, str]:
     """Write a fake plugin distribution into ``site``, put it on sys.path and isolate the registries
     (:func:`isolate_registries`; the caller drops the module from sys.modules afterwards: see

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import run_cli, shifted_views, write_dist_info
+from helpers import install_dataset_plugin, run_cli, shifted_views
 from npy7_plugin import ANGULAR, NPY7_PROTOCOL, Npy7Scene, write_npy7_scene
 
 SIZE = (24, 32)  # (H, W)
@@ -20,15 +20,7 @@ DISPARITIES = {"train": (1, -1, 1), "val": (-1,)}  # px per view step, integer: 
 @pytest.fixture
 def npy7(tmp_path, monkeypatch) -> Path:
     """The plugin installed as a distribution with an ``lfbench.datasets`` entry point, and a data root of it."""
-    import lfbench.data.dataset as dataset
-
-    site = tmp_path / "site"
-    write_dist_info(site, "lfbench-npy7-test", "[lfbench.datasets]\nnpy7 = npy7_plugin:Npy7Dataset\n")
-    monkeypatch.syspath_prepend(str(site))
-    reg = dataset.DATASETS
-    for attr in ("_objects", "_entries", "_aliases", "load_errors"):
-        monkeypatch.setattr(reg, attr, dict(getattr(reg, attr)))
-    monkeypatch.setattr(reg, "_loaded", False)
+    install_dataset_plugin(tmp_path / "site", monkeypatch, "lfbench-npy7-test", {"npy7": "npy7_plugin:Npy7Dataset"})
     root = tmp_path / "npy7"
     rng = np.random.default_rng(0)
     h, w = SIZE
