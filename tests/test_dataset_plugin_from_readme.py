@@ -123,6 +123,9 @@ BROKEN_CASES = {
               "load_views() gave uint8 views, expected float32 (7, 7, H, W, 3) RGB or (7, 7, H, W) gray in [0, 1]"),
     "above-1": ("    def load_views(self):\n        return np.load(self.path).astype(np.float32)", None, None,
                 "load_views() gave values in [0, 255], expected [0, 1] (8-bit: divide by 255)"),
+    "nan-views": ("    def load_views(self):\n        views = super().load_views()\n"
+                  "        views[0, 0, 0, 0, 0] = np.nan\n        return views", None, None,
+                  "load_views() gave 1 NaN or infinite values, expected values in [0, 1]"),
     "raises": ("    def load_views(self):\n        raise ValueError('cannot decode the views')", None, None,
                "load_views() failed: ValueError: cannot decode the views"),
     "spatial-size": ("    @property\n    def spatial_size(self):\n        return (17, 16)", None, None,
@@ -130,6 +133,14 @@ BROKEN_CASES = {
     "gt-shape": ("    def gt_disparity(self, resolution='lowres'):\n"
                  "        return super().gt_disparity(resolution)[:-1]", None, None,
                  "gt_disparity() is (15, 16), expected (16, 16) (the views' (H, W))"),
+    "gt-all-nan": ("    def gt_disparity(self, resolution='lowres'):\n"
+                   "        return np.full(self.spatial_size, np.nan, np.float32)", None, None,
+                   "gt_disparity() has no finite value"),
+    "highres-gt": ("    def has_gt(self, resolution='lowres'):\n        return True\n\n"
+                   "    def gt_disparity(self, resolution='lowres'):\n        gt = np.load(self._gt_path)\n"
+                   "        return gt if resolution == 'lowres' else np.kron(gt, np.ones((2, 3), np.float32))",
+                   "dataclasses.replace(NPY7_PROTOCOL, resolutions=('lowres', 'highres'))", None,
+                   "gt_disparity('highres') is (32, 48), expected (32, 32) (2 times the views' (H, W))"),
     "protocol-angular": ("    pass", "dataclasses.replace(NPY7_PROTOCOL, angular_size=(5, 5))", None,
                          "angular_size is (7, 7), the protocol declares (5, 5)"),
     "no-pickle": ("    def __init__(self, path, category, flag):\n        super().__init__(path, category)\n"
