@@ -6,12 +6,15 @@ nothing but the public adapter contract (issue 38)."""
 from __future__ import annotations
 
 import json
+import tomllib
 from pathlib import Path
 
 import numpy as np
 import pytest
 from helpers import run_cli, shifted_views, write_dist_info
 from npy7_plugin import ANGULAR, NPY7_PROTOCOL, Npy7Scene, write_npy7_scene
+
+from lfbench.data.dataset import DatasetProtocol
 
 SIZE = (24, 32)  # (H, W)
 DISPARITIES = {"train": (1, -1, 1), "val": (-1,)}  # px per view step, integer: the views are exact shifts
@@ -176,3 +179,64 @@ def test_a_scene_pickles_as_its_file(npy7):
     scene.gray_views()
     again = pickle.loads(pickle.dumps(scene))
     assert "_views" not in again.__dict__ and again.spatial_size == SIZE and again.name == "val0"
+
+
+# -- issue 38: the protocol everywhere (training validation) and bad input as one line -----------------------------
+
+#: A protocol of its own: a 6 px border, BadPix 0.05 / 0.2 and MSE x100 (no BadPix of the paper's three).
+OWN_PROTOCOL = DatasetProtocol(border_px=6, metrics=("badpix_0.05", "badpix_0.2", "mse_x100"),
+                               disparity_range=(-2.0, 2.0), angular_size=(ANGULAR, ANGULAR))
+
+
+@pytest.fixture
+def own_protocol(npy7, monkeypatch) -> Path:
+    """The plugin's data root, its adapter declaring :data:`OWN_PROTOCOL`."""
+    from npy7_plugin import Npy7Dataset
+
+    monkeypatch.setattr(Npy7Dataset, "protocol", OWN_PROTOCOL)
+    return npy7
+
+
+def _config(root: Path, validation: str = "") -> str:
+    """TRAIN without its [validation] border: ``validation``, lines of that section instead."""
+    return TRAIN.format(root=root).replace("border = 4\n", validation)
+
+
+def test_validation_takes_the_border_and_badpix_of_the_training_datas_protocol(own_protocol, tmp_path):
+    from lfbench.training.config import TrainConfig
+
+    cfg = TrainConfig.from_dict(tomllib.loads(_config(own_protocol)))
+    # the protocol's border and its first BadPix (table order: as the protocol lists them); recorded as such
+    assert (cfg.validation.border, cfg.validation.threshold) == (6, 0.05)
+    assert cfg.to_dict()["validation"] == {"every": 2, "max_size": 0, "border": 6, "threshold": 0.05}
+    explicit = TrainConfig.from_dict(tomllib.loads(_config(own_protocol, "border = 3\nthreshold = 0.1\n")))
+    assert (explicit.validation.border, explicit.validation.threshold) == (3, 0.1)  # a value of the config wins
+
+
+def test_hci_validation_keeps_its_border_and_badpix(tmp_path):
+    from helpers import write_scene
+
+    from lfbench.training.config import TrainConfig
+
+    write_scene(tmp_path / "hci", "val", "stratified")
+    raw = tomllib.loads(_config(tmp_path / "hci"))
+    cfg = TrainConfig.from_dict(raw)
+    assert (cfg.validation.border, cfg.validation.threshold) == (15, 0.07)
+    # the same config dict as when 15 and 0.07 were the declared defaults: checkpoints resume, cells keep fingerprints
+    assert cfg.to_dict()["validation"] == {"every": 2, "max_size": 0, "border": 15, "threshold": 0.07}
+    raw["data"]["roots"] = [str(tmp_path / "absent")]  # a root not there yet: the benchmark's, refused when run
+    assert TrainConfig.from_dict(raw).validation.border == 15
+
+
+def test_training_validation_scores_by_the_protocol(own_protocol, tmp_path, capsys):
+    from lfbench.training.curves import _validation_labels, read_metrics
+
+    config = tmp_path / "train.toml"
+    config.write_text(_config(own_protocol).replace("steps = 2", "steps = 1").replace("every = 2", "every = 1"))
+    rc, out, err = run_cli(capsys, "train", config, "--out", tmp_path / "run", "--no-progress")
+    assert rc == 0, err
+    vals = [e for e in read_metrics(tmp_path / "run" / "metrics.jsonl") if e["event"] == "validation"]
+    h, w = SIZE
+    assert [(v["pixels"], v["threshold"]) for v in vals] == [((h - 12) * (w - 12), 0.05)]  # 12 x 20 px: 6 px border
+    assert _validation_labels(vals) == ("BadPix 0.05 (%)", "MSE x100")  # the learning curve's axis label
+    assert "[validation] step 1: BadPix(0.05) " in out + err

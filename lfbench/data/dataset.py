@@ -33,7 +33,7 @@ from lfbench.utils.registry import Registry
 _log = logging.getLogger(__name__)
 
 __all__ = ["DATASET_GROUP", "DATASETS", "DEFAULT_METRICS", "Dataset", "DatasetProtocol", "detect_dataset", "dataset_of",
-           "open_datasets", "open_dataset", "method_range_params"]
+           "open_datasets", "open_dataset", "method_range_params", "protocol_of"]
 
 DATASET_GROUP = "lfbench.datasets"
 
@@ -243,6 +243,12 @@ def _open(dataset: type[Dataset], root: Path) -> Benchmark:
 def _protocol(dataset: type[Dataset], root: Path) -> DatasetProtocol:
     """The protocol of ``root`` (:func:`_call_adapter` of ``protocol_for``)."""
     return _call_adapter(dataset, root, "protocol_for", DatasetProtocol)
+
+
+def protocol_of(root: str | Path, name: str | None = None) -> DatasetProtocol:
+    """The scoring protocol of ``root``'s data: its adapter's (``name``, else detected: :func:`dataset_of`; no
+    scene opened), read from the root where the data declares it (:meth:`Dataset.protocol_for`)."""
+    return _protocol(dataset_of(root, name), Path(root))
 
 
 def open_dataset(root: str | Path, name: str | None = None) -> tuple[type[Dataset], Benchmark]:
