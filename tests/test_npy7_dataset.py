@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import run_cli, shifted_views, write_dist_info
+from helpers import assert_one_error_line, run_cli, shifted_views, write_dist_info
 from npy7_plugin import ANGULAR, NPY7_PROTOCOL, Npy7Scene, write_npy7_scene
 
 from lfbench.data.dataset import DatasetProtocol
@@ -240,3 +240,92 @@ def test_training_validation_scores_by_the_protocol(own_protocol, tmp_path, caps
     assert [(v["pixels"], v["threshold"]) for v in vals] == [((h - 12) * (w - 12), 0.05)]  # 12 x 20 px: 6 px border
     assert _validation_labels(vals) == ("BadPix 0.05 (%)", "MSE x100")  # the learning curve's axis label
     assert "[validation] step 1: BadPix(0.05) " in out + err
+
+
+class _AnySizeScene(Npy7Scene):
+    """The plugin's scene with its adapter's own checks turned off: any angular size (the file's), float views as
+    stored (a NaN kept)."""
+
+    def __init__(self, path: str | Path, category: str = "other") -> None:
+        self.path = Path(path)
+        self.name = self.path.name.removesuffix(".views.npy")
+        self.category = category
+        header = np.load(self.path, mmap_mode="r")
+        self._angular, self._shape = tuple(header.shape[:2]), tuple(header.shape[2:4])
+
+    @property
+    def angular_size(self) -> tuple[int, int]:
+        return self._angular
+
+    def load_views(self) -> np.ndarray:
+        views = np.load(self.path)
+        return views if views.dtype == np.float32 else views.astype(np.float32) / np.float32(255.0)
+
+
+@pytest.fixture
+def any_size(npy7, monkeypatch) -> Path:
+    """The plugin's data root read with :class:`_AnySizeScene`."""
+    from npy7_plugin import Npy7Dataset
+
+    from lfbench.data.scene import Benchmark
+
+    def open_any(cls, root: Path) -> Benchmark:
+        return Benchmark(root=root, scenes=tuple(_AnySizeScene(p, p.parent.name)
+                                                  for p in sorted(Path(root).glob("*/*.views.npy"))))
+
+    monkeypatch.setattr(Npy7Dataset, "open", classmethod(open_any))
+    return npy7
+
+
+def _add_scene(root: Path, name: str, category: str, angular: int = 5, gt: bool = True, dtype=np.uint8) -> Path:
+    """A scene of ``angular`` x ``angular`` views written beside the others (without its .disp.npy unless ``gt``)."""
+    h, w = SIZE
+    centre = np.random.default_rng(1).integers(0, 256, size=(h, w, 3), dtype=np.uint8)
+    views = shifted_views(centre, 1, angular)
+    path = write_npy7_scene(root, name, category, views, np.full((h, w), 1.0, np.float32))
+    if dtype != np.uint8:
+        np.save(path, (views / 255.0).astype(dtype))
+    if not gt:
+        path.with_name(f"{name}.disp.npy").unlink()
+    return path
+
+
+def test_train_refuses_scenes_of_mixed_angular_size_naming_the_file_before_writing(any_size, tmp_path, capsys):
+    path = _add_scene(any_size, "v5", "train")  # 5x5 among the 7x7 training scenes
+    config = tmp_path / "train.toml"
+    config.write_text(TRAIN.format(root=any_size))
+    rc, out, err = run_cli(capsys, "train", config, "--out", tmp_path / "run")
+    line = assert_one_error_line(rc, err, str(path), "has 5x5 views", "'train0'", "7x7")
+    assert "training scene 'v5' has 5x5 views, the run's first scene 'train0' 7x7" in line
+    assert not (tmp_path / "run").exists()  # nothing written: no command.txt, config.toml, metrics.jsonl, lock
+
+
+def test_evaluate_warns_of_a_scene_without_ground_truth_and_scores_the_others(any_size, tmp_path, capsys):
+    path = _add_scene(any_size, "nogt", "val", angular=7, gt=False)
+    rc, out, err = run_cli(capsys, "evaluate", "--data", any_size, "--method", "planesweep", "--out", tmp_path / "ev",
+                           "--scenes", "val", "--no-progress")
+    assert rc == 0, err
+    assert (f"warning: 1 selected scene(s) have no ground truth and are not scored: nogt (first: {path})"
+            in err.splitlines())
+    records = json.loads((tmp_path / "ev" / "results.json").read_text())["records"]
+    assert {r["scene"] for r in records} == {"val0"}
+
+
+def test_evaluate_refuses_a_scene_of_another_angular_size_than_the_protocols(any_size, tmp_path, capsys):
+    path = _add_scene(any_size, "small", "val")  # 5x5 views, the protocol's are 7x7
+    rc, out, err = run_cli(capsys, "evaluate", "--data", any_size, "--method", "planesweep", "--out", tmp_path / "ev",
+                           "--scenes", "val", "--no-progress")
+    line = assert_one_error_line(rc, err, str(path))
+    assert "scene 'small' has 5x5 views, its dataset's protocol 7x7: it cannot be scored by that protocol" in line
+    assert not (tmp_path / "ev").exists()
+
+
+def test_evaluate_names_the_file_of_views_holding_nan(any_size, tmp_path, capsys):
+    path = _add_scene(any_size, "holes", "val", angular=7, dtype=np.float32)
+    views = np.load(path)
+    views[3, 3, 0, 0, 0] = np.nan
+    np.save(path, views)
+    rc, out, err = run_cli(capsys, "evaluate", "--data", any_size, "--method", "planesweep", "--out", tmp_path / "ev",
+                           "--scenes", "holes", "--no-progress")
+    line = assert_one_error_line(rc, err, str(path))
+    assert line.endswith(f"{path}: the views of scene 'holes' hold NaN or infinite values"), line

@@ -21,12 +21,12 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
 
-from lfbench.data.scene import LOWRES, Benchmark
+from lfbench.data.scene import LOWRES, Benchmark, Scene
 from lfbench.utils.errors import DataError, LFBenchError, SpecError, exception_line
 from lfbench.utils.registry import Registry
 
@@ -83,6 +83,19 @@ class DatasetProtocol:
             raise ValueError(f"border must be >= 0 px, got {self.border_px}")
         if self.scorer not in ("lfbench", "paper-author"):
             raise ValueError(f"scorer must be 'lfbench' or 'paper-author', got {self.scorer!r}")
+
+    def check_angular_size(self, scenes: Iterable[Scene]) -> None:
+        """DataError naming the first of ``scenes`` whose views' angular size (what its adapter declares: no view
+        is decoded; loaded views are held to it, lfbench.data.scene.Scene) is not the protocol's, and both sizes;
+        nothing to check where the protocol fixes none."""
+        if self.angular_size is None:
+            return
+        pv, pu = self.angular_size
+        for scene in scenes:
+            v, u = scene.angular_size
+            if (v, u) != (pv, pu):
+                raise DataError(f"scene {scene.name!r} has {u}x{v} views, its dataset's protocol {pu}x{pv}: it cannot "
+                                "be scored by that protocol", scene.path)
 
     def describe(self) -> list[str]:
         """The protocol as lines for ``lfbench datasets``."""
