@@ -126,11 +126,11 @@ def run(args: argparse.Namespace) -> int:
     selected = bench.select([s for s in args.scenes.split(",") if s.strip()])
     with_gt = [s.has_gt() for s in selected]
     scenes = [s for s, gt in zip(selected, with_gt, strict=True) if gt]
-    _warn_without_gt([s for s, gt in zip(selected, with_gt, strict=True) if not gt])  # the README: not scored
-    protocol.check_angular_size(scenes)  # one line naming the scene, before any method runs
     if not scenes:
         raise DataError(f"none of the selected scenes has ground truth ({dataset.name} layout: {dataset.layout})",
                         ", ".join(map(str, args.data)))
+    protocol.check_angular_size(scenes)  # one line naming the scene, before any method runs
+    _warn_without_gt([s for s, gt in zip(selected, with_gt, strict=True) if not gt])  # the README: not scored
     writers = [*([w.SceneFigures()] if args.figures else []), *([w.Maps()] if args.save_maps or args.html else []),
                w.Tables(),
                *([w.BootstrapCIs(w.CIOptions(resamples=args.ci_resamples, block=args.ci_block))] if args.ci else []),
