@@ -329,3 +329,14 @@ def test_evaluate_names_the_file_of_views_holding_nan(any_size, tmp_path, capsys
                            "--scenes", "holes", "--no-progress")
     line = assert_one_error_line(rc, err, str(path))
     assert line.endswith(f"{path}: the views of scene 'holes' hold NaN or infinite values"), line
+
+
+def test_train_refuses_7x7_scenes_beside_a_synthetic_set_before_generating_it(npy7, tmp_path, capsys):
+    config = tmp_path / "train.toml"
+    config.write_text(TRAIN.format(root=npy7).replace('validation = ["val"]', 'validation = ["synthetic"]')
+                      .replace('train = ["train"]', 'train = ["train0"]')  # (HCI's split "train" is another)
+                      + '[[data.synthetic]]\ncategory = "synthetic"\nsize = 32\nscenes = 1\n')
+    rc, out, err = run_cli(capsys, "train", config, "--out", tmp_path / "run")
+    line = assert_one_error_line(rc, err, "has 9x9 views, the run's first scene 'train0' 7x7")
+    assert str(tmp_path / "run" / "data" / "synthetic") in line
+    assert not (tmp_path / "run").exists()  # nothing generated, nothing written

@@ -13,6 +13,7 @@ from pathlib import Path
 
 from lfbench.data.dataset import DATASETS, open_dataset
 from lfbench.data.scene import Benchmark, Scene, check_scene_names
+from lfbench.data.synth import ANGULAR as SYNTH_ANGULAR
 from lfbench.data.synth import write_benchmark
 from lfbench.data.synth_urbanlf import write_urbanlf
 from lfbench.training.config import SyntheticSpec, TrainConfig, expand_path
@@ -120,6 +121,7 @@ class PlannedScene:
     category: str
     path: Path
     spatial_size: tuple[int, int]
+    angular_size: tuple[int, int] = (SYNTH_ANGULAR.default,) * 2  # what lfbench.data.synth writes in every layout
 
     def has_gt(self) -> bool:
         return True
@@ -151,10 +153,9 @@ def check_data(cfg: TrainConfig, data_dir: Path, renew: Collection[str] = ()) ->
 def check_angular_size(scenes: Sequence[Scene | PlannedScene]) -> None:
     """DataError naming the first of ``scenes`` (a run's training, then validation scenes) whose views' angular size
     differs from the first's, and both sizes: one network takes them all. Read from what each adapter declares (no
-    view is decoded); scenes not generated yet (:class:`PlannedScene`) are checked once they are."""
-    opened = [s for s in scenes if isinstance(s, Scene)]
-    for scene in opened[1:]:
-        first, (v, u) = opened[0], scene.angular_size
+    view is decoded), for scenes not generated yet (:class:`PlannedScene`) from what the generator writes."""
+    for scene in scenes[1:]:
+        first, (v, u) = scenes[0], scene.angular_size
         if (v, u) != first.angular_size:
             fv, fu = first.angular_size
             raise DataError(f"training scene {scene.name!r} has {u}x{v} views, the run's first scene {first.name!r} "
