@@ -352,7 +352,10 @@ class TrainConfig:
         problem = model_problem(trainable, values["model"])
         if problem:
             raise SpecError(problem, t.source)
-        return {**values, "validation": values["validation"].of_protocol(training_protocol(values["data"], t.source))}
+        validation = values["validation"]
+        if validation.border is None or validation.threshold is None:  # from the data's protocol (read only then)
+            validation = validation.of_protocol(training_protocol(values["data"], t.source))
+        return {**values, "validation": validation}
 
     def to_dict(self) -> dict[str, Any]:
         """The config in its TOML layout as plain values (storable in a weights-only checkpoint);
