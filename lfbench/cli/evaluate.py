@@ -7,12 +7,18 @@ tables as markdown/LaTeX/CSV, and prints the per-scene table.
 from __future__ import annotations
 
 import argparse
+import logging
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from lfbench.cli.argtypes import add_flag
 from lfbench.utils.flags import DEVICE, JOBS, section_flags
 from lfbench.utils.options import option
+
+if TYPE_CHECKING:
+    from lfbench.data.scene import Scene
 
 HELP = "score methods on a dataset's scenes (results.json, results.csv, tables)"
 
@@ -117,11 +123,14 @@ def run(args: argparse.Namespace) -> int:
         from lfbench.reports.html import SITE_DIR, check_site_dir
 
         check_site_dir(args.out / SITE_DIR)
-    scenes = bench.select([s for s in args.scenes.split(",") if s.strip()])
-    scenes = [s for s in scenes if s.has_gt()]
+    selected = bench.select([s for s in args.scenes.split(",") if s.strip()])
+    with_gt = [s.has_gt() for s in selected]
+    scenes = [s for s, gt in zip(selected, with_gt, strict=True) if gt]
     if not scenes:
         raise DataError(f"none of the selected scenes has ground truth ({dataset.name} layout: {dataset.layout})",
                         ", ".join(map(str, args.data)))
+    protocol.check_angular_size(scenes)  # one line naming the scene, before any method runs
+    _warn_without_gt([s for s, gt in zip(selected, with_gt, strict=True) if not gt])  # the README: not scored
     writers = [*([w.SceneFigures()] if args.figures else []), *([w.Maps()] if args.save_maps or args.html else []),
                w.Tables(),
                *([w.BootstrapCIs(w.CIOptions(resamples=args.ci_resamples, block=args.ci_block))] if args.ci else []),
@@ -142,3 +151,11 @@ def run(args: argparse.Namespace) -> int:
     if args.html:
         print(f"HTML report: {args.out / SITE_DIR / 'index.html'}")
     return 0
+
+
+def _warn_without_gt(scenes: Sequence[Scene]) -> None:
+    """One warning line naming the selected ``scenes`` left out for having no ground truth (not scored)."""
+    if scenes:
+        names = ", ".join(s.name for s in scenes[:5]) + (f" and {len(scenes) - 5} more" if len(scenes) > 5 else "")
+        logging.getLogger(__name__).warning("warning: %d selected scene(s) have no ground truth and are not scored: %s "
+                                            "(first: %s)", len(scenes), names, scenes[0].path)

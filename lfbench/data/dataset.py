@@ -21,19 +21,19 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
 
-from lfbench.data.scene import LOWRES, Benchmark
+from lfbench.data.scene import LOWRES, Benchmark, Scene
 from lfbench.utils.errors import DataError, LFBenchError, SpecError, exception_line
 from lfbench.utils.registry import Registry
 
 _log = logging.getLogger(__name__)
 
 __all__ = ["DATASET_GROUP", "DATASETS", "DEFAULT_METRICS", "Dataset", "DatasetProtocol", "detect_dataset", "dataset_of",
-           "open_datasets", "open_dataset", "method_range_params"]
+           "open_datasets", "open_dataset", "method_range_params", "protocol_of"]
 
 DATASET_GROUP = "lfbench.datasets"
 
@@ -83,6 +83,19 @@ class DatasetProtocol:
             raise ValueError(f"border must be >= 0 px, got {self.border_px}")
         if self.scorer not in ("lfbench", "paper-author"):
             raise ValueError(f"scorer must be 'lfbench' or 'paper-author', got {self.scorer!r}")
+
+    def check_angular_size(self, scenes: Iterable[Scene]) -> None:
+        """DataError naming the first of ``scenes`` whose views' angular size (what its adapter declares: no view
+        is decoded; loaded views are held to it, lfbench.data.scene.Scene) is not the protocol's, and both sizes;
+        nothing to check where the protocol fixes none."""
+        if self.angular_size is None:
+            return
+        pv, pu = self.angular_size
+        for scene in scenes:
+            v, u = scene.angular_size
+            if (v, u) != (pv, pu):
+                raise DataError(f"scene {scene.name!r} has {u}x{v} views, its dataset's protocol {pu}x{pv}: it cannot "
+                                "be scored by that protocol", scene.path)
 
     def describe(self) -> list[str]:
         """The protocol as lines for ``lfbench datasets``."""
@@ -243,6 +256,12 @@ def _open(dataset: type[Dataset], root: Path) -> Benchmark:
 def _protocol(dataset: type[Dataset], root: Path) -> DatasetProtocol:
     """The protocol of ``root`` (:func:`_call_adapter` of ``protocol_for``)."""
     return _call_adapter(dataset, root, "protocol_for", DatasetProtocol)
+
+
+def protocol_of(root: str | Path, name: str | None = None) -> DatasetProtocol:
+    """The scoring protocol of ``root``'s data: its adapter's (``name``, else detected: :func:`dataset_of`; no
+    scene opened), read from the root where the data declares it (:meth:`Dataset.protocol_for`)."""
+    return _protocol(dataset_of(root, name), Path(root))
 
 
 def open_dataset(root: str | Path, name: str | None = None) -> tuple[type[Dataset], Benchmark]:

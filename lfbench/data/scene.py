@@ -259,12 +259,16 @@ class Scene(LightField):
         return views
 
     def _checked_views(self, views: np.ndarray) -> np.ndarray:
-        """``views`` as float32, refused (DataError naming the scene) unless (V, U, H, W[, 3]) of this scene."""
+        """``views`` as float32, refused (DataError naming the scene's file) unless (V, U, H, W[, 3]) of this scene
+        and finite (found by one read: their sum is NaN or infinite where a value is; views lie in [0, 1])."""
         views = np.asarray(views, dtype=np.float32)
         v, u = self.angular_size
+        path = getattr(self, "path", None)
         if views.ndim not in (4, 5) or views.shape[:2] != (v, u) or (views.ndim == 5 and views.shape[4] != 3):
             raise DataError(f"{type(self).__name__}.load_views gave an array of shape {views.shape}, expected "
-                            f"({v}, {u}, H, W, 3) or ({v}, {u}, H, W)", getattr(self, "path", None))
+                            f"({v}, {u}, H, W, 3) or ({v}, {u}, H, W)", path)
+        if not np.isfinite(views.sum(dtype=np.float64)):
+            raise DataError(f"the views of scene {self.name!r} hold NaN or infinite values", path)
         return views
 
     def rgb_views(self) -> np.ndarray:

@@ -10,10 +10,11 @@ from typing import Any
 
 from lfbench.data.dataset import DatasetProtocol, method_range_params
 from lfbench.scoring.base import Metric
-from lfbench.scoring.metrics import scored_metrics
+from lfbench.scoring.general import BadPixels
+from lfbench.scoring.metrics import METRICS, metric_order, scored_metrics
 from lfbench.scoring.rules import ScoringRules
 
-__all__ = ["Scoring", "protocol_scoring"]
+__all__ = ["Scoring", "badpix_thresholds", "protocol_scoring"]
 
 
 @dataclass(frozen=True)
@@ -43,3 +44,16 @@ def protocol_scoring(protocol: DatasetProtocol, *, toolkit: bool = False, allow_
                    rules=ScoringRules.of_protocol(protocol, toolkit=toolkit, allow_highres=allow_highres),
                    metrics=tuple(scored_metrics(protocol.metrics, protocol.source, extra)),
                    grid=method_range_params(protocol.disparity_range, protocol.disparity_interval))
+
+
+def badpix_thresholds(metric_ids: Iterable[str]) -> list[float]:
+    """The thresholds (px) of the general BadPix metrics among ``metric_ids`` (a protocol's), in table order
+    (lfbench.scoring.metrics.metric_order: BadPix 0.07 first where scored): the first is the protocol's primary
+    BadPix (what training validation scores unless its config says otherwise)."""
+    out = []
+    for metric_id in metric_order(metric_ids):
+        m = METRICS.find(metric_id)
+        sample = None if m is None or m.pixelwise is None else m.pixelwise.sample
+        if isinstance(sample, BadPixels) and m.category == "general":
+            out.append(float(sample.threshold))
+    return out

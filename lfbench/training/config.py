@@ -45,7 +45,7 @@ Layout (every table optional except ``[[stages]]``; defaults are the authors' se
     precision = "fp32"; tf32 = false; cudnn_benchmark = false   # bf16 autocast, TF32, cuDNN autotuning
 
     [validation]
-    every = 2000; max_size = 0; border = 15; threshold = 0.07
+    every = 2000; max_size = 0; border = 15; threshold = 0.07   # border, threshold: default the data's protocol's
 
     [[stages]]                              # run in order; stage k > 1 starts from stage k-1's weights
     name = "l1"; loss = "l1"; lr = 1e-3; steps = 100000   # a fresh optimizer per stage (Trainable.configure_optimizers)
@@ -64,14 +64,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from lfbench.data.dataset import DATASETS
-from lfbench.data.disparity import EVALUATION_BORDER_PX
+from lfbench.data.dataset import DATASETS, DEFAULT_METRICS, DatasetProtocol, protocol_of
 from lfbench.data.synth import MAX_SYNTH_SIZE, scene_name
 from lfbench.method.params import values_problem
 from lfbench.method.trainable import DEFAULT_TRAINABLE, Trainable, get_trainable
 from lfbench.training.losses import NEEDS_DISTRIBUTION, make_loss
 from lfbench.utils.envvars import expand_vars
-from lfbench.utils.errors import SpecError
+from lfbench.utils.errors import LFBenchError, SpecError
 from lfbench.utils.hardware import parse_device
 from lfbench.utils.names import file_names
 from lfbench.utils.options import (
@@ -267,8 +266,23 @@ class TrainingConfig:
 class ValidationConfig:
     every: int = option(0, low=0, help="steps between validations (0: only at the end of each stage)")
     max_size: int = option(0, low=0, help="centre-crop larger images to this many px (0: whole image)")
-    border: int = option(EVALUATION_BORDER_PX, low=0, help="pixels left out at each image border when scoring")
-    threshold: float = option(0.07, low=0.0, low_open=True, help="BadPix threshold (px)")
+    border: int | None = option(None, low=0, default_text="the training data's protocol's border (HCI: 15)",
+                                help="pixels left out at each image border when scoring")
+    threshold: float | None = option(None, low=0.0, low_open=True,
+                                     default_text="the training data's protocol's first BadPix (HCI: 0.07)",
+                                     help="BadPix threshold (px)")
+
+    def of_protocol(self, protocol: DatasetProtocol) -> ValidationConfig:
+        """This section with the options it leaves unset taken from ``protocol`` (the training data's): its border
+        and its first BadPix threshold in table order (lfbench.scoring.protocol.badpix_thresholds; 0.07 where it
+        scores no BadPix)."""
+        from lfbench.scoring.protocol import badpix_thresholds  # the metric registry: only when a config is read
+
+        threshold = self.threshold
+        if threshold is None:
+            threshold = (badpix_thresholds(protocol.metrics) or badpix_thresholds(DEFAULT_METRICS))[0]
+        return dataclasses.replace(self, border=protocol.border_px if self.border is None else self.border,
+                                   threshold=threshold)
 
 
 def _stage_name(values: dict[str, Any], index: int | None) -> str:
@@ -321,7 +335,7 @@ class TrainConfig:
     source: str | None = field(default=None, compare=False)  # the file it was read from (not an option)
 
     @staticmethod
-    def check_options(values: dict[str, Any], t: Table) -> None:
+    def check_options(values: dict[str, Any], t: Table) -> dict[str, Any]:
         stages = values["stages"]
         names = [s.name for s in stages]
         if len(set(names)) != len(names):
@@ -338,6 +352,10 @@ class TrainConfig:
         problem = model_problem(trainable, values["model"])
         if problem:
             raise SpecError(problem, t.source)
+        validation = values["validation"]
+        if validation.border is None or validation.threshold is None:  # from the data's protocol (read only then)
+            validation = validation.of_protocol(training_protocol(values["data"], t.source))
+        return {**values, "validation": validation}
 
     def to_dict(self) -> dict[str, Any]:
         """The config in its TOML layout as plain values (storable in a weights-only checkpoint);
@@ -397,6 +415,27 @@ def resume_view(config: dict[str, Any], stages: int, in_progress: int | None = N
     if in_progress is not None and in_progress < len(d["stages"]):
         d["stages"][in_progress].pop("steps", None)
     return d
+
+
+def training_protocol(data: DataConfig, source: str | Path | None = None) -> DatasetProtocol:
+    """The protocol of the data a run trains on, which [validation] follows where it sets no border or threshold:
+    data.dataset's adapter, else the adapter the first root's layout matches (by file names: nothing is decoded),
+    else the layout's of the first synthetic set in use; the benchmark's (HCI's) where none of these is known (no
+    root, or a root not found: the run refuses it before any work, lfbench.training.scenes.check_data)."""
+    roots = data.roots
+    try:
+        if roots:
+            return protocol_of(expand_path(roots[0], None if source is None else str(source)), data.dataset)
+        if data.dataset is not None:
+            return DATASETS.get(data.dataset).protocol
+        in_use = data.synthetic_in_use()
+        if in_use:
+            return DATASETS.get(in_use[0].layout).protocol
+    except LFBenchError:  # the run names the root's problem itself, before anything is written
+        pass
+    from lfbench.scoring.rules import BENCHMARK_DATASET
+
+    return DATASETS.get(BENCHMARK_DATASET).protocol
 
 
 def expand_path(value: str, source: str | None = None) -> Path:

@@ -64,7 +64,14 @@ from lfbench.training.model import (
     stage_optimizer,
 )
 from lfbench.training.run_folder import EXPORTS, RunPaths, check_resume_state, run_folder_lock
-from lfbench.training.scenes import check_data, discover, invalid_area, prepare_synthetic, select_scenes
+from lfbench.training.scenes import (
+    check_angular_size,
+    check_data,
+    discover,
+    invalid_area,
+    prepare_synthetic,
+    select_scenes,
+)
 from lfbench.training.signals import StopFlag, TrainingInterrupted
 from lfbench.training.validate import check_validation_area, validate
 from lfbench.utils.atomic import write_text
@@ -189,7 +196,7 @@ class Trainer:
         if self.ctx.is_main and scenes:
             v = self.cfg.validation
             start = time.perf_counter()
-            res = validate(model, scenes, self.ctx.device, v.border, v.threshold)
+            res = validate(model, scenes, self.ctx.device, border=v.border, threshold=v.threshold)
             res.update(event="validation", stage=stage + 1, stage_name=self.cfg.stages[stage].name, step=step,
                        global_step=self.global_step, seconds=round(time.perf_counter() - start, 3))
             self.last_validation = res
@@ -293,6 +300,7 @@ class Trainer:
         cfg = self.cfg
         bench = discover(cfg, self.paths.data)
         train_scenes, val_scenes = select_scenes(bench, cfg)
+        check_angular_size([*train_scenes, *val_scenes])  # the generated sets too
         check_validation_area(val_scenes, cfg.validation.border, cfg.validation.max_size, cfg.source)
         masks = invalid_area(cfg)
         unknown = set(cfg.data.scene_weights) - {s.name for s in train_scenes}

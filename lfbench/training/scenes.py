@@ -13,6 +13,7 @@ from pathlib import Path
 
 from lfbench.data.dataset import DATASETS, open_dataset
 from lfbench.data.scene import Benchmark, Scene, check_scene_names
+from lfbench.data.synth import ANGULAR as SYNTH_ANGULAR
 from lfbench.data.synth import write_benchmark
 from lfbench.data.synth_urbanlf import write_urbanlf
 from lfbench.training.config import SyntheticSpec, TrainConfig, expand_path
@@ -120,6 +121,7 @@ class PlannedScene:
     category: str
     path: Path
     spatial_size: tuple[int, int]
+    angular_size: tuple[int, int] = (SYNTH_ANGULAR.default,) * 2  # what lfbench.data.synth writes in every layout
 
     def has_gt(self) -> bool:
         return True
@@ -139,12 +141,26 @@ def check_data(cfg: TrainConfig, data_dir: Path, renew: Collection[str] = ()) ->
     planned = [PlannedScene(name, spec.category, data_dir / spec.category / name, spec.shape)
                for spec in to_write for name in spec.scene_names()]
     try:
-        _, val = select_scenes(Benchmark(root=bench.root, scenes=(*bench.scenes, *planned),  # type: ignore[arg-type]
+        train, val = select_scenes(Benchmark(root=bench.root, scenes=(*bench.scenes, *planned),  # type: ignore[arg-type]
                                          splits=bench.splits), cfg)
     except DataError as exc:  # a name of the config that selects nothing: the config's error
         raise SpecError(f"[data] {exc.args[0]}", cfg.source) from None
+    check_angular_size([*train, *val])
     check_validation_area(val, cfg.validation.border, cfg.validation.max_size, cfg.source)
     invalid_area(cfg)
+
+
+def check_angular_size(scenes: Sequence[Scene | PlannedScene]) -> None:
+    """DataError naming the first of ``scenes`` (a run's training, then validation scenes) whose views' angular size
+    differs from the first's, and both sizes: one network takes them all. Read from what each adapter declares (no
+    view is decoded), for scenes not generated yet (:class:`PlannedScene`) from what the generator writes."""
+    for scene in scenes[1:]:
+        first, (v, u) = scenes[0], scene.angular_size
+        if (v, u) != first.angular_size:
+            fv, fu = first.angular_size
+            raise DataError(f"training scene {scene.name!r} has {u}x{v} views, the run's first scene {first.name!r} "
+                            f"{fu}x{fv} ({first.path}): the scenes a run trains and validates on share one angular "
+                            "size", scene.path)
 
 
 def invalid_area(cfg: TrainConfig) -> Path | None:
@@ -155,4 +171,5 @@ def invalid_area(cfg: TrainConfig) -> Path | None:
     return path
 
 
-__all__ = ["PlannedScene", "check_data", "discover", "invalid_area", "prepare_synthetic", "select_scenes"]
+__all__ = ["PlannedScene", "check_angular_size", "check_data", "discover", "invalid_area", "prepare_synthetic",
+           "select_scenes"]

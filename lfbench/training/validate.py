@@ -12,7 +12,6 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from lfbench.data.disparity import EVALUATION_BORDER_PX
 from lfbench.data.scene import LOWRES, Scene
 from lfbench.method.trainable import contract_problem, plugin_failure
 from lfbench.scoring.base import Metric
@@ -64,9 +63,11 @@ def validation_metrics(threshold: float) -> dict[str, Metric]:
     return {"badpix": bad_pix_metric(threshold), "mse_x100": get_metric("mse_x100")}
 
 
-def validate(model: torch.nn.Module, scenes: Sequence[ValidationScene], device: torch.device,
-             border: int = EVALUATION_BORDER_PX, threshold: float = 0.07) -> dict:
-    """``{"badpix": %, "mse_x100": ..., "pixels": n, "scenes": {name: {...}}}``; badpix at ``threshold`` px."""
+def validate(model: torch.nn.Module, scenes: Sequence[ValidationScene], device: torch.device, *, border: int,
+             threshold: float) -> dict:
+    """``{"badpix": %, "mse_x100": ..., "pixels": n, "scenes": {name: {...}}}``; badpix at ``threshold`` px, both
+    scored inside a ``border`` px border (a training run's: its [validation] section, which takes what it leaves
+    unset from the training data's protocol, lfbench.training.config.ValidationConfig.of_protocol)."""
     per_scene: dict[str, dict[str, float]] = {}
     gts, preds = [], []
     rules = ScoringRules(border_px=border)
