@@ -285,7 +285,8 @@ def _protocol_record(results: Results) -> dict[str, Any]:
     and the protocol (``meta.protocol``), each only when recorded."""
     record: dict[str, Any] = {}
     if "scoring" in results.meta:
-        record.update(ScoringRules.from_meta(results.meta).to_meta())
+        rules = ScoringRules.from_meta(results.meta)
+        record.update({**rules.to_meta(), "scorer": rules.scorer})  # the scorer too where it is lfbench's
     record.update({f"protocol {k}": v for k, v in (results.meta.get("protocol") or {}).items()})
     return record
 

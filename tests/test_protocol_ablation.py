@@ -325,3 +325,7 @@ def test_a_cell_scored_under_another_protocol_is_refused(ablation):
         check_same_scoring(Results.read(out), Results(meta={"scoring": {"border_px": 15}}), source)
     assert "border px 15 here, 6 in the rest" in str(err.value) and str(source) in str(err.value)
     assert "\n" not in str(err.value)
+    ours = Results.read(out)
+    other = Results(meta={**ours.meta, "scoring": {**ours.meta["scoring"], "scorer": "paper-author"}})
+    with pytest.raises(DataError, match=r"\(scorer paper-author here, lfbench in the rest\)"):
+        check_same_scoring(ours, other, source)  # the default scorer is compared too
