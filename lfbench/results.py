@@ -25,7 +25,8 @@ from lfbench.utils.jsonfile import json_text, read_json
 from lfbench.utils.names import file_names
 from lfbench.utils.outputs import check_complete, check_within
 
-__all__ = ["CSV_COLUMNS", "Record", "Results", "RunInfo", "check_names", "check_unique", "protocol_meta"]
+__all__ = ["CSV_COLUMNS", "Record", "Results", "RunInfo", "check_names", "check_same_scoring", "check_unique",
+           "protocol_meta"]
 
 CSV_COLUMNS = ("method", "scene", "metric", "value", "resolution")
 
@@ -277,6 +278,30 @@ def protocol_meta(metrics: Sequence[str], disparity_range: tuple[float, float]) 
     :attr:`Results.protocol_metrics` and :attr:`Results.disparity_range`): its metric ids and disparity range
     (px per view step); the border is ``meta.scoring.border_px``."""
     return {"metrics": list(metrics), "disparity_range": [float(disparity_range[0]), float(disparity_range[1])]}
+
+
+def _protocol_record(results: Results) -> dict[str, Any]:
+    """What ``results`` record of how they were scored: the rules (``meta.scoring``, as every reader takes them)
+    and the protocol (``meta.protocol``), each only when recorded."""
+    record: dict[str, Any] = {}
+    if "scoring" in results.meta:
+        rules = ScoringRules.from_meta(results.meta)
+        record.update({**rules.to_meta(), "scorer": rules.scorer})  # the scorer too where it is lfbench's
+    record.update({f"protocol {k}": v for k, v in (results.meta.get("protocol") or {}).items()})
+    return record
+
+
+def check_same_scoring(ours: Results, theirs: Results, source: str | Path) -> None:
+    """DataError (one line, naming ``source``) when ``theirs`` were scored under another protocol than ``ours``
+    (a border, non-finite rule, scorer, high-resolution scene, metric list or disparity range that both record
+    and that differs): their numbers cannot share one table, map or page. What either does not record (results
+    written before it was) is not compared."""
+    mine, other = _protocol_record(ours), _protocol_record(theirs)
+    differ = [k for k in mine if k in other and mine[k] != other[k]]
+    if differ:
+        what = "; ".join(f"{k.replace('_', ' ')} {other[k]} here, {mine[k]} in the rest" for k in differ)
+        raise DataError(f"scored under another protocol than the results it would join ({what}); results of one "
+                        "protocol only share a table: score the others into another folder", source)
 
 
 def _check_meta(meta: dict[str, Any], path: Path) -> None:

@@ -3,7 +3,8 @@ the zero map ``constant``)? ``table_baselines`` and one summary line per baselin
 
 Scores are compared per scene group (lfbench.reports.sweep_table.scene_group: the synthetic evaluation
 scenes together, each real scene alone; a group's value is the metric's scene aggregate, the mean, of the
-per-scene scores, each the mean over resolutions as in table_seeds) on BadPix 0.07 and MSE x100, in the
+per-scene scores, each the mean over resolutions as in table_seeds) on the verdict metrics of the results'
+protocol (:func:`verdict_metrics`: its primary metric and MSE x100, BadPix 0.07 and MSE x100 on HCI), in the
 direction the metric registry gives. A cell *beats* a baseline when it is better on every metric on every
 group. With seeds, a row is a variant: it beats a baseline on a (metric, group) when the end of its 95 %
 t-interval over seeds on the baseline's side (the upper end when lower is better) is better than the
@@ -26,15 +27,25 @@ import pandas as pd
 
 from lfbench.ablation.significance import LEVEL, scene_scores, t_interval, within_range
 from lfbench.reports.sweep_table import SYNTH_PREFIX, scene_group
-from lfbench.scoring.metrics import get_metric
+from lfbench.scoring.metrics import get_metric, primary_metric
 
 __all__ = ["BEATS", "VERDICT_METRICS", "baselines_caption", "baselines_table", "group_scores", "scene_groups",
-           "summary_lines", "verdict"]
+           "summary_lines", "verdict", "verdict_metrics"]
 
+#: The verdict metrics of HCI's protocol (:func:`verdict_metrics` of its metrics), the functions' default.
 VERDICT_METRICS = ("badpix_0.07", "mse_x100")
 BEATS = "beats"
 NOT_BEATEN, NOT_RESOLVED = "does not beat", "not resolved"
 NO_SCORES = "no scores to compare"
+
+
+def verdict_metrics(metric_ids: Sequence[str]) -> tuple[str, ...]:
+    """The metrics the verdicts compare, of a protocol's metrics (``metric_ids``): its primary metric
+    (lfbench.scoring.metrics.primary_metric, its first BadPix in table order), then MSE x100 where the protocol
+    scores it (:data:`VERDICT_METRICS` on HCI); the captions name them (:func:`baselines_caption`)."""
+    primary = primary_metric(metric_ids)
+    chosen = ([primary] if primary is not None else []) + (["mse_x100"] if "mse_x100" in metric_ids else [])
+    return tuple(dict.fromkeys(chosen))
 
 
 def _fmt(value: float) -> str:

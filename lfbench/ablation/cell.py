@@ -302,6 +302,14 @@ def scoring_kwargs(ev: Evaluation) -> dict[str, Any]:
     return {"rules": scoring.rules, "metrics": list(scoring.metrics), "meta": meta}
 
 
+def results_meta(ev: Evaluation) -> dict[str, Any]:
+    """What the ablation's merged results record of the evaluation's protocol, as ``lfbench evaluate`` records it:
+    the dataset, the protocol's metrics and disparity range (:func:`scoring_kwargs`) and its scoring rules
+    (``meta.scoring``: the border the tables, figures and pages follow)."""
+    scoring = scoring_kwargs(ev)
+    return {**scoring["meta"], "scoring": scoring["rules"].to_meta()}
+
+
 def evaluate_weights(label: str, weights: Path, ev: Evaluation, scenes, threads: int, out: Path,
                      save_maps: bool = True, network: str = DEFAULT_TRAINABLE):
     """Score the weights (of the trainable ``network``) on the scenes into ``out`` (results.json/csv and,

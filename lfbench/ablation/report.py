@@ -45,10 +45,10 @@ import numpy as np
 import pandas as pd
 
 from lfbench.ablation import plots
-from lfbench.ablation.baselines import baselines_caption, baselines_table, scene_groups, summary_lines
+from lfbench.ablation.baselines import baselines_caption, baselines_table, scene_groups, summary_lines, verdict_metrics
 from lfbench.ablation.cell import load_scenes
 from lfbench.ablation.facts import axis_text, axis_value, cell_info, network_of, same_value
-from lfbench.ablation.significance import ALPHA, ordering_metric, seeds_table, significance_table
+from lfbench.ablation.significance import ALPHA, ORDERING_METRIC, ordering_metric, seeds_table, significance_table
 from lfbench.ablation.spec import NO_TABLE, AblationSpec
 from lfbench.data.provenance import SYNTHETIC_CAPTION
 from lfbench.reports.html import SiteInputs, SiteSection
@@ -67,13 +67,14 @@ from lfbench.reports.writers import (
     drive_writers,
 )
 from lfbench.results import Results
-from lfbench.scoring.metrics import METRICS, get_metric, metric_order
+from lfbench.scoring.metrics import METRICS, describe_metric, get_metric, metric_order, primary_metric
+from lfbench.scoring.rules import ScoringRules
 from lfbench.utils.errors import DataError, SpecError
 from lfbench.utils.names import file_name
 from lfbench.utils.outputs import check_within
 
 __all__ = ["MAP_CHOICES", "AblationFigures", "AblationSite", "AblationTables", "best_cell", "cell_frame", "check_maps",
-           "drawn_map_folders", "load_paper_tables", "report_writers",
+           "drawn_map_folders", "load_paper_tables", "primary_ablation_metric", "report_writers",
            "run_writers", "saved_map_folders", "spec_reference", "write_report"]
 
 ERROR_MAPS_DIR = f"{FIGURES_DIR}/error_maps"
@@ -124,6 +125,13 @@ def ablation_metrics(results: Results) -> list[str]:
     else:
         declared = [m for m in held if (found := METRICS.find(m)) is not None and found.category == "general"]
     return [m for m in metric_order(declared) if m in held]
+
+
+def primary_ablation_metric(results: Results) -> str | None:
+    """The metric that picks the best cell (``--maps best``) and tests the orderings when no reference table
+    declares one: the primary metric (lfbench.scoring.metrics.primary_metric) of :func:`ablation_metrics`,
+    BadPix(0.07) on HCI; None when the results hold none."""
+    return primary_metric(ablation_metrics(results))
 
 
 def cell_frame(spec: AblationSpec, results: Results, markers: Sequence[dict[str, Any]],
@@ -319,13 +327,14 @@ def baseline_verdicts(spec: AblationSpec, results: Results) -> tuple[pd.DataFram
     if not spec.cells or not spec.methods or scores.empty:
         return pd.DataFrame(), [], []
     labels = [m.label for m in spec.methods]
-    table = baselines_table(cell_info(spec), scores, labels, seeds=bool(spec.seeds))
+    metrics = verdict_metrics(ablation_metrics(results))  # the protocol's: the caption names them
+    table = baselines_table(cell_info(spec), scores, labels, seeds=bool(spec.seeds), metrics=metrics)
     groups = list(dict.fromkeys(scene_groups(scores).values()))
-    lines = summary_lines(table, labels, groups)
+    lines = summary_lines(table, labels, groups, metrics)
     what = "every cell against the baselines ([[methods]])" + (
         f", mean over seeds {', '.join(str(x) for x in spec.seeds)}" if spec.seeds else "")
     title, *ours = caption_lines(spec, what)  # the title, then (synthetic data: a line saying so) what ours is
-    return table, [title, *lines, baselines_caption(seeds=bool(spec.seeds)), *ours], lines
+    return table, [title, *lines, baselines_caption(metrics, seeds=bool(spec.seeds)), *ours], lines
 
 
 # --------------------------------------------------------------------------- captions
@@ -434,9 +443,10 @@ class AblationTables(OutputWriter):
                            "t-interval can reach past it")
         written = write_table(seeds, out, "table_seeds", caption)
         self.sections.append(SiteSection("seeds", "Mean over seeds", seeds, caption))
-        sig = significance_table(table, info, scores)
+        ordering = ordering_metric(table, primary_metric(metrics) or ORDERING_METRIC)
+        sig = significance_table(table, info, scores, ordering)
         if not sig.empty:
-            metric = get_metric(ordering_metric(table))
+            metric = get_metric(ordering)
             caption = caption_lines(spec, f"the paper's orderings, paired t-test over seeds ({metric.label}, "
                                           f"{metric.direction}; two-sided, alpha {ALPHA:g})")
             sig = sig.set_index("claim (paper)")
@@ -530,12 +540,15 @@ class AblationSite(Site):
     """The ablation's site: the leaderboard of the cells and extra methods, their maps, and the tables of
     :class:`AblationTables` (means over seeds with intervals, orderings, verdicts against each baseline)."""
 
-    def __init__(self, spec: AblationSpec, tables: AblationTables, folder: Path, maps: str = "all") -> None:
+    def __init__(self, spec: AblationSpec, tables: AblationTables, folder: Path, maps: str = "all",
+                 best_by: str | None = ORDERING_METRIC) -> None:
         notes = [f"Ablation {spec.source}: budget {spec.budget_label()}; one method per cell (its id) and per extra "
                  f"method. Training curves: tensorboard --logdir {folder / 'cells'}."]
-        if maps != "all":
+        if maps != "all":  # best_by: the metric that picked the best cell (best_cell), None when there is none
+            best = (f"the best cell's ({describe_metric(best_by).name})" if best_by is not None
+                    else "no cell's (no scores)")
             notes.append(f"Maps drawn with --maps {maps}: "
-                         + ("none." if maps == "none" else "the best cell's (BadPix(0.07)) and the extra methods'.")
+                         + ("none." if maps == "none" else f"{best} and the extra methods'.")
                          + " (lfbench ablate SPEC --report-only --html --maps all draws every cell's.)")
         super().__init__(title=spec.title, notes=notes)
         self.tables = tables
@@ -566,9 +579,13 @@ def check_maps(maps: str) -> None:
         raise SpecError(f"--maps must be one of {', '.join(MAP_CHOICES)}, got {maps!r}")
 
 
-def best_cell(spec: AblationSpec, results: Results, metric: str = "badpix_0.07") -> str | None:
-    """The cell with the best mean of ``metric`` over its scenes (the first in the spec's order on a tie), or
-    None when no cell has a finite value of it."""
+def best_cell(spec: AblationSpec, results: Results, metric: str | None = None) -> str | None:
+    """The cell with the best mean of ``metric`` (default: the primary metric of the results' protocol,
+    :func:`primary_ablation_metric`) over its scenes (the first in the spec's order on a tie), or None when no cell
+    has a finite value of it."""
+    metric = metric or primary_ablation_metric(results)
+    if metric is None:
+        return None
     frame = results.to_frame()
     frame = frame[(frame["metric"] == metric) & frame["method"].isin([c.id for c in spec.cells])]
     means = frame.groupby("method", sort=False)["value"].mean().dropna()
@@ -607,7 +624,7 @@ def report_writers(spec: AblationSpec, markers: Sequence[dict[str, Any]], result
     if spec.evaluation.error_maps and maps != "none":
         writers.append(SceneFigures(ERROR_MAPS_DIR, files=True))
     if html:
-        writers.append(AblationSite(spec, ablation, folder, maps))
+        writers.append(AblationSite(spec, ablation, folder, maps, primary_ablation_metric(results)))
     return writers
 
 
@@ -641,9 +658,10 @@ def run_writers(writers: Sequence[OutputWriter], spec: AblationSpec, results: Re
                 scenes: Sequence[Any] = (), *, maps: str = "all") -> list[Path]:
     """Run the ablation's ``writers`` into ``stage``: the saved maps of its cells and methods under
     ``folder`` (those ``maps`` selects, :func:`drawn_map_folders`) are handed to them as predictions (the
-    error maps), on the evaluation scenes the results record; ``scenes``: the evaluation scenes, for the site."""
-    run = RunOutputs(stage=stage, results=results, scenes=scenes, source=folder,
-                     maps=drawn_map_folders(spec, results, folder, maps))
+    error maps), on the evaluation scenes the results record; ``scenes``: the evaluation scenes, for the site.
+    The figures draw at the border the results were scored with (``meta.scoring``)."""
+    run = RunOutputs(stage=stage, rules=ScoringRules.from_meta(results.meta), results=results, scenes=scenes,
+                     source=folder, maps=drawn_map_folders(spec, results, folder, maps))
     saved = ()
     if spec.evaluation.error_maps:
         recorded = load_scenes(tuple((d, None) for d in results.meta.get("scenes", [])), spec.evaluation)

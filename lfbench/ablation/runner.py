@@ -42,12 +42,12 @@ from lfbench.ablation.cell import (
     GENERATED_LAYOUT,
     MAPS,
     CellTask,
-    evaluation_dataset,
     is_done,
     link_data_folder,
     load_scenes,
     open_generated,
     read_marker,
+    results_meta,
     run_cell,
     scoring_kwargs,
     scoring_of,
@@ -56,7 +56,7 @@ from lfbench.ablation.report import check_maps, report_writers, run_writers
 from lfbench.ablation.spec import AblationSpec, Cell, SyntheticEval, sha256_of
 from lfbench.method.registry import create_from_spec
 from lfbench.reports.writers import Maps
-from lfbench.results import Results, check_names
+from lfbench.results import Results, check_names, check_same_scoring
 from lfbench.runs.folder import evaluate_to_folder
 from lfbench.training.scenes import check_data
 from lfbench.utils.atomic import fresh_dir, write_text
@@ -433,17 +433,18 @@ def run_ablation(spec: AblationSpec, out: str | Path, *, jobs: int = 1, progress
     markers = run_cells(tasks, executor, progress, log)
     timings = time_cells(tasks, spec.evaluation.threads or per_job or cores, progress, log, executor)
     markers = [{**m, **{k: v for k, v in t.items() if k != "key"}} for m, t in zip(markers, timings, strict=True)]
-    dataset = evaluation_dataset(spec.evaluation)  # the dataset of the data root, when there is one
-    combined = Results(meta={**({"dataset": dataset.name} if dataset is not None else {}),
-                             **scoring_of(spec.evaluation).meta(),
+    combined = Results(meta={**results_meta(spec.evaluation),
                              **({"synthetic": True} if spec.evaluation.is_synthetic else {}),
                              "ablation": {"title": spec.title, "spec": str(spec.source), "table": spec.table,
                                           "budget": spec.budget_label(), "shared_stage1": spec.shared_stage1,
                                           "cells": markers}})
     for t in tasks:
-        combined.extend(Results.read(Path(t.cell_dir)))  # the folder: its results.json may not lead out of it
+        cell = Results.read(Path(t.cell_dir))  # the folder: its results.json may not lead out of it
+        check_same_scoring(combined, cell, Path(t.cell_dir) / "results.json")
+        combined.extend(cell)
     references = []
     for res in run_methods(spec, out, scenes, log):
+        check_same_scoring(combined, res, out / "methods")
         combined.extend(res)
         references += res.meta.get("references", [])  # an oracle among the [[methods]]: a reference line
     combined.meta["references"] = references
@@ -526,6 +527,7 @@ def merge_results(out: Path, new: Results, dest: Path | None = None) -> Results:
         new.write(dest)
         return new
     old = Results.read(out)
+    check_same_scoring(new, old, path)  # earlier runs' cells are tabulated beside these: one protocol
     replaced = set(new.methods)
     merged = Results(records=[r for r in old.records if r.method not in replaced] + list(new.records),
                      runs=[r for r in old.runs if r.method not in replaced] + list(new.runs),

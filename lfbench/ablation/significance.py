@@ -45,6 +45,7 @@ __all__ = ["ALPHA", "Comparison", "comparisons", "paired_t", "scene_scores", "se
 
 ALPHA = 0.05
 LEVEL = 0.95
+#: HCI's primary metric (lfbench.scoring.metrics.primary_metric): the orderings' metric by default.
 ORDERING_METRIC = "badpix_0.07"
 
 
@@ -139,9 +140,10 @@ def _text(value: Any) -> str:
     return f"{value:g}" if isinstance(value, float | int) and not isinstance(value, bool) else str(value)
 
 
-def ordering_metric(table: PaperTable | None) -> str:
-    """The metric a table's orderings are tested in: its first declared metric, else :data:`ORDERING_METRIC`."""
-    return next(iter(table.metrics), ORDERING_METRIC) if table is not None else ORDERING_METRIC
+def ordering_metric(table: PaperTable | None, default: str = ORDERING_METRIC) -> str:
+    """The metric a table's orderings are tested in: its first declared metric, else ``default`` (the primary
+    metric of the results' protocol, lfbench.scoring.metrics.primary_metric; :data:`ORDERING_METRIC`, HCI's)."""
+    return next(iter(table.metrics), default) if table is not None else default
 
 
 def scene_scores(scores: pd.DataFrame, metric: str) -> pd.DataFrame:

@@ -52,9 +52,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="also write the HTML report OUT/html/index.html (leaderboard of the cells, their maps)")
     p.add_argument("--maps", choices=["all", "best", "none"], default="all",
                    help="whose saved maps the error-map figures and the HTML report draw: every cell's (default), only "
-                        "the best cell's by BadPix(0.07) and the [[methods]]', or none (drawing maps can take longer "
-                        "than training short cells; the cells save their maps anyway, so --report-only --maps all "
-                        "draws them later)")
+                        "the best cell's by the protocol's primary metric (its first BadPix: BadPix(0.07) on HCI) "
+                        "and the [[methods]]', or none (drawing maps can take longer than training short cells; the "
+                        "cells save their maps anyway, so --report-only --maps all draws them later)")
     p.add_argument("--no-maps", dest="maps", action="store_const", const="none", help="the same as --maps none")
     p.add_argument("--executor", choices=EXECUTORS.names(), default=None,
                    help="where the cells run: " + "; ".join(f"{name}: {EXECUTORS.get(name).help}"

@@ -38,7 +38,7 @@ from lfbench.data.scene import LightField
 from lfbench.data.submission import find_disp_map, read_submission_map
 from lfbench.method.base import Prediction
 from lfbench.reports.plotting import add_colorbar, as_gray, colormap, legend_label, method_colours, pyplot, save_figure
-from lfbench.scoring.metrics import METRICS, BadPixels, bad_pix_curve, metric_order
+from lfbench.scoring.metrics import bad_pix_curve, badpix_threshold, metric_order, primary_metric
 from lfbench.scoring.prepare import SceneReference, align_prediction
 from lfbench.scoring.rules import ScoringRules
 from lfbench.utils.atomic import write_bytes, write_text
@@ -68,12 +68,12 @@ class Thresholds:
     @classmethod
     def of_metrics(cls, metric_ids: Sequence[str]) -> Thresholds:
         """The thresholds of the ``badpix_<t>`` ids among ``metric_ids`` (a protocol's metrics): every one
-        marked, the first in table order (:func:`lfbench.scoring.metrics.metric_order`: BadPix 0.07 first where
-        scored) the primary; the default when there is none."""
+        marked, that of the protocol's primary metric (:func:`lfbench.scoring.metrics.primary_metric`: BadPix 0.07
+        where scored) the primary; the default when there is none."""
         found = {m: t for m in metric_order(metric_ids) if (t := badpix_threshold(m)) is not None}
         if not found:
             return cls()
-        return cls(marked=tuple(sorted(set(found.values()))), primary=next(iter(found.values())))
+        return cls(marked=tuple(sorted(set(found.values()))), primary=found[primary_metric(found)])
 
     @property
     def curve(self) -> np.ndarray:
@@ -83,15 +83,6 @@ class Thresholds:
         if top <= CURVE_THRESHOLDS[-1]:
             return CURVE_THRESHOLDS
         return np.round(np.linspace(0.0, math.ceil(top * 125) / 100, 101), 6)
-
-
-def badpix_threshold(metric_id: str) -> float | None:
-    """The threshold (px) of a general BadPix(t) metric by its definition (its pixel sample), else None."""
-    m = METRICS.find(metric_id)
-    sample = None if m is None or m.pixelwise is None else m.pixelwise.sample
-    if isinstance(sample, BadPixels) and m.category == "general" and m.bootstrap is not None:
-        return float(sample.threshold)
-    return None
 
 
 # BadPix map codes and colours (RGB in [0, 1]); GOOD is a grey level, never pure red.

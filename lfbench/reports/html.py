@@ -49,7 +49,7 @@ from lfbench.reports.paper import PAPER_RESOLUTION_COLUMN, average_with_paper, p
 from lfbench.reports.plotting import colormap, method_colours, write_image
 from lfbench.reports.tables import average_table, per_scene_table
 from lfbench.results import Results
-from lfbench.scoring.metrics import describe_metric, metric_order
+from lfbench.scoring.metrics import describe_metric, metric_order, primary_metric
 from lfbench.scoring.rules import ScoringRules
 from lfbench.scoring.stats import read_ci_csv
 from lfbench.utils.atomic import fresh_dir, replace_dir, write_text
@@ -348,9 +348,9 @@ def _meta_lines(results: Results) -> list[str]:
     if scoring:
         rule = ("toolkit rule (BadPix counts NaN as good)" if scoring.get("toolkit_nonfinite")
                 else "non-finite predictions count as bad pixels")
-        highres = ", ".join(scoring.get("highres_scenes", [])) or "no scene"
-        lines.append(f"Scoring: {scoring.get('border_px', EVALUATION_BORDER_PX)} px border ignored; {rule}; "
-                     f"high resolution where available for {highres}.")
+        highres = ", ".join(scoring.get("highres_scenes", []))  # none: a dataset without high resolution
+        lines.append(f"Scoring: {scoring.get('border_px', EVALUATION_BORDER_PX)} px border ignored; {rule}"
+                     + (f"; high resolution where available for {highres}." if highres else "."))
     if meta.get("created"):
         lines.append(f"Created {meta['created']} with lfbench {meta.get('lfbench_version', '?')}.")
     return lines
@@ -482,7 +482,7 @@ def _write_site(inputs: SiteInputs, root: Path, thresholds: fig.Thresholds, pair
     if radar_ok:
         tk.plot_radar(radar, root / "img" / "radar.png", colours=colours)
         figures["radar"] = "img/radar.png"
-        figures["radar_metrics"] = ", ".join(describe_metric(m).name for m in radar.index)
+        figures["radar_metrics"] = ", ".join(tk.radar_axis_name(m) for m in radar.index)
 
     common = {"title": inputs.title, "methods": [{"label": m, "href": method_pages[m]} for m in methods],
               "scenes": [{"label": s, "href": scene_pages[s]} for s in scene_names],
@@ -524,8 +524,10 @@ def _rules(results: Results) -> ScoringRules:
 
 
 def _scene_order(results: Results, scene: str, metric_ranks: Mapping[str, pd.DataFrame]) -> list[str]:
-    """Methods on a scene, best BadPix(0.07) (else first metric) first."""
-    metric = "badpix_0.07" if "badpix_0.07" in results.metrics else metric_order(results.metrics)[0]
+    """Methods on a scene, best first in the protocol's primary metric (lfbench.scoring.metrics.primary_metric:
+    BadPix(0.07) on HCI) where the results hold it, else in their first metric."""
+    held = [m for m in results.protocol_metrics if m in results.metrics]
+    metric = primary_metric(held) or metric_order(results.metrics)[0]
     ranks = metric_ranks[metric]
     ranks = ranks[ranks["scene"] == scene]
     order = dict(zip(ranks["method"], ranks["rank"].fillna(np.inf), strict=True))

@@ -25,7 +25,7 @@ from tabulate import tabulate
 
 from lfbench.reports import latex
 from lfbench.results import Record, Results, RunInfo
-from lfbench.scoring.metrics import METRICS, list_metrics, metric_order
+from lfbench.scoring.metrics import METRICS, metric_order
 from lfbench.utils.atomic import write_text
 from lfbench.utils.markdown import markdown_cell
 
@@ -34,11 +34,10 @@ if TYPE_CHECKING:
 
 
 def _header(column: str) -> str:
-    """A column's header: a registered general metric's name (BadPix(0.07), MSE x100, ...), else as is."""
-    for m in list_metrics("general"):
-        if m.id == column:
-            return m.name
-    return column
+    """A column's header: the name of the general metric the registry knows by that id (BadPix(0.07), MSE x100,
+    any BadPix(t) such as BadPix(0.05), a general metric of a plugin), else as is."""
+    metric = METRICS.find(column)
+    return metric.name if metric is not None and metric.id == column and metric.category == "general" else column
 
 
 def _scene_aggregate(metric_id: str) -> str:

@@ -40,7 +40,8 @@ __all__ = [
     "A_BETTER", "B_BETTER", "HEATMAP_CMAP", "OUTSIDE", "PAIRWISE_LIMIT", "PAIRWISE_THRESHOLD", "TIE",
     "absolute_error", "bad_fraction_map", "heatmap_image", "median_error_map", "pairwise_classes",
     "pairwise_difference", "pairwise_image", "pairwise_shares", "plot_error_heatmaps", "plot_pairwise",
-    "plot_radar", "radar_figure", "radar_metric_ids", "radar_radii", "radar_scores", "save_formats",
+    "plot_radar", "radar_axis_name", "radar_figure", "radar_magnitudes", "radar_metric_ids", "radar_radii",
+    "radar_scores", "save_formats",
     "toolkit_figures_from_scene_maps",
 ]
 
@@ -176,12 +177,31 @@ def radar_scores(results: Any, methods: Sequence[str] | None = None, metrics: Se
     return table.dropna(how="all")
 
 
+def radar_magnitudes(scores: pd.DataFrame) -> pd.DataFrame:
+    """:func:`radar_scores` as the chart plots them, lower is better on every axis: a signed metric's row (a
+    bias, :attr:`lfbench.scoring.base.Metric.signed`) as its magnitude, as tables, ranks and the regression
+    gate compare it (:meth:`~lfbench.scoring.base.Metric.badness`); every other row as it is."""
+    signed = [m for m in scores.index if getattr(METRICS.find(m), "signed", False)]
+    if not signed:
+        return scores
+    shown = scores.copy()
+    shown.loc[signed] = shown.loc[signed].abs()
+    return shown
+
+
+def _radar_top(scores: pd.DataFrame) -> pd.Series:
+    """Each axis's outer value: 1.2 x the largest value on it (1 if that is <= 0)."""
+    vmax = scores.max(axis=1, skipna=True) * 1.2
+    return vmax.where(vmax > 0, 1.0)
+
+
 def radar_radii(scores: pd.DataFrame, rings: int = 4) -> pd.DataFrame:
     """Radii in [0, 1] of :func:`radar_scores`, per axis as the toolkit draws them: the axis runs from 0
     to vmax = 1.2 x the largest value on it (1 if that is <= 0), offset by one ring so 0 is not the
-    centre: r = (value + vmax / rings) / (vmax + vmax / rings)."""
-    vmax = scores.max(axis=1, skipna=True) * 1.2
-    vmax = vmax.where(vmax > 0, 1.0)
+    centre: r = (value + vmax / rings) / (vmax + vmax / rings); a signed metric by its magnitude
+    (:func:`radar_magnitudes`)."""
+    scores = radar_magnitudes(scores)
+    vmax = _radar_top(scores)
     step = vmax / rings
     return scores.add(step, axis=0).div(vmax + step, axis=0)
 
@@ -250,6 +270,12 @@ def plot_error_heatmaps(gt_by_scene: Mapping[str, np.ndarray], preds_by_scene: M
 
 
 @plain_text
+def radar_axis_name(metric_id: str) -> str:
+    """A radar axis's label: the metric's name, |name| for a signed metric (drawn by its magnitude)."""
+    metric = describe_metric(metric_id)
+    return f"|{metric.name}|" if metric.signed else metric.name
+
+
 def radar_figure(scores: pd.DataFrame, *, title: str = "", highlight: str | None = None,
                  labels: Mapping[str, str] | None = None, colours: Mapping[str, str] | None = None) -> Any:
     """The figure of :func:`plot_radar` (not saved): the chart at the left, the legend beside it with
@@ -267,11 +293,11 @@ def radar_figure(scores: pd.DataFrame, *, title: str = "", highlight: str | None
     ax.set_yticks([0.2, 0.4, 0.6, 0.8, 1.0])
     ax.set_yticklabels([])
     ax.set_xticks(angles)
-    names = [(labels or {}).get(m, describe_metric(m).name) for m in scores.index]
+    names = [(labels or {}).get(m, radar_axis_name(m)) for m in scores.index]
     ax.set_xticklabels([n.replace(": ", ":\n") for n in names], fontsize=8)
     ax.set_thetalim(0, 2 * np.pi)  # set_xticks may have narrowed the view to the ticks
     ax.grid(alpha=0.35)
-    vmax = (scores.max(axis=1) * 1.2).where(scores.max(axis=1) > 0, 1.0)
+    vmax = _radar_top(radar_magnitudes(scores))
     for angle, top in zip(angles, vmax, strict=True):
         for k in (1, 2, 3, 4):
             ax.text(angle + 0.09, 0.2 * (k + 1), f"{top * k / 4:.3g}", fontsize=6, color="0.45", ha="center",

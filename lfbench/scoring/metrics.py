@@ -69,6 +69,8 @@ __all__ = [
     "describe_metric",
     "scored_metrics",
     "metric_order",
+    "badpix_threshold",
+    "primary_metric",
 ]
 
 #: The process-wide registry, filled from the entry-point group ``lfbench.metrics``: lfbench's own metrics first
@@ -141,3 +143,22 @@ def metric_order(metric_ids: Iterable[str]) -> list[str]:
     ids = list(metric_ids)
     first = sorted(dict.fromkeys(m for m in ids if _order(m) is not None), key=_order)
     return first + [m for m in ids if m not in first]
+
+
+def badpix_threshold(metric_id: str) -> float | None:
+    """The threshold (px) of a general BadPix(t) metric by its definition (its pixel sample), else None."""
+    m = METRICS.find(metric_id)
+    sample = None if m is None or m.pixelwise is None else m.pixelwise.sample
+    if isinstance(sample, BadPixels) and m.category == "general" and m.bootstrap is not None:
+        return float(sample.threshold)
+    return None
+
+
+def primary_metric(metric_ids: Iterable[str]) -> str | None:
+    """The one metric of a protocol (``metric_ids``: its metrics, e.g. lfbench.results.Results.protocol_metrics)
+    that judges where one must: the BadPix maps and their captions, the best cell of an ablation, its orderings
+    and its verdicts against baselines. It is the first BadPix(t) in table order (:func:`metric_order`: where
+    the metrics have a table order, its first BadPix, BadPix(0.07) on HCI; else the protocol's first BadPix),
+    else the first metric in that order; None for no metric."""
+    ordered = metric_order(metric_ids)
+    return next((m for m in ordered if badpix_threshold(m) is not None), ordered[0] if ordered else None)
