@@ -10,8 +10,7 @@ from typing import Any
 
 from lfbench.data.dataset import DatasetProtocol, method_range_params
 from lfbench.scoring.base import Metric
-from lfbench.scoring.general import BadPixels
-from lfbench.scoring.metrics import METRICS, metric_order, scored_metrics
+from lfbench.scoring.metrics import badpix_threshold, metric_order, scored_metrics
 from lfbench.scoring.rules import ScoringRules
 
 __all__ = ["Scoring", "badpix_thresholds", "protocol_scoring"]
@@ -50,10 +49,5 @@ def badpix_thresholds(metric_ids: Iterable[str]) -> list[float]:
     """The thresholds (px) of the general BadPix metrics among ``metric_ids`` (a protocol's), in table order
     (lfbench.scoring.metrics.metric_order: BadPix 0.07 first where scored): the first is the protocol's primary
     BadPix (what training validation scores unless its config says otherwise)."""
-    out = []
-    for metric_id in metric_order(metric_ids):
-        m = METRICS.find(metric_id)
-        sample = None if m is None or m.pixelwise is None else m.pixelwise.sample
-        if isinstance(sample, BadPixels) and m.category == "general":
-            out.append(float(sample.threshold))
-    return out
+    thresholds = (badpix_threshold(metric_id) for metric_id in metric_order(metric_ids))
+    return [t for t in thresholds if t is not None]
