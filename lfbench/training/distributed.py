@@ -13,6 +13,7 @@ error line instead of a silent hang in the first collective.
 
 from __future__ import annotations
 
+import functools
 import os
 from dataclasses import dataclass, field
 from datetime import timedelta
@@ -86,6 +87,29 @@ class DistContext:
     def close(self) -> None:
         if self.enabled and dist.is_initialized():
             dist.destroy_process_group()
+
+
+def match_grad_strides(module: torch.nn.Module) -> None:
+    """Give each parameter's gradient the parameter's own strides where the two differ only in dimensions of size 1.
+
+    A 1x1 convolution's weight (O, I, 1, 1) in channels-last memory and its contiguous gradient (the network
+    uses it as a matrix) address the same elements in the same order, but their strides differ in the size-1
+    dimensions. Autograd's layout contract ignores those dimensions, DistributedDataParallel compares every stride:
+    it warned once ("Grad strides do not match bucket view strides") and copied such gradients each step. The hook
+    returns a view with the parameter's strides: no copy, the same values. A gradient of any other layout is left
+    as it is."""
+    for param in module.parameters():
+        if param.requires_grad and param.layout == torch.strided:
+            param.register_hook(functools.partial(_restride, shape=param.shape, stride=param.stride()))
+
+
+def _restride(grad: torch.Tensor, *, shape: torch.Size, stride: tuple[int, ...]) -> torch.Tensor | None:
+    """``grad`` viewed with ``stride`` when it differs from it only where ``shape`` is 1, else None (unchanged)."""
+    if grad.layout != torch.strided or grad.shape != shape or grad.stride() == stride:
+        return None
+    if any(n != 1 and a != b for n, a, b in zip(shape, grad.stride(), stride, strict=True)):
+        return None
+    return grad.as_strided(shape, stride, grad.storage_offset())
 
 
 def resolve_device(preference: str, local_rank: int = 0) -> torch.device:

@@ -53,7 +53,7 @@ from lfbench.training.batches import batch_source
 from lfbench.training.config import TrainConfig, resume_view
 from lfbench.training.curves import MAX_LOG_BYTES, RunLogger, default_loggers, parse_log_line
 from lfbench.training.data import PatchSampler, ValidationScene, load_scene_data, load_validation_scene
-from lfbench.training.distributed import DistContext, agree_on_resume, setup
+from lfbench.training.distributed import DistContext, agree_on_resume, match_grad_strides, setup
 from lfbench.training.losses import make_loss
 from lfbench.training.model import (
     build_model,
@@ -425,6 +425,7 @@ class Trainer:
         if not self.ctx.enabled:
             return model
         device = self.ctx.device
+        match_grad_strides(model)  # 1x1 weights: no stride warning, no gradient copy per step
         return DistributedDataParallel(model, device_ids=[device.index] if device.type == "cuda" else None)
 
     def _progress(self, st, step: int, label: str):
