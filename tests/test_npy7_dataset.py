@@ -205,6 +205,29 @@ def test_validation_takes_the_border_and_badpix_of_the_training_datas_protocol(o
     assert (explicit.validation.border, explicit.validation.threshold) == (3, 0.1)  # a value of the config wins
 
 
+def test_validation_takes_the_scorer_of_the_training_datas_protocol(npy7, monkeypatch, capsys):
+    """A protocol scored by the paper author's scorer (UrbanLF-Syn's) is validated by it, recorded in the config;
+    a config's own scorer wins, also where it sets border and threshold; an unknown one is one line."""
+    import dataclasses
+
+    from npy7_plugin import Npy7Dataset
+
+    from lfbench.training.config import TrainConfig
+    from lfbench.utils.errors import SpecError
+
+    monkeypatch.setattr(Npy7Dataset, "protocol", dataclasses.replace(OWN_PROTOCOL, scorer="paper-author"))
+    cfg = TrainConfig.from_dict(tomllib.loads(_config(npy7)))
+    assert cfg.validation.scorer == "paper-author"
+    assert cfg.to_dict()["validation"]["scorer"] == "paper-author"
+    assert TrainConfig.from_dict(cfg.to_dict()) == cfg
+    fixed = TrainConfig.from_dict(tomllib.loads(_config(npy7, "border = 3\nthreshold = 0.1\n")))
+    assert fixed.validation.scorer == "paper-author"  # read from the data although border and threshold are set
+    own = TrainConfig.from_dict(tomllib.loads(_config(npy7, 'scorer = "lfbench"\n')))
+    assert own.validation.scorer == "lfbench" and own.to_dict()["validation"]["scorer"] == "lfbench"
+    with pytest.raises(SpecError, match=r"validation.scorer.*must be one of lfbench, paper-author, got 'toolkit'"):
+        TrainConfig.from_dict(tomllib.loads(_config(npy7, 'scorer = "toolkit"\n')))
+
+
 def test_hci_validation_keeps_its_border_and_badpix(tmp_path):
     from helpers import write_scene
 
@@ -216,6 +239,7 @@ def test_hci_validation_keeps_its_border_and_badpix(tmp_path):
     assert (cfg.validation.border, cfg.validation.threshold) == (15, 0.07)
     # the same config dict as when 15 and 0.07 were the declared defaults: checkpoints resume, cells keep fingerprints
     assert cfg.to_dict()["validation"] == {"every": 2, "max_size": 0, "border": 15, "threshold": 0.07}
+    assert cfg.validation.scorer is None  # lfbench's own, left unrecorded: the config dict stays as it was
     raw["data"]["roots"] = [str(tmp_path / "absent")]  # a root not there yet: the benchmark's, refused when run
     assert TrainConfig.from_dict(raw).validation.border == 15
 

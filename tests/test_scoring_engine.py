@@ -352,3 +352,33 @@ def test_training_validation_scores_as_the_formulas():
     everything = np.ones(gt.shape, bool)
     assert out["badpix"] == _old_bad_pix(gt, pred, 0.07, everything, False)
     assert out["mse_x100"] == _old_mse(gt, pred, everything) and out["pixels"] == gt.size == 22 * 26 + 20 * 20 - 2
+
+
+def test_training_validation_scores_by_the_paper_authors_scorer():
+    """scorer="paper-author" (the UrbanLF-Syn protocol's, lfbench.scoring.policy): BadPix counts |error| >= t over
+    every pixel inside the border (a NaN prediction good, an exact tie bad), MSE x100 is 100 x the plain mean (one NaN
+    makes it NaN); pooled over the scenes the same way. Worked out by hand on 2 x 2 scored pixels per scene."""
+    import torch
+
+    from lfbench.training.data import ValidationScene
+    from lfbench.training.validate import validate
+
+    gt = np.zeros((4, 4), np.float32)
+    preds = {0.0: np.full((4, 4), 0.5, np.float32), 1.0: np.full((4, 4), 0.5, np.float32)}
+    preds[0.0][1:3, 1:3] = [[0.5, 0.0], [0.25, 0.125]]  # errors 0.5 (tie at t = 0.5), 0, 0.25, 0.125
+    preds[1.0][1:3, 1:3] = [[np.nan, 1.0], [0.0, 0.0]]  # NaN, 1, 0, 0
+
+    class Fixed(torch.nn.Module):
+        def forward(self, views):
+            return torch.from_numpy(preds[float(views[0, 0, 0, 0])])[None], None
+
+    scenes = [ValidationScene(name=f"s{k}", views=np.full((9, 4, 4), k, np.float32), gt=gt) for k in (0, 1)]
+    author = validate(Fixed(), scenes, torch.device("cpu"), border=1, threshold=0.5, scorer="paper-author")
+    assert author["scenes"]["s0"] == {"badpix": 25.0, "mse_x100": 100 * (0.25 + 0.0625 + 0.015625) / 4}
+    assert author["scenes"]["s1"]["badpix"] == 25.0 and np.isnan(author["scenes"]["s1"]["mse_x100"])
+    assert author["badpix"] == 25.0 and np.isnan(author["mse_x100"]) and author["pixels"] == 8
+    # lfbench's own (the default): > t, a NaN prediction bad, MSE over the finite errors
+    own = validate(Fixed(), scenes, torch.device("cpu"), border=1, threshold=0.5)
+    assert own["scenes"]["s0"]["badpix"] == 0.0 and own["scenes"]["s1"]["badpix"] == 50.0
+    assert own["scenes"]["s1"]["mse_x100"] == 100 * float(np.float32(1) / np.float32(3))  # float32 errors
+    assert own["badpix"] == 25.0

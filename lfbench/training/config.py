@@ -68,6 +68,7 @@ from lfbench.data.dataset import DATASETS, DEFAULT_METRICS, DatasetProtocol, pro
 from lfbench.data.synth import MAX_SYNTH_SIZE, scene_name
 from lfbench.method.params import values_problem
 from lfbench.method.trainable import DEFAULT_TRAINABLE, Trainable, get_trainable
+from lfbench.scoring.policy import LFBENCH, SCORERS
 from lfbench.training.losses import NEEDS_DISTRIBUTION, make_loss
 from lfbench.utils.envvars import expand_vars
 from lfbench.utils.errors import LFBenchError, SpecError
@@ -262,6 +263,10 @@ class TrainingConfig:
                                    help="let cuDNN time its algorithms per input shape (fixed patch size: faster)")
 
 
+def _scorer_problem(name: str | None) -> str | None:
+    return None if name is None or name in SCORERS else f"must be one of {', '.join(SCORERS)}, got {name!r}"
+
+
 @dataclass(frozen=True)
 class ValidationConfig:
     every: int = option(0, low=0, help="steps between validations (0: only at the end of each stage)")
@@ -271,18 +276,30 @@ class ValidationConfig:
     threshold: float | None = option(None, low=0.0, low_open=True,
                                      default_text="the training data's protocol's first BadPix (HCI: 0.07)",
                                      help="BadPix threshold (px)")
+    scorer: str | None = option(None, omit_default=True, check=_scorer_problem,
+                                default_text="the training data's protocol's scorer (HCI: lfbench)",
+                                help="how BadPix compares and what a non-finite value counts as: lfbench or "
+                                     "paper-author (lfbench.scoring.policy)")
+
+    @property
+    def needs_protocol(self) -> bool:
+        """Whether an option is left to the training data's protocol (:meth:`of_protocol`)."""
+        return self.border is None or self.threshold is None or self.scorer is None
 
     def of_protocol(self, protocol: DatasetProtocol) -> ValidationConfig:
-        """This section with the options it leaves unset taken from ``protocol`` (the training data's): its border
-        and its first BadPix threshold in table order (lfbench.scoring.protocol.badpix_thresholds; 0.07 where it
-        scores no BadPix)."""
+        """This section with the options it leaves unset taken from ``protocol`` (the training data's): its border,
+        its first BadPix threshold in table order (lfbench.scoring.protocol.badpix_thresholds; 0.07 where it
+        scores no BadPix) and its scorer (kept unset for lfbench's own: a stored HCI config stays as it was)."""
         from lfbench.scoring.protocol import badpix_thresholds  # the metric registry: only when a config is read
 
         threshold = self.threshold
         if threshold is None:
             threshold = (badpix_thresholds(protocol.metrics) or badpix_thresholds(DEFAULT_METRICS))[0]
+        scorer = self.scorer
+        if scorer is None and protocol.scorer != LFBENCH.name:
+            scorer = protocol.scorer
         return dataclasses.replace(self, border=protocol.border_px if self.border is None else self.border,
-                                   threshold=threshold)
+                                   threshold=threshold, scorer=scorer)
 
 
 def _stage_name(values: dict[str, Any], index: int | None) -> str:
@@ -353,7 +370,7 @@ class TrainConfig:
         if problem:
             raise SpecError(problem, t.source)
         validation = values["validation"]
-        if validation.border is None or validation.threshold is None:  # from the data's protocol (read only then)
+        if validation.needs_protocol:  # from the data's protocol (read only then: by file names)
             validation = validation.of_protocol(training_protocol(values["data"], t.source))
         return {**values, "validation": validation}
 

@@ -196,7 +196,8 @@ class Trainer:
         if self.ctx.is_main and scenes:
             v = self.cfg.validation
             start = time.perf_counter()
-            res = validate(model, scenes, self.ctx.device, border=v.border, threshold=v.threshold)
+            res = validate(model, scenes, self.ctx.device, border=v.border, threshold=v.threshold,
+                           scorer=v.scorer)
             res.update(event="validation", stage=stage + 1, stage_name=self.cfg.stages[stage].name, step=step,
                        global_step=self.global_step, seconds=round(time.perf_counter() - start, 3))
             self.last_validation = res

@@ -18,6 +18,8 @@ from lfbench.scoring.base import Metric
 from lfbench.scoring.general import bad_pix_metric
 from lfbench.scoring.metrics import get_metric
 from lfbench.scoring.pixels import PixelErrors
+from lfbench.scoring.policy import LFBENCH
+from lfbench.scoring.policy import scorer as scorer_policy
 from lfbench.scoring.prepare import SceneReference
 from lfbench.scoring.rules import ScoringRules
 from lfbench.training.data import ValidationScene, validation_size
@@ -64,21 +66,26 @@ def validation_metrics(threshold: float) -> dict[str, Metric]:
 
 
 def validate(model: torch.nn.Module, scenes: Sequence[ValidationScene], device: torch.device, *, border: int,
-             threshold: float) -> dict:
+             threshold: float, scorer: str | None = None) -> dict:
     """``{"badpix": %, "mse_x100": ..., "pixels": n, "scenes": {name: {...}}}``; badpix at ``threshold`` px, both
-    scored inside a ``border`` px border (a training run's: its [validation] section, which takes what it leaves
-    unset from the training data's protocol, lfbench.training.config.ValidationConfig.of_protocol)."""
+    scored inside a ``border`` px border by the ``scorer``'s comparison and non-finite rule (lfbench.scoring.policy,
+    None: lfbench's;
+    a training run's: its [validation] section, which takes what it leaves unset from the training data's
+    protocol, lfbench.training.config.ValidationConfig.of_protocol)."""
     per_scene: dict[str, dict[str, float]] = {}
     gts, preds = [], []
-    rules = ScoringRules(border_px=border)
+    policy = scorer_policy(scorer or LFBENCH.name)
+    rules = ScoringRules(border_px=border, scorer=policy.name)
     metrics = validation_metrics(threshold)
     for s in scenes:
         pred = predict_disparity(model, s.views, device, s.name)
         p = SceneReference.of_ground_truth(s.gt, rules, s.name).prepare(pred, LOWRES, f"validation on {s.name}")
         px = p.errors()  # the prediction's errors inside the border, as every score computes them
         per_scene[s.name] = {key: metric.score_pixels(px) for key, metric in metrics.items()}
-        gts.append(px.gt[px.gt_finite])
-        preds.append(px.pred[px.gt_finite])
+        scored = slice(None) if policy.nan_good else px.gt_finite  # the pixels the policy scores
+        gts.append(px.gt[scored])
+        preds.append(px.pred[scored])
     pooled = PixelErrors.of_maps(np.concatenate(gts), np.concatenate(preds))
+    pooled.scorer = policy
     return {**{key: metric.score_pixels(pooled) for key, metric in metrics.items()}, "threshold": threshold,
             "pixels": pooled.size, "scenes": per_scene}
