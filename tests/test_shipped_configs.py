@@ -1,9 +1,9 @@
 """Every shipped training config and ablation spec (configs/, ablations/, examples/tiny_plugin/) parses to
 the same values as before the options were declared once (issue 21.4): the parsed dataclasses and the
 cells' training configs are compared with tests/data/shipped_configs.json, recorded from the hand-written
-parsers they replaced (since updated for one deliberate change: paper_methods absent is None, "the
-reference's own", and the spec's reference). Regenerate it only for a deliberate change of a shipped file or a
-parsed value:
+parsers they replaced (since updated for deliberate changes: paper_methods absent is None, "the
+reference's own", and the spec's reference; [validation] scorer, the paper author's on UrbanLF-Syn). Regenerate
+it only for a deliberate change of a shipped file or a parsed value:
 ``python tests/test_shipped_configs.py > tests/data/shipped_configs.json``."""
 
 from __future__ import annotations

@@ -146,3 +146,21 @@ def test_a_root_of_no_known_layout_is_one_line_and_nothing_is_written(tmp_path):
     lines = [line for line in run.stderr.splitlines() if line.strip()]
     assert len(lines) == 1 and "no known dataset layout" in lines[0] and str(tmp_path / "empty") in lines[0]
     assert not out.exists()
+
+
+def test_validation_scores_by_the_urbanlf_protocol_with_or_without_the_data(tmp_path, monkeypatch):
+    """The UrbanLF-Syn protocol's scorer (the paper author's) for validation, from the synthetic sets' layout, from a
+    root named as urbanlf-syn, and from that name alone where the root is not there: the same config dict (and the
+    same ablation fingerprint) on every machine."""
+    assert urban_config().validation.scorer == URBANLF_PROTOCOL.scorer == "paper-author"
+    repo = Path(__file__).resolve().parents[1]
+    dicts = []
+    for root in (None, tmp_path / "not-there"):
+        if root is None:
+            monkeypatch.delenv("LFBENCH_URBANLF_ROOT", raising=False)  # ${LFBENCH_URBANLF_ROOT} unset
+        else:
+            monkeypatch.setenv("LFBENCH_URBANLF_ROOT", str(root))
+        cfg = TrainConfig.from_toml(repo / "configs" / "subfocal_urbanlf.toml")
+        assert cfg.validation.scorer == "paper-author"
+        dicts.append(cfg.to_dict()["validation"])
+    assert dicts[0] == dicts[1]

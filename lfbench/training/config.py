@@ -435,15 +435,21 @@ def resume_view(config: dict[str, Any], stages: int, in_progress: int | None = N
 
 
 def training_protocol(data: DataConfig, source: str | Path | None = None) -> DatasetProtocol:
-    """The protocol of the data a run trains on, which [validation] follows where it sets no border or threshold:
-    data.dataset's adapter, else the adapter the first root's layout matches (by file names: nothing is decoded),
-    else the layout's of the first synthetic set in use; the benchmark's (HCI's) where none of these is known (no
-    root, or a root not found: the run refuses it before any work, lfbench.training.scenes.check_data)."""
+    """The protocol of the data a run trains on, which [validation] follows where it sets no border, threshold or
+    scorer: the first root's as its adapter (data.dataset's, else the one its layout matches, by file names: nothing
+    is decoded) reads it, else data.dataset's adapter's declared protocol (a named dataset whose root is not there
+    yet: the same values on every machine), else the layout's of the first synthetic set in use; the benchmark's
+    (HCI's) where none of these is known (a root not found: the run refuses it before any work,
+    lfbench.training.scenes.check_data)."""
     roots = data.roots
     try:
         if roots:
-            return protocol_of(expand_path(roots[0], None if source is None else str(source)), data.dataset)
-        if data.dataset is not None:
+            try:
+                return protocol_of(expand_path(roots[0], None if source is None else str(source)), data.dataset)
+            except LFBenchError:
+                if data.dataset is None:
+                    raise
+        if data.dataset is not None:  # also for a root not there (yet): the same config, the same values everywhere
             return DATASETS.get(data.dataset).protocol
         in_use = data.synthetic_in_use()
         if in_use:
