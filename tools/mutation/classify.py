@@ -343,6 +343,25 @@ REASONS: dict[str, tuple[str, ...]] = {
     "equivalent: `getattr(dataset, \"__module__\", default)` with the default None, dropped or \"XXXX\": every "
     "class has a __module__, so the default is never read": (
         *(f"data.dataset.x__plugin__mutmut_{i}" for i in (5, 8, 11)),),
+    # the third round (issue 31's changes outside scoring: results/mutation/issue39/README.md)
+    "equivalent: a codec name in another case (\"UTF-8\" for \"utf-8\"): Python's codec lookup ignores case": (
+        "utils.atomic.x_write_text__mutmut_12", "method.checkpoint.x_sniff__mutmut_59",
+        "utils.executor.x_run_marked__mutmut_13", "utils.executor.xǁProcessPoolǁ_died__mutmut_16"),
+    "equivalent: write_bytes' atomic_open(path) without \"wb\": atomic_open's mode defaults to \"wb\"": (
+        "utils.atomic.x_write_bytes__mutmut_4",),
+    "equivalent: write_text's `newline=None` or no newline: on POSIX, where lfbench runs (fork, symbolic links, "
+    "SIGKILL), a written '\\n' is '\\n' (os.linesep)": (
+        "utils.atomic.x_write_text__mutmut_4", "utils.atomic.x_write_text__mutmut_8"),
+    "equivalent: check_output_file's `resolve(strict=None)`: None is false, as strict=False": (
+        "utils.outputs.x_check_output_file__mutmut_5",),
+    "equivalent: read_marker's `what` (None, dropped, another text) only words a DataError that read_marker "
+    "catches (an unreadable marker is no marker): never shown": (
+        *(f"ablation.cell.x_read_marker__mutmut_{i}" for i in (3, 5, 8, 9)),),
+    "equivalent: symlink_to's `target_is_directory` (None, dropped, False) matters only on Windows; POSIX makes "
+    "the same link": (
+        *(f"ablation.cell.x_link_data_folder__mutmut_{i}" for i in (12, 14, 19)),),
+    "equivalent: _is_name's `c in \"XX_-.XX\"`: X is alphanumeric, so the set of characters allowed is the same": (
+        "method.checkpoint.x__is_name__mutmut_10",),
 }
 
 # Survivors that are NOT equivalent: a test could tell them apart, but none in the fast suite can (each says why).
@@ -358,6 +377,12 @@ KNOWN_NOT_KILLED: dict[str, tuple[str, ...]] = {
     "lfbench's proportion metrics have scale 100 (d is -100, 0 or 100), where the two agree; they differ only "
     "for a plugin's proportion metric of scale 1, which lfbench does not ship and the fast suite does not have": (
         "scoring.stats.x_paired_pixel_test__mutmut_87",),
+    NOT_KILLED + "a text file written or read without `encoding=` takes the locale's encoding (run_marked's mark, "
+    "_died's reading of the marks, write_text): they differ for a non-ASCII label under a non-UTF-8 locale, "
+    "and the test machine has only C.utf8 / POSIX with Python reading UTF-8, so no fast test can tell": (
+        "utils.atomic.x_write_text__mutmut_3", "utils.atomic.x_write_text__mutmut_7",
+        "utils.executor.x_run_marked__mutmut_9", "utils.executor.x_run_marked__mutmut_11",
+        "utils.executor.xǁProcessPoolǁ_died__mutmut_11", "utils.executor.xǁProcessPoolǁ_died__mutmut_13"),
 }
 
 _FIELDS = re.compile(r"\b(name|description|vmin|vmax|cmap)=(f?\"[^\"]*\"|[^,)\n]*)\s*,?")
