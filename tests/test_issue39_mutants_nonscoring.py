@@ -403,7 +403,8 @@ def test_zip_problem_of_an_empty_or_unreadable_archive(tmp_path, monkeypatch):
 
 def test_read_checkpoint_refusals_word_for_word(tmp_path):
     """Mutants of read_checkpoint: the payload returned, a non-dict named by its type and `what`, Python
-    objects refused (weights_only), a damaged torch zip in its words."""
+    objects refused (weights_only), a damaged torch zip and a damaged legacy file in their words (not called
+    Python objects)."""
     good = _torch_file(tmp_path / "w.pt", {"a": torch.ones(2)})
     payload = mck.read_checkpoint(good)
     assert list(payload) == ["a"] and payload["a"].device.type == "cpu"
@@ -412,11 +413,14 @@ def test_read_checkpoint_refusals_word_for_word(tmp_path):
     damaged = tmp_path / "d.pt"
     with zipfile.ZipFile(damaged, "w") as z:
         z.writestr("archive/data.pkl", b"\x80\x02garbage")
+    legacy = tmp_path / "g.pt"  # torch's legacy (non-zip) format begins with a pickle: opcodes no plain value has
+    legacy.write_bytes(b"\x80\x02garbage\xff\x00" * 3)
     cases = {(listed, "weights file"): f"{listed}: a torch file holding a list, not an lfbench weights file (a dict)",
              (listed, None): f"{listed}: a torch file holding a list, not an lfbench checkpoint file (a dict)",
              (objects, None): f"{objects}: holds Python objects beyond tensors and plain values; lfbench loads "
                               "weights only and does not unpickle it",
-             (damaged, None): f"{damaged}: a damaged torch file, not a readable torch checkpoint"}
+             (damaged, None): f"{damaged}: a damaged torch file, not a readable torch checkpoint",
+             (legacy, None): f"{legacy}: a damaged or incomplete file, not a readable torch checkpoint"}
     for (path, what), line in cases.items():
         with pytest.raises(DataError) as info:
             mck.read_checkpoint(path) if what is None else mck.read_checkpoint(path, what)

@@ -99,7 +99,9 @@ def read_checkpoint(path: str | Path, what: str = "checkpoint file") -> dict[str
     check_checkpoint_file(path, what)
     try:
         payload = torch.load(path, map_location="cpu", weights_only=True)
-    except pickle.UnpicklingError:  # torch's weights-only refusal (its advice is not passed on)
+    except pickle.UnpicklingError as exc:  # torch's weights-only refusal (its advice is not passed on)
+        if "Unsupported global" not in str(exc):  # an opcode no pickle of plain values has: a damaged file
+            raise DataError(f"{_damaged(path)}, not a readable torch checkpoint", path) from None
         raise DataError("holds Python objects beyond tensors and plain values; lfbench loads weights only and "
                         "does not unpickle it", path) from None
     except Exception:  # noqa: BLE001 - torch raises many kinds for a damaged file; what it is is enough
