@@ -60,3 +60,17 @@ def test_accumulated_gradients_keep_the_strides():
     _matrix_loss(weight).backward()
     assert weight.grad.stride() == weight.stride()
     assert torch.equal(weight.grad, 2 * first)
+
+
+def test_removed_hooks_leave_gradients_as_autograd_makes_them():
+    """Each stage's DDP gets its own hooks (the training loop removes the previous stage's): a removed hook no longer
+    restrides."""
+    weight = _weight_1x1()
+    module = torch.nn.Module()
+    module.weight = weight
+    handles = match_grad_strides(module)
+    assert len(handles) == 1
+    for handle in handles:
+        handle.remove()
+    _matrix_loss(weight).backward()
+    assert weight.grad.stride() == (3, 1, 1, 1)

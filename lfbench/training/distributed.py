@@ -89,18 +89,18 @@ class DistContext:
             dist.destroy_process_group()
 
 
-def match_grad_strides(module: torch.nn.Module) -> None:
+def match_grad_strides(module: torch.nn.Module) -> list[torch.utils.hooks.RemovableHandle]:
     """Give each parameter's gradient the parameter's own strides where the two differ only in dimensions of size 1.
 
     A 1x1 convolution's weight (O, I, 1, 1) in channels-last memory and its contiguous gradient (the network
     uses it as a matrix) address the same elements in the same order, but their strides differ in the size-1
     dimensions. Autograd's layout contract ignores those dimensions, DistributedDataParallel compares every stride:
     it warned once ("Grad strides do not match bucket view strides") and copied such gradients each step. The hook
-    returns a view with the parameter's strides: no copy, the same values. A gradient of any other layout is left
-    as it is."""
-    for param in module.parameters():
-        if param.requires_grad and param.layout == torch.strided:
-            param.register_hook(functools.partial(_restride, shape=param.shape, stride=param.stride()))
+    returns a view with the parameter's strides (as they are now: when DDP is built): no copy, the same values. A
+    gradient of any other layout is left as it is. Returns the hooks' handles (remove them before a new DDP wraps the
+    module: each stage builds its own)."""
+    return [param.register_hook(functools.partial(_restride, shape=param.shape, stride=param.stride()))
+            for param in module.parameters() if param.requires_grad and param.layout == torch.strided]
 
 
 def _restride(grad: torch.Tensor, *, shape: torch.Size, stride: tuple[int, ...]) -> torch.Tensor | None:

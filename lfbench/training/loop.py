@@ -104,6 +104,7 @@ class Trainer:
         self.init_info: dict | None = None  # {"path", "sha256"} of cfg.init once loaded (also kept on resume)
         self.schedule_state: dict | None = None  # a resumed learning-rate schedule's state
         self.schedule = None  # the learning-rate schedule of the stage in progress (None: a constant rate)
+        self._stride_hooks: list = []  # gradient hooks of the DDP wrapping the model now (match_grad_strides)
 
     # -- output ------------------------------------------------------------------------------
 
@@ -426,7 +427,9 @@ class Trainer:
         if not self.ctx.enabled:
             return model
         device = self.ctx.device
-        match_grad_strides(model)  # 1x1 weights: no stride warning, no gradient copy per step
+        for handle in self._stride_hooks:  # the previous stage's, for the strides its DDP compared
+            handle.remove()
+        self._stride_hooks = match_grad_strides(model)  # 1x1 weights: no stride warning, no gradient copy per step
         return DistributedDataParallel(model, device_ids=[device.index] if device.type == "cuda" else None)
 
     def _progress(self, st, step: int, label: str):

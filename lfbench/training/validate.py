@@ -69,9 +69,8 @@ def validate(model: torch.nn.Module, scenes: Sequence[ValidationScene], device: 
              threshold: float, scorer: str | None = None) -> dict:
     """``{"badpix": %, "mse_x100": ..., "pixels": n, "scenes": {name: {...}}}``; badpix at ``threshold`` px, both
     scored inside a ``border`` px border by the ``scorer``'s comparison and non-finite rule (lfbench.scoring.policy,
-    None: lfbench's;
-    a training run's: its [validation] section, which takes what it leaves unset from the training data's
-    protocol, lfbench.training.config.ValidationConfig.of_protocol)."""
+    None: lfbench's); a training run's: its [validation] section, which takes what it leaves unset from the training
+    data's protocol, lfbench.training.config.ValidationConfig.of_protocol."""
     per_scene: dict[str, dict[str, float]] = {}
     gts, preds = [], []
     policy = scorer_policy(scorer or LFBENCH.name)
