@@ -324,3 +324,27 @@ def test_collector_errors_reproduce_the_evaluated_metrics(hci_root, shared_data)
     iid = stats.bootstrap_errors(se.errors, "badpix_0.07", n=300)
     blk = stats.bootstrap_errors(se.errors, "badpix_0.07", n=300, groups=se.groups(16))
     assert iid.low < iid.estimate < iid.high and blk.high - blk.low > 1.5 * (iid.high - iid.low)
+
+
+def test_paired_pixel_test_of_a_proportion_in_its_own_scale(monkeypatch):
+    """A metric plugin's proportion of scale 1 (a share, not a percentage): the McNemar counts take d > 0 as
+    'worse' (its losses are -1, 0, 1, not -100, 0, 100) and the bootstrap CI is in the metric's own units, the
+    same as the difference: BadPix(0.07)'s test / 100, with the same resamples (the CI was 100 x too wide)."""
+    from lfbench.scoring.metrics import METRICS, Metric, PixelMetric, Proportion, get_metric
+
+    badpix = get_metric("badpix_0.07")
+    for attr in ("_objects", "_entries", "_aliases"):
+        monkeypatch.setattr(METRICS, attr, dict(getattr(METRICS, attr)))
+    METRICS.add("share_bad_0.07", Metric(id="share_bad_0.07", name="share", description="", unit="",
+                                         pixelwise=PixelMetric(badpix.pixelwise.sample, Proportion(scale=1.0))))
+    rng = np.random.default_rng(3)
+    gt = rng.uniform(-1, 1, (20, 20)).astype(np.float32)
+    pred_a = gt + rng.normal(0, 0.08, gt.shape).astype(np.float32)
+    pred_b = gt + rng.normal(0, 0.05, gt.shape).astype(np.float32)
+    percent = stats.paired_pixel_test(gt, pred_a, pred_b, None, "badpix_0.07", n=200)
+    share = stats.paired_pixel_test(gt, pred_a, pred_b, None, "share_bad_0.07", n=200)
+    assert percent.test.startswith("exact McNemar") and share.test == percent.test
+    assert share.p_value == percent.p_value and share.n == percent.n == 400
+    assert percent.low < percent.difference < percent.high
+    for got, want in ((share.difference, percent.difference), (share.low, percent.low), (share.high, percent.high)):
+        assert got == pytest.approx(want / 100, rel=1e-12)

@@ -385,7 +385,7 @@ def paired_pixel_test(gt: np.ndarray, pred_a: np.ndarray, pred_b: np.ndarray, ma
         worse, better = int(np.count_nonzero(d > 0)), int(np.count_nonzero(d < 0))
         probs = np.array([worse, d.size - worse - better, better], dtype=np.float64) / d.size
         counts = rng.multinomial(d.size, probs, size=n)
-        reps = 100.0 * (counts[:, 0] - counts[:, 2]) / d.size
+        reps = family.scale * (counts[:, 0] - counts[:, 2]) / d.size  # in the metric's units, as diff
         import scipy.stats  # on first use, as below
 
         p = 1.0 if worse + better == 0 else float(scipy.stats.binomtest(worse, worse + better, 0.5).pvalue)
