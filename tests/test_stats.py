@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -348,3 +349,14 @@ def test_paired_pixel_test_of_a_proportion_in_its_own_scale(monkeypatch):
     assert percent.low < percent.difference < percent.high
     for got, want in ((share.difference, percent.difference), (share.low, percent.low), (share.high, percent.high)):
         assert got == pytest.approx(want / 100, rel=1e-12)
+
+
+def test_scored_positions_are_int32_below_2_31_pixels_and_int64_from_there():
+    """ScoredErrors.from_prepared's positions: int32 while they fit, int64 for a map of 2^31 pixels or more (the
+    largest position, 2^31 - 1, would still fit; 2^31 + 1 pixels would not). Kills the bound's `or True`, `3**31`,
+    `2**32` and `<=`, which only a map of over 8 GiB could show through from_prepared."""
+    assert [stats._position_dtype(n) for n in (0, 1, 2**31 - 1)] == [np.int32] * 3
+    assert [stats._position_dtype(n) for n in (2**31, 2**31 + 1, 2**40)] == [np.int64] * 3
+    gt = np.zeros((3, 4), np.float32)
+    small = stats.ScoredErrors.from_prepared(SimpleNamespace(gt=gt, pred=gt + 1, mask=None, scale=1))
+    assert small.flat_index.dtype == np.int32 and small.flat_index.tolist() == list(range(12))

@@ -182,8 +182,7 @@ class ScoredErrors:
         """The errors of a prepared prediction on its scored pixels (float32 errors; int32 positions
         while they fit), with its scale."""
         err, scored = _scored(prepared.gt, prepared.pred, prepared.mask, toolkit)
-        index = np.flatnonzero(scored)
-        index = index.astype(np.int32 if scored.size < 2**31 else np.int64)
+        index = np.flatnonzero(scored).astype(_position_dtype(scored.size))
         return cls(err.astype(np.float32, copy=False), index, tuple(prepared.gt.shape), toolkit, prepared.scale)
 
     def groups(self, block: int | None) -> np.ndarray | None:
@@ -195,6 +194,12 @@ class ScoredErrors:
         h, w = self.shape
         y, x = np.divmod(self.flat_index, w)
         return (y // block) * (-(-w // block)) + x // block
+
+
+def _position_dtype(size: int) -> type[np.signedinteger]:
+    """The dtype of the flat positions of a map of ``size`` pixels: int32 while every position (0 .. size - 1)
+    is below 2^31, int64 from 2^31 pixels on (a map that large cannot be built in a fast test; this rule can)."""
+    return np.int32 if size < 2**31 else np.int64
 
 
 def block_groups(mask: np.ndarray, block: int | None) -> np.ndarray | None:
