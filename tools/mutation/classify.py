@@ -8,8 +8,9 @@ record or a gate decision. A survivor with no reason is printed as UNEXPLAINED a
 either a test is missing or the reason must be written here.
 
 A few survivors may be known but not equivalent: a test could kill them, but none that the fast suite can run
-(each entry says why). They are listed in KNOWN_NOT_KILLED; their reason begins with "not killed (known, not equivalent): ", they appear in the table and its summary under that
-label and are counted apart in the last line, and they do not fail the run.
+(each entry says why). They are listed in KNOWN_NOT_KILLED; their reason begins with "not killed (known,
+not equivalent): ", they appear in the table and its summary under that label and are counted apart in the
+last line, and they do not fail the run.
 
     python tools/mutation/classify.py --recheck results/mutation/recheck_import_time.json \\
         --out results/mutation/survivors_classified.md
