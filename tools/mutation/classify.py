@@ -164,6 +164,12 @@ REASONS: dict[str, tuple[str, ...]] = {
         "scoring.prepare.x__kept__mutmut_4",),
     "equivalent while SCENE_AGGREGATES has one entry ('mean'): the separator of a one-item join never "
     "appears in the message": ("scoring.base.xǁMetricǁ__post_init____mutmut_4",),
+    "equivalent: the default of the own-code test's getattr(fn, '__module__', ...) for an fn without a __module__ "
+    "attribute: '', 'None' (str of None) and 'XXXX' all have a first dotted part other than 'lfbench', so such an "
+    "fn is a plugin's (guarded) either way": (
+        "scoring.base.xǁMetricǁ__call____mutmut_9", "scoring.base.xǁMetricǁ__call____mutmut_15"),
+    "equivalent: `dtype.kind not in \"XXbiufXX\"`: a dtype's kind is one character and no NumPy kind is 'X', so "
+    "it is in the string exactly when it is in \"biuf\"": ("scoring.pixelwise.x__sample_problem__mutmut_13",),
     # issue 23's scoring engine (results/mutation/issue23/)
     "equivalent: a cache bypassed or keyed differently: the value is computed afresh (the same numbers) or "
     "kept under another key that is still unique to it (SceneReference.memo / per_prediction, PixelSet.memo, "
