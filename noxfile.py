@@ -68,7 +68,10 @@ def mutation(session: nox.Session) -> None:
     shutil.rmtree(ROOT / "mutants", ignore_errors=True)  # cached verdicts would hide changed tests
     out = ROOT / "results" / "mutation"  # what the run produces
     tools = ROOT / "tools" / "mutation"  # the scripts that produce it
-    session.run("mutmut", "run", *(session.posargs or ["--max-children", "1"]))
+    # one OpenMP thread: mutmut forks each mutant's tests from a process that ran torch, and a forked child that
+    # finds the parent's OpenMP pool waits for its threads forever (the planesweep's sweep hung there, 0 CPU s)
+    session.run("mutmut", "run", *(session.posargs or ["--max-children", "1"]),
+                env={"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"})
     session.run("python", str(tools / "recheck_import_time.py"), "--out", str(out / "recheck_import_time.json"))
     with open(out / "mutmut_results.txt", "w", encoding="utf-8") as f:
         session.run("mutmut", "results", stdout=f, stderr=None)
