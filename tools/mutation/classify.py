@@ -38,7 +38,7 @@ REASONS: dict[str, tuple[str, ...]] = {
     "equivalent: NumPy comparisons raise no floating-point exception (NaN compares False silently), so "
     "ignoring `invalid` around a comparison changes nothing": (
         "scoring.general.x_bad_pix_of__mutmut_3",
-        "scoring.region_metrics.x__backgammon_of__mutmut_6",
+        "scoring.region_metrics.x__backgammon_sample__mutmut_6",
         "scoring.general.x_bad_pix__mutmut_16", "scoring.general.x_bad_pix__mutmut_33",
         "scoring.region_metrics.x_backgammon_fattening__mutmut_14",
         "scoring.region_metrics.x_backgammon_thinning__mutmut_14",
@@ -51,23 +51,24 @@ REASONS: dict[str, tuple[str, ...]] = {
         "scoring.region_metrics.x_disparity_normals__mutmut_6",
         "scoring.region_metrics.xǁDotLayoutǁmissed__mutmut_38",
         "scoring.region_metrics.xǁDotLayoutǁmissed__mutmut_40",
-        "scoring.region_metrics.x_depth_normals__mutmut_63", "scoring.region_metrics.x_depth_normals__mutmut_65",
         "scoring.region_metrics.x_missed_dots__mutmut_118", "scoring.region_metrics.x_missed_dots__mutmut_120",
         "scoring.region_metrics.x_median_angular_error__mutmut_11",
         "scoring.region_metrics.x_median_angular_error__mutmut_14",
-        "scoring.region_metrics.x_bumpiness_x100__mutmut_19"),
+        "scoring.region_metrics.x__gt_bump_ok__mutmut_3"),
     "equivalent: a default that is never used: every metric is called through Metric.__call__, which always "
-    "passes `toolkit=`; mse_x100 ignores `toolkit` (MSE has one rule)": (
+    "passes `toolkit=` (a pixel-wise sample through PixelMetric, which does too); mse_x100 ignores `toolkit` "
+    "(MSE has one rule: squared_error never reads it)": (
         "scoring.general.x__quantile_metric__mutmut_1", "scoring.general.x__quantile_metric__mutmut_12",
         "scoring.general.x_bad_pix_metric__mutmut_14", "scoring.region_metrics.x__bad_pix_pixels__mutmut_1",
         "scoring.general.x_mse_x100__mutmut_3",
         "scoring.general.x_mse_x100__mutmut_5",
-        "scoring.general.x_mse_x100_of__mutmut_1",
+        "scoring.general.x_mse_x100_of__mutmut_1", "scoring.general.x_mse_x100_of__mutmut_3",
+        "scoring.general.x_mse_x100_of__mutmut_5",
         "scoring.general.x__q25_of__mutmut_1",
-        "scoring.region_metrics.x__fine_fat_pixels__mutmut_1",
-        "scoring.region_metrics.x__fine_thin_pixels__mutmut_1",
-        "scoring.region_metrics.x__bg_fat_pixels__mutmut_1",
-        "scoring.region_metrics.x__bg_thin_pixels__mutmut_1",
+        "scoring.region_metrics.x__fattened__mutmut_1",
+        "scoring.region_metrics.x__thinned__mutmut_1",
+        "scoring.region_metrics.x__bg_fattened__mutmut_1",
+        "scoring.region_metrics.x__bg_thinned__mutmut_1",
         "scoring.region_metrics.xǁDotLayoutǁmissed__mutmut_1",
         "scoring.general.x_mse_x100__mutmut_1", "scoring.general.x_bad_pix_metric__mutmut_3",
         "scoring.region_metrics.x__bad_pix_fn__mutmut_1", "scoring.region_metrics.x__bump_fn__mutmut_1",
@@ -121,9 +122,9 @@ REASONS: dict[str, tuple[str, ...]] = {
     "an empty error list returns before the thresholds are used, reading mask names when none is needed "
     "changes nothing, ndimage.convolve's default mode is the default 'reflect'": (
         "scoring.region_metrics.xǁDotLayoutǁmissed__mutmut_51",
-        "scoring.region_metrics.x__bg_fat_pixels__mutmut_8",
-        "scoring.region_metrics.x_bumpiness_map__mutmut_14", "scoring.region_metrics.x_bumpiness_x100__mutmut_27",
-        "scoring.region_metrics.x_bumpiness_x100__mutmut_32", "scoring.region_metrics.x_missed_dots__mutmut_131",
+        "scoring.region_metrics.x__bg_fattened__mutmut_8",
+        "scoring.region_metrics.x_bumpiness_map__mutmut_14", "scoring.region_metrics.x__gt_bump_ok__mutmut_10",
+        "scoring.region_metrics.x__gt_bump_ok__mutmut_14", "scoring.region_metrics.x_missed_dots__mutmut_131",
         "scoring.region_metrics.x__scale__mutmut_6", "scoring.prepare.x_align_prediction__mutmut_34",
         "scoring.prepare.x_read_label_mask__mutmut_24",
         "scoring.prepare.xǁSceneReferenceǁprepare__mutmut_26", "scoring.prepare.xǁSceneReferenceǁprepare__mutmut_48",
@@ -179,6 +180,9 @@ REASONS: dict[str, tuple[str, ...]] = {
         *(f"scoring.region_metrics.x__mae_fn__mutmut_{i}" for i in (7, 26, 30, 31, 38, 44, 45)),
         *(f"scoring.region_metrics.x__missed_dots_fn__mutmut_{i}" for i in (39, 43, 44)),
         "scoring.region_metrics.x__halfway_of__mutmut_16", "scoring.region_metrics.x__halfway_of__mutmut_17",
+        *(f"scoring.region_metrics.x__bump_fn__mutmut_{i}" for i in (33, 39, 40, 53, 54)),
+        "scoring.region_metrics.x__backgammon_sample__mutmut_19",
+        "scoring.region_metrics.x__backgammon_sample__mutmut_20",
         *(f"scoring.score.x_score_predictions__mutmut_{i}" for i in (1, 12, 19))),
     "equivalent: a shortcut taken or not: when every element is kept, `values[keep]` is `values` (the same "
     "elements in the same order); at scale 1 the upsampling index is the identity; the block size of "
@@ -197,7 +201,7 @@ REASONS: dict[str, tuple[str, ...]] = {
     "equivalent: False and None are both false (the flag `nearer_foreground`), and a 2-D PixelSet's "
     "shape[+1] is its shape[-1]": (
         "scoring.region_metrics.x_backgammon_thinning__mutmut_4",
-        "scoring.region_metrics.x__bg_thin_pixels__mutmut_4", "scoring.pixels.xǁPixelSetǁ__init____mutmut_10"),
+        "scoring.region_metrics.x__bg_thinned__mutmut_4", "scoring.pixels.xǁPixelSetǁ__init____mutmut_10"),
     "equivalent: without any (box, label) pair DotLayout.missed returns NaN before it reads the layout's "
     "index, key or dropped count; the candidate pixels only skip labels the lookup tables map to -1 anyway": (
         *(f"scoring.region_metrics.xǁDotLayoutǁof__mutmut_{i}" for i in (44, 45, 47, 58, 60, 61, 63, 66, 67)),),
@@ -373,6 +377,19 @@ REASONS: dict[str, tuple[str, ...]] = {
         *(f"ablation.cell.x_link_data_folder__mutmut_{i}" for i in (12, 14, 19)),),
     "equivalent: _is_name's `c in \"XX_-.XX\"`: X is alphanumeric, so the set of characters allowed is the same": (
         "method.checkpoint.x__is_name__mutmut_10",),
+    # the full run's region-metric survivors (tests/test_region_mutants_full.py kills the others)
+    "equivalent: the ground truth's bumpiness support computed under `toolkit` too: _bump_mean reads it only "
+    "without `toolkit` (the toolkit's rule leaves every non-finite value out), so no number changes": (
+        "scoring.region_metrics.x_bumpiness_x100__mutmut_25", "scoring.region_metrics.x__bump_fn__mutmut_47"),
+    "equivalent: np.clip(cos, -1, 1, out=cos) or into a new array: the same values, and cos is "
+    "angular_error_deg's own temporary": (
+        "scoring.region_metrics.x_angular_error_deg__mutmut_22",
+        "scoring.region_metrics.x_angular_error_deg__mutmut_26"),
+    "equivalent: _present's `1 << label` in np.left_shift's own result type instead of uint32: uint32 for "
+    "unsigned labels of up to 32 bits and bool, int64 or uint64 for signed or 64-bit ones; every type holds "
+    "1 << 31 exactly and this branch sees labels 0..31 only (the labels are integers: DotLayout indexes its "
+    "lookup tables with them)": (
+        "scoring.region_metrics.x__present__mutmut_27", "scoring.region_metrics.x__present__mutmut_31"),
 }
 
 # Survivors that are NOT equivalent: a test could tell them apart, but none in the fast suite can (each says why).
