@@ -395,3 +395,13 @@ def test_the_same_metric_again_under_its_entry_point_is_no_collision(plugin):
     taken = reg.register(_metric("taken"))
     assert reg.names() == ["same", "taken"] and reg.load_errors == {}
     assert reg.get("same") is same and reg.get("taken") is taken
+
+
+def test_all_loads_the_plugins_first(plugin):
+    """Mutant of MetricRegistry.all's `if not self._loaded` (`if self._loaded`): a fresh registry's all() loads
+    its group's plugins before listing (not an empty tuple), and lists them once loaded."""
+    module, group = plugin("plug_new = {module}:NEW")
+    reg = MetricRegistry(group)
+    listed = reg.all()
+    new = sys.modules[module].NEW
+    assert listed == (new,) and reg.all() == (new,)
