@@ -377,12 +377,6 @@ KNOWN_NOT_KILLED: dict[str, tuple[str, ...]] = {
     "lfbench's proportion metrics have scale 100 (d is -100, 0 or 100), where the two agree; they differ only "
     "for a plugin's proportion metric of scale 1, which lfbench does not ship and the fast suite does not have": (
         "scoring.stats.x_paired_pixel_test__mutmut_87",),
-    NOT_KILLED + "a text file written or read without `encoding=` takes the locale's encoding (run_marked's mark, "
-    "_died's reading of the marks, write_text): they differ for a non-ASCII label under a non-UTF-8 locale, "
-    "and the test machine has only C.utf8 / POSIX with Python reading UTF-8, so no fast test can tell": (
-        "utils.atomic.x_write_text__mutmut_3", "utils.atomic.x_write_text__mutmut_7",
-        "utils.executor.x_run_marked__mutmut_9", "utils.executor.x_run_marked__mutmut_11",
-        "utils.executor.xǁProcessPoolǁ_died__mutmut_11", "utils.executor.xǁProcessPoolǁ_died__mutmut_13"),
 }
 
 _FIELDS = re.compile(r"\b(name|description|vmin|vmax|cmap)=(f?\"[^\"]*\"|[^,)\n]*)\s*,?")
