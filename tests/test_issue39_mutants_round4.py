@@ -81,7 +81,7 @@ def test_journal_and_manifest_names_of_a_set():
 @pytest.mark.parametrize(("name", "ok"), [
     ("a", True), ("x" * 255, True), ("é" * 127, True), ("é" * 128, False), ("x" * 256, False), ("", False),
     (".hidden", False), ("a/b", False), ("a\\b", False), ("a\0b", False), (5, False), (None, False),
-    ("a.b", True), ("\udcff", True)])
+    ("a.b", True), ("\udcff", True), ("X", True), ("aXb", True)])
 def test_an_entry_name_is_plain_top_level_and_at_most_255_bytes(name, ok):
     """Mutants of _is_entry_name: the type, the byte length (UTF-8, surrogates escaped), the hidden and separator
     checks."""
@@ -100,7 +100,7 @@ def test_names_are_a_list_of_distinct_entry_names():
 
 @pytest.mark.parametrize(("name", "ok"), [("x", True), ("", False), (".", False), ("..", False), ("a/b", False),
                                           ("a\\b", False), ("a\0", False), ("x" * 255, True), ("x" * 256, False),
-                                          ("...", True)])
+                                          ("...", True), ("X", True)])
 def test_a_staging_folder_name_is_plain(name, ok):
     """Mutants of _is_plain."""
     assert outputs._is_plain(name) is ok
@@ -463,6 +463,7 @@ def test_alive_reads_the_pid_of_a_staging_folder(monkeypatch):
     pid the kernel cannot take."""
     assert outputs._alive(f"{STAGE}{os.getpid()}.x") is True
     assert outputs._alive(f"{STAGE}{os.getpid()}") is True
+    assert outputs._alive(f"{STAGE}{os.getpid()}.a.b") is True
     assert outputs._alive(f"{STAGE}x.{os.getpid()}") is False
     assert outputs._alive(f"{STAGE}99999999999999999999999.x") is False
     calls = []
@@ -504,8 +505,9 @@ def test_check_within_follows_links(tmp_path):
         with pytest.raises(DataError) as info:
             outputs.check_within(folder / name, folder)
         assert str(info.value) == f"{folder / name}: broken symbolic link or unreadable path"
-    with pytest.raises(DataError):
+    with pytest.raises(DataError) as info:
         outputs.check_within(folder / "sub" / "f", tmp_path / "absent")
+    assert str(info.value) == f"{folder / 'sub' / 'f'}: broken symbolic link or unreadable path"
 
 
 def test_check_complete_of_a_folder_without_journal(tmp_path):
@@ -1401,7 +1403,8 @@ def test_time_cell_times_the_recorded_weights_once(tmp_path, monkeypatch):
     host, SLURM job) written and re-used while its key is the same, the torch threads restored."""
     digest = _weights(tmp_path / "c")
     calls = []
-    monkeypatch.setattr(cell, "make_method", lambda *a: calls.append(("make", *a)) or torch.set_num_threads(1))
+    monkeypatch.setattr(cell, "make_method", lambda *a: calls.append(("make", *a)) or torch.set_num_threads(1)
+                        or "method")
     monkeypatch.setattr(cell, "time_whole_scene", lambda *a, **kw: calls.append(("time", *a, kw)) or [3.0, 1.0, 2.5])
     monkeypatch.setattr(cell.socket, "gethostname", lambda: "node7")
     monkeypatch.setenv("SLURM_JOB_ID", "77")
@@ -1415,7 +1418,7 @@ def test_time_cell_times_the_recorded_weights_once(tmp_path, monkeypatch):
     assert out == {"key": key, "test_s": 2.5, "test_s_all": [3.0, 1.0, 2.5], "time_size": 32, "time_angular": [5, 5],
                    "threads": 4, "device": "cpu", "host": "node7", "slurm_job_id": "77"}
     assert calls == [("make", tmp_path / "c" / "final.pt", ev, 4, "epinet"),
-                     ("time", None, 32, 3, 1, {"angular": (5, 5)})]
+                     ("time", "method", 32, 3, 1, {"angular": (5, 5)})]
     assert (tmp_path / "c" / "timing.json").read_text() == json.dumps(out, indent=2, sort_keys=True) + "\n"
     calls.clear()
     assert cell.time_cell(tmp_path / "c", ev, 4, "epinet", (5, 5)) == out
@@ -1446,7 +1449,7 @@ def test_time_cell_refuses_weights_the_cell_did_not_record(tmp_path, marker):
 def test_run_cell_skips_a_finished_cell_and_runs_the_others_with_their_threads(tmp_path, monkeypatch):
     """Mutants of run_cell: the folder made, the lock, a finished cell's marker returned without a run, an
     unfinished one run with the cell's torch threads (restored after)."""
-    task = _task(tmp_path, threads=2)
+    task = _task(tmp_path, threads=2, cell_dir=str(tmp_path / "cells" / "c1"))
     threads = torch.get_num_threads()
     seen = []
     monkeypatch.setattr(cell, "_run", lambda t: seen.append((t, torch.get_num_threads())) or {"ran": 1})
@@ -1491,7 +1494,7 @@ def test_run_trains_scores_and_marks_the_cell(tmp_path, monkeypatch):
     (tmp_path / "shared").mkdir()
     ev = Evaluation(threads=5)
     task = _task(tmp_path, data_links={"syn": str(tmp_path / "shared")}, scenes=(("s1", "cat"),), evaluation=ev,
-                 progress=False)
+                 progress=False, cell_dir=str(tmp_path / "cells" / "c1"))
     marker = cell._run(task)
     config = task.path / "train.toml"
     digest = tck.state_sha256({"w": torch.tensor([3.0])})
@@ -1508,7 +1511,7 @@ def test_run_trains_scores_and_marks_the_cell(tmp_path, monkeypatch):
     in_results = {k: v for k, v in expected.items() if k not in ("fingerprint", "eval_fingerprint", "results_sha256")}
     assert json.loads((task.path / "results.json").read_text()) == {"k": 1, "cell": in_results}
     assert (task.path / "log.txt").read_text() == "# <%Y-%m-%d %H:%M:%S> cell c1 (3 threads)\nstep 1\n"
-    assert os.readlink(task.path / "data" / "syn") == "../../shared"
+    assert os.readlink(task.path / "data" / "syn") == "../../../shared"
     assert cell.is_done(task) is True
 
 
@@ -1523,11 +1526,148 @@ def test_run_from_a_shared_stage1_without_runs(tmp_path, monkeypatch):
 
     evaluated = []
     monkeypatch.setattr(loop, "train", train)
-    monkeypatch.setattr(cell, "seed_from_stage1", lambda task: 12.5)
+    monkeypatch.setattr(cell, "seed_from_stage1", lambda given: 12.5 if given is task else None)
     monkeypatch.setattr(cell, "stage1_digest", lambda folder: f"digest of {folder}")
     monkeypatch.setattr(cell, "load_scenes", lambda scenes, ev: [])
     monkeypatch.setattr(cell, "evaluate_weights", lambda *a: evaluated.append(a[4]) or _Results([], []))
-    marker = cell._run(_task(tmp_path, stage1_dir="S1", threads=4))
+    task = _task(tmp_path, stage1_dir="S1", threads=4)
+    task.path.mkdir()
+    marker = cell._run(task)
     assert evaluated == [4]
     assert (marker["train_s"], marker["own_train_s"], marker["stage1_s"]) == (30.0, 17.5, 12.5)
     assert (marker["stage1_sha256"], marker["eval_runtime_s"], marker["scenes"]) == ("digest of S1", None, [])
+
+
+def test_run_names_a_training_summary_it_cannot_read(tmp_path, monkeypatch):
+    """Mutants of _run's read of summary.json: its `what` in the error line."""
+    import lfbench.training.loop as loop
+
+    monkeypatch.setattr(loop, "train", lambda cfg, out, command, progress: (out / "summary.json").write_text("{"))
+    task = _task(tmp_path)
+    with pytest.raises(DataError) as info:
+        cell._run(task)
+    assert str(info.value) == (f"{task.path / 'summary.json'}: training summary is not valid JSON: Expecting property "
+                               "name enclosed in double quotes: line 1 column 2 (char 1)")
+
+
+def test_seed_from_stage1_copies_at_most_max_copy_bytes(tmp_path, monkeypatch):
+    """Mutants of seed_from_stage1's read: the file named by its name in the error, the bound MAX_COPY_BYTES."""
+    src = tmp_path / "stage1"
+    _stage1(src)
+    (src / "best.pt").write_bytes(b"abcd")
+    monkeypatch.setattr(cell, "MAX_COPY_BYTES", 3)
+    with pytest.raises(DataError) as info:
+        cell.seed_from_stage1(_task(tmp_path, stage1_dir=str(src)))
+    assert str(info.value) == f"{src / 'best.pt'}: best.pt is larger than 3 bytes, more than lfbench reads"
+
+
+def test_cluster_options_name_a_bad_value_by_its_flag():
+    """Mutants of ClusterOptions.__post_init__: the flag's name in the line."""
+    with pytest.raises(SpecError) as info:
+        executor.ClusterOptions("pool", gpus_per_job=-1)
+    assert str(info.value) == "--gpus-per-job: must be >= 0, got -1"
+    with pytest.raises(SpecError) as info:
+        executor.ClusterOptions("nowhere")
+    assert str(info.value).startswith("Unknown executor 'nowhere'")
+
+
+def test_one_worker_on_a_gpu(monkeypatch):
+    """Mutants of _start's GPU line: the first worker's GPU decides (one worker has only that one)."""
+    import multiprocessing
+
+    class Context:
+        def Queue(self):  # noqa: N802 (multiprocessing's name)
+            return SimpleNamespace(put=lambda item: None)
+
+    monkeypatch.setattr(multiprocessing, "get_context", lambda name: Context())
+    monkeypatch.setattr(executor, "ProcessPoolExecutor", lambda **kw: None)
+    monkeypatch.setattr(executor, "visible_gpus", lambda: ["3"])
+    lines = []
+    _, marks = executor.ProcessPool(executor.ClusterOptions("pool"), jobs=1, log=lines.append)._start(1)
+    marks.rmdir()
+    assert lines == ["1 worker(s) on GPU(s) 3 (round-robin)"]
+
+
+def test_a_named_set_names_its_own_journal_in_a_refusal(tmp_path):
+    """Mutants of commit's check of the staged entries: the journal of the set named."""
+    outputs_set = outputs.OutputSet(tmp_path / "out", "cell")
+    (outputs_set.stage / "link").symlink_to(tmp_path)
+    with pytest.raises(DataError) as info:
+        outputs_set.commit(["link"])
+    assert str(info.value) == _refusal(tmp_path / "out" / ".lfbench-commit.cell.json",
+                                       f"commit journal: staged entry {outputs_set.stage / 'link'} is a symbolic link")
+
+
+def test_commit_written_keeps_what_it_is_told(tmp_path):
+    """Mutants of commit_written's `keep`."""
+    out = tmp_path / "out"
+    first = outputs.OutputSet(out)
+    (first.stage / "a").write_text("a")
+    first.commit(["a"])
+    second = outputs.OutputSet(out)
+    (second.stage / "b").write_text("b")
+    assert second.commit_written([second.stage / "b"], keep=["a"]) == [out / "b"]
+    assert _files(out) == {".lfbench-outputs.json": _manifest("a", "b"), "a": "a", "b": "b"}
+
+
+def test_abort_when_the_staging_folder_is_gone(tmp_path):
+    """Mutants of abort's rmtree (errors ignored): a staging folder someone removed is no error."""
+    outputs_set = outputs.OutputSet(tmp_path / "out")
+    outputs_set.stage.rmdir()
+    outputs_set.abort()
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_journal_that_is_not_json_is_named_as_a_commit_journal(tmp_path):
+    """Mutants of _read_journal's `what`."""
+    (tmp_path / ".lfbench-commit.json").write_text("{")
+    with pytest.raises(DataError) as info:
+        outputs.recover(tmp_path)
+    assert str(info.value) == _refusal(tmp_path / ".lfbench-commit.json", "commit journal is not valid UTF-8 JSON")
+
+
+@pytest.fixture
+def stuck_files(monkeypatch):
+    """Files named ``stuck*`` cannot be removed (a busy file on a network file system); returns the names whose
+    removal was tried."""
+    tried = []
+    unlink = os.unlink
+
+    def stuck_unlink(path, *, dir_fd=None):
+        name = os.fsdecode(path)
+        if os.path.basename(name).startswith("stuck"):
+            tried.append(os.path.basename(name))
+            raise PermissionError(errno.EPERM, "Operation not permitted", name)
+        return unlink(path, dir_fd=dir_fd)
+
+    monkeypatch.setattr(os, "unlink", stuck_unlink)
+    return tried
+
+
+def test_stale_temporaries_are_removed_as_far_as_they_can_be(tmp_path, stuck_files):
+    """Mutants of _remove's rmtree (errors ignored): every file of a stale folder is tried, not only up to the
+    first that cannot be removed."""
+    (tmp_path / "stale").mkdir()
+    for name in ("stuck1", "stuck2", "stuck3"):
+        (tmp_path / "stale" / name).write_text(name)
+    outputs._remove(tmp_path / "stale")
+    assert sorted(stuck_files) == ["stuck1", "stuck2", "stuck3"]
+
+
+def test_a_roll_forward_ends_even_when_the_staging_folder_cannot_be_removed(tmp_path, stuck_files):
+    """Mutants of _roll_forward's rmtree (errors ignored): the commit is done, what is left of the staging folder
+    is the next run's to clean."""
+    outputs_set = outputs.OutputSet(tmp_path / "out")
+    (outputs_set.stage / "a").write_text("a")
+    (outputs_set.stage / "stuck").write_text("s")
+    outputs_set.commit(["a"])
+    assert _files(tmp_path / "out") == {".lfbench-outputs.json": _manifest("a"), "a": "a",
+                                        f"{outputs_set.stage.name}/stuck": "s"}
+    assert stuck_files == ["stuck"]
+
+
+def test_the_pool_ends_even_when_a_mark_cannot_be_removed(pool_map, stuck_files):
+    """Mutants of map's rmtree of the marks (errors ignored)."""
+    run, events, marks = pool_map
+    run([1, 2], fn=lambda i: (marks / "stuck").write_text("x") and i)
+    assert events[-3:] == [("done", 1), ("done", 2), ("shutdown", True, True)] and stuck_files == ["stuck"]
