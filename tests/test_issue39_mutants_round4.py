@@ -992,9 +992,10 @@ def test_the_pool_starts_spawned_workers_with_their_gpus(monkeypatch):
 # --------------------------------------------------------------------------- training/checkpoint.py
 
 
-def test_rng_state_is_weights_only_loadable_and_restores_every_generator(tmp_path):
+def test_rng_state_is_weights_only_loadable_and_restores_every_generator(tmp_path, monkeypatch):
     """Mutants of rng_state / set_rng_state: each generator's state in its types (int64 tensors, plain ints and
-    float), saved and read back weights-only, then restored: the same draws again."""
+    float), saved and read back weights-only, then restored: the same draws again (CUDA's: the next test)."""
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
     random.seed(3)
     np.random.seed(4)
     torch.manual_seed(5)
