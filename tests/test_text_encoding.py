@@ -26,6 +26,17 @@ LABEL = "Straße ÉPI 深度"
 _PACKAGE_ROOT = str(Path(lfbench.__file__).resolve().parent.parent)
 
 
+# Under mutmut the child runs the mutant named by MUTANT_UNDER_TEST, which it inherits. A method's mutant is named
+# with "ǁ" (``executor.xǁProcessPoolǁ_died__mutmut_11``): the ASCII child decodes that name into surrogates and would
+# run the original method, so it takes the name back as the UTF-8 its parent wrote (an environment value holding
+# "ǁ" cannot be set under this locale: mutmut's own copy of the name is set instead).
+_UNDER_MUTMUT = ("import os\n"
+                 "_name = os.environ.pop('MUTANT_UNDER_TEST', None)\n"
+                 "if _name is not None:\n"
+                 "    from mutmut.mutation import trampoline\n"
+                 "    trampoline._mutant_under_test = os.fsencode(_name).decode('utf-8')\n")
+
+
 def _ascii_child(code: str, *args: str) -> subprocess.CompletedProcess:
     """Run ``code`` in a child Python whose locale encoding is ASCII; skip when this Python will not give one.
     ``args`` are ASCII (non-ASCII text goes as JSON): the child decodes its argv as ASCII too."""
@@ -36,7 +47,7 @@ def _ascii_child(code: str, *args: str) -> subprocess.CompletedProcess:
     if probe.stdout.split() != ["0", "ansi_x3.4-1968"]:
         pytest.skip(f"this Python under LC_ALL=C reads text as {probe.stdout.strip()!r}, not ASCII: the locale "
                     "cannot differ from UTF-8 here")
-    return subprocess.run([sys.executable, "-c", code, *args], env=env, capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-c", _UNDER_MUTMUT + code, *args], env=env, capture_output=True, text=True,
                           timeout=60)
 
 
