@@ -21,9 +21,12 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
 from classify import NOT_KILLED, reason_of  # noqa: E402
-from survivors import NO_TESTS, ROOT, SURVIVED, survivors  # noqa: E402
+from mutmut.stats import status_by_exit_code  # noqa: E402  mutmut's own reading of its exit codes
+from survivors import ROOT, SURVIVED, survivors  # noqa: E402
 
-KILLED, TIMEOUTS = {1, 3, -9, -11}, {-24, 24, 36}  # failed tests, a crash or SIGKILL; SIGXCPU (mutmut's timeouts)
+# mutmut's statuses -> this table's columns (a crash or SIGKILL of the tests, "segfault", detected the mutant)
+COLUMN_OF = {"killed": "killed", "segfault": "killed", "timeout": "timeout", "no tests": "no tests",
+             "not checked": "not run"}
 COLUMNS = ("mutants", "killed", "timeout", "survived: explained", "known, not killed", "unexplained", "no tests",
            "not run")
 
@@ -37,14 +40,11 @@ def tally(mutants: Path, killed_elsewhere: set[str]) -> tuple[dict[str, Counter]
         row = rows.setdefault(str(meta.relative_to(mutants).with_suffix("")), Counter())
         for name, code in json.loads(meta.read_text(encoding="utf-8"))["exit_code_by_key"].items():
             row["mutants"] += 1
-            if code is None:
-                row["not run"] += 1
-            elif code in KILLED or name in killed_elsewhere:
+            status = status_by_exit_code[code]
+            if name in killed_elsewhere:
                 row["killed"] += 1
-            elif code in TIMEOUTS:
-                row["timeout"] += 1
-            elif code == NO_TESTS:
-                row["no tests"] += 1
+            elif status in COLUMN_OF:
+                row[COLUMN_OF[status]] += 1
             elif code == SURVIVED:
                 reason = reason_of(name, diffs.get(name, ""))
                 column = ("unexplained" if reason is None else "known, not killed" if reason.startswith(NOT_KILLED)
@@ -53,7 +53,7 @@ def tally(mutants: Path, killed_elsewhere: set[str]) -> tuple[dict[str, Counter]
                 if reason is None:
                     unexplained[re.sub(r"__mutmut_\d+$", "", name)] += 1
             else:
-                row[f"exit {code}"] += 1
+                row[status] += 1
     return rows, unexplained
 
 
