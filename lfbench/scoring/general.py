@@ -148,8 +148,8 @@ def squared_error(px: PixelErrors, *, toolkit: bool = False) -> Sample:
         return Sample(np.square(px.err), None)
     if px.gt_all_finite and px.pred_all_finite:
         return Sample(np.square(px.err), None)
-    scored = px.finite
-    return Sample(np.square(px.err), None) if scored.all() else Sample(np.square(px.err[scored]), scored)
+    scored = px.finite  # some value is not finite here
+    return Sample(np.square(px.err[scored]), scored)
 
 
 # MSE x100: the toolkit (numpy 1.x) multiplied the float32 mean by 100 in float64; :class:`Mean` does the same

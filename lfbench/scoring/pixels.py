@@ -94,7 +94,7 @@ class PixelSet:
     def values(self, pred: np.ndarray, rows_per_block: int = 256) -> np.ndarray:
         """A prediction's values at the pixels, in raster order: ``pred`` is the low-resolution map when the
         set upsamples (taken to the set's resolution a block of rows at a time, never whole), else a map of
-        ``shape``."""
+        ``shape``. IndexError when ``pred`` is narrower than the low-resolution columns the set reads."""
         pred = np.asarray(pred)
         if self.upsample is None:
             return self._selected(pred)

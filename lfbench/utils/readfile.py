@@ -38,9 +38,7 @@ def _open(path: Path, what: str, error: type[LFBenchError]) -> int:
         if os.path.islink(path):
             raise error(f"{what} is a symbolic link that leads nowhere", path) from None
         raise error(f"{what} not found", path) from None
-    except IsADirectoryError:
-        raise error(f"{what} is a folder, expected a file", path) from None
-    except OSError as exc:
+    except OSError as exc:  # a folder opens read-only (POSIX): fstat below names it
         raise error(f"cannot read {what}: {exc.strerror or exc}", path) from None
     mode = os.fstat(fd).st_mode
     if not stat.S_ISREG(mode):
