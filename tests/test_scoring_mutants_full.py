@@ -405,3 +405,14 @@ def test_all_loads_the_plugins_first(plugin):
     listed = reg.all()
     new = sys.modules[module].NEW
     assert listed == (new,) and reg.all() == (new,)
+
+
+def test_find_loads_the_plugins_first(plugin):
+    """Mutant of MetricRegistry.find's `if not self._loaded` (`if self._loaded`): the first lookup of a fresh
+    registry loads all its group's plugins, in the group's order, whichever is asked for: the order of the metrics
+    (tables, --metrics all) does not depend on what was looked up first."""
+    module, group = plugin("plug_new = {module}:NEW\nsame = {module}:SAME")
+    reg = MetricRegistry(group)
+    found = reg.find("same")
+    assert found is sys.modules[module].SAME and reg.registered() == ["plug_new", "same"]
+    assert reg.find("plug_tk") is sys.modules[module].NEW and reg.names() == ["plug_new", "same"]

@@ -239,7 +239,7 @@ REASONS: dict[str, tuple[str, ...]] = {
     "values in the same order; every reader of Sample.keep indexes with it or skips it when None), and "
     "Sample's `keep` defaults to None": (
         "scoring.pixelwise.x_kept__mutmut_1", "scoring.pixelwise.x_kept__mutmut_5",
-        *(f"scoring.general.x_squared_error__mutmut_{i}" for i in (4, 7, 11))),
+        *(f"scoring.general.x_squared_error__mutmut_{i}" for i in (4, 9))),
     "equivalent: astype(None) is astype(float64), the dtype named (bool values and bincount's int64 counts "
     "become float64 either way)": (
         "scoring.pixelwise.xǁProportionǁpooled_replicates__mutmut_9",
@@ -309,8 +309,7 @@ REASONS: dict[str, tuple[str, ...]] = {
         *(f"scoring.stats.x_paired_scene_test__mutmut_{i}" for i in (5, 7, 10, 12)),),
     "equivalent: a toolkit flag None or left to its default, which is False (None is falsy)": (
         "scoring.stats.x__loss__mutmut_69", "scoring.stats.x__loss__mutmut_71",
-        "scoring.stats.x_paired_pixel_test__mutmut_8", "scoring.stats.x_paired_pixel_test__mutmut_18",
-        "scoring.stats.xǁScoredErrorsǁfrom_prepared__mutmut_6"),
+        "scoring.stats.x_paired_pixel_test__mutmut_8", "scoring.stats.x_paired_pixel_test__mutmut_18"),
     "equivalent: the np.errstate entry surrounds operations that raise no floating-point warning (_loss's "
     "np.abs and np.where; the registered draws compare and square: NaN, inf and an overflowing square run "
     "under `-W error`)": (
@@ -414,6 +413,36 @@ REASONS: dict[str, tuple[str, ...]] = {
     "equivalent: _alive's pid as `split(\".\")[0]` or `split(\".\", 2)[0]`: the first field is the same whatever "
     "the number of splits": (
         "utils.outputs.x__alive__mutmut_6", "utils.outputs.x__alive__mutmut_9"),
+    # the full run's late functions (tests/test_scoring_mutants_late.py kills the others)
+    "equivalent: score_scene's reference.prepare(pred, res, ...) with the source None or left to its default: "
+    "score_scene aligned and checked the prediction under its source before (reference.align), and prepare's "
+    "own check of that aligned map finds nothing, so the source is never written": (
+        "scoring.score.x_score_scene__mutmut_54", "scoring.score.x_score_scene__mutmut_57"),
+    "equivalent: align_prediction's `kind in \"XXfiuXX\"`: no NumPy dtype kind is X, so the kinds accepted are "
+    "the same; np.full(shape, None, dtype=float32) is NaN, as np.nan": (
+        "scoring.prepare.x_align_prediction__mutmut_17", "scoring.prepare.x_align_prediction__mutmut_35"),
+    "equivalent: PixelSet.values' guard with `>=` (at equality the columns fit: `take` reads the same values as "
+    "the repeats, only slower) or `pred.shape[+1]` (the prediction is 2-D: index 1 is index -1)": (
+        "scoring.pixels.xǁPixelSetǁvalues__mutmut_23", "scoring.pixels.xǁPixelSetǁvalues__mutmut_24"),
+    "equivalent: a sample's fast path made never taken (`... and False`): when every flag is True, kept() and "
+    "np.where give a Sample of the same values with keep None; the test only saves computing the flags": (
+        "scoring.general.x_abs_error_x100__mutmut_15", "scoring.general.x_abs_error_x100__mutmut_23",
+        "scoring.general.xǁBadPixelsǁ__call____mutmut_28"),
+    "equivalent: _own's `getattr(fn, \"__module__\", default)` with the default None or \"XXXX\" for \"\": a "
+    "callable without a __module__ is not lfbench's whatever text stands for it (\"None\", \"XXXX\" and \"\" are not "
+    "\"lfbench\")": (
+        "scoring.pixelwise.x__own__mutmut_5", "scoring.pixelwise.x__own__mutmut_11"),
+    "equivalent: Metric.__post_init__'s list of scene aggregates joined by another separator: SCENE_AGGREGATES "
+    "holds one name, and one name joined has no separator": ("scoring.base.xǁMetricǁ__post_init____mutmut_16",),
+    "equivalent: Metric.__post_init__'s `isnan(low) and isnan(high)` for `or`: a NaN bound makes `not low < high` "
+    "true by itself, so a range with one NaN is refused either way": (
+        "scoring.base.xǁMetricǁ__post_init____mutmut_19",),
+    "equivalent: MSE's short_label None or left out: a metric's label falls back to its name, which is the same "
+    "text (\"MSE x100\")": ("scoring.general.x__mse_metric__mutmut_10", "scoring.general.x__mse_metric__mutmut_21"),
+    "equivalent: _ordinal's teens from 11 (`11 <=`, `10 <`) or to 19 (`< 20`): 10 and 20 end in 0, whose suffix is "
+    "\"th\" either way": (
+        "scoring.general.x__ordinal__mutmut_10", "scoring.general.x__ordinal__mutmut_11",
+        "scoring.general.x__ordinal__mutmut_14"),
 }
 
 # Survivors that are NOT equivalent: a test could tell them apart, but none in the fast suite can (each says why).

@@ -30,8 +30,10 @@ MODULES = ("lfbench.scoring.base", "lfbench.scoring.general", "lfbench.scoring.r
            "lfbench.scoring.prepare", "lfbench.scoring.region_metrics", "lfbench.scoring.metrics",
            "lfbench.scoring.score", "lfbench.runs.regress", "lfbench.scoring.pixelwise", "lfbench.data.disparity",
            "lfbench.utils.readfile")
-# the tests of the metric definitions and the registry (what runs at import), the definitions table first
-TESTS = ("tests/test_scoring_edges.py", "tests/test_scoring_engine_mutants.py", "tests/test_metrics.py",
+# the tests of the metric definitions and the registry (what runs at import): first those that build what they check
+# in their own body (fast: -x stops at the first failure), then the definitions table
+TESTS = ("tests/test_scoring_mutants_late.py", "tests/test_scoring_mutants_full.py",
+         "tests/test_scoring_edges.py", "tests/test_scoring_engine_mutants.py", "tests/test_metrics.py",
          "tests/test_region_metrics.py", "tests/test_prepare.py", "tests/test_scoring_engine.py")
 # subprocesses: they import the unmutated code
 DESELECT = ("tests/test_region_metrics.py::test_cli_evaluate_all_metrics",
