@@ -6,6 +6,9 @@ mutants no test reached, and those not run yet; then the unexplained survivors' 
 of recheck_import_time.py, whose "killed" verdicts count as killed. ``--fresh``: mutants re-run in fresh
 processes (a file of names, one per line, with the verdict after a tab: killed / survived), which override the
 mutants folder's verdicts (mutmut's forked runs see no mutant of a function that ran before the fork).
+``--listing``: `mutmut results` of earlier runs of the same code (the mutants they did not kill, a line each; runs of
+other files each): the verdicts of the mutants this folder has not run, those they leave out counted as killed;
+for a folder made again to tally earlier runs whose folders are gone, with the verdicts of the mutants run since.
 
     python tools/mutation/tally.py --mutants mutants --out results/mutation/full_run/tally.md
 """
@@ -31,15 +34,30 @@ COLUMNS = ("mutants", "killed", "timeout", "survived: explained", "known, not ki
            "not run")
 
 
-def tally(mutants: Path, killed_elsewhere: set[str]) -> tuple[dict[str, Counter], Counter]:
-    """Per file (path under mutants/) a Counter of COLUMNS; and the unexplained survivors' functions."""
-    diffs = {name: diff for name, _, diff in survivors(mutants, (SURVIVED,))}
+def read_listing(path: Path) -> dict[str, str]:
+    """The statuses of a `mutmut results` listing ("    name: status" lines), by mutant name."""
+    statuses = {}
+    for line in path.read_text(encoding="utf-8").splitlines():
+        name, sep, status = line.strip().rpartition(": ")
+        if sep:
+            statuses[name] = status
+    return statuses
+
+
+def tally(mutants: Path, killed_elsewhere: set[str], listing: dict[str, str] | None = None
+          ) -> tuple[dict[str, Counter], Counter]:
+    """Per file (path under mutants/) a Counter of COLUMNS; and the unexplained survivors' functions. ``listing``:
+    the statuses of an earlier run for the mutants not run here (absent: killed)."""
+    code_of = {status: code for code, status in status_by_exit_code.items()}
+    diffs = {name: diff for name, _, diff in survivors(mutants, (SURVIVED, None) if listing else (SURVIVED,))}
     rows: dict[str, Counter] = {}
     unexplained: Counter = Counter()
     for meta in sorted(mutants.rglob("*.py.meta")):
         row = rows.setdefault(str(meta.relative_to(mutants).with_suffix("")), Counter())
         for name, code in json.loads(meta.read_text(encoding="utf-8"))["exit_code_by_key"].items():
             row["mutants"] += 1
+            if code is None and listing is not None:
+                code = code_of[listing.get(name, "killed")]
             status = status_by_exit_code[code]
             if name in killed_elsewhere:
                 row["killed"] += 1
@@ -80,6 +98,8 @@ def main() -> int:
     parser.add_argument("--mutants", type=Path, default=ROOT / "mutants")
     parser.add_argument("--recheck", type=Path, nargs="*", default=[])
     parser.add_argument("--fresh", type=Path, nargs="*", default=[])
+    parser.add_argument("--listing", type=Path, nargs="+", help="`mutmut results` of earlier runs of the same code "
+                                                                   "(of other files each)")
     parser.add_argument("--out", type=Path, required=True)
     args = parser.parse_args()
     killed = set()
@@ -90,7 +110,8 @@ def main() -> int:
             name, _, verdict = line.partition("\t")
             if verdict.strip() == "killed":
                 killed.add(name.strip())
-    rows, unexplained = tally(args.mutants, killed)
+    listing = None if args.listing is None else {k: v for path in args.listing for k, v in read_listing(path).items()}
+    rows, unexplained = tally(args.mutants, killed, listing)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(markdown(rows, unexplained), encoding="utf-8")
     print(f"{sum(unexplained.values())} unexplained survivors in {len(unexplained)} functions")
