@@ -316,3 +316,28 @@ def readme_section(heading: str) -> str:
 def code_blocks(section: str) -> list[tuple[str, str]]:
     """(language, body) of every fenced code block of ``section``."""
     return [(m[1], m[2]) for m in re.finditer(r"```(\w*)\n(.*?)```", section, re.S)]
+
+
+def as_plugin(fn, qualname: str, module: str = "hostile_plugin"):
+    """``fn`` as a plugin's function: its ``__module__`` ``module`` and ``__qualname__`` ``qualname`` (so that the
+    error lines naming it are written out whole)."""
+    fn.__module__ = module
+    fn.__qualname__ = qualname
+    return fn
+
+
+def _no_module(self):
+    raise AttributeError("__module__")
+
+
+class Anonymous:
+    """A callable object with neither ``__module__`` nor ``__qualname__`` (a plugin may hand over such a thing):
+    calls ``then(*args, **kwargs)``."""
+
+    __module__ = property(_no_module)
+
+    def __init__(self, then=None) -> None:
+        self.then = then
+
+    def __call__(self, *args, **kwargs):
+        return self.then(*args, **kwargs)

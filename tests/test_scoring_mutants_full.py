@@ -11,9 +11,9 @@ mutmut forks each mutant's child from a parent that imported lfbench and loaded 
 collection, so a test that relies on that registry never runs a mutated add or _load_entry_point: every registry
 test here builds a fresh MetricRegistry in its body, of its own entry-point group, filled by a fake installed
 distribution (tests/helpers.write_dist_info) or by register. The plugins' functions are given their module and
-qualified name (``hostile_plugin``) so that every error line is written out whole. Each test names the class of
-mutants it kills. In-process, no subprocess, no CLI, fast. The survivors no input can tell apart have their reasons
-in tools/mutation/classify.py.
+qualified name (``hostile_plugin``: tests/helpers.as_plugin) so that every error line is written out whole. Each
+test names the class of mutants it kills. In-process, no subprocess, no CLI, fast. The survivors no input can tell
+apart have their reasons in tools/mutation/classify.py.
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from helpers import write_dist_info
+from helpers import Anonymous, as_plugin, write_dist_info
 
 from lfbench.scoring.base import Metric, MetricRegistry
 from lfbench.scoring.metrics import primary_metric
@@ -32,32 +32,6 @@ from lfbench.scoring.pixels import PixelErrors
 from lfbench.scoring.pixelwise import Mean, PixelMetric, Sample
 from lfbench.utils.errors import LFBenchError, SpecError
 from lfbench.utils.registry import NameTaken
-
-PLUGIN_MODULE = "hostile_plugin"
-
-
-def _plugin(fn, qualname: str):
-    """``fn`` as a plugin's function: module ``hostile_plugin``, qualified name ``qualname``."""
-    fn.__module__ = PLUGIN_MODULE
-    fn.__qualname__ = qualname
-    return fn
-
-
-def _no_module(self):
-    raise AttributeError("__module__")
-
-
-class Anonymous:
-    """A callable object with neither ``__module__`` nor ``__qualname__`` (a plugin may hand over such a thing):
-    calls ``then(*args, **kwargs)``."""
-
-    __module__ = property(_no_module)
-
-    def __init__(self, then) -> None:
-        self.then = then
-
-    def __call__(self, *args, **kwargs):
-        return self.then(*args, **kwargs)
 
 
 def _raise(exc: BaseException):
@@ -68,7 +42,7 @@ def _raise(exc: BaseException):
 
 def _metric(metric_id: str, fn=None, **kw) -> Metric:
     return Metric(id=metric_id, name=metric_id.title(), description="", unit="px",
-                  fn=fn if fn is not None else _plugin(lambda gt, pred, mask=None, *, toolkit=False: 0.0, "score"),
+                  fn=fn if fn is not None else as_plugin(lambda gt, pred, mask=None, *, toolkit=False: 0.0, "score"),
                   **kw)
 
 
@@ -87,7 +61,7 @@ def test_a_plugins_function_of_maps_gets_every_argument_as_given():
         seen.append((gt, pred, mask, toolkit, context))
         return np.float32(2.5)
 
-    metric = _metric("plug", _plugin(score, "score"))
+    metric = _metric("plug", as_plugin(score, "score"))
     value = metric(GT, PRED, MASK, toolkit=True, scene="S", resolution="lowres")
     assert value == 2.5 and type(value) is float
     [(gt, pred, mask, toolkit, context)] = seen
@@ -98,7 +72,7 @@ def test_a_plugins_function_of_maps_gets_every_argument_as_given():
 def test_a_plugins_function_that_raises_is_one_line_naming_it():
     """Mutants of the plugin's name (`name = f"{self.id!r} ({module}.{qualname})"`: None, the attribute names, fn
     for None) and of `plugin_failure(name, exc)` (an argument None or left out)."""
-    metric = _metric("plug", _plugin(_raise(RuntimeError("boom\nsecond line")), "Scorer.score"))
+    metric = _metric("plug", as_plugin(_raise(RuntimeError("boom\nsecond line")), "Scorer.score"))
     with pytest.raises(LFBenchError) as info:
         metric(GT, PRED)
     assert str(info.value) == "metric plugin 'plug' (hostile_plugin.Scorer.score) failed: RuntimeError: boom"
@@ -108,7 +82,7 @@ def test_a_plugins_lfbench_error_passes_unchanged():
     """The plugin's own LFBenchError is re-raised as it is (not wrapped)."""
     own = LFBenchError("the plugin's own line")
     with pytest.raises(LFBenchError) as info:
-        _metric("plug", _plugin(_raise(own), "score"))(GT, PRED)
+        _metric("plug", as_plugin(_raise(own), "score"))(GT, PRED)
     assert info.value is own
 
 
@@ -129,7 +103,7 @@ def test_a_plugin_object_without_module_or_qualname_is_scored_and_named_by_its_t
 def test_a_plugins_function_that_returns_no_number_is_one_line_naming_it(returned, kind):
     """Mutants of the check of the value (`or` for `and`: a string that float() reads, '1.5', passed) and of its
     message (None, type(None))."""
-    metric = _metric("plug", _plugin(lambda *a, **k: returned, "score"))
+    metric = _metric("plug", as_plugin(lambda *a, **k: returned, "score"))
     with pytest.raises(LFBenchError) as info:
         metric(GT, PRED)
     assert str(info.value) == f"metric plugin 'plug' (hostile_plugin.score) returned a {kind}, expected a number"
@@ -160,7 +134,7 @@ def _draw(sample_fn):
 
 def _drawn_problem(returned) -> str:
     with pytest.raises(LFBenchError) as info:
-        _draw(_plugin(lambda px, *, toolkit=False: returned, "sample"))
+        _draw(as_plugin(lambda px, *, toolkit=False: returned, "sample"))
     prefix = "metric plugin hostile_plugin.sample returned "
     assert str(info.value).startswith(prefix)
     return str(info.value)[len(prefix):]
@@ -169,7 +143,7 @@ def _drawn_problem(returned) -> str:
 def test_a_plugins_sample_function_is_named_by_its_module_and_qualified_name():
     """Mutants of _describe's name (`getattr(fn, '__qualname__', None) or type(fn).__name__`: None, `and`, fn for
     None, the attribute's name) and of its module's attribute name: a function is `module.qualname`."""
-    fn = _plugin(_raise(RuntimeError("boom")), "Plugin.sample")
+    fn = as_plugin(_raise(RuntimeError("boom")), "Plugin.sample")
     with pytest.raises(LFBenchError) as info:
         _draw(fn)
     assert str(info.value) == "metric plugin hostile_plugin.Plugin.sample failed: RuntimeError: boom"
@@ -213,7 +187,7 @@ def test_as_many_values_as_pixels_without_a_keep_mask():
     """Mutant of `None if values.size == n` (`or True`): 3 values for 4 pixels are refused, 4 are kept as they are."""
     assert _drawn_problem(Sample(np.zeros(3), None)) == "3 values for 4 pixels and no keep mask"
     values = np.arange(4.0)
-    drawn = _draw(_plugin(lambda px, *, toolkit=False: (values, None), "sample"))
+    drawn = _draw(as_plugin(lambda px, *, toolkit=False: (values, None), "sample"))
     assert type(drawn) is Sample and drawn.values is values and drawn.keep is None
 
 
@@ -234,7 +208,7 @@ def test_as_many_values_as_kept_pixels():
     """Mutant of `None if kept_count == values.size` (`or True`): 3 values for 2 kept pixels are refused, 2 kept."""
     keep = np.array([True, False, True, False])
     assert _drawn_problem(Sample(np.zeros(3), keep)) == "3 values for 2 kept pixels"
-    drawn = _draw(_plugin(lambda px, *, toolkit=False: Sample(np.ones(2), keep), "sample"))
+    drawn = _draw(as_plugin(lambda px, *, toolkit=False: Sample(np.ones(2), keep), "sample"))
     assert drawn.keep is keep and drawn.values.tolist() == [1.0, 1.0]
 
 

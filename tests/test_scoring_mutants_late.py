@@ -18,7 +18,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from helpers import write_scene
+from helpers import Anonymous, as_plugin, write_scene
 
 from lfbench.data.hci import HCIScene
 from lfbench.data.scene import ArrayLightField
@@ -188,24 +188,31 @@ def _recording_metric(metric_id: str, log: list[str], *, pixelwise: bool) -> Met
     return Metric(id=metric_id, name=metric_id, description="", unit="px", fn=of_maps)
 
 
+@pytest.fixture()
+def log(monkeypatch) -> list[str]:
+    """What happened, in order: the recording metrics append their ids, Prepared.release appends "release" (the
+    region without a mask) or "release <mask name>"."""
+    events: list[str] = []
+    real_release = prepare_module.Prepared.release
+
+    def release(self, mask_name=None):
+        events.append("release" if mask_name is None else f"release {mask_name}")
+        real_release(self, mask_name)
+
+    monkeypatch.setattr(prepare_module.Prepared, "release", release)
+    return events
+
+
 @pytest.mark.parametrize(("kinds", "expected"), [
     ("pm", ["p0", "release", "m1"]),          # a function of maps after the last pixel-wise metric of the region
     ("pp", ["p0", "p1", "release"]),          # released after the last, not the first
     ("pmp", ["p0", "m1", "p2", "release"]),
 ])
-def test_a_regions_errors_are_released_once_after_the_last_metric_that_reads_them(monkeypatch, kinds, expected):
+def test_a_regions_errors_are_released_once_after_the_last_metric_that_reads_them(log, kinds, expected):
     """score_scene mutants 36 (functions of maps counted as readers), 37 (only they counted), 38 (only runtime
     metrics counted), 71 (the region never found), 72 (released after every other metric) and 73 (the region's
     name lost): the errors of a region are released once, right after the last pixel-wise metric that reads them,
     whatever comes after it, and the values are those of the metrics."""
-    log: list[str] = []
-    real_release = prepare_module.Prepared.release
-
-    def release(self, mask_name=None):
-        log.append("release" if mask_name is None else f"release {mask_name}")
-        real_release(self, mask_name)
-
-    monkeypatch.setattr(prepare_module.Prepared, "release", release)
     metrics = [_recording_metric(f"{kind}{k}", log, pixelwise=kind == "p") for k, kind in enumerate(kinds)]
     reference = _reference(2)
     score = score_scene(reference.scene, reference.gt() + F32(0.5), metrics, reference.rules, reference=reference)
@@ -213,18 +220,13 @@ def test_a_regions_errors_are_released_once_after_the_last_metric_that_reads_the
     assert score.values == pytest.approx({m.id: 0.5 for m in metrics}, abs=1e-6)
 
 
-def test_a_region_masks_errors_are_released_by_its_name(tmp_path, monkeypatch):
+def test_a_region_masks_errors_are_released_by_its_name(tmp_path, log):
     """score_scene mutant 73 (``release(None)``): a region metric's errors are released under the region's name."""
     reference = _masked_reference(tmp_path)
-    released: list[str | None] = []
-    real_release = prepare_module.Prepared.release
-    monkeypatch.setattr(prepare_module.Prepared, "release",
-                        lambda self, name=None: (released.append(name), real_release(self, name)))
-    log: list[str] = []
     plain = _recording_metric("p0", log, pixelwise=True)
     region = Metric(id="p1", name="p1", description="", unit="px", pixelwise=plain.pixelwise, mask_name="objects")
     score_scene(reference.scene, reference.gt(), [plain, region], reference.rules, reference=reference)
-    assert released == [None, "objects"]
+    assert log == ["p0", "release", "p0", "release objects"]  # p1 draws with p0's sample function
 
 
 def test_a_function_of_maps_that_does_not_ask_for_the_scene_gets_no_scene(tmp_path):
@@ -287,11 +289,6 @@ def _errors(pred: list[float]) -> PixelErrors:
     return PixelErrors.of_maps(gt[None], np.asarray(pred, F32)[None])
 
 
-def _as(module: str, fn):
-    fn.__module__, fn.__qualname__ = module, "sample"
-    return fn
-
-
 @pytest.mark.parametrize(("p", "shown"), [(250, "250"), (100, "100"), (100.0, "100.0"), (-0.5, "-0.5"),
                                           (True, "True"), ("25", "25"), (None, "None"),
                                           (1.0000000000000002e22, "1.0000000000000002e+")])
@@ -312,7 +309,7 @@ def test_a_plugins_family_with_a_problem_is_one_line_naming_the_plugin():
     """PixelMetric.draw mutants 2 (the family's problem ignored), 3 (its message lost) and 4 (the plugin not
     named): a plugin's OrderStatistic(250) is refused before its function runs, naming the function."""
     calls = []
-    sample = _as("my_plugin", lambda px, *, toolkit=False: calls.append(1) or Sample(px.err))
+    sample = as_plugin(lambda px, *, toolkit=False: calls.append(1) or Sample(px.err), "sample", module="my_plugin")
     with pytest.raises(LFBenchError) as caught:
         PixelMetric(sample, OrderStatistic(250)).draw(_errors([1.0, 2.0]))
     assert str(caught.value) == ("metric plugin my_plugin.sample: OrderStatistic(250): the percentage must be a "
@@ -324,7 +321,8 @@ def test_a_plugins_sample_gets_the_toolkit_flag_it_is_drawn_with():
     """PixelMetric.draw mutants 14 and 16 (``toolkit`` None or left to the plugin's default): the plugin's function
     is called with the caller's flag."""
     seen = []
-    sample = _as("my_plugin", lambda px, *, toolkit="unset": seen.append(toolkit) or Sample(px.err))
+    sample = as_plugin(lambda px, *, toolkit="unset": seen.append(toolkit) or Sample(px.err), "sample",
+                       module="my_plugin")
     metric = PixelMetric(sample, Mean(1.0))
     metric.draw(_errors([1.0]), toolkit=True)
     metric.draw(_errors([1.0]), toolkit=False)
@@ -339,21 +337,15 @@ def test_lfbenchs_own_sample_is_not_guarded_its_exceptions_keep_their_type():
     def broken(px, *, toolkit=False):
         raise ZeroDivisionError("lfbench bug")
 
-    own = PixelMetric(_as("lfbench.scoring.general", broken), Mean(1.0))
+    own = PixelMetric(as_plugin(broken, "sample", module="lfbench.scoring.general"), Mean(1.0))
     with pytest.raises(ZeroDivisionError, match="^lfbench bug$"):
         own.draw(_errors([1.0]))
-    assert _own(broken) and _own(_as("lfbench", lambda px: None))
-    plugin = PixelMetric(_as("lfbench_extra.metrics", broken), Mean(1.0))
+    assert _own(broken) and _own(as_plugin(lambda px: None, "sample", module="lfbench"))
+    plugin = PixelMetric(as_plugin(broken, "sample", module="lfbench_extra.metrics"), Mean(1.0))
     line = r"^metric plugin lfbench_extra\.metrics\.sample failed: ZeroDivisionError: lfbench bug$"
     with pytest.raises(LFBenchError, match=line):
         plugin.draw(_errors([1.0]))
-    assert not _own(_as("lfbench_extra", lambda px: None)) and not _own(Anonymous())
-
-
-class Anonymous:
-    """A callable object without ``__module__``."""
-
-    __module__ = property(lambda self: (_ for _ in ()).throw(AttributeError("__module__")))
+    assert not _own(as_plugin(lambda px: None, "sample", module="lfbench_extra")) and not _own(Anonymous())
 
 
 def test_the_defaults_of_a_sample_are_lfbenchs_own_rules():
