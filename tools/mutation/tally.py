@@ -48,7 +48,6 @@ def tally(mutants: Path, killed_elsewhere: set[str], listing: dict[str, str] | N
           ) -> tuple[dict[str, Counter], Counter]:
     """Per file (path under mutants/) a Counter of COLUMNS; and the unexplained survivors' functions. ``listing``:
     the statuses of an earlier run for the mutants not run here (absent: killed)."""
-    code_of = {status: code for code, status in status_by_exit_code.items()}
     diffs = {name: diff for name, _, diff in survivors(mutants, (SURVIVED, None) if listing else (SURVIVED,))}
     rows: dict[str, Counter] = {}
     unexplained: Counter = Counter()
@@ -57,13 +56,14 @@ def tally(mutants: Path, killed_elsewhere: set[str], listing: dict[str, str] | N
         for name, code in json.loads(meta.read_text(encoding="utf-8"))["exit_code_by_key"].items():
             row["mutants"] += 1
             if code is None and listing is not None:
-                code = code_of[listing.get(name, "killed")]
-            status = status_by_exit_code[code]
+                status = listing.get(name, "killed")
+            else:
+                status = status_by_exit_code[code]
             if name in killed_elsewhere:
                 row["killed"] += 1
             elif status in COLUMN_OF:
                 row[COLUMN_OF[status]] += 1
-            elif code == SURVIVED:
+            elif status == "survived":
                 reason = reason_of(name, diffs.get(name, ""))
                 column = ("unexplained" if reason is None else "known, not killed" if reason.startswith(NOT_KILLED)
                           else "survived: explained")
